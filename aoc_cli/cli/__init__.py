@@ -1,0 +1,1 @@
+"""The ``aoc`` command: thin typer modules that parse flags, call the library and print."""

@@ -1,0 +1,171 @@
+"""The one place that knows the output formats.
+
+Data goes to stdout, messages and progress to stderr. Every command that prints data goes
+through :func:`write_records` (a list of rows) or :func:`write_object` (one object), so
+``--format table|json|jsonl|csv`` behaves the same everywhere and ``| jq`` always works.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import sys
+from typing import Any, Iterable, Sequence
+
+import numpy as np
+from rich.console import Console
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    TextColumn,
+    TimeElapsedColumn,
+    TimeRemainingColumn,
+)
+from rich.table import Table
+
+from aoc_cli.errors import AocError
+
+FORMATS = ("table", "json", "jsonl", "csv")
+
+#: stderr console for messages, progress bars and warnings.
+console = Console(stderr=True)
+
+
+def _stdout_console() -> Console:
+    # Created per call so that a redirected sys.stdout (tests, pipes) is honoured.
+    return Console(file=sys.stdout, soft_wrap=False, width=None if sys.stdout.isatty() else 200)
+
+
+def resolve_format(fmt: str | None) -> str:
+    """``None`` means: a table on a terminal, JSON when stdout is a pipe or a file."""
+    if fmt is None:
+        return "table" if sys.stdout.isatty() else "json"
+    fmt = fmt.lower()
+    if fmt not in FORMATS:
+        raise AocError(f"unknown --format {fmt!r}: use one of {', '.join(FORMATS)}")
+    return fmt
+
+
+def to_jsonable(value: Any) -> Any:
+    """numpy scalars and arrays to plain Python; non-finite floats to None (JSON has no NaN)."""
+    if isinstance(value, dict):
+        return {str(k): to_jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [to_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return to_jsonable(value.tolist())
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def _cell(value: Any) -> str:
+    value = to_jsonable(value)
+    if value is None:
+        return ""
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    if isinstance(value, (list, dict)):
+        return json.dumps(value, separators=(",", ":"))
+    return str(value)
+
+
+def write_records(
+    records: Sequence[dict],
+    fmt: str | None,
+    columns: Sequence[str] | None = None,
+    title: str | None = None,
+    out=None,
+) -> None:
+    """Write rows (dicts sharing keys) in the chosen format to stdout."""
+    out = out or sys.stdout
+    fmt = resolve_format(fmt)
+    records = [to_jsonable(r) for r in records]
+    if columns is None:
+        columns = list(dict.fromkeys(k for r in records for k in r))
+    if fmt == "json":
+        json.dump(records, out, indent=2)
+        out.write("\n")
+    elif fmt == "jsonl":
+        for r in records:
+            out.write(json.dumps(r) + "\n")
+    elif fmt == "csv":
+        buf = io.StringIO()
+        writer = csv.writer(buf, lineterminator="\n")
+        writer.writerow(columns)
+        for r in records:
+            writer.writerow([_cell(r.get(c)) for c in columns])
+        out.write(buf.getvalue())
+    else:
+        table = Table(title=title)
+        for c in columns:
+            table.add_column(str(c), overflow="fold")
+        for r in records:
+            table.add_row(*[_cell(r.get(c)) for c in columns])
+        _stdout_console().print(table)
+    out.flush()
+
+
+def write_object(obj: dict, fmt: str | None, title: str | None = None, out=None) -> None:
+    """Write one object: JSON object, one JSONL line, a one-row CSV or a key/value table."""
+    out = out or sys.stdout
+    fmt = resolve_format(fmt)
+    obj = to_jsonable(obj)
+    if fmt == "json":
+        json.dump(obj, out, indent=2)
+        out.write("\n")
+    elif fmt == "jsonl":
+        out.write(json.dumps(obj) + "\n")
+    elif fmt == "csv":
+        write_records([obj], "csv", out=out)
+        return
+    else:
+        table = Table(title=title, show_header=False)
+        table.add_column("key", style="bold")
+        table.add_column("value", overflow="fold")
+        for k, v in obj.items():
+            table.add_row(str(k), _cell(v))
+        _stdout_console().print(table)
+    out.flush()
+
+
+def message(text: str) -> None:
+    """A message for the person at the terminal (stderr)."""
+    console.print(text, highlight=False)
+
+
+def progress(transient: bool = False) -> Progress:
+    """A rich progress bar on stderr: ``with progress() as p: t = p.add_task("...", total=n)``.
+
+    Shown when stderr is a terminal (or ``AOC_PROGRESS=1``); silent in pipes and tests.
+    """
+    return Progress(
+        TextColumn("[progress.description]{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+        console=console,
+        transient=transient,
+        disable=not console.is_terminal and not _force_progress(),
+    )
+
+
+def _force_progress() -> bool:
+    import os
+
+    return os.environ.get("AOC_PROGRESS", "") == "1"
+
+
+def iter_progress(items: Iterable, description: str, total: int | None = None):
+    """Iterate with a progress bar on stderr."""
+    with progress() as p:
+        task = p.add_task(description, total=total)
+        for item in items:
+            yield item
+            p.advance(task)

@@ -1,0 +1,43 @@
+"""Corpus store: schema, atomic writes, manifest, histories.
+
+>>> from aoc_cli.store import Store
+>>> corpus = Store.open().corpus("pendulum")      # doctest: +SKIP
+>>> h = corpus.history([10, 11], length=4)         # doctest: +SKIP
+"""
+
+from aoc_cli.store.atomic import atomic_dir, atomic_path, hash_arrays, hash_file, write_json, write_npy
+from aoc_cli.store.corpus import (
+    CorpusData,
+    History,
+    box_space,
+    discrete_space,
+    episode_starts_from_lengths,
+    gather_history,
+)
+from aoc_cli.store.store import Corpus, Store, check_name, concat
+
+
+def open_corpus(name: str, store=None) -> Corpus:
+    """Open corpus ``name`` of the store at ``store`` (default: $AOC_STORE or ./corpora)."""
+    return Store.open(store).corpus(name)
+
+
+__all__ = [
+    "Corpus",
+    "CorpusData",
+    "History",
+    "Store",
+    "atomic_dir",
+    "atomic_path",
+    "box_space",
+    "check_name",
+    "concat",
+    "discrete_space",
+    "episode_starts_from_lengths",
+    "gather_history",
+    "hash_arrays",
+    "hash_file",
+    "open_corpus",
+    "write_json",
+    "write_npy",
+]
