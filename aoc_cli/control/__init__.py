@@ -1,0 +1,35 @@
+"""The accountable controller: candidates, decisions, decision records, OOD monitor, rollouts."""
+
+from aoc_cli.control.config import ControllerConfig
+from aoc_cli.control.controller import Controller, Decision
+from aoc_cli.control.monitor import OODMonitor
+from aoc_cli.control.records import decision_record, read_audit_step, write_audit
+from aoc_cli.control.rollout import EpisodeResult, HistoryBuffer, run_episode, summarize
+from aoc_cli.control.run import (
+    Session,
+    explain_query,
+    open_session,
+    parse_query,
+    replay_decision,
+    rollout,
+)
+
+__all__ = [
+    "Controller",
+    "ControllerConfig",
+    "Decision",
+    "EpisodeResult",
+    "HistoryBuffer",
+    "OODMonitor",
+    "Session",
+    "decision_record",
+    "explain_query",
+    "open_session",
+    "parse_query",
+    "read_audit_step",
+    "replay_decision",
+    "rollout",
+    "run_episode",
+    "summarize",
+    "write_audit",
+]

@@ -1,0 +1,60 @@
+"""The controller's settings, with the paper's defaults."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+
+@dataclass
+class ControllerConfig:
+    r"""Algorithm 1 of the paper (the Accountable Offline Controller).
+
+    At each step, K candidate actions :math:`a^{(1..K)}` are sampled; each gets a belief
+    :math:`b_t = b(o_t, a, h_t)`, a corpus residual :math:`r(b_t)` and a value estimate
+    :math:`\hat v(a) = \sum_c w^c v^c` over its minimal corpus subset. The decision is
+
+    .. math:: \pi(o_t, h_t) = \arg\max_{a:\ r(a) \le q_\epsilon(r)} \hat v(a)
+
+    where :math:`q_\epsilon` is the epsilon-quantile of the K residuals (ties: the smaller
+    residual). In imitation mode (ABC) there are no candidates: the decision is the weighted
+    action of the minimal corpus subset of :math:`b(o_t, h_t)`.
+    """
+
+    candidates: int = 100
+    """K, candidate actions per step (a discrete space uses every action)."""
+    epsilon: float = 0.5
+    """Keep candidates whose residual is within this quantile of the K residuals, in (0, 1]."""
+    k: int | None = None
+    """Nearest corpus beliefs per query; None = 2 (d_b + 1)."""
+    sampler: str = "uniform"
+    """uniform (in a box action space) | bc (a behaviour-cloning model plus Gaussian noise)."""
+    bc_model: str = "bc"
+    """Model id of the imitation-mode model used by the bc sampler."""
+    bc_noise: float = 0.2
+    """Standard deviation of the bc sampler's noise, as a fraction of the action range."""
+    min_weight: float = 0.05
+    """Supporting rows with at least this weight count when checking for disagreement."""
+    action_spread: float = 0.5
+    """Heterogeneity warning: supporting actions spread more than this fraction of the range."""
+    value_spread: float = 1.0
+    """Heterogeneity warning: supporting values spread more than this many corpus value stds."""
+    ood_warmup: int = 10
+    """Steps before the OOD monitor starts flagging."""
+    ood_sigmas: float = 3.0
+    """A step is flagged when its residual exceeds the running mean by this many stds."""
+
+    def check(self) -> "ControllerConfig":
+        from aoc_cli.errors import AocError
+
+        if not 0.0 < self.epsilon <= 1.0:
+            raise AocError(f"--epsilon must be in (0, 1], got {self.epsilon}")
+        if self.candidates < 1:
+            raise AocError(f"--candidates must be >= 1, got {self.candidates}")
+        if self.k is not None and self.k < 1:
+            raise AocError(f"--k must be >= 1, got {self.k}")
+        if self.sampler not in ("uniform", "bc"):
+            raise AocError(f"unknown --sampler {self.sampler!r}: use uniform or bc")
+        return self
+
+    def to_dict(self) -> dict:
+        return asdict(self)

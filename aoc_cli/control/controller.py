@@ -1,0 +1,211 @@
+"""The accountable controller (Algorithm 1 of the paper) and its decisions.
+
+One step, top to bottom:
+
+1. K candidate actions (uniform in a box, every action of a discrete space, or a black-box
+   sampler such as behaviour cloning plus noise);
+2. one batched belief pass, ``b_t = b(o_t, a, h_t)`` for every candidate, (K, d_b);
+3. one batched decomposition against the corpus beliefs: corpus residual, minimal corpus
+   subset and value estimate ``v_hat = sum_c w^c v^c`` for every candidate;
+4. keep the candidates whose residual is within the epsilon-quantile of the K residuals;
+5. the argmax of ``v_hat`` among them (ties: the smaller residual).
+
+In imitation mode (ABC) the belief is ``b(o_t, h_t)`` and the decision is the weighted action
+of its minimal corpus subset: the weighted mean (continuous) or the weight-argmax (discrete).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from aoc_cli.control.config import ControllerConfig
+from aoc_cli.errors import AocError
+from aoc_cli.store import History
+
+
+@dataclass
+class Decision:
+    """One decision and everything needed to audit it.
+
+    ``action`` (d_a,) float or a scalar int (discrete); ``support_rows`` (m,) corpus rows of
+    the minimal corpus subset, ``support_weights`` (m,), ``support_distances`` (m,) belief
+    distances to the query. ``candidates`` (K, d_a) or (K,), with ``candidate_residuals``,
+    ``candidate_values`` (K,) and ``passed`` (K,) bool (empty in imitation mode).
+    """
+
+    action: np.ndarray
+    value: float | None
+    residual: float
+    support_rows: np.ndarray
+    support_weights: np.ndarray
+    support_distances: np.ndarray
+    candidates: np.ndarray
+    candidate_residuals: np.ndarray
+    candidate_values: np.ndarray
+    passed: np.ndarray
+    chosen: int
+    threshold: float
+    warnings: list[str] = field(default_factory=list)
+
+
+def repeat_history(history: History, times: int) -> History:
+    """A one-row history repeated ``times`` times along the row axis."""
+    return History(*(np.repeat(np.asarray(x), times, axis=0) for x in history))
+
+
+def action_bounds(action_space: dict, actions: np.ndarray | None = None):
+    """(low (d_a,), high (d_a,)) of a box action space; from the data when not recorded."""
+    if "low" in action_space and "high" in action_space:
+        low = np.asarray(action_space["low"], dtype=np.float64)
+        high = np.asarray(action_space["high"], dtype=np.float64)
+        if np.all(np.isfinite(low)) and np.all(np.isfinite(high)):
+            return low, high
+    if actions is None:
+        raise AocError("the action space has no bounds: cannot sample candidates")
+    return actions.min(axis=0).astype(np.float64), actions.max(axis=0).astype(np.float64)
+
+
+class Controller:
+    """AOC (value mode) or ABC (imitation mode) over one corpus, model and index.
+
+    ``index`` is a :class:`aoc_cli.index.build.CorpusIndex` (beliefs of every corpus row,
+    values, the nearest-neighbour index); ``selection`` an optional (N,) bool row mask applied
+    at query time, with no rebuild.
+    """
+
+    def __init__(self, corpus, index, config: ControllerConfig | None = None,
+                 selection: np.ndarray | None = None, bc_model=None, seed: int = 0,
+                 action_space: dict | None = None):
+        self.corpus = corpus
+        self.index = index
+        self.model = index.model
+        self.config = (config or ControllerConfig()).check()
+        self.selection = selection
+        self.bc_model = bc_model
+        self.rng = np.random.default_rng(seed)
+        self.discrete = corpus.discrete
+        self.action_space = action_space or corpus.action_space
+        if self.config.sampler == "bc" and bc_model is None and self.model.mode == "value":
+            raise AocError("--sampler bc needs an imitation-mode model: run "
+                           f"`aoc train {corpus.name} --model {self.config.bc_model} "
+                           "--mode imitation`")
+        self.corpus_actions = corpus.actions
+        if not self.discrete:
+            self.low, self.high = action_bounds(self.action_space, self.corpus_actions)
+            self.span = np.maximum(self.high - self.low, 1e-12)
+        values = index.values
+        self.value_std = float(np.std(values)) if values is not None and len(values) else 1.0
+
+    # -- candidates ------------------------------------------------------------------------
+    def sample_candidates(self, observation: np.ndarray, history: History) -> np.ndarray:
+        """(K, d_a) float candidates, or (n,) int: every action of a discrete space."""
+        if self.discrete:
+            return np.arange(int(self.corpus.n_actions), dtype=np.int64)
+        k = self.config.candidates
+        if self.config.sampler == "uniform":
+            return self.rng.uniform(self.low, self.high, size=(k, len(self.low)))
+        # bc: the behaviour-cloning action plus Gaussian noise (the first candidate noiseless)
+        mean = np.asarray(self.bc_model.predict(observation[None], None, history))[0]
+        noise = self.rng.standard_normal((k, len(self.low))) * self.config.bc_noise * self.span
+        noise[0] = 0.0
+        return np.clip(mean[None, :] + noise, self.low, self.high)
+
+    # -- one step --------------------------------------------------------------------------
+    def decide(self, observation: np.ndarray, history: History,
+               candidates: np.ndarray | None = None) -> Decision:
+        """Decide at one step; ``history`` is a one-row History (1, L, ...)."""
+        observation = np.asarray(observation, dtype=np.float32).reshape(-1)
+        if self.model.mode == "imitation":
+            return self._imitate(observation, history)
+        if candidates is None:
+            candidates = self.sample_candidates(observation, history)
+        return self.evaluate(observation, history, candidates, choose=True)
+
+    def evaluate(self, observation: np.ndarray, history: History, candidates: np.ndarray,
+                 choose: bool = True) -> Decision:
+        """Decompose every candidate; with ``choose``, apply the epsilon filter and argmax.
+
+        Without ``choose`` the first candidate is reported (used to explain a given action).
+        """
+        n = len(candidates)
+        obs = np.repeat(observation[None, :], n, axis=0)
+        beliefs = self.model.beliefs(obs, candidates, repeat_history(history, n))
+        dec = self.index.decompose(beliefs, k=self.config.k, selection=self.selection)
+        residual = np.asarray(dec.residual, dtype=np.float64)
+        value = np.asarray(dec.value, dtype=np.float64)
+        if choose:
+            threshold = float(np.quantile(residual, self.config.epsilon))
+            passed = residual <= threshold + 1e-12 * max(1.0, threshold)
+            order = np.lexsort((residual, -value))  # by value desc, then residual asc
+            chosen = int(next(i for i in order if passed[i]))
+        else:
+            threshold, passed, chosen = float("nan"), np.ones(n, bool), 0
+        decision = Decision(
+            action=np.asarray(candidates[chosen]),
+            value=float(value[chosen]),
+            residual=float(residual[chosen]),
+            support_rows=_trim(dec.rows[chosen], dec.rows[chosen]),
+            support_weights=_trim(dec.weights[chosen], dec.rows[chosen]),
+            support_distances=_trim(dec.distance[chosen], dec.rows[chosen]),
+            candidates=np.asarray(candidates),
+            candidate_residuals=residual,
+            candidate_values=value,
+            passed=passed,
+            chosen=chosen,
+            threshold=threshold,
+        )
+        decision.warnings = self.heterogeneity(decision)
+        return decision
+
+    def _imitate(self, observation: np.ndarray, history: History) -> Decision:
+        belief = self.model.beliefs(observation[None], None, history)
+        dec = self.index.decompose(belief, k=self.config.k, selection=self.selection)
+        rows = _trim(dec.rows[0], dec.rows[0])
+        weights = _trim(dec.weights[0], dec.rows[0])
+        actions = self.corpus_actions[rows]
+        if self.discrete:
+            totals = np.bincount(actions, weights=weights, minlength=int(self.corpus.n_actions))
+            action = np.asarray(int(np.argmax(totals)))
+        else:
+            action = (weights[:, None] * actions).sum(axis=0)
+        value = None if dec.value is None else float(dec.value[0])
+        decision = Decision(
+            action=action, value=value, residual=float(dec.residual[0]),
+            support_rows=rows, support_weights=weights,
+            support_distances=_trim(dec.distance[0], dec.rows[0]),
+            candidates=np.empty((0,)), candidate_residuals=np.empty(0),
+            candidate_values=np.empty(0), passed=np.empty(0, bool), chosen=-1,
+            threshold=float("nan"),
+        )
+        decision.warnings = self.heterogeneity(decision)
+        return decision
+
+    # -- warnings --------------------------------------------------------------------------
+    def heterogeneity(self, d: Decision) -> list[str]:
+        """Warnings when the supporting rows disagree (the paper's risky-decision signal)."""
+        keep = d.support_weights >= self.config.min_weight
+        rows = d.support_rows[keep]
+        out = []
+        if len(rows) < 2:
+            return out
+        actions = self.corpus_actions[rows]
+        if self.discrete:
+            if len(np.unique(actions)) > 1:
+                out.append(f"supporting rows disagree on the action: {sorted(set(actions.tolist()))}")
+        else:
+            spread = float(np.max((actions.max(0) - actions.min(0)) / self.span))
+            if spread > self.config.action_spread:
+                out.append(f"supporting actions spread over {spread:.0%} of the action range")
+        values = self.index.values
+        if values is not None:
+            v = values[rows]
+            if self.value_std > 0 and (v.max() - v.min()) > self.config.value_spread * self.value_std:
+                out.append(f"supporting values range from {v.min():.4g} to {v.max():.4g}")
+        return out
+
+
+def _trim(values: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """Drop the -1 padding of a decomposition row."""
+    return np.asarray(values)[np.asarray(rows) >= 0]

@@ -1,0 +1,166 @@
+"""The library entry points behind `aoc rollout` and `aoc explain`."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+
+import numpy as np
+
+from aoc_cli.control.config import ControllerConfig
+from aoc_cli.control.controller import Controller, Decision
+from aoc_cli.control.monitor import OODMonitor
+from aoc_cli.control.records import decision_record, write_audit
+from aoc_cli.control.rollout import EpisodeResult, check_spaces, run_episode, summarize
+from aoc_cli.errors import AocError
+
+
+@dataclass
+class Session:
+    """A controller ready to act: corpus, model, index, selection and settings."""
+
+    corpus: object
+    index: object
+    controller: Controller
+
+    @property
+    def model(self):
+        return self.index.model
+
+    def meta(self) -> dict:
+        return {
+            "corpus": self.corpus.name, "corpus_hash": self.corpus.hash,
+            "model": self.model.model_id, "model_hash": self.model.hash,
+            "index": self.index.index_id, "mode": self.model.mode,
+            "config": self.controller.config.to_dict(),
+            "selection": None if self.controller.selection is None
+            else np.flatnonzero(self.controller.selection).tolist()
+            if self.controller.selection.sum() < 10000 else "mask",
+        }
+
+
+def open_session(corpus, model_id: str | None = None, index_id: str = "default",
+                 config: ControllerConfig | None = None, selection=None, seed: int = 0,
+                 action_space: dict | None = None) -> Session:
+    """Load the model and index of ``corpus`` and build a controller."""
+    from aoc_cli.belief import load_model
+    from aoc_cli.index.build import load_index
+
+    config = (config or ControllerConfig()).check()
+    index = load_index(corpus, model_id, index_id)
+    bc_model = None
+    if config.sampler == "bc" and index.model.mode == "value" and not corpus.discrete:
+        bc_model = load_model(corpus, config.bc_model)
+        if bc_model.mode != "imitation":
+            raise AocError(f"model {config.bc_model!r} is not an imitation-mode model: the bc "
+                           f"sampler needs `aoc train {corpus.name} --model {config.bc_model} "
+                           "--mode imitation`")
+    controller = Controller(corpus, index, config, selection=selection, bc_model=bc_model,
+                            seed=seed, action_space=action_space)
+    return Session(corpus, index, controller)
+
+
+def rollout(session: Session, env, episodes: int, seed: int = 0, policy=None,
+            audit: str | None = None, noise_after: int | None = None, noise_std: float = 0.0,
+            progress=None) -> tuple[list[EpisodeResult], dict]:
+    """Run ``episodes`` episodes (seeds ``seed``, ``seed+1``, ...) with the controller (or
+    another ``policy`` with a ``decide(observation, history)`` method)."""
+    check_spaces(env, session.corpus)
+    policy = policy or session.controller
+    cfg = session.controller.config
+    typical = session.index.meta.get("typical_residual", {})
+    results = []
+    task = progress.add_task("rollout", total=episodes) if progress is not None else None
+    for e in range(episodes):
+        monitor = OODMonitor(warmup=cfg.ood_warmup, sigmas=cfg.ood_sigmas,
+                             floor=0.1 * float(typical.get("p50") or 0.0))
+        res = run_episode(env, policy, session.model.history_length, session.corpus, e,
+                          seed + e, monitor, noise_after, noise_std,
+                          keep_decisions=audit is not None)
+        res.monitor = monitor
+        results.append(res)
+        if progress is not None:
+            progress.update(task, advance=1, description=f"rollout (return {res.total_return:.1f})")
+    if audit is not None:
+        write_audit(audit, results, session.meta())
+    return results, summarize(results)
+
+
+def explain_query(session: Session, observation, history, action=None,
+                  compare: list | None = None) -> list[dict]:
+    """Records for a query: the controller's own choice (no action), one given action, or
+    several actions side by side (``compare``)."""
+    typical = session.index.meta.get("typical_residual", {}).get("p50")
+    ctl = session.controller
+    if compare:
+        out = []
+        for a in compare:
+            d = ctl.evaluate(observation, history, _as_candidates(session.corpus, [a]), choose=False)
+            out.append(decision_record(d, session.corpus, session.index, observation=observation,
+                                       typical_residual=typical))
+        return out
+    if action is not None:
+        if session.model.mode == "imitation":
+            raise AocError("an imitation-mode model explains its own decision; drop \"action\"")
+        d = ctl.evaluate(observation, history, _as_candidates(session.corpus, [action]),
+                         choose=False)
+    else:
+        d = ctl.decide(observation, history)
+    return [decision_record(d, session.corpus, session.index, observation=observation,
+                            typical_residual=typical)]
+
+
+def _as_candidates(corpus, actions: list) -> np.ndarray:
+    if corpus.discrete:
+        arr = np.asarray(actions, dtype=np.float64).reshape(-1)
+        if np.any(arr != np.round(arr)) or np.any(arr < 0) or np.any(arr >= corpus.n_actions):
+            raise AocError(f"discrete actions are integers in 0..{corpus.n_actions - 1}")
+        return arr.astype(np.int64)
+    arr = np.asarray(actions, dtype=np.float64)
+    if arr.ndim == 1:
+        arr = arr[:, None] if corpus.action_dim == 1 else arr[None]
+    if arr.shape[1] != corpus.action_dim:
+        raise AocError(f"an action of corpus {corpus.name!r} has {corpus.action_dim} "
+                       f"numbers, got {arr.shape[1]}")
+    return arr
+
+
+def replay_decision(session: Session, recorded: dict) -> Decision:
+    """Re-run a decision from an audit log with its recorded inputs (same candidates)."""
+    meta = recorded["meta"]
+    if meta.get("corpus_hash") != session.corpus.hash or \
+            meta.get("model_hash") != session.model.hash:
+        raise AocError("the audit log was recorded with another version of the corpus or "
+                       "model: it cannot be replayed against this one")
+    cand = recorded["candidates"]
+    return session.controller.decide(recorded["observation"], recorded["history"],
+                                     candidates=cand)
+
+
+def parse_query(line: str, lineno: int, corpus, history_length: int):
+    """One JSONL query -> (observation (d_o,), one-row History, action or None)."""
+    from aoc_cli.control.rollout import HistoryBuffer
+
+    try:
+        q = json.loads(line)
+    except json.JSONDecodeError as err:
+        raise AocError(f"line {lineno} of the input is not valid JSON: {err.msg}") from None
+    if not isinstance(q, dict) or "observation" not in q:
+        raise AocError(f"line {lineno}: a query is an object with an \"observation\" list")
+    obs = np.asarray(q["observation"], dtype=np.float64).reshape(-1)
+    if obs.shape[0] != corpus.observation_dim:
+        raise AocError(f"line {lineno}: observation has {obs.shape[0]} numbers, corpus "
+                       f"{corpus.name!r} has {corpus.observation_dim}")
+    d_a = corpus.action_dim
+    buf = HistoryBuffer(history_length, corpus.observation_dim, d_a, corpus.discrete)
+    width = corpus.observation_dim + d_a + 1
+    for j, step in enumerate(q.get("history") or []):
+        step = np.asarray(step, dtype=np.float64).reshape(-1)
+        if step.shape[0] != width:
+            raise AocError(f"line {lineno}: history step {j} has {step.shape[0]} numbers, "
+                           f"expected {width} (observation, action, reward)")
+        o, a, r = step[:corpus.observation_dim], step[corpus.observation_dim:-1], step[-1]
+        buf.push(o, int(a[0]) if corpus.discrete else a, float(r))
+    action = q.get("action")
+    compare = q.get("compare")
+    return obs.astype(np.float32), buf.history(), action, compare

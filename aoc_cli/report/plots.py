@@ -1,0 +1,56 @@
+"""PNG plots (matplotlib, Agg backend): residual and reward curves, bars with error bars."""
+
+from __future__ import annotations
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from aoc_cli.store import atomic_path  # noqa: E402
+
+
+def save(fig, path) -> None:
+    """Save a figure atomically and close it."""
+    with atomic_path(path, suffix=".png") as tmp:
+        fig.savefig(tmp, dpi=110, bbox_inches="tight", format="png")
+    plt.close(fig)
+
+
+def plot_rollout_curves(results, path, title: str = "", noise_after: int | None = None) -> None:
+    """Per-step reward and corpus residual of each episode, with OOD flags and the 3-sigma band."""
+    fig, (ax_r, ax_res) = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    for res in results:
+        t = np.arange(res.length)
+        ax_r.plot(t, res.rewards, lw=1, alpha=0.8)
+        resid = np.array([np.nan if x is None else x for x in res.residuals], dtype=float)
+        line, = ax_res.plot(t, resid, lw=1, alpha=0.8)
+        band = np.array(getattr(getattr(res, "monitor", None), "upper", []), dtype=float)
+        if len(band) == len(t):
+            ax_res.plot(t, np.where(np.isfinite(band), band, np.nan), ls="--", lw=0.8,
+                        color=line.get_color(), alpha=0.6)
+        flags = np.flatnonzero(res.ood)
+        if len(flags):
+            ax_res.scatter(flags, resid[flags], marker="x", color="red", s=18, zorder=3)
+    if noise_after is not None:
+        for ax in (ax_r, ax_res):
+            ax.axvline(noise_after, color="grey", ls=":", lw=1)
+    ax_r.set_ylabel("reward")
+    ax_res.set_ylabel("corpus residual")
+    ax_res.set_xlabel("step")
+    ax_res.legend(["residual", "3-sigma band", "OOD flag"][: 3], loc="upper left", fontsize=8)
+    fig.suptitle(title)
+    save(fig, path)
+
+
+def plot_bars(labels, means, stds, path, title: str = "", ylabel: str = "") -> None:
+    """A bar chart with error bars."""
+    fig, ax = plt.subplots(figsize=(max(4, 0.9 * len(labels) + 2), 4))
+    x = np.arange(len(labels))
+    ax.bar(x, means, yerr=stds, capsize=4, color="#4c72b0")
+    ax.set_xticks(x, labels, rotation=30, ha="right")
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.axhline(0, color="black", lw=0.6)
+    save(fig, path)
