@@ -15,6 +15,7 @@ from aoc_cli.store.corpus import (
     gather_history,
 )
 from aoc_cli.store.store import Corpus, Store, check_name, concat
+from aoc_cli.store.summary import built_from, list_corpora, summarize
 
 
 def open_corpus(name: str, store=None) -> Corpus:
@@ -30,6 +31,7 @@ __all__ = [
     "atomic_dir",
     "atomic_path",
     "box_space",
+    "built_from",
     "check_name",
     "concat",
     "discrete_space",
@@ -37,7 +39,9 @@ __all__ = [
     "gather_history",
     "hash_arrays",
     "hash_file",
+    "list_corpora",
     "open_corpus",
+    "summarize",
     "write_json",
     "write_npy",
 ]

@@ -1,0 +1,53 @@
+"""``aoc info NAME`` (one corpus in detail) and ``aoc ls`` (every corpus of the store)."""
+
+from __future__ import annotations
+
+from typing import Optional
+
+import typer
+
+from aoc_cli.cli.common import FormatOption, get_store
+
+
+def register(app: typer.Typer) -> None:
+    @app.command("info")
+    def info(
+        name: str = typer.Argument(..., help="Corpus name."),
+        fmt: Optional[str] = FormatOption,
+    ) -> None:
+        """Rows, episodes, spaces, returns, tags and what has been built from corpus NAME."""
+        from aoc_cli.report.output import resolve_format, write_object, write_records
+        from aoc_cli.store import summarize
+        from aoc_cli.store.summary import space_text
+
+        resolved = resolve_format(fmt)
+        summary = summarize(get_store().corpus(name))
+        if resolved != "table":
+            write_object(summary, resolved)
+            return
+        brief = {k: v for k, v in summary.items()
+                 if k not in ("tags", "built", "sources", "observation_space", "action_space")}
+        brief["observation_space"] = space_text(summary["observation_space"])
+        brief["action_space"] = space_text(summary["action_space"])
+        brief["sources"] = ", ".join(s.get("path", "?") for s in summary["sources"])
+        write_object(brief, "table", title=f"corpus {name}")
+        tag_rows = [{"tag": t, "label": label, "rows": n}
+                    for t, counts in summary["tags"].items() for label, n in counts.items()]
+        if tag_rows:
+            write_records(tag_rows, "table", title="tags")
+        if summary["built"]:
+            write_records([{**m, "files": ", ".join(m["files"])} for m in summary["built"]],
+                          "table", title="built from this corpus")
+
+    @app.command("ls")
+    def ls(fmt: Optional[str] = FormatOption) -> None:
+        """List the corpora of the store."""
+        from aoc_cli.report.output import message, write_records
+        from aoc_cli.store import list_corpora
+
+        store = get_store()
+        records = list_corpora(store)
+        if not records:
+            message(f"no corpora in {store.root}: create one with `aoc ingest` or `aoc collect`")
+        write_records(records, fmt, columns=["name", "rows", "episodes", "observation", "action",
+                                             "has_rewards", "models"], title=str(store.root))

@@ -1,0 +1,16 @@
+"""Readers that turn Minari, D4RL, d3rlpy, NPZ and CSV data into corpus rows.
+
+>>> from aoc_cli.formats import ingest, ReadOptions
+>>> ingest("hopper-medium.hdf5", "hopper", options=ReadOptions(tags={"policy": "medium"}))
+... # doctest: +SKIP
+
+Every reader returns an :class:`aoc_cli.store.CorpusData` (rows (o_t, a_t, r_t), episodes
+contiguous); :func:`detect_format` picks the reader, :func:`read_dataset` applies the options
+shared by all formats, :func:`ingest` writes the result into the store.
+"""
+
+from aoc_cli.formats.common import ReadOptions
+from aoc_cli.formats.detect import FORMATS, detect_format
+from aoc_cli.formats.ingest import IngestResult, ingest, read_dataset
+
+__all__ = ["FORMATS", "IngestResult", "ReadOptions", "detect_format", "ingest", "read_dataset"]

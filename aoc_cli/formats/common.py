@@ -1,0 +1,198 @@
+"""What every reader shares: options, HDF5 opening with clear errors, flat (D4RL-style) arrays
+to episodes, label encoding of tag columns, and the length check.
+
+Readers return a :class:`aoc_cli.store.CorpusData`; the rows of an episode are (o_t, a_t, r_t),
+the observation at which action a_t was taken and the reward that followed it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Iterable, Iterator
+
+import h5py
+import numpy as np
+
+from aoc_cli.errors import AocError
+from aoc_cli.store import CorpusData, box_space, discrete_space, episode_starts_from_lengths
+
+
+def no_progress(items: Iterable, description: str, total: int | None = None) -> Iterable:
+    """The default progress hook: iterate silently."""
+    return items
+
+
+@dataclass
+class ReadOptions:
+    """How to read a dataset (the flags of ``aoc ingest``).
+
+    ``progress(items, description, total)`` wraps slow loops (the CLI passes a rich bar).
+    The CSV fields are ignored by the other readers.
+    """
+
+    tags: dict[str, str] = field(default_factory=dict)
+    tag_columns: list[str] = field(default_factory=list)
+    reward_free: bool = False
+    drop_nonfinite: bool = False
+    discrete_actions: bool = False
+    # CSV only
+    columns_file: Path | None = None
+    obs_columns: list[str] | None = None
+    act_columns: list[str] | None = None
+    reward_column: str | None = None
+    id_column: str | None = None
+    time_column: str | None = None
+    terminal_column: str | None = None
+    static: Path | None = None
+    progress: Callable[..., Iterable] = no_progress
+
+
+@contextlib.contextmanager
+def open_h5(path: Path) -> Iterator[h5py.File]:
+    """Open an HDF5 file read-only; a corrupt or truncated file is an AocError.
+
+    Errors raised while reading inside the block (h5py raises OSError for damaged chunks and
+    truncated data) become the same one-line AocError.
+    """
+    try:
+        f = h5py.File(path, "r")
+    except OSError as err:
+        raise AocError(f"cannot read {path}: not a readable HDF5 file, truncated or corrupt "
+                       f"({_short(err)}); re-download or re-export it") from None
+    try:
+        yield f
+    except (OSError, RuntimeError) as err:
+        raise AocError(f"cannot read {path}: the HDF5 file is truncated or corrupt "
+                       f"({_short(err)}); re-download or re-export it") from None
+    finally:
+        with contextlib.suppress(Exception):
+            f.close()
+
+
+def _short(err: Exception) -> str:
+    return str(err).splitlines()[0][:160] if str(err) else type(err).__name__
+
+
+def check_lengths(arrays: dict[str, np.ndarray | None]) -> int:
+    """All arrays (None skipped) have the same first dimension; return it."""
+    lengths = {k: len(v) for k, v in arrays.items() if v is not None}
+    if len(set(lengths.values())) > 1:
+        raise AocError("arrays of different lengths: "
+                       + ", ".join(f"{k} has {v} rows" for k, v in lengths.items())
+                       + "; every array needs one entry per step")
+    return next(iter(lengths.values()), 0)
+
+
+def encode_labels(values: np.ndarray) -> tuple[np.ndarray, list[str]]:
+    """Any per-row values (N,) -> (codes (N,) int32, sorted labels as strings)."""
+    values = np.asarray(values)
+    if values.ndim != 1:
+        values = values.reshape(len(values), -1)
+        if values.shape[1] != 1:
+            raise AocError("a tag column must hold one value per row, got shape "
+                           f"{values.shape}")
+        values = values[:, 0]
+    if values.dtype.kind == "f" and np.all(np.isfinite(values)) and \
+            np.all(values == np.round(values)):
+        values = values.astype(np.int64)
+    if values.dtype.kind == "S":
+        values = np.char.decode(values, "utf-8")
+    uniq, codes = np.unique(values, return_inverse=True)
+    return codes.astype(np.int32), [str(u) for u in uniq]
+
+
+def action_space_of(actions: np.ndarray, discrete: bool, names=None) -> tuple[np.ndarray, dict]:
+    """Actions and their space when the source declares none: integer (or ``discrete``) ->
+    discrete with n = max + 1; else a box whose bounds are the observed min and max."""
+    actions = np.asarray(actions)
+    if discrete or (actions.dtype.kind in "iub" and actions.ndim <= 2 and
+                    (actions.ndim == 1 or actions.shape[1] == 1)):
+        flat = actions.reshape(len(actions))
+        if len(flat) and flat.dtype.kind == "f":
+            ok = np.isfinite(flat) & (flat == np.round(flat))
+            if not ok.all():
+                bad = int(np.flatnonzero(~ok)[0])
+                raise AocError(f"discrete action of row {bad} is not an integer: {flat[bad]}; "
+                               "drop --discrete-actions for continuous actions")
+        flat = flat.astype(np.int64)
+        if len(flat) and flat.min() < 0:
+            raise AocError(f"discrete actions must be 0, 1, 2, ...; row "
+                           f"{int(np.argmin(flat))} has {int(flat.min())}")
+        return flat, discrete_space(int(flat.max()) + 1 if len(flat) else 1, names)
+    actions = actions.reshape(len(actions), int(np.prod(actions.shape[1:])))
+    if not np.issubdtype(actions.dtype, np.floating):
+        actions = actions.astype(np.float32)
+    space = box_space(actions.shape[1], names=names)
+    if len(actions):
+        with np.errstate(invalid="ignore"):
+            space["low"] = np.nanmin(actions, axis=0).astype(float).tolist()
+            space["high"] = np.nanmax(actions, axis=0).astype(float).tolist()
+        space["bounds"] = "observed"
+    return actions, space
+
+
+def flat_observations(obs: np.ndarray) -> np.ndarray:
+    """(N, ...) -> (N, d_o); integers become float32."""
+    obs = np.asarray(obs)
+    obs = obs.reshape(len(obs), int(np.prod(obs.shape[1:])))
+    if not np.issubdtype(obs.dtype, np.floating):
+        obs = obs.astype(np.float32)
+    return obs
+
+
+def from_flat(
+    observations: np.ndarray,
+    actions: np.ndarray,
+    rewards: np.ndarray | None,
+    terminals: np.ndarray | None,
+    timeouts: np.ndarray | None,
+    source: dict,
+    options: ReadOptions,
+    extra: dict[str, np.ndarray] | None = None,
+    episode_ends: np.ndarray | None = None,
+) -> CorpusData:
+    """D4RL-style flat arrays -> CorpusData.
+
+    An episode ends at a row where ``terminals | timeouts`` (or ``episode_ends``) is set; a
+    trailing episode with neither is kept and marked truncated on its last row. Timeouts become
+    truncations (a row that is both is a terminal). ``extra`` holds per-row arrays that
+    ``--tag-column`` may name and that numeric 1-d ones become corpus ``columns``.
+    """
+    extra = extra or {}
+    n = check_lengths({"observations": observations, "actions": actions, "rewards": rewards,
+                       "terminals": terminals, "timeouts": timeouts,
+                       "episode_terminals": episode_ends})
+    term = np.zeros(n, bool) if terminals is None else np.asarray(terminals).reshape(n) != 0
+    tout = np.zeros(n, bool) if timeouts is None else np.asarray(timeouts).reshape(n) != 0
+    ends = term | tout
+    if episode_ends is not None:
+        ends |= np.asarray(episode_ends).reshape(n) != 0
+    trunc = ends & ~term
+    if n and not ends[-1]:
+        trunc[-1] = True
+        ends[-1] = True
+    stops = np.flatnonzero(ends) + 1
+    starts = np.concatenate([[0], stops]).astype(np.int64)
+    obs = flat_observations(observations)
+    act, act_space = action_space_of(actions, options.discrete_actions)
+    tags = {}
+    for col in options.tag_columns:
+        if col not in extra:
+            known = ", ".join(sorted(extra)) or "none"
+            raise AocError(f"--tag-column {col!r} is not in the file (per-row arrays: {known})")
+        check_lengths({"observations": observations, col: extra[col]})
+        tags[col] = encode_labels(extra[col])
+    columns = {k: np.asarray(v, dtype=np.float64) for k, v in extra.items()
+               if k not in options.tag_columns and np.asarray(v).ndim == 1
+               and np.asarray(v).dtype.kind in "fiub" and len(v) == n}
+    return CorpusData(
+        observations=obs, actions=act,
+        rewards=None if rewards is None else np.asarray(rewards, np.float64).reshape(n),
+        terminals=term, truncations=trunc,
+        episode_starts=starts if n else episode_starts_from_lengths([]),
+        observation_space=box_space(obs.shape[1]),
+        action_space=act_space,
+        tags=tags, columns=columns, source=source,
+    )

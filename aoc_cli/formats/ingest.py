@@ -1,0 +1,133 @@
+"""Read a dataset into a corpus of the store: ``aoc ingest`` as a library function.
+
+Checks that need no reading (the name, an existing corpus) come first, so bad usage fails
+before a long read; the store is written only once everything is valid, atomically.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from aoc_cli.errors import AocError
+from aoc_cli.formats.common import ReadOptions
+from aoc_cli.formats.detect import FORMATS, detect_format
+from aoc_cli.store import CorpusData, Store, check_name
+
+
+def read_dataset(path: str | os.PathLike, fmt: str | None = None,
+                 options: ReadOptions | None = None) -> CorpusData:
+    """Read ``path`` (format ``fmt`` or detected) into a validated :class:`CorpusData`.
+
+    Applies the options every format shares: constant ``tags``, ``reward_free``, and the
+    non-finite check (an AocError naming the first bad row) or, with ``drop_nonfinite``, the
+    removal of every episode holding a NaN/inf observation, action or reward.
+    """
+    from aoc_cli.formats import csv, d3rlpy, d4rl, minari, npz
+
+    options = options or ReadOptions()
+    if fmt is None:
+        fmt = detect_format(path)
+    elif fmt not in FORMATS:
+        raise AocError(f"unknown format {fmt!r}: use --from {'|'.join(FORMATS)}")
+    elif fmt != "minari" and not Path(path).exists():
+        raise AocError(f"no such file or folder: {path}; check the path")
+    reader = {"minari": minari.read_minari, "d4rl": d4rl.read_d4rl,
+              "d3rlpy": d3rlpy.read_d3rlpy, "npz": npz.read_npz, "csv": csv.read_csv}[fmt]
+    data = reader(Path(path) if fmt != "minari" else path, options)
+    if data.n_rows == 0:
+        raise AocError(f"{path} has zero rows: nothing to store")
+    if options.reward_free:
+        data.rewards = None
+    for key, value in options.tags.items():
+        if key in data.tags:
+            raise AocError(f"tag {key!r} is given twice (--tag and --tag-column)")
+        data.tags[key] = (np.zeros(data.n_rows, np.int32), [value])
+    data.source = {**data.source, "format": fmt}
+    if options.drop_nonfinite:
+        bad = data.nonfinite_episodes()
+        if bad.all():
+            raise AocError(f"every episode of {path} holds NaN or inf values: nothing left to "
+                           "store")
+        if bad.any():
+            data = data.select_episodes(~bad)
+            data.source = {**data.source, "dropped_nonfinite_episodes": int(bad.sum())}
+    else:
+        _check_finite(data)
+    return data.validate()
+
+
+def _check_finite(data: CorpusData) -> None:
+    """AocError naming the first row (and its episode and step) holding NaN or inf."""
+    first = None
+    for name, arr in (("observations", data.observations), ("actions", data.actions),
+                      ("rewards", data.rewards)):
+        if arr is None:
+            continue
+        arr = np.asarray(arr)
+        if not np.issubdtype(arr.dtype, np.floating):
+            continue
+        finite = np.isfinite(arr) if arr.ndim == 1 else np.isfinite(arr).all(axis=1)
+        if not finite.all():
+            row = int(np.argmin(finite))
+            if first is None or row < first[1]:
+                first = (name, row)
+    if first is None:
+        return
+    name, row = first
+    starts = np.asarray(data.episode_starts)
+    ep = int(np.searchsorted(starts, row, side="right") - 1)
+    label = f"episode {ep}" + (f" (id {data.episode_ids[ep]})" if data.episode_ids else "")
+    raise AocError(f"{name} of row {row} ({label}, step {row - int(starts[ep])}) is not finite "
+                   "(NaN or inf): fix the data or pass --drop-nonfinite to drop the episodes "
+                   "that hold such rows")
+
+
+@dataclass
+class IngestResult:
+    """What ``aoc ingest`` prints."""
+
+    name: str
+    format: str
+    rows: int
+    episodes: int
+    seconds: float
+    total_rows: int
+    total_episodes: int
+    dropped_episodes: int
+
+    def summary(self) -> dict:
+        out = {"name": self.name, "format": self.format, "rows": self.rows,
+               "episodes": self.episodes, "seconds": round(self.seconds, 3)}
+        if self.total_rows != self.rows:
+            out.update(total_rows=self.total_rows, total_episodes=self.total_episodes)
+        if self.dropped_episodes:
+            out["dropped_episodes"] = self.dropped_episodes
+        return out
+
+
+def ingest(path: str | os.PathLike, name: str, *, store: Store | None = None,
+           fmt: str | None = None, options: ReadOptions | None = None,
+           overwrite: bool = False, append: bool = False) -> IngestResult:
+    """Read ``path`` and store it as corpus ``name`` (replace with ``overwrite``, add episodes
+    with ``append``: same spaces required). Nothing is written unless everything is valid."""
+    t0 = time.perf_counter()
+    store = store or Store.open()
+    check_name(name)
+    if overwrite and append:
+        raise AocError("pass either --overwrite or --append, not both")
+    if store.exists(name) and not (overwrite or append):
+        raise AocError(f"corpus {name!r} already exists: pass --overwrite to replace it or "
+                       "--append to add to it")
+    data = read_dataset(path, fmt, options)
+    corpus = store.write(name, data, overwrite=overwrite, append=append)
+    return IngestResult(
+        name=name, format=data.source.get("format", fmt or "?"), rows=data.n_rows,
+        episodes=data.n_episodes, seconds=time.perf_counter() - t0,
+        total_rows=corpus.n_rows, total_episodes=corpus.n_episodes,
+        dropped_episodes=int(data.source.get("dropped_nonfinite_episodes", 0)),
+    )
