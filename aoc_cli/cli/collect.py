@@ -1,0 +1,70 @@
+"""``aoc collect TASK --steps N --name NAME``: run a built-in task's behaviour policies into a
+corpus; ``aoc collect --list`` shows the tasks. Parses and prints only; the work is in
+:mod:`aoc_cli.envs`."""
+
+from __future__ import annotations
+
+from typing import Optional
+
+import typer
+
+from aoc_cli.cli.common import FormatOption, get_store
+from aoc_cli.errors import AocError
+from aoc_cli.report.output import message, progress, write_records
+
+LIST_COLUMNS = ["name", "gym_id", "horizon", "default_steps", "default_episodes", "policies",
+                "success"]
+
+
+def register(app: typer.Typer) -> None:
+    @app.command("collect")
+    def collect_cmd(
+        task: Optional[str] = typer.Argument(
+            None, help="Built-in task: pendulum-het, pendulum-het-upright, maze, two-gates, "
+                       "lunar (see --list)."),
+        steps: Optional[int] = typer.Option(
+            None, "--steps", "-n", help="Rows to collect (default: the task's, see --list)."),
+        episodes: Optional[int] = typer.Option(
+            None, "--episodes", help="Episodes to collect instead of --steps."),
+        name: Optional[str] = typer.Option(None, "--name", help="Name of the corpus to write."),
+        seed: int = typer.Option(0, "--seed", help="Random seed: same seed, same corpus."),
+        overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing corpus."),
+        list_tasks: bool = typer.Option(False, "--list", help="List the tasks and their defaults."),
+        fmt: Optional[str] = FormatOption,
+    ) -> None:
+        """Run a built-in task's behaviour policies and store the data as a corpus."""
+        from aoc_cli.envs import TASKS, collect, get_task
+
+        if list_tasks:
+            write_records([t.describe() for t in TASKS.values()], fmt, columns=LIST_COLUMNS,
+                          title="built-in tasks")
+            return
+        if task is None:
+            raise AocError("give a task to collect (one of " + ", ".join(TASKS)
+                           + "), or --list to see them")
+        t = get_task(task)
+        if name is None:
+            raise AocError(f"give the corpus name: aoc collect {task} --name NAME")
+        for flag, value in (("--steps", steps), ("--episodes", episodes)):
+            if value is not None and value <= 0:
+                raise AocError(f"{flag} must be a positive integer, got {value}")
+        if steps is not None and episodes is not None:
+            raise AocError("give --steps or --episodes, not both")
+        store = get_store()
+        if store.exists(name) and not overwrite:
+            raise AocError(f"corpus {name!r} already exists in {store.root}: pass --overwrite "
+                           "to replace it, or choose another --name")
+        unit = "episodes" if episodes is not None or (steps is None and not t.default_steps) \
+            else "rows"
+        with progress() as bar:
+            job = bar.add_task(f"collect {task} ({unit})", total=None)
+
+            def on_progress(done: int, total: int) -> None:
+                bar.update(job, completed=done, total=total)
+
+            data, summary = collect(task, steps=steps, episodes=episodes, seed=seed,
+                                    progress=on_progress)
+        corpus = store.write(name, data, overwrite=overwrite)
+        message(f"wrote corpus {name!r}: {corpus.n_rows} rows, {corpus.n_episodes} episodes "
+                f"of {task} (seed {seed}, hash {corpus.hash}) to {corpus.path}")
+        write_records(summary, fmt, title=f"behaviour policies of {name}")

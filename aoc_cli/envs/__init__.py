@@ -1,0 +1,81 @@
+"""Built-in tasks: gymnasium environments with their behaviour policies and evaluation settings.
+
+>>> from aoc_cli.envs import TASKS, collect, make_env
+>>> env = make_env("maze")                       # the evaluation env: (0, 0) -> (16, 0), 100 steps
+>>> data, summary = collect("two-gates", episodes=8, seed=0)
+>>> data.n_episodes, sorted(data.tags)
+(8, ['policy'])
+
+Importing this package registers the gymnasium ids ``aoc/PendulumHet-v0``,
+``aoc/PendulumHetUpright-v0``, ``aoc/Maze-v0`` and ``aoc/TwoGates-v0`` (without importing it
+first: ``gymnasium.make("aoc_cli.envs:aoc/Maze-v0")``). ``lunar`` is gymnasium's own
+``LunarLanderContinuous-v3``.
+
+Success: where a task defines it (maze, two-gates, lunar), its evaluation environment puts a bool
+``info["success"]`` in every step's info; the value at the episode's last step is the outcome.
+pendulum-het defines none (compare returns).
+"""
+
+from __future__ import annotations
+
+import gymnasium
+
+from aoc_cli.envs.base import Episode, Progress, Task
+from aoc_cli.errors import AocError
+from aoc_cli.store import CorpusData
+
+_IDS = {
+    "aoc/PendulumHet-v0": ("aoc_cli.envs.pendulum_het:PendulumHetEnv", 200, {}),
+    "aoc/PendulumHetUpright-v0": ("aoc_cli.envs.pendulum_het:PendulumHetEnv", 200,
+                                  {"upright": True}),
+    "aoc/Maze-v0": ("aoc_cli.envs.maze:MazeEnv", 100, {"world": "maze"}),
+    "aoc/TwoGates-v0": ("aoc_cli.envs.maze:MazeEnv", 32, {"world": "two-gates"}),
+}
+for _id, (_entry, _steps, _kwargs) in _IDS.items():
+    if _id not in gymnasium.registry:
+        gymnasium.register(id=_id, entry_point=_entry, max_episode_steps=_steps,
+                           kwargs=_kwargs)
+
+from aoc_cli.envs import lunar, maze, pendulum_het  # noqa: E402  (after registration)
+
+#: name -> Task, in the order ``aoc collect --list`` shows them.
+TASKS: dict[str, Task] = {t.name: t for mod in (pendulum_het, maze, lunar) for t in mod.TASKS}
+
+
+def get_task(name: str) -> Task:
+    """The built-in task ``name``; unknown -> AocError listing the tasks."""
+    if name not in TASKS:
+        raise AocError(f"unknown task {name!r}: use one of {', '.join(TASKS)} "
+                       "(see `aoc collect --list`)")
+    return TASKS[name]
+
+
+def make_env(name_or_gym_id: str, **kw) -> gymnasium.Env:
+    """A built-in task's evaluation environment, or any registered gymnasium id."""
+    if name_or_gym_id in TASKS:
+        return TASKS[name_or_gym_id].make(**kw)
+    if name_or_gym_id in gymnasium.registry:
+        try:
+            return gymnasium.make(name_or_gym_id, **kw)
+        except gymnasium.error.DependencyNotInstalled as err:
+            raise AocError(f"gymnasium environment {name_or_gym_id!r} needs a package that is "
+                           f"not installed: {str(err).splitlines()[0]}") from err
+    raise AocError(f"unknown environment {name_or_gym_id!r}: use a built-in task "
+                   f"({', '.join(TASKS)}) or a registered gymnasium id such as Pendulum-v1")
+
+
+def collect(task: str, steps: int | None = None, episodes: int | None = None, seed: int = 0,
+            progress: Progress | None = None) -> tuple[CorpusData, list[dict]]:
+    """Run ``task``'s behaviour mix for exactly ``steps`` rows (or ``episodes`` episodes; neither:
+    the task's default) and return the corpus data and a per-policy summary (episodes, rows,
+    mean/std return, success rate where defined). Same seed, same arrays, bit for bit.
+
+    ``progress(done, total)`` is called as rows (or episodes) are collected.
+    """
+    t = get_task(task)
+    data, summary = t.collect_fn(steps=steps, episodes=episodes, seed=int(seed),
+                                 progress=progress)
+    return data.validate(), summary
+
+
+__all__ = ["TASKS", "Episode", "Task", "collect", "get_task", "make_env"]

@@ -1,0 +1,131 @@
+"""lunar: gymnasium's LunarLanderContinuous-v3 with its own heuristic lander as the expert.
+
+Behaviour data: ``gymnasium.envs.box2d.lunar_lander.heuristic`` plus Gaussian action noise of std
+0, 0.25, 0.5 and 1 (clipped to [-1, 1]; the stored action is the one sent to the environment),
+the four levels in turn, one episode each. Success (gymnasium's ``reward_threshold``): an episode
+return of at least 200, reported as ``info["success"]`` at the episode's last step by
+:class:`LanderSuccess` (False on every other step).
+"""
+
+from __future__ import annotations
+
+import gymnasium
+import numpy as np
+from gymnasium.envs.box2d.lunar_lander import heuristic
+
+from aoc_cli.envs import render
+from aoc_cli.envs.base import Episode, Progress, Task, budget, summarise, to_corpus
+from aoc_cli.store import box_space
+
+GYM_ID = "LunarLanderContinuous-v3"
+HORIZON = 1000
+SUCCESS_RETURN = 200.0
+NOISE_LEVELS = (0.0, 0.25, 0.5, 1.0)
+POLICIES = tuple(f"heuristic-noise{n:g}" for n in NOISE_LEVELS)
+
+
+class LanderSuccess(gymnasium.Wrapper):
+    """Adds ``info["success"]`` (episode return >= 200, at the last step) and
+    ``info["episode_return"]`` (the return so far) to LunarLander."""
+
+    def reset(self, **kw):
+        self._return = 0.0
+        obs, info = self.env.reset(**kw)
+        info["success"] = False
+        return obs, info
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        self._return += float(reward)
+        info["episode_return"] = self._return
+        info["success"] = bool((terminated or truncated) and self._return >= SUCCESS_RETURN)
+        return obs, reward, terminated, truncated, info
+
+
+def make(**kw) -> gymnasium.Env:
+    """The evaluation environment: LunarLanderContinuous-v3 (1000 steps) with success info."""
+    return LanderSuccess(gymnasium.make(GYM_ID, **kw))
+
+
+def expert_action(env: gymnasium.Env, observation: np.ndarray, noise: float,
+                  rng: np.random.Generator) -> np.ndarray:
+    """The heuristic lander's action (2,) plus N(0, noise^2), clipped to [-1, 1], float32."""
+    a = np.asarray(heuristic(env.unwrapped, observation), dtype=np.float64)
+    if noise > 0:
+        a = a + noise * rng.standard_normal(2)
+    return np.clip(a, -1.0, 1.0).astype(np.float32)
+
+
+def run_episode(env: gymnasium.Env, policy: str, rng: np.random.Generator) -> Episode:
+    """One episode of ``policy`` (a name of POLICIES); the reset seed is drawn from ``rng``."""
+    noise = float(policy.rsplit("noise", 1)[1])
+    obs, _info = env.reset(seed=int(rng.integers(2**31 - 1)))
+    observations, actions, rewards = [], [], []
+    while True:
+        a = expert_action(env, obs, noise, rng)
+        observations.append(obs)
+        actions.append(a)
+        obs, reward, terminated, truncated, info = env.step(a)
+        rewards.append(reward)
+        if terminated or truncated:
+            break
+    return Episode(np.asarray(observations, np.float32), np.asarray(actions, np.float32),
+                   np.asarray(rewards, np.float64), bool(terminated), {"policy": policy},
+                   success=bool(info["success"]))
+
+
+def _collect(steps: int | None, episodes: int | None, seed: int, progress: Progress | None):
+    steps, episodes = budget(steps, episodes, 100_000, None)
+    rng = np.random.default_rng(seed)
+    env = make()
+    eps: list[Episode] = []
+    rows = 0
+    try:
+        while (steps is not None and rows < steps) or (episodes is not None
+                                                       and len(eps) < episodes):
+            eps.append(run_episode(env, POLICIES[len(eps) % len(POLICIES)], rng))
+            rows += len(eps[-1])
+            if progress is not None and steps is not None:
+                progress(min(rows, steps), steps)
+            elif progress is not None:
+                progress(len(eps), episodes)
+    finally:
+        env.close()
+    space = env.observation_space
+    source = {"kind": "collect", "task": "lunar", "gym_id": GYM_ID, "seed": int(seed),
+              "steps": steps, "episodes": episodes, "policies": list(POLICIES)}
+    data = to_corpus(eps, {"policy": POLICIES},
+                     box_space(8, space.low, space.high,
+                               ["x", "y", "vx", "vy", "angle", "angular_velocity",
+                                "left_leg", "right_leg"]),
+                     box_space(2, -1.0, 1.0, ["main_engine", "side_engine"]), source,
+                     steps=steps)
+    return data, summarise(eps, {"policy": POLICIES}, kept_rows=steps)
+
+
+def trajectory(observations: np.ndarray) -> np.ndarray:
+    """(T, 8) observations -> (T, 2) lander positions (x, y; the pad is at (0, 0))."""
+    return np.asarray(observations, dtype=float)[:, :2]
+
+
+def plot_trajectories(paths, out_png, title=None, labels=None) -> None:
+    """Lander paths in the observation's coordinates, with the landing pad."""
+    paths = render.check_paths(paths, labels)
+    fig, ax = render.new_axes(title or "lunar", "x (pad at 0)", "y (pad at 0)", size=(6, 4.5))
+    ax.axhline(0.0, color="#999999", lw=1)
+    ax.plot([-0.2, 0.2], [0, 0], color="gold", lw=6, solid_capstyle="butt", zorder=4)
+    render.draw_paths(ax, paths, labels)
+    ax.set_xlim(-1.0, 1.0)
+    ax.set_ylim(-0.1, 1.6)
+    render.save(fig, out_png)
+
+
+TASKS = [Task(
+    name="lunar", gym_id=GYM_ID, horizon=HORIZON, policies=POLICIES,
+    description="gymnasium LunarLanderContinuous-v3, heuristic lander with action noise",
+    make_fn=make,
+    collect_fn=lambda steps=None, episodes=None, seed=0, progress=None: _collect(
+        steps, episodes, seed, progress),
+    plot_fn=plot_trajectories, trajectory_fn=trajectory, default_steps=100_000,
+    goal=(0.0, 0.0), success_test=f"episode return >= {SUCCESS_RETURN:g}",
+)]
