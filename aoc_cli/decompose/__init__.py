@@ -1,0 +1,10 @@
+"""The decomposition engine: a query belief as a weighted, minimal subset of corpus rows.
+
+`decompose(beliefs, queries, k=None, values=None, index=None, reference=False)` runs the paper's
+four steps (neighbours, exact corpus residual and projection, minimal corpus subset, value) for
+a whole batch of queries at once; see `engine.py`, which reads top to bottom.
+"""
+
+from aoc_cli.decompose.engine import DecomposeConfig, Decomposition, decompose
+
+__all__ = ["DecomposeConfig", "Decomposition", "decompose"]

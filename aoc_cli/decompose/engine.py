@@ -1,0 +1,190 @@
+"""The decomposition of query beliefs against the corpus, batched, in the paper's four steps.
+
+For each query belief y (one per candidate action of a control step):
+
+1. neighbours      N_k(y): the k nearest corpus beliefs B (k, d_b), from the index;
+2. residual        r(y) = min_{w in simplex} ||B^T w - y||,  y* = B^T w  (exact; minnorm.py);
+3. minimal subset  at most d_b + 1 affinely independent rows whose hull contains y*, of the
+                   smallest volume found (hull.py), with weights w >= 0, sum w = 1, B_S^T w = y*;
+4. value           v_hat(y) = sum_c w_c v_c.
+
+(Definitions "Belief Corpus Residual" and "Minimal Hull and Minimal Corpus Subset" of the AOC
+paper; DESIGN.md "The method, precisely".)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from aoc_cli.decompose.hull import minimal_subset
+from aoc_cli.decompose.minnorm import min_norm_point
+from aoc_cli.decompose.reference import caratheodory, reference_weights
+from aoc_cli.errors import AocError
+from aoc_cli.index import BeliefIndex
+from aoc_cli.index.threads import single_threaded_blas
+
+
+@dataclass
+class DecomposeConfig:
+    """How a query belief is decomposed over the corpus (paper defaults).
+
+    k: neighbours per query; None means the paper's k = 2 (d_b + 1) (appendix "Finding the
+        Minimal Convex Hull Efficiently"), clipped to the corpus size.
+    qp_tol: optimality tolerance of step 2, on the Frank-Wolfe gap
+        <x, x> - min_c <b_c - y, x>  with x = y* - y, relative to the squared neighbourhood radius.
+    lp_start: step 3 starts from the lifted-LP vertex, the Delaunay simplex containing y*
+        (min sum w_c ||b_c - y*||^2 s.t. B^T w = y*, w in simplex).
+    exchange_budget: at most this many volume-reducing vertex exchanges in step 3.
+    reference: solve step 2 with the reference QP (piqp) instead of the batched solver.
+    """
+
+    k: int | None = None
+    qp_tol: float = 1e-10
+    lp_start: bool = True
+    exchange_budget: int = 64
+    reference: bool = False
+
+
+@dataclass
+class Decomposition:
+    """The decomposition of Q query beliefs; m = min(d_b + 1, k) columns per query.
+
+    rows: (Q, m) int64 corpus rows of the minimal corpus subset, by decreasing weight, -1 padded.
+    weights: (Q, m) float64, >= 0, summing to 1, 0 where padded.
+    residual: (Q,) float64 corpus residual r = ||y* - y|| (0 inside the neighbours' hull).
+    projection: (Q, d_b) y*, the nearest point of the neighbours' hull.
+    distance: (Q, m) ||b_c - y|| of each supporting row, nan where padded.
+    value: (Q,) sum_c w_c v_c when values were given, else None.
+    neighbours: (Q, k) corpus rows searched (step 1), -1 padded.
+    fallbacks: queries whose step 2 went to the reference QP. pivots: step-3 exchange rounds.
+    """
+
+    rows: np.ndarray
+    weights: np.ndarray
+    residual: np.ndarray
+    projection: np.ndarray
+    distance: np.ndarray
+    value: np.ndarray | None
+    neighbours: np.ndarray
+    fallbacks: int = 0
+    pivots: int = 0
+
+
+def decompose(
+    beliefs: np.ndarray,
+    queries: np.ndarray,
+    k: int | None = None,
+    values: np.ndarray | None = None,
+    index: BeliefIndex | None = None,
+    reference: bool = False,
+    selection=None,
+    config: DecomposeConfig | None = None,
+) -> Decomposition:
+    """Decompose each query belief over its nearest corpus beliefs (steps 1-4 above).
+
+    beliefs: (N, d_b) corpus beliefs; queries: (Q, d_b); k: neighbours (default 2(d_b + 1));
+    values: (N,) row values v; index: a BeliefIndex over `beliefs` (default: exact search);
+    reference: step 2 by the reference QP; selection: restrict to a row mask / row ids.
+    """
+    config = config or DecomposeConfig()
+    beliefs, Y, values = _check_inputs(beliefs, queries, values)
+    n_rows, d = beliefs.shape
+    k = config.k if k is None else k
+    k = 2 * (d + 1) if k is None else int(k)
+    if k < 1:
+        raise AocError(f"k must be at least 1 (got {k}); use the default 2(d+1) or a positive number")
+    k = min(k, n_rows)
+    if index is None:
+        index = BeliefIndex.build(beliefs, kind="flat")
+    elif index.n_rows != n_rows or index.dim != d:
+        raise AocError(
+            f"the index covers ({index.n_rows}, {index.dim}) beliefs, not ({n_rows}, {d}); rebuild the index"
+        )
+    with single_threaded_blas():
+        return _decompose(beliefs, Y, k, values, index, reference or config.reference, selection, config)
+
+
+def _decompose(beliefs, Y, k, values, index, reference, selection, config) -> Decomposition:
+    n_q, d = Y.shape
+    if n_q == 0:
+        m = min(d + 1, k)
+        empty = np.zeros((0, m))
+        return Decomposition(
+            np.zeros((0, m), np.int64), empty, np.zeros(0), np.zeros((0, d)), empty,
+            None if values is None else np.zeros(0), np.zeros((0, k), np.int64),
+        )
+
+    # 1. neighbours: the k nearest corpus beliefs of every query
+    _, neighbours = index.search(Y, k, selection)
+    valid = neighbours >= 0
+    B = np.asarray(beliefs[np.maximum(neighbours, 0)], dtype=np.float64)
+    P = B - Y[:, None, :]  # neighbours relative to the query, p_c = b_c - y
+
+    # 2. corpus residual and projection: min_{w in simplex} ||B^T w - y||, exactly
+    if reference:
+        weights, failed = np.zeros(valid.shape), np.arange(n_q)
+    else:
+        solved = min_norm_point(P, valid, tol=config.qp_tol)
+        weights, failed = solved.weights, np.flatnonzero(~solved.ok)
+    for q in failed:
+        c = np.flatnonzero(valid[q])
+        w = reference_weights(B[q, c], Y[q])
+        weights[q] = 0.0
+        weights[q, c] = caratheodory(B[q, c], w)
+    offset = np.einsum("qk,qkd->qd", weights, P)  # y* - y
+    residual = np.sqrt((offset**2).sum(1))
+
+    # 3. minimal corpus subset: exchange vertices while the hull shrinks and still holds y*
+    weights, support, pivots = minimal_subset(
+        P, valid, weights, offset, lp_start=config.lp_start, budget=config.exchange_budget
+    )
+    full = support.sum(1) == d + 1  # d + 1 affinely independent points: y* = y, r = 0
+    residual[full] = 0.0
+    offset[full] = 0.0
+
+    m = min(d + 1, k)
+    order = np.argsort(-weights, axis=1, kind="stable")[:, :m]
+    w_out = np.take_along_axis(weights, order, axis=1)
+    used = w_out > 0
+    rows = np.where(used, np.take_along_axis(neighbours, order, axis=1), -1)
+    w_out = np.where(used, w_out, 0.0)
+    w_out /= w_out.sum(1, keepdims=True)
+    dist = np.sqrt((np.take_along_axis(P, order[:, :, None], axis=1) ** 2).sum(-1))
+    dist = np.where(used, dist, np.nan)
+
+    # 4. value estimate: v_hat = sum_c w_c v_c over the subset
+    value = None
+    if values is not None:
+        value = (w_out * np.where(used, values[np.maximum(rows, 0)], 0.0)).sum(1)
+    return Decomposition(
+        rows=rows.astype(np.int64),
+        weights=w_out,
+        residual=residual,
+        projection=Y + offset,
+        distance=dist,
+        value=value,
+        neighbours=neighbours.astype(np.int64),
+        fallbacks=int(len(failed)) if not reference else 0,
+        pivots=pivots,
+    )
+
+
+def _check_inputs(beliefs, queries, values):
+    beliefs = np.asarray(beliefs)
+    if beliefs.ndim != 2 or beliefs.shape[0] == 0:
+        raise AocError(f"the corpus beliefs must be a non-empty (N, d) array; got shape {beliefs.shape}")
+    d = beliefs.shape[1]
+    Y = np.asarray(queries, dtype=np.float64)
+    if Y.ndim == 1 and Y.shape[0] == d:
+        Y = Y[None, :]
+    if Y.ndim != 2 or Y.shape[1] != d:
+        raise AocError(f"queries must have shape (Q, {d}) to match the corpus beliefs; got {np.shape(queries)}")
+    if not np.isfinite(Y).all():
+        raise AocError("queries contain NaN or infinite values; check the belief model's inputs")
+    if values is not None:
+        values = np.asarray(values, dtype=np.float64)
+        if values.shape != (beliefs.shape[0],):
+            raise AocError(f"values need one entry per corpus row ({beliefs.shape[0]}); got shape {values.shape}")
+    return beliefs, Y, values

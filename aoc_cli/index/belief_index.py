@@ -1,0 +1,408 @@
+"""A FAISS index over the corpus beliefs: k nearest rows, row selection, re-sampling.
+
+Entries of the FAISS index are *positions*; `row_of[position]` is the corpus row a position
+stands for. A base index has one position per row (row_of = identity); a derived index built by
+`resample` / `subsample` repeats or drops rows (multiplicity 4 = four copies of the row, 0.5 = a
+seeded random half), so the same code answers "the k nearest rows of the re-weighted corpus"
+(the paper's adaptivity experiment) with no retraining. Every answer is in corpus rows.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+from dataclasses import asdict
+from pathlib import Path
+
+import faiss
+import numpy as np
+
+from aoc_cli.errors import AocError
+from aoc_cli.index.config import IndexConfig
+from aoc_cli.index.threads import faiss_threads, single_threaded_blas
+
+
+class Selection:
+    """A prepared row restriction: a FAISS ID selector over the index positions.
+
+    Build it once (`BeliefIndex.select(rows_or_mask)`) and pass it to every search of a
+    decision; preparing costs O(N), searching with it costs nothing extra.
+    """
+
+    def __init__(self, mask: np.ndarray):
+        self.mask = mask  # (M,) bool over positions
+        self.count = int(mask.sum())
+        self._bits = np.packbits(mask, bitorder="little")
+        self.selector = faiss.IDSelectorBitmap(mask.size, faiss.swig_ptr(self._bits))
+        self.positions = np.flatnonzero(mask) if self.count <= 4096 else None
+
+
+class BeliefIndex:
+    """Nearest corpus beliefs of query beliefs, exact ("flat") or approximate ("hnsw", "ivf").
+
+    beliefs: the (N, d) float32 corpus belief array the index was built from (kept by
+    reference, e.g. a memory map; None after `load` without beliefs: vectors then come from the
+    FAISS storage).
+    """
+
+    def __init__(
+        self,
+        index: faiss.Index,
+        config: IndexConfig,
+        kind: str,
+        n_rows: int,
+        row_of: np.ndarray | None = None,
+        beliefs: np.ndarray | None = None,
+    ):
+        self.index = index
+        self.config = config
+        self.kind = kind
+        self.n_rows = int(n_rows)
+        self._row_of = None if row_of is None else np.asarray(row_of, dtype=np.int64)
+        self.beliefs = beliefs
+        self._store = _storage_view(index, kind)
+
+    # ---------------------------------------------------------------- building
+    @classmethod
+    def build(cls, beliefs: np.ndarray, config: IndexConfig | None = None, **overrides) -> "BeliefIndex":
+        """Index the (N, d) corpus beliefs. `overrides` set IndexConfig fields (e.g. kind="hnsw")."""
+        config = config or IndexConfig()
+        if overrides:
+            config = IndexConfig.from_dict({**asdict(config), **overrides})
+        beliefs = _as_beliefs(beliefs)
+        n_rows = beliefs.shape[0]
+        if n_rows == 0:
+            raise AocError("the corpus has no beliefs to index; compute beliefs for a non-empty corpus first")
+        kind = config.resolved_kind(n_rows)
+        _set_threads(config)
+        index = _new_faiss(kind, beliefs, config)
+        index.add(beliefs)
+        return cls(index, config, kind, n_rows, None, beliefs)
+
+    @property
+    def dim(self) -> int:
+        return int(self.index.d)
+
+    @property
+    def size(self) -> int:
+        """Number of positions (index entries); equals n_rows for a base index."""
+        return int(self.index.ntotal)
+
+    @property
+    def row_of(self) -> np.ndarray:
+        """(size,) int64: the corpus row of every index position."""
+        if self._row_of is None:
+            return np.arange(self.size, dtype=np.int64)
+        return self._row_of
+
+    @property
+    def derived(self) -> bool:
+        return self._row_of is not None
+
+    def vectors(self, positions: np.ndarray) -> np.ndarray:
+        """(n, d) float32 beliefs stored at the given index positions."""
+        positions = np.asarray(positions, dtype=np.int64)
+        if self.beliefs is not None:
+            rows = positions if self._row_of is None else self._row_of[positions]
+            return np.asarray(self.beliefs[rows], dtype=np.float32)
+        if self._store is not None:
+            return self._store[positions]
+        if isinstance(self.index, faiss.IndexIVF) and self.index.direct_map.type == 0:
+            self.index.make_direct_map()
+        return self.index.reconstruct_batch(positions)
+
+    # ---------------------------------------------------------------- selection
+    def select(self, selection) -> Selection:
+        """Prepare a row restriction: a boolean mask over corpus rows (N,) or an array of rows."""
+        if isinstance(selection, Selection):
+            return selection
+        sel = np.asarray(selection)
+        if sel.dtype == bool:
+            if sel.shape != (self.n_rows,):
+                raise AocError(
+                    f"row mask has shape {sel.shape}, the corpus has {self.n_rows} rows; pass one flag per row"
+                )
+            rows_mask = sel
+        else:
+            if sel.size and not np.issubdtype(sel.dtype, np.integer):
+                raise AocError("a selection is a boolean row mask or an array of integer row ids")
+            sel = sel.astype(np.int64).ravel()
+            if sel.size and (sel.min() < 0 or sel.max() >= self.n_rows):
+                raise AocError(f"selected row ids must lie in [0, {self.n_rows}); check the selection")
+            rows_mask = np.zeros(self.n_rows, dtype=bool)
+            rows_mask[sel] = True
+        mask = rows_mask if self._row_of is None else rows_mask[self._row_of]
+        prepared = Selection(np.ascontiguousarray(mask))
+        if prepared.count == 0:
+            raise AocError("the selection leaves no corpus rows in the index; select at least one row")
+        return prepared
+
+    def _params(self, selection: Selection | None, k: int):
+        sel = None if selection is None else selection.selector
+        if self.kind == "hnsw":
+            params = faiss.SearchParametersHNSW(efSearch=max(self.config.hnsw_ef_search, k))
+        elif self.kind == "ivf":
+            params = faiss.SearchParametersIVF(nprobe=self.config.ivf_nprobe)
+        else:
+            params = faiss.SearchParameters()
+        if sel is not None:
+            params.sel = sel
+        return params
+
+    # ---------------------------------------------------------------- search
+    def search(self, queries: np.ndarray, k: int, selection=None) -> tuple[np.ndarray, np.ndarray]:
+        """The k nearest corpus rows of each query.
+
+        queries: (Q, d) beliefs. selection: None, a row mask (N,) bool, an array of rows, or a
+        prepared `Selection`. Returns distances (Q, k) float64, Euclidean, ascending, and rows
+        (Q, k) int64 corpus rows; when fewer than k rows are available the tail is padded with
+        inf / -1. A batch is served by one search at its centroid when that answer is
+        certified (see IndexConfig.pool_factor); the rest is searched query by query.
+        """
+        Y = _as_queries(queries, self.dim)
+        if k < 1:
+            raise AocError(f"k must be at least 1 (got {k}); ask for one or more neighbours")
+        sel = None if selection is None else self.select(selection)
+        available = self.size if sel is None else sel.count
+        kk = min(int(k), available)
+        _set_threads(self.config)
+        dist = np.full((Y.shape[0], int(k)), np.inf)
+        pos = np.full((Y.shape[0], int(k)), -1, dtype=np.int64)
+        with single_threaded_blas():
+            if sel is not None and sel.positions is not None:
+                # a small selection: exact over the selected rows, whatever the kind
+                d2, p = _exact_among(Y, self.vectors(sel.positions), kk)
+                dist[:, :kk], pos[:, :kk] = d2, sel.positions[p]
+            elif Y.shape[0] >= 2:
+                dist[:, :kk], pos[:, :kk] = self._pooled(Y, kk, sel, available)
+            else:
+                dist[:, :kk], pos[:, :kk] = self._direct(Y, kk, sel)
+        rows = np.where(pos >= 0, self.row_of[np.maximum(pos, 0)], -1)
+        return np.sqrt(np.maximum(dist, 0.0)), rows
+
+    def _direct(self, Y: np.ndarray, k: int, sel: Selection | None) -> tuple[np.ndarray, np.ndarray]:
+        with faiss_threads(1 if Y.shape[0] < 8 else self.config.threads):
+            D, I = self.index.search(Y, k, params=self._params(sel, k))
+        D = np.where(I >= 0, D.astype(np.float64), np.inf)
+        return D, I
+
+    def _pooled(self, Y: np.ndarray, k: int, sel: Selection | None, available: int):
+        """One search at the centroid serves every query it can certify (triangle inequality)."""
+        cfg = self.config
+        kp = int(min(available, max(math.ceil(cfg.pool_factor * k), cfg.pool_min, k)))
+        c = Y.mean(axis=0, keepdims=True)
+        with faiss_threads(1):  # one query: threads only add synchronisation
+            Dc, Ic = self.index.search(c, kp, params=self._params(sel, kp))
+        pool = Ic[0][Ic[0] >= 0]
+        if pool.size < k:
+            return self._direct(Y, k, sel)
+        d2, p = _exact_among(Y, self.vectors(pool), k)
+        pos = pool[p]
+        if pool.size >= available:
+            return d2, pos  # the pool is every available row
+        radius = math.sqrt(max(float(Dc[0, pool.size - 1]), 0.0))
+        spread = np.sqrt(((Y.astype(np.float64) - c.astype(np.float64)) ** 2).sum(axis=1))
+        kth = np.sqrt(np.maximum(d2[:, -1], 0.0))
+        certified = kth <= (radius - spread) - 1e-5 * radius
+        if not certified.all():
+            rest = np.flatnonzero(~certified)
+            d2[rest], pos[rest] = self._direct(Y[rest], k, sel)
+        return d2, pos
+
+    # ---------------------------------------------------------------- adaptivity
+    def resample(self, multiplicity, seed: int | None = None) -> "BeliefIndex":
+        """A derived index where corpus row c appears multiplicity[c] times.
+
+        multiplicity: a scalar or (N,) non-negative floats over corpus rows, applied to every
+        position of this index. The integer part gives copies; of the positions sharing a
+        fractional part f, exactly round(f * n_f) get one more copy, chosen at random (seeded).
+        So 4 = four copies, 1 = unchanged, 0.5 = a random half, 0 = dropped.
+        """
+        mult = np.asarray(multiplicity, dtype=np.float64)
+        if mult.ndim == 0:
+            mult = np.full(self.n_rows, float(mult))
+        if mult.shape != (self.n_rows,):
+            raise AocError(f"multiplicity needs one value per corpus row ({self.n_rows}); got shape {mult.shape}")
+        if not np.all(np.isfinite(mult)) or (mult < 0).any():
+            raise AocError("multiplicities must be finite and non-negative; fix the re-sampling weights")
+        per_pos = mult[self.row_of]
+        base = np.floor(per_pos)
+        frac = np.round(per_pos - base, 12)
+        counts = base.astype(np.int64)
+        rng = np.random.default_rng(self.config.seed if seed is None else seed)
+        for f in np.unique(frac[frac > 0]):
+            members = np.flatnonzero(frac == f)
+            extra = int(round(f * members.size))
+            counts[rng.choice(members, size=extra, replace=False)] += 1
+        positions = np.repeat(np.arange(self.size, dtype=np.int64), counts)
+        if positions.size == 0:
+            raise AocError("re-sampling leaves no corpus rows; give some rows a positive multiplicity")
+        vectors = np.ascontiguousarray(self.vectors(positions))
+        _set_threads(self.config)
+        if self.kind == "ivf":
+            index = faiss.clone_index(self.index)
+            index.reset()  # keeps the trained coarse quantiser: no re-training
+        else:
+            index = _new_faiss(self.kind, vectors, self.config)
+        index.add(vectors)
+        row_of = self.row_of[positions]
+        return BeliefIndex(index, self.config, self.kind, self.n_rows, row_of, self.beliefs)
+
+    def subsample(self, fraction, seed: int | None = None) -> "BeliefIndex":
+        """A derived index keeping a seeded random fraction of rows (scalar or (N,) in [0, 1])."""
+        frac = np.asarray(fraction, dtype=np.float64)
+        if (frac < 0).any() or (frac > 1).any():
+            raise AocError("sub-sampling fractions must lie in [0, 1]; use resample for copies")
+        return self.resample(frac, seed=seed)
+
+    # ---------------------------------------------------------------- persistence
+    def save(self, path: str | os.PathLike) -> None:
+        """Write the FAISS index to `path`, its config to `path`.json (and the row map of a
+        derived index to `path`.rows.npy), each atomically (temp file + os.replace)."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        _atomic(path, lambda tmp: faiss.write_index(self.index, tmp))
+        meta = {
+            "kind": self.kind,
+            "n_rows": self.n_rows,
+            "dim": self.dim,
+            "size": self.size,
+            "derived": self.derived,
+            "config": asdict(self.config),
+        }
+        _atomic(Path(f"{path}.json"), lambda tmp: Path(tmp).write_text(json.dumps(meta, indent=2)))
+        rows_path = Path(f"{path}.rows.npy")
+        if self.derived:
+            _atomic(rows_path, lambda tmp: _save_npy(tmp, self._row_of))
+        elif rows_path.exists():
+            rows_path.unlink()
+
+    @classmethod
+    def load(cls, path: str | os.PathLike, beliefs: np.ndarray | None = None) -> "BeliefIndex":
+        """Read an index written by `save`. beliefs: the corpus belief array (optional)."""
+        path = Path(path)
+        if not path.exists():
+            raise AocError(f"no index at {path}; build it first (aoc index)")
+        index = faiss.read_index(str(path))
+        meta_path = Path(f"{path}.json")
+        meta = json.loads(meta_path.read_text()) if meta_path.exists() else {}
+        config = IndexConfig.from_dict(meta.get("config", {}))
+        kind = meta.get("kind") or _kind_of(index)
+        rows_path = Path(f"{path}.rows.npy")
+        row_of = np.load(rows_path) if meta.get("derived") and rows_path.exists() else None
+        n_rows = int(meta.get("n_rows", index.ntotal))
+        if beliefs is not None:
+            beliefs = _as_beliefs(beliefs)
+            if beliefs.shape != (n_rows, index.d):
+                raise AocError(
+                    f"beliefs have shape {beliefs.shape} but the index was built on ({n_rows}, {index.d}); rebuild the index"
+                )
+        return cls(index, config, kind, n_rows, row_of, beliefs)
+
+
+# -------------------------------------------------------------------- helpers
+def _new_faiss(kind: str, train: np.ndarray, config: IndexConfig) -> faiss.Index:
+    d = train.shape[1]
+    if kind == "flat":
+        return faiss.IndexFlatL2(d)
+    if kind == "hnsw":
+        index = faiss.IndexHNSWFlat(d, config.hnsw_m)
+        index.hnsw.efConstruction = config.hnsw_ef_construction
+        index.hnsw.efSearch = config.hnsw_ef_search
+        return index
+    if kind == "ivf":
+        nlist = config.nlist(train.shape[0])
+        index = faiss.IndexIVFFlat(faiss.IndexFlatL2(d), d, nlist)
+        index.cp.seed = config.seed
+        n_train = min(train.shape[0], max(config.ivf_train_max, 40 * nlist))
+        rng = np.random.default_rng(config.seed)
+        pick = np.sort(rng.choice(train.shape[0], size=n_train, replace=False))
+        index.train(np.ascontiguousarray(train[pick]))
+        index.nprobe = config.ivf_nprobe
+        return index
+    raise AocError(f"unknown index kind {kind!r}; use flat, hnsw, ivf or auto")
+
+
+def _storage_view(index: faiss.Index, kind: str) -> np.ndarray | None:
+    """Zero-copy (ntotal, d) view of the vectors of a flat or HNSW-flat index."""
+    flat = None
+    if isinstance(index, faiss.IndexFlat):
+        flat = index
+    elif isinstance(index, faiss.IndexHNSW):
+        storage = faiss.downcast_index(index.storage)
+        flat = storage if isinstance(storage, faiss.IndexFlat) else None
+    if flat is None or flat.ntotal == 0:
+        return None
+    return faiss.rev_swig_ptr(flat.get_xb(), flat.ntotal * flat.d).reshape(flat.ntotal, flat.d)
+
+
+def _kind_of(index: faiss.Index) -> str:
+    if isinstance(index, faiss.IndexHNSW):
+        return "hnsw"
+    if isinstance(index, faiss.IndexIVF):
+        return "ivf"
+    return "flat"
+
+
+def _exact_among(Y: np.ndarray, V: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Squared distances (float64, ascending) and positions (into V) of the k nearest rows of V.
+
+    Candidates are ranked in float32 after centring on the mean of V (so the expansion
+    |y|^2 - 2 y.v + |v|^2 does not cancel), then the k kept distances are recomputed exactly.
+    """
+    centre = V.mean(axis=0, dtype=np.float64).astype(np.float32)
+    Yc = np.asarray(Y, dtype=np.float32) - centre
+    Vc = np.asarray(V, dtype=np.float32) - centre
+    D = (Yc * Yc).sum(1)[:, None] - 2.0 * (Yc @ Vc.T) + (Vc * Vc).sum(1)[None, :]
+    if k < V.shape[0]:
+        part = np.argpartition(D, k - 1, axis=1)[:, :k]
+    else:
+        part = np.broadcast_to(np.arange(V.shape[0]), D.shape)
+    diff = V[part].astype(np.float64) - np.asarray(Y, dtype=np.float64)[:, None, :]
+    dp = np.einsum("qkd,qkd->qk", diff, diff)
+    order = np.argsort(dp, axis=1, kind="stable")
+    return np.take_along_axis(dp, order, axis=1), np.take_along_axis(part, order, axis=1)
+
+
+def _as_beliefs(beliefs) -> np.ndarray:
+    arr = np.asarray(beliefs)
+    if arr.ndim != 2:
+        raise AocError(f"beliefs must be an (N, d) array; got shape {arr.shape}")
+    if arr.dtype != np.float32 or not arr.flags.c_contiguous:
+        arr = np.ascontiguousarray(arr, dtype=np.float32)
+    return arr
+
+
+def _as_queries(queries, dim: int) -> np.ndarray:
+    Y = np.asarray(queries, dtype=np.float64)
+    if Y.ndim == 1:
+        Y = Y[None, :]
+    if Y.ndim != 2 or Y.shape[1] != dim:
+        raise AocError(f"queries must have shape (Q, {dim}) to match the beliefs; got {np.shape(queries)}")
+    if not np.isfinite(Y).all():
+        raise AocError("queries contain NaN or infinite values; check the belief model's inputs")
+    return np.ascontiguousarray(Y, dtype=np.float32)
+
+
+def _save_npy(path: str, array: np.ndarray) -> None:
+    with open(path, "wb") as handle:
+        np.save(handle, array)
+
+
+def _set_threads(config: IndexConfig) -> None:
+    if config.threads > 0:
+        faiss.omp_set_num_threads(config.threads)
+
+
+def _atomic(path: Path, write) -> None:
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise

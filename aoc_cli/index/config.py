@@ -1,0 +1,77 @@
+"""Configuration of the nearest-neighbour index over corpus beliefs."""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, fields
+
+from aoc_cli.errors import AocError
+
+KINDS = ("auto", "flat", "hnsw", "ivf")
+
+
+@dataclass
+class IndexConfig:
+    """How the k nearest corpus beliefs of a query are found (step 1 of the decomposition).
+
+    The index answers  N_k(y) = the k corpus rows c minimising ||b^c - y||_2  (the paper uses
+    k = 2(d_b + 1) neighbours, DESIGN.md "The method, precisely", step 1).
+
+    kind: "flat" is exact brute force; "hnsw" (graph) and "ivf" (inverted lists) are approximate;
+        "auto" picks flat below `auto_flat_max` rows, hnsw up to `auto_hnsw_max`, ivf beyond.
+    hnsw_m, hnsw_ef_construction, hnsw_ef_search: graph degree and beam widths (the search beam
+        is raised to at least the number of neighbours asked for).
+    ivf_nlist: number of inverted lists (0: 4 sqrt(N) rounded to a power of two, at most 16384);
+        ivf_nprobe: lists visited per query; ivf_train_max: rows used to train the coarse quantiser.
+    pool_factor, pool_min: batched search. The Q queries of one control step lie close together,
+        so the index is searched once, at their centroid c, for k' = max(pool_factor * k,
+        pool_min) rows. A row outside that pool is at least d_k'(c) - ||y_i - c|| from query i
+        (triangle inequality), so query i's k nearest rows inside the pool are its exact k
+        nearest whenever its k-th distance is below that bound ("certified"). Uncertified
+        queries are searched one by one. With an approximate kind the pool is as good as the
+        index's own answer for c.
+    threads: FAISS OpenMP threads (0: leave FAISS's default).
+    seed: seeds k-means training and the random parts of re-sampling.
+    """
+
+    kind: str = "auto"
+    auto_flat_max: int = 200_000
+    auto_hnsw_max: int = 2_000_000
+    hnsw_m: int = 32
+    hnsw_ef_construction: int = 64
+    hnsw_ef_search: int = 128
+    ivf_nlist: int = 0
+    ivf_nprobe: int = 48
+    ivf_train_max: int = 200_000
+    pool_factor: float = 4.0
+    pool_min: int = 128
+    threads: int = 0
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.kind not in KINDS:
+            raise AocError(f"unknown index kind {self.kind!r}; use one of {', '.join(KINDS)}")
+
+    def resolved_kind(self, n_rows: int) -> str:
+        """The concrete kind used for a corpus of n_rows rows."""
+        if self.kind != "auto":
+            return self.kind
+        if n_rows <= self.auto_flat_max:
+            return "flat"
+        return "hnsw" if n_rows <= self.auto_hnsw_max else "ivf"
+
+    def nlist(self, n_rows: int) -> int:
+        """Inverted lists for IVF: the configured number, or about 4 sqrt(N)."""
+        if self.ivf_nlist > 0:
+            return min(self.ivf_nlist, max(1, n_rows))
+        target = 4.0 * math.sqrt(max(n_rows, 1))
+        return int(min(16384, max(1, 2 ** round(math.log2(max(target, 1.0))))))
+
+    def to_json(self) -> str:
+        return json.dumps(asdict(self), indent=2, sort_keys=True)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "IndexConfig":
+        names = {f.name for f in fields(cls)}
+        return cls(**{key: value for key, value in data.items() if key in names})
