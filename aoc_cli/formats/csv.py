@@ -89,8 +89,8 @@ def numeric(values: np.ndarray, name: str, path: Path) -> np.ndarray:
             try:
                 float(v)
             except ValueError:
-                raise AocError(f"{path}: column {name!r}, data row {i + 1} holds {v!r}, not a "
-                               "number") from None
+                raise AocError(f"{path}: column {name!r}, data row {i + 1} holds "
+                               f"{str(v)!r}, not a number") from None
     raise AssertionError("unreachable")
 
 
@@ -111,7 +111,7 @@ def _sort_key(values: np.ndarray, name: str, path: Path, dates: bool) -> np.ndar
             return np.array(np.char.strip(values), dtype="datetime64[ns]").astype(np.int64)
         except ValueError:
             raise AocError(f"{path}: time column {name!r} holds neither numbers nor ISO dates "
-                           f"(e.g. {values[0]!r})") from None
+                           f"(e.g. {str(values[0])!r})") from None
     return np.char.strip(values)
 
 
@@ -261,7 +261,7 @@ def _read_static(path: Path, id_col: str, episode_keys: np.ndarray, episode_ids:
     keys = numeric(cols[id_col], id_col, path) if numeric_ids else np.char.strip(cols[id_col])
     uniq, counts = np.unique(keys, return_counts=True)
     if np.any(counts > 1):
-        raise AocError(f"--static {path} has several rows for id {uniq[counts > 1][0]!r}: "
+        raise AocError(f"--static {path} has several rows for id {str(uniq[counts > 1][0])!r}: "
                        "give one row per episode")
     order = np.argsort(keys, kind="stable")
     pos = np.searchsorted(keys[order], episode_keys)
