@@ -116,7 +116,7 @@ def plot_trajectories(paths, out_png, title=None, labels=None) -> None:
     ax.plot([-0.2, 0.2], [0, 0], color="gold", lw=6, solid_capstyle="butt", zorder=4)
     render.draw_paths(ax, paths, labels)
     ax.set_xlim(-1.0, 1.0)
-    ax.set_ylim(-0.1, 1.6)
+    ax.set_ylim(-0.3, 1.6)
     render.save(fig, out_png)
 
 
