@@ -38,6 +38,8 @@ def reference_weights(neighbours: np.ndarray, query: np.ndarray) -> np.ndarray:
         solver="piqp",
         eps_abs=1e-12,
         eps_rel=1e-12,
+        eps_duality_gap_abs=1e-14,
+        eps_duality_gap_rel=1e-14,
     )
     if w is None:
         raise RuntimeError("piqp found no solution of the corpus-residual QP")
