@@ -87,7 +87,7 @@ class Task:
             "default_steps": self.default_steps,
             "default_episodes": self.default_episodes,
             "policies": ", ".join(self.policies),
-            "success": self.success_test or "none (compare returns)",
+            "success": self.success_test or "none (returns)",
         }
 
 
