@@ -8,6 +8,7 @@ the observation at which action a_t was taken and the reward that followed it.
 from __future__ import annotations
 
 import contextlib
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Iterable, Iterator
@@ -17,6 +18,7 @@ import numpy as np
 
 from aoc_cli.errors import AocError
 from aoc_cli.store import CorpusData, box_space, discrete_space, episode_starts_from_lengths
+from aoc_cli.store.corpus import all_finite
 
 
 def no_progress(items: Iterable, description: str, total: int | None = None) -> Iterable:
@@ -126,11 +128,22 @@ def action_space_of(actions: np.ndarray, discrete: bool, names=None) -> tuple[np
         actions = actions.astype(np.float32)
     space = box_space(actions.shape[1], names=names)
     if len(actions):
-        with np.errstate(invalid="ignore"):
-            space["low"] = np.nanmin(actions, axis=0).astype(float).tolist()
-            space["high"] = np.nanmax(actions, axis=0).astype(float).tolist()
-        space["bounds"] = "observed"
+        space.update(observed_bounds(actions), bounds="observed")
     return actions, space
+
+
+def observed_bounds(actions: np.ndarray) -> dict:
+    """``{"low": [...], "high": [...]}``: the per-dimension min and max of (N, d_a) actions,
+    ignoring NaN (all-NaN dimensions give None)."""
+    if all_finite(actions):
+        low, high = actions.min(axis=0), actions.max(axis=0)
+    else:
+        finite = np.where(np.isfinite(actions), actions, np.nan)
+        with np.errstate(invalid="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            low, high = np.nanmin(finite, axis=0), np.nanmax(finite, axis=0)
+    return {"low": [None if not np.isfinite(x) else float(x) for x in low],
+            "high": [None if not np.isfinite(x) else float(x) for x in high]}
 
 
 def flat_observations(obs: np.ndarray) -> np.ndarray:

@@ -14,9 +14,10 @@ from pathlib import Path
 import numpy as np
 
 from aoc_cli.errors import AocError
-from aoc_cli.formats.common import ReadOptions
+from aoc_cli.formats.common import ReadOptions, observed_bounds
 from aoc_cli.formats.detect import FORMATS, detect_format
 from aoc_cli.store import CorpusData, Store, check_name
+from aoc_cli.store.corpus import all_finite
 
 
 def read_dataset(path: str | os.PathLike, fmt: str | None = None,
@@ -56,6 +57,9 @@ def read_dataset(path: str | os.PathLike, fmt: str | None = None,
         if bad.any():
             data = data.select_episodes(~bad)
             data.source = {**data.source, "dropped_nonfinite_episodes": int(bad.sum())}
+            if data.action_space.get("bounds") == "observed":
+                data.action_space = {**data.action_space,
+                                     **observed_bounds(np.asarray(data.actions))}
     else:
         _check_finite(data)
     return data.validate()
@@ -69,7 +73,7 @@ def _check_finite(data: CorpusData) -> None:
         if arr is None:
             continue
         arr = np.asarray(arr)
-        if not np.issubdtype(arr.dtype, np.floating):
+        if all_finite(arr):
             continue
         finite = np.isfinite(arr) if arr.ndim == 1 else np.isfinite(arr).all(axis=1)
         if not finite.all():

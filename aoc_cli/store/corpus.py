@@ -45,6 +45,19 @@ def episode_starts_from_lengths(lengths) -> np.ndarray:
     return np.concatenate([[0], np.cumsum(np.asarray(lengths, dtype=np.int64))]).astype(np.int64)
 
 
+def all_finite(arr: np.ndarray) -> bool:
+    """True when a float array holds no NaN or inf. Fast path: NaN and inf propagate through a
+    sum (one pass, no temporary); only when the sum is not finite (a bad value, or an overflow
+    of large finite values) is every element checked."""
+    arr = np.asarray(arr)
+    if not np.issubdtype(arr.dtype, np.floating):
+        return True
+    with np.errstate(over="ignore", invalid="ignore"):
+        if np.isfinite(arr.sum()):
+            return True
+    return bool(np.isfinite(arr).all())
+
+
 @dataclass
 class CorpusData:
     """A corpus in memory, as readers produce it and the store writes it."""
@@ -132,7 +145,7 @@ class CorpusData:
             raise AocError("episode offsets must start at 0, end at the row count and increase")
         self.episode_starts = starts
         for name, arr in (("observations", obs), ("actions", act), ("rewards", self.rewards)):
-            if arr is None or not np.issubdtype(arr.dtype, np.floating):
+            if arr is None or not np.issubdtype(arr.dtype, np.floating) or all_finite(arr):
                 continue
             finite = np.isfinite(arr) if arr.ndim == 1 else np.isfinite(arr).all(axis=1)
             if not finite.all():
@@ -153,6 +166,8 @@ class CorpusData:
             if arr is None or not np.issubdtype(np.asarray(arr).dtype, np.floating):
                 continue
             a = np.asarray(arr)
+            if all_finite(a):
+                continue
             bad |= ~(np.isfinite(a) if a.ndim == 1 else np.isfinite(a).all(axis=1))
         ep = np.searchsorted(self.episode_starts, np.arange(self.n_rows), side="right") - 1
         out = np.zeros(self.n_episodes, dtype=bool)
