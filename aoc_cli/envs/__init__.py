@@ -54,14 +54,15 @@ def make_env(name_or_gym_id: str, **kw) -> gymnasium.Env:
     """A built-in task's evaluation environment, or any registered gymnasium id."""
     if name_or_gym_id in TASKS:
         return TASKS[name_or_gym_id].make(**kw)
-    if name_or_gym_id in gymnasium.registry:
-        try:
-            return gymnasium.make(name_or_gym_id, **kw)
-        except gymnasium.error.DependencyNotInstalled as err:
-            raise AocError(f"gymnasium environment {name_or_gym_id!r} needs a package that is "
-                           f"not installed: {str(err).splitlines()[0]}") from err
-    raise AocError(f"unknown environment {name_or_gym_id!r}: use a built-in task "
-                   f"({', '.join(TASKS)}) or a registered gymnasium id such as Pendulum-v1")
+    try:
+        return gymnasium.make(name_or_gym_id, **kw)
+    except gymnasium.error.DependencyNotInstalled as err:
+        raise AocError(f"gymnasium environment {name_or_gym_id!r} needs a package that is "
+                       f"not installed: {str(err).splitlines()[0]}") from err
+    except (gymnasium.error.Error, ModuleNotFoundError) as err:
+        raise AocError(f"unknown environment {name_or_gym_id!r}: use a built-in task "
+                       f"({', '.join(TASKS)}) or a registered gymnasium id such as "
+                       f"Pendulum-v1 ({str(err).splitlines()[0]})") from err
 
 
 def collect(task: str, steps: int | None = None, episodes: int | None = None, seed: int = 0,

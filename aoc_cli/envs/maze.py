@@ -149,7 +149,8 @@ def targets(policy: str, pos: np.ndarray) -> np.ndarray:
 
 
 def heading_action(pos: np.ndarray, target: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """Straight for ``target`` with speed U(0.5, 1) (no overshoot) plus N(0, 0.15^2) noise; (B, 2)."""
+    """Actions (B, 2): straight for ``target`` (B, 2) at speed U(0.5, 1), never past it, plus
+    N(0, 0.15^2) noise on each coordinate, clipped to [-1, 1]."""
     delta = np.asarray(target) - pos
     dist = np.linalg.norm(delta, axis=1)
     speed = np.minimum(rng.uniform(*SPEED, len(pos)), dist)
@@ -222,7 +223,7 @@ def _collect(world: str, steps: int | None, episodes: int | None, seed: int,
         plan = [names[(len(eps) + i) % len(names)] for i in range(batch)]
         before = rows
 
-        def on_step(length, before=before, done_eps=len(eps)):
+        def on_step(length, before=before):
             if progress is not None and steps is not None:
                 progress(min(steps, before + int(length.sum())), steps)
 

@@ -28,7 +28,8 @@ def test_vectorised_step_equals_gymnasiums_pendulum_bit_for_bit():
             obs, r, *_ = env.step(torque[i:i + 1])
             assert r == reward[i]
             np.testing.assert_array_equal(env.state, [new_theta[i], new_theta_dot[i]])
-            np.testing.assert_array_equal(obs, observe(new_theta[i:i + 1], new_theta_dot[i:i + 1])[0])
+            expected = observe(new_theta[i:i + 1], new_theta_dot[i:i + 1])[0]
+            np.testing.assert_array_equal(obs, expected)
         theta, theta_dot = new_theta, new_theta_dot
 
 
