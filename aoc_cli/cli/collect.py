@@ -54,10 +54,8 @@ def register(app: typer.Typer) -> None:
         if store.exists(name) and not overwrite:
             raise AocError(f"corpus {name!r} already exists in {store.root}: pass --overwrite "
                            "to replace it, or choose another --name")
-        unit = "episodes" if episodes is not None or (steps is None and not t.default_steps) \
-            else "rows"
         with progress() as bar:
-            job = bar.add_task(f"collect {task} ({unit})", total=None)
+            job = bar.add_task(f"collect {t.name}", total=None)
 
             def on_progress(done: int, total: int) -> None:
                 bar.update(job, completed=done, total=total)

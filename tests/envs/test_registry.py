@@ -39,6 +39,7 @@ def test_gym_ids_are_registered_and_any_gymnasium_id_works():
     env = gymnasium.make("aoc/PendulumHet-v0", system="converse")
     assert env.unwrapped.system == "converse"
     assert make_env("Pendulum-v1").spec.id == "Pendulum-v1"
+    assert make_env("aoc_cli.envs:aoc/TwoGates-v0").spec.max_episode_steps == 32
     with pytest.raises(AocError, match="pendulum-het, pendulum-het-upright, maze"):
         make_env("NoSuchEnv-v9")
 
