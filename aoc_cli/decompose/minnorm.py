@@ -92,20 +92,19 @@ def min_norm_point(
     out_res = np.zeros(n_q)
     out_ok = np.zeros(n_q, dtype=bool)
 
-    # state of the live problems (compacted when half of them are done)
+    # state of the live problems; slot arrays are kept contiguous and only as wide as needed
     live = np.arange(n_q)
     r = np.arange(n_q)
     j0 = np.argmin(sq, axis=1)
+    mu = 1
     slot = np.zeros((n_q, m), dtype=np.int64)
     slot[:, 0] = j0
-    active = np.zeros((n_q, m), dtype=bool)
-    active[:, 0] = True
-    lam = np.zeros((n_q, m))
-    lam[:, 0] = 1.0
-    Hinv = np.zeros((n_q, m, m))
-    Hinv[:, 0, 0] = 1.0 / (sq[r, j0] + 1.0)
-    Ps = np.zeros((n_q, m, d))
-    Ps[:, 0] = P[r, j0]
+    act = np.ones((n_q, mu), dtype=bool)
+    nact = np.ones(n_q, dtype=np.int64)
+    lam = np.ones((n_q, mu))
+    H = (1.0 / (sq[r, j0] + 1.0))[:, None, None].copy()
+    a = H[:, :, 0].copy()  # row sums of H^{-1}, kept up to date
+    Ps = P[r, j0][:, None, :].copy()
     Pl, sql = P, sq
     blocked = np.where(valid, 0.0, np.inf)
     done = np.zeros(n_q, dtype=bool)
@@ -113,70 +112,78 @@ def min_norm_point(
 
     def collect(idx: np.ndarray) -> None:
         q = live[idx]
-        w = np.where(active[idx], lam[idx], 0.0)
+        w = np.where(act[idx], lam[idx], 0.0)
         w = w / w.sum(axis=1, keepdims=True)
-        np.add.at(out_w, (np.repeat(q, m), slot[idx].ravel()), w.ravel())
+        np.add.at(out_w, (np.repeat(q, mu), slot[idx, :mu].ravel()), w.ravel())
         xf = (w[:, None, :] @ Ps[idx])[:, 0]
         out_res[q] = np.sqrt(np.einsum("qd,qd->q", xf, xf)) * scale[q]
         out_ok[q] = ~failed[idx]
 
     it = 0
-    mu = min(2, m)  # slots in use: corrals fill slots from the left, so only [:mu] is touched
     while it < max_iter:
         it += 1
-        act, lm, Hv, Pv = active[:, :mu], lam[:, :mu], Hinv[:, :mu, :mu], Ps[:, :mu]
-        a = Hv.sum(axis=2)
+        if mu < m and (nact == mu).any():  # a corral may grow: widen the slot arrays
+            old, mu = mu, min(m, mu + 3)
+            act, lam, a, Ps = (_widen(x, old, mu) for x in (act, lam, a, Ps))
+            H = _widen(H, old, mu, square=True)
         alpha = a / a.sum(axis=1, keepdims=True)
         neg = act & (alpha <= 0.0)
-        minor = neg.any(axis=1) & ~done
-        lm[...] = np.where(minor[:, None], lm, alpha)
+        minor = neg.any(axis=1)
+        lam = np.where(minor[:, None], lam, alpha)
 
         # major cycle: optimality test and entering point
-        x = (lm[:, None, :] @ Pv)[:, 0]
-        xP = (Pl @ x[:, :, None])[..., 0] + blocked
+        x = (lam[:, None, :] @ Ps)[:, 0]
+        xP = (Pl @ x[:, :, None])[..., 0]
+        xP += blocked
         j = np.argmin(xP, axis=1)
         xx = np.einsum("qd,qd->q", x, x)
         # a full corral (d + 1 points, or all k) with alpha > 0: x is optimal
-        optimal = (xx - xP[r, j] <= tol + 1e-10 * xx) | act.all(axis=1)
+        optimal = (xx - xP[r, j] <= tol + 1e-10 * xx) | (nact == m)
         add = ~(minor | done | optimal)
-        done |= ~minor & optimal
+        done |= optimal & ~minor
 
         # minor cycle: step towards alpha until a weight reaches zero; that point leaves
-        ratio = np.where(neg, lm / np.maximum(lm - alpha, 1e-300), np.inf)
+        ratio = np.where(neg, lam / np.maximum(lam - alpha, 1e-300), np.inf)
         s_out = np.argmin(ratio, axis=1)
         theta = np.where(minor, np.minimum(ratio[r, s_out], 1.0), 0.0)
-        lm += theta[:, None] * (alpha - lm)
+        lam += theta[:, None] * (alpha - lam)
 
         # one rank-one update of H^{-1}: drop s_out (minor) or add j at a free slot (add)
         s_in = np.argmin(act, axis=1)
         pj = Pl[r, j]
-        g = np.where(act, (Pv @ pj[:, :, None])[..., 0] + 1.0, 0.0)
-        u = (Hv @ g[:, :, None])[..., 0]
+        g = (Ps @ pj[:, :, None])[..., 0] + 1.0
+        g *= act
+        u = (H @ g[:, :, None])[..., 0]
         sigma = sql[r, j] + 1.0 - np.einsum("qm,qm->q", g, u)
-        c = Hv[r, :, s_out]
+        c = H[r, :, s_out]
         c_out = c[r, s_out]
         u[r, s_in] -= 1.0
         bad = (add & (sigma <= 1e-13)) | (minor & (c_out <= 0.0))
-        add &= ~bad
-        minor &= ~bad
-        failed |= bad
-        done |= bad
-        v = np.where(add[:, None], u, np.where(minor[:, None], c, 0.0))
+        if bad.any():
+            add &= ~bad
+            minor &= ~bad
+            failed |= bad
+            done |= bad
+        v = np.where(add[:, None], u, c)
+        v *= (add | minor)[:, None]
         den = np.where(add, sigma, np.where(minor, -c_out, 1.0))
-        Hv += v[:, :, None] * (v / den[:, None])[:, None, :]
+        w = v / den[:, None]
+        H += v[:, :, None] * w[:, None, :]
+        a += v * w.sum(axis=1, keepdims=True)
         rm = r[minor]
         so = s_out[rm]
         act[rm, so] = False
-        lm[rm, so] = 0.0
-        Hv[rm, so, :] = 0.0
-        Hv[rm, :, so] = 0.0
+        lam[rm, so] = 0.0
+        H[rm, so, :] = 0.0
+        H[rm, :, so] = 0.0
+        a[rm, so] = 0.0
         ad = r[add]
         si = s_in[ad]
         act[ad, si] = True
         slot[ad, si] = j[ad]
-        Pv[ad, si] = pj[ad]
-        if ad.size and mu < m and act[:, mu - 1].any():
-            mu += 1
+        Ps[ad, si] = pj[ad]
+        nact += add
+        nact -= minor
 
         if done.all():
             break
@@ -185,7 +192,7 @@ def min_norm_point(
             collect(fin)
             keep = ~done
             live = live[keep]
-            slot, active, lam, Hinv, Ps = slot[keep], active[keep], lam[keep], Hinv[keep], Ps[keep]
+            slot, act, nact, lam, H, a, Ps = slot[keep], act[keep], nact[keep], lam[keep], H[keep], a[keep], Ps[keep]
             Pl, sql, blocked = Pl[keep], sql[keep], blocked[keep]
             done, failed = done[keep], failed[keep]
             r = np.arange(live.size)
@@ -193,3 +200,17 @@ def min_norm_point(
     collect(np.arange(live.size))
     out_support = out_w > 0
     return MinNormResult(out_w, out_support, out_res, out_ok, it)
+
+
+def _widen(x: np.ndarray, old: int, new: int, square: bool = False) -> np.ndarray:
+    """x with its slot axis 1 (and axis 2 too if square) grown from old to new, zero-filled."""
+    shape = list(x.shape)
+    shape[1] = new
+    if square:
+        shape[2] = new
+    out = np.zeros(shape, dtype=x.dtype)
+    if square:
+        out[:, :old, :old] = x
+    else:
+        out[:, :old] = x
+    return out
