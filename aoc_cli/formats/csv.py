@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from aoc_cli.errors import AocError
-from aoc_cli.formats.common import ReadOptions, action_space_of, encode_labels
+from aoc_cli.formats.common import ReadOptions, action_space_of, encode_labels, no_progress
 from aoc_cli.store import CorpusData, box_space
 
 CHUNK_LINES = 50_000
@@ -63,8 +63,9 @@ def read_table(path: Path, progress=None) -> tuple[list[str], dict[str, np.ndarr
     body = [ln for ln in lines[1:] if ln.strip()]
     rows: list[list[str]] = []
     chunks = range(0, len(body), CHUNK_LINES)
-    for start in (progress or (lambda x, *a, **k: x))(chunks, f"reading {path.name}",
-                                                      len(chunks)):
+    if progress is None or len(chunks) < 2:  # no bar for a file read in one go
+        progress = no_progress
+    for start in progress(chunks, f"reading {path.name}", len(chunks)):
         part = list(csv.reader(body[start:start + CHUNK_LINES], delimiter=delimiter))
         for i, r in enumerate(part):
             if len(r) != len(header):

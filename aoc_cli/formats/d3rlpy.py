@@ -26,6 +26,7 @@ from aoc_cli.formats.common import (
     check_lengths,
     flat_observations,
     from_flat,
+    no_progress,
     open_h5,
 )
 from aoc_cli.store import CorpusData, box_space, episode_starts_from_lengths
@@ -66,7 +67,8 @@ def read_d3rlpy(path: Path, options: ReadOptions) -> CorpusData:
         version = f["version"][()] if "version" in f else b"?"
         source["version"] = version.decode() if isinstance(version, bytes) else str(version)
         obs, act, rew, term, lengths = [], [], [], [], []
-        for i in options.progress(range(n_ep), "reading d3rlpy episodes", n_ep):
+        progress = options.progress if n_ep > 100 else no_progress
+        for i in progress(range(n_ep), "reading d3rlpy episodes", n_ep):
             o = _observations(f, i, path)
             a = _get(f, f"actions_{i}", path)
             r = _get(f, f"rewards_{i}", path).reshape(-1) if f"rewards_{i}" in f else None

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from aoc_cli.errors import AocError
-from aoc_cli.formats.common import ReadOptions, encode_labels
+from aoc_cli.formats.common import ReadOptions, encode_labels, no_progress
 from aoc_cli.store import CorpusData, box_space, discrete_space, episode_starts_from_lengths
 
 BATCH_EPISODES = 256
@@ -72,7 +72,8 @@ def read_minari(path: str | os.PathLike, options: ReadOptions) -> CorpusData:
     indices = list(dataset.episode_indices)
     batches = [indices[i:i + BATCH_EPISODES] for i in range(0, len(indices), BATCH_EPISODES)]
     try:
-        for batch in options.progress(batches, "reading Minari episodes", len(batches)):
+        progress = options.progress if len(batches) > 1 else no_progress
+        for batch in progress(batches, "reading Minari episodes", len(batches)):
             for ep in dataset.storage.get_episodes(batch):
                 t = len(ep["rewards"])
                 o = flatten(ep["observations"])
