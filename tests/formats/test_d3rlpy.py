@@ -52,3 +52,14 @@ def test_d3rlpy_v1_flat_dump_ends_episodes_at_episode_terminals(tmp_path):
     assert data.source["format"] == "d3rlpy"
     assert list(data.episode_starts) == [0, 4, 10]
     assert data.terminals[3] and data.truncations[9] and not data.terminals[9]
+
+
+def test_truncated_d3rlpy_dump_is_a_clear_error(tmp_path):
+    import pytest
+
+    from aoc_cli.errors import AocError
+
+    path = write_d3rlpy(tmp_path / "b.h5", d3rlpy_episodes(lengths=(30,) * 10))
+    path.write_bytes(path.read_bytes()[: path.stat().st_size * 3 // 4])
+    with pytest.raises(AocError, match="truncated or corrupt"):
+        read_dataset(path)

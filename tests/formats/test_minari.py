@@ -51,3 +51,20 @@ def test_minari_dataset_id_box_spaces_and_info_tag(minari_root, tmp_path):
     codes, labels = data.tags["policy"]
     assert labels == ["0", "1"] and codes.tolist() == [0] * 5 + [1] * 3
     assert data.source["dataset_id"] == "test/box-v0"
+
+
+def test_truncated_minari_file_is_a_clear_error(minari_root):
+    from aoc_cli.errors import AocError
+
+    write_minari("test/cut-v0", lengths=(20,) * 5)
+    path = minari_root / "test" / "cut-v0" / "data" / "main_data.hdf5"
+    path.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
+    with pytest.raises(AocError, match="truncated or corrupt"):
+        read_dataset("test/cut-v0")
+
+
+def test_unknown_minari_id_is_a_missing_path(minari_root):
+    from aoc_cli.errors import AocError
+
+    with pytest.raises(AocError, match="no such file or folder"):
+        read_dataset("test/absent-v0")
