@@ -1,0 +1,276 @@
+"""A trained belief model on disk, ``<corpus>/models/<id>/``, and loaded for use.
+
+Files (the folder is written in a temporary folder beside it and renamed into place):
+
+* ``weights.pt``: the network's ``state_dict`` only (load with ``weights_only=True``);
+* ``config.json``: the BeliefConfig, mode, value spec, normalisation, input dims, split,
+  final metrics, and ``corpus_hash`` (the corpus the model was trained on);
+* ``metrics.csv``: one line per epoch (train/validation loss, R^2 or accuracy, seconds);
+* ``values.npy``: (N,) float64 the value target v of every corpus row (value mode only).
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import json
+import time
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+import torch
+
+from aoc_cli.belief.config import BeliefConfig
+from aoc_cli.belief.model import BeliefNet, Encoder, Normalisation
+from aoc_cli.errors import AocError
+from aoc_cli.store import History, atomic_dir, check_name, write_json, write_npy
+
+FORMAT = "aoc-belief-model"
+FORMAT_VERSION = 1
+
+
+def model_dir(corpus, model_id: str) -> Path:
+    return Path(corpus.models_dir) / check_name(model_id, "model")
+
+
+def list_models(corpus) -> list[str]:
+    """Ids of the models of ``corpus``, oldest first (by training time)."""
+    root = Path(corpus.models_dir)
+    if not root.is_dir():
+        return []
+    found = []
+    for p in root.iterdir():
+        if p.name.startswith(".") or not (p / "config.json").is_file():
+            continue
+        try:
+            trained = json.loads((p / "config.json").read_text()).get("trained_unix", 0.0)
+        except (OSError, json.JSONDecodeError):
+            continue
+        found.append((trained, p.name))
+    return [name for _t, name in sorted(found)]
+
+
+def save_model(corpus, model_id: str, *, net: BeliefNet, config: BeliefConfig, dims: dict,
+               norm: Normalisation, value: dict | None, values: np.ndarray | None,
+               metrics: dict, history: list[dict], split: dict) -> Path:
+    """Write the model folder atomically (replacing any previous one of that id)."""
+    path = model_dir(corpus, model_id)
+    meta = {
+        "format": FORMAT, "format_version": FORMAT_VERSION,
+        "model": model_id, "corpus": corpus.name, "corpus_hash": corpus.hash,
+        "trained": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "trained_unix": time.time(),
+        "mode": config.mode, "value": value, "config": config.to_dict(), "dims": dims,
+        "normalisation": norm.to_dict(), "split": split, "metrics": metrics,
+    }
+    with atomic_dir(path) as tmp:
+        torch.save({k: v.detach().cpu() for k, v in net.state_dict().items()},
+                   tmp / "weights.pt")
+        if values is not None:
+            write_npy(tmp / "values.npy", np.asarray(values, dtype=np.float64))
+        columns = list(dict.fromkeys(k for r in history for k in r))
+        with open(tmp / "metrics.csv", "w", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=columns, lineterminator="\n")
+            writer.writeheader()
+            writer.writerows(history)
+        write_json(tmp / "config.json", meta)
+    return path
+
+
+class LinearHead(NamedTuple):
+    """The linear head l in original units: ``output = belief @ weight.T + bias``.
+
+    weight (out, d_b) float64, bias (out,) float64; out = 1 (value), d_a (continuous actions)
+    or n (discrete logits).
+    """
+
+    weight: np.ndarray
+    bias: np.ndarray
+
+
+class BeliefModel:
+    """A trained belief function b and head l, ready for batched inference."""
+
+    def __init__(self, path: Path, meta: dict, net: BeliefNet, values: np.ndarray | None,
+                 device: torch.device):
+        self.path = Path(path)
+        self.meta = meta
+        self.id = meta["model"]
+        self.config = BeliefConfig.from_dict(meta["config"])
+        self.mode: str = meta["mode"]
+        self.dims: dict = meta["dims"]
+        self.corpus_hash: str = meta["corpus_hash"]
+        self.values = values
+        self.net = net.eval()
+        self.device = device
+        self.encoder = Encoder(Normalisation.from_dict(meta["normalisation"]),
+                               self.dims["discrete"], self.dims["n_actions"], device)
+
+    @property
+    def d_b(self) -> int:
+        return int(self.config.belief_dim)
+
+    @property
+    def history_length(self) -> int:
+        return int(self.config.history_length)
+
+    @property
+    def discrete(self) -> bool:
+        return bool(self.dims["discrete"])
+
+    @property
+    def hash(self) -> str:
+        """blake2b of the weights and the config: what an index built from this model records."""
+        h = hashlib.blake2b(digest_size=16)
+        for key, tensor in sorted(self.net.state_dict().items()):
+            arr = tensor.detach().cpu().numpy()
+            h.update(f"{key}{arr.dtype.str}{arr.shape}".encode())
+            h.update(np.ascontiguousarray(arr).tobytes())
+        stable = {k: self.meta[k] for k in ("mode", "value", "config", "dims", "normalisation",
+                                             "corpus_hash")}
+        h.update(json.dumps(stable, sort_keys=True).encode())
+        return h.hexdigest()
+
+    @property
+    def head_weights(self) -> LinearHead:
+        """The head in original units (value, action, or logits): see :class:`LinearHead`."""
+        w = self.net.head.weight.detach().cpu().double().numpy()
+        b = self.net.head.bias.detach().cpu().double().numpy()
+        if self.encoder.t_std is not None:
+            std = self.encoder.t_std.cpu().double().numpy()
+            mean = self.encoder.t_mean.cpu().double().numpy()
+            w, b = w * std[:, None], b * std + mean
+        return LinearHead(w, b)
+
+    # -- inference -------------------------------------------------------------------------
+    def _inputs(self, observations, actions, history: History | None):
+        obs = np.asarray(observations)
+        if obs.ndim == 1:
+            obs = obs[None, :]
+        d_o = self.dims["observation"]
+        if obs.ndim != 2 or obs.shape[1] != d_o:
+            raise AocError(f"observations must be (Q, {d_o}), got shape {obs.shape}")
+        q = len(obs)
+        act = None
+        if self.mode == "value":
+            if actions is None:
+                raise AocError("a value-mode belief model needs the actions (Q, d_a)")
+            act = np.asarray(actions)
+            if self.discrete and act.ndim == 2 and act.shape[1] == 1:
+                act = act[:, 0]
+            if self.discrete and act.ndim == 0:
+                act = act[None]
+            if not self.discrete and act.ndim == 1:
+                act = act[:, None] if self.dims["action"] == 1 else act[None, :]
+            q = max(q, len(act))
+        steps = None
+        L = self.history_length
+        if L > 0:
+            if history is None:
+                raise AocError(f"this belief model needs a history of length {L}")
+            if history.mask.shape[1] < L:
+                raise AocError(f"history of length {history.mask.shape[1]} given, the model "
+                               f"was trained with --history-length {L}")
+            h = [np.asarray(x)[:, -L:] for x in history]
+            steps = self.encoder.steps(*h)
+            q = max(q, len(steps))
+        parts = [self.encoder.observations(obs),
+                 None if act is None else self.encoder.actions(act), steps]
+        out = []
+        for p in parts:  # broadcast a leading dimension of 1 (one observation, K candidates)
+            if p is not None and len(p) != q:
+                if len(p) != 1:
+                    raise AocError(f"inputs have different row counts ({len(p)} vs {q})")
+                p = p.expand(q, *p.shape[1:])
+            out.append(p)
+        return out
+
+    def beliefs(self, observations, actions=None, history: History | None = None,
+                batch: int = 65536) -> np.ndarray:
+        """(Q, d_b) float32 beliefs of observations (Q, d_o), actions (Q, d_a) or (Q,) int
+        (value mode; ignored in imitation mode) and their histories (R = Q or 1)."""
+        return self._run(observations, actions, history, batch)[0]
+
+    def predict(self, observations, actions=None, history: History | None = None,
+                batch: int = 65536) -> np.ndarray:
+        """Head outputs in original units: value (Q,), actions (Q, d_a) or logits (Q, n)."""
+        out = self._run(observations, actions, history, batch)[1]
+        return out[:, 0] if self.mode == "value" else out
+
+    def _run(self, observations, actions, history, batch):
+        obs, act, steps = self._inputs(observations, actions, history)
+        beliefs, outs = [], []
+        with torch.no_grad():
+            for i in range(0, len(obs), batch):
+                sl = slice(i, i + batch)
+                b, out = self.net(obs[sl], None if act is None else act[sl],
+                                  None if steps is None else steps[sl])
+                if self.encoder.t_std is not None:
+                    out = self.encoder.untarget(out)
+                beliefs.append(b.cpu().numpy().astype(np.float32))
+                outs.append(out.cpu().double().numpy())
+        if not beliefs:
+            return (np.zeros((0, self.d_b), np.float32),
+                    np.zeros((0, self.dims["output"]), np.float64))
+        return np.concatenate(beliefs), np.concatenate(outs)
+
+    def row_beliefs(self, corpus, batch: int = 65536, progress=None) -> np.ndarray:
+        """(N, d_b) float32 beliefs of every corpus row (its own observation, action, history).
+
+        ``progress(done_rows, total_rows)`` is called after each batch when given.
+        """
+        from aoc_cli.belief.train import encode_corpus
+
+        check_corpus(self, corpus)
+        inputs = encode_corpus(corpus, self.encoder, self.history_length,
+                               self.mode == "value", self.device)
+        n = corpus.n_rows
+        out = np.empty((n, self.d_b), np.float32)
+        with torch.no_grad():
+            for i in range(0, n, batch):
+                rows = torch.arange(i, min(n, i + batch), device=self.device)
+                out[i:i + len(rows)] = self.net.belief(*inputs.batch(rows)).cpu().numpy()
+                if progress is not None:
+                    progress(i + len(rows), n)
+        return out
+
+
+def check_corpus(model: BeliefModel, corpus) -> None:
+    """Refuse a model trained on other data than ``corpus`` holds now."""
+    if model.corpus_hash != corpus.hash:
+        raise AocError(
+            f"model {model.id!r} was trained on a different version of corpus {corpus.name!r} "
+            f"(hash {model.corpus_hash[:12]}, now {corpus.hash[:12]}): re-run "
+            f"`aoc train {corpus.name} --model {model.id} --overwrite`"
+        )
+
+
+def load_model(corpus, model_id: str | None = None, device: str | None = None) -> BeliefModel:
+    """Load model ``model_id`` of ``corpus`` (None: the only, else the latest trained)."""
+    ids = list_models(corpus)
+    if model_id is None:
+        if not ids:
+            raise AocError(f"corpus {corpus.name!r} has no trained model: run "
+                           f"`aoc train {corpus.name}`")
+        model_id = ids[-1]
+    path = model_dir(corpus, model_id)
+    if not (path / "config.json").is_file():
+        known = ", ".join(ids) or "none"
+        raise AocError(f"corpus {corpus.name!r} has no model {model_id!r} (models: {known}): "
+                       f"run `aoc train {corpus.name} --model {model_id}`")
+    meta = json.loads((path / "config.json").read_text())
+    if meta.get("format") != FORMAT or meta.get("format_version") != FORMAT_VERSION:
+        raise AocError(f"model {model_id!r} of corpus {corpus.name!r} has an unknown format: "
+                       f"re-run `aoc train {corpus.name} --model {model_id} --overwrite`")
+    from aoc_cli.belief.train import build_net, pick_device
+
+    dev = pick_device(device or meta["config"].get("device", "auto"))
+    net = build_net(meta["dims"], BeliefConfig.from_dict(meta["config"]))
+    state = torch.load(path / "weights.pt", map_location="cpu", weights_only=True)
+    net.load_state_dict(state)
+    values = None
+    if (path / "values.npy").is_file():
+        values = np.load(path / "values.npy", allow_pickle=False)
+    model = BeliefModel(path, meta, net.to(dev), values, dev)
+    check_corpus(model, corpus)
+    return model

@@ -1,0 +1,113 @@
+"""The belief model's configuration, with the paper's defaults.
+
+Paper: "Accountability in Offline Reinforcement Learning: Explaining Decisions with a Corpus
+of Examples", section "Optimization Procedure"
+(its first equation), appendix "Learning the Belief Space" (hyper-parameter table) and appendix
+"The Strictly Batch (Offline) Imitation Setting" (reward-free data).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import asdict, dataclass, fields
+
+from aoc_cli.errors import AocError
+
+MODES = ("value", "imitation")
+#: Value targets computed from the rewards; any other name is a numeric corpus column.
+REWARD_TARGETS = ("return", "mean-return", "reward")
+
+
+@dataclass
+class BeliefConfig:
+    r"""How to learn the belief function b and the linear head l.
+
+    Value mode (AOC), the paper's equation (algo_1)::
+
+        b, l = argmin_{b, l}  E_{(o, a, h, v) in D} ( v - l(b(o, a, h)) )^2
+
+    with v standardised, ``b(o, a, h) = act(W3 relu(W2 relu(W1 [GRU(h), o, a])))`` in R^{d_b}
+    (three fully connected layers; the last activated layer is the belief) and ``l`` linear.
+    Imitation mode (ABC, strictly batch imitation, for reward-free data)::
+
+        b, l = argmin_{b, l}  E_{(o, a, h) in D}  loss(a, l(b(o, h)))
+
+    with ``loss`` the squared error on standardised actions (continuous) or the cross-entropy
+    of the logits ``l(b)`` (discrete). ``h`` is the previous ``history_length`` transitions
+    (o, a, r) of the same episode, zero-padded at the episode start, with the mask as an input
+    feature; ``history_length = 0`` drops the GRU and b depends on (o, a) (or o) alone.
+
+    Defaults from the paper's table: GRU, 128 hidden units, 1 recurrent layer, batch 500, Adam,
+    learning rate 0.001, memory length 4, embedding (belief) dimension 20. The paper trains
+    4000 epochs; aoc stops early on the validation loss instead (``patience``, ``max_epochs``).
+    """
+
+    mode: str = "value"
+    #: ``return`` (discounted return-to-go), ``mean-return``, ``reward`` or a column name.
+    value: str = "return"
+    gamma: float = 0.99
+    history_length: int = 4
+    belief_dim: int = 20
+    #: Units of the GRU (one layer) and of the first two fully connected layers.
+    hidden: int = 128
+    #: Activation of the belief layer: ``tanh`` (bounded, no dead units) or ``relu``.
+    belief_activation: str = "tanh"
+    lr: float = 1e-3
+    batch_size: int = 500
+    max_epochs: int = 200
+    #: Stop after this many epochs without a validation-loss improvement of ``min_delta``.
+    patience: int = 10
+    min_delta: float = 1e-4
+    #: Share of the episodes held out for validation (split by episode, never by row).
+    val_fraction: float = 0.2
+    seed: int = 0
+    #: CPU threads for torch; ``None`` = every core this process may use.
+    threads: int | None = None
+    #: ``auto`` (a GPU when torch sees one, else CPU), ``cpu`` or ``cuda``.
+    device: str = "auto"
+
+    def validate(self) -> "BeliefConfig":
+        """Check every field; AocError names the flag to fix."""
+        if self.mode not in MODES:
+            raise AocError(f"unknown --mode {self.mode!r}: use value or imitation")
+        if not self.value:
+            raise AocError("--value is empty: use return, mean-return, reward or a column name")
+        if self.history_length < 0:
+            raise AocError(f"--history-length must be >= 0, got {self.history_length}")
+        if not 0.0 <= self.gamma <= 1.0:
+            raise AocError(f"--gamma must be in [0, 1], got {self.gamma}")
+        for name, flag in (("belief_dim", "--belief-dim"), ("hidden", "--hidden"),
+                           ("batch_size", "--batch-size"), ("max_epochs", "--epochs")):
+            if getattr(self, name) < 1:
+                raise AocError(f"{flag} must be >= 1, got {getattr(self, name)}")
+        if self.patience < 1:
+            raise AocError(f"--patience must be >= 1, got {self.patience}")
+        if not self.lr > 0:
+            raise AocError(f"--lr must be > 0, got {self.lr}")
+        if not 0.0 < self.val_fraction < 1.0:
+            raise AocError(f"--val-fraction must be in (0, 1), got {self.val_fraction}")
+        if self.threads is not None and self.threads < 1:
+            raise AocError(f"--threads must be >= 1, got {self.threads}")
+        if self.belief_activation not in ("tanh", "relu"):
+            raise AocError(f"unknown belief activation {self.belief_activation!r}: "
+                           "use tanh or relu")
+        if self.device not in ("auto", "cpu", "cuda"):
+            raise AocError(f"unknown device {self.device!r}: use auto, cpu or cuda")
+        return self
+
+    def resolved_threads(self) -> int:
+        """The explicit CPU thread count torch will use."""
+        if self.threads is not None:
+            return int(self.threads)
+        try:
+            return max(1, len(os.sched_getaffinity(0)))
+        except AttributeError:  # pragma: no cover - not Linux
+            return max(1, os.cpu_count() or 1)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "BeliefConfig":
+        known = {f.name for f in fields(cls)}
+        return cls(**{k: v for k, v in data.items() if k in known})

@@ -1,0 +1,115 @@
+"""Value targets v^c: the performance measure each corpus row is trained to predict.
+
+* ``return``: discounted return-to-go ``v_t = sum_{k = t}^{T_e - 1} gamma^(k - t) r_k`` within
+  the row's own episode e (rows ``[s_e, T_e)``). At a truncated (time-limit) or cut-off episode
+  end this is just the sum of the remaining discounted rewards *within the logged episode*: there
+  is no bootstrapping from a value estimate, so no model enters the target.
+* ``mean-return``: the mean of the remaining rewards ``(1 / (T_e - t)) sum_{k = t}^{T_e - 1} r_k``.
+* ``reward``: the immediate reward ``r_t``.
+* any other name: a numeric per-row column of the corpus, used as is.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.signal import lfilter
+
+from aoc_cli.belief.config import REWARD_TARGETS
+from aoc_cli.errors import AocError
+
+#: Padded cells allowed per group of episodes of similar length (beyond 4x the real rows).
+_GROUP_CELLS = 1 << 22
+
+
+def discounted_return_to_go(rewards: np.ndarray, episode_starts: np.ndarray,
+                            gamma: float) -> np.ndarray:
+    """(N,) float64 ``sum_{k >= t, same episode} gamma^(k - t) r_k`` for rewards (N,).
+
+    Episodes of similar length are padded into a matrix (zeros after the end contribute
+    nothing) and filtered in reverse with one ``lfilter`` call per group: no Python per row.
+    """
+    rewards = np.asarray(rewards, dtype=np.float64)
+    starts = np.asarray(episode_starts, dtype=np.int64)
+    lengths = np.diff(starts)
+    out = np.empty_like(rewards)
+    order = np.argsort(lengths, kind="stable")
+    i = 0
+    while i < len(order):
+        # Grow the group while the padded matrix stays small relative to its real rows.
+        j = i + 1
+        total = int(lengths[order[i]])
+        while j < len(order):
+            longest = int(lengths[order[j]])
+            if (j - i + 1) * longest > max(4 * (total + longest), _GROUP_CELLS):
+                break
+            total += longest
+            j += 1
+        group = order[i:j]
+        g_len = lengths[group]
+        width = int(g_len.max())
+        col = np.arange(width)
+        inside = col[None, :] < g_len[:, None]                       # (G, W)
+        rows = starts[group][:, None] + np.where(inside, col[None, :], 0)
+        mat = np.where(inside, rewards[rows], 0.0)
+        ret = lfilter([1.0], [1.0, -gamma], mat[:, ::-1], axis=1)[:, ::-1]
+        out[rows[inside]] = ret[inside]
+        i = j
+    return out
+
+
+def mean_remaining_reward(rewards: np.ndarray, episode_starts: np.ndarray) -> np.ndarray:
+    """(N,) float64 mean of the rewards from each row to the end of its episode."""
+    starts = np.asarray(episode_starts, dtype=np.int64)
+    lengths = np.diff(starts)
+    ends = np.repeat(starts[1:], lengths)
+    remaining = ends - np.arange(len(rewards))
+    return discounted_return_to_go(rewards, starts, 1.0) / remaining
+
+
+def value_targets(corpus, value: str, gamma: float) -> np.ndarray:
+    """(N,) float64 value target v of every row of ``corpus`` (see the module docstring)."""
+    if value in REWARD_TARGETS:
+        if not corpus.has_rewards:
+            raise AocError(
+                f"corpus {corpus.name!r} has no rewards, so --value {value} cannot be computed: "
+                "use --mode imitation (or --value COLUMN with a numeric column of the corpus)"
+            )
+        rewards = corpus.rewards
+        if value == "reward":
+            v = np.asarray(rewards, dtype=np.float64).copy()
+        elif value == "mean-return":
+            v = mean_remaining_reward(rewards, corpus.episode_starts)
+        else:
+            v = discounted_return_to_go(rewards, corpus.episode_starts, gamma)
+    else:
+        columns = list(corpus.manifest.get("columns", []))
+        if value not in columns:
+            known = ", ".join(columns) or "none"
+            raise AocError(
+                f"unknown --value {value!r}: use return, mean-return, reward or a numeric column "
+                f"of corpus {corpus.name!r} (columns: {known})"
+            )
+        v = np.asarray(corpus.column(value), dtype=np.float64).copy()
+    bad = ~np.isfinite(v)
+    if bad.any():
+        raise AocError(
+            f"--value {value} is not finite (NaN or inf) in {int(bad.sum())} rows, first row "
+            f"{int(np.flatnonzero(bad)[0])}: choose another --value or fix the column"
+        )
+    return v
+
+
+def value_spec(value: str, gamma: float) -> dict:
+    """How v was computed, as recorded in the model's config.json."""
+    spec: dict = {"target": value}
+    if value == "return":
+        spec["gamma"] = gamma
+        spec["definition"] = ("discounted return-to-go within the logged episode, "
+                              "no bootstrapping at truncated ends")
+    elif value == "mean-return":
+        spec["definition"] = "mean of the remaining rewards of the episode"
+    elif value == "reward":
+        spec["definition"] = "immediate reward"
+    else:
+        spec["definition"] = f"corpus column {value!r}"
+    return spec

@@ -1,0 +1,267 @@
+"""Training the belief model: episode split, precomputed inputs, Adam, early stopping.
+
+Every input is encoded once as tensors: the standardised observations (N, d_o), the encoded
+actions (N, d_a_in), a table of history-step features (N + 1, F) whose last row is the zero
+padding, and the history index (N, L) into that table. A mini-batch is then three gathers, so
+there is no Python work per sample.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import nn
+
+from aoc_cli.belief.artefact import model_dir, save_model
+from aoc_cli.belief.config import BeliefConfig
+from aoc_cli.belief.model import BeliefNet, Encoder, Normalisation
+from aoc_cli.belief.targets import value_spec, value_targets
+from aoc_cli.errors import AocError
+from aoc_cli.store import check_name
+
+#: Rows per forward pass when evaluating (no gradients).
+EVAL_BATCH = 65536
+
+
+def split_episodes(n_episodes: int, val_fraction: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """(train episodes, validation episodes), sorted; at least one episode in each."""
+    if n_episodes < 2:
+        raise AocError(
+            f"the corpus has {n_episodes} episode(s): a validation split by episode needs at "
+            "least 2; collect or ingest more episodes"
+        )
+    n_val = min(n_episodes - 1, max(1, int(round(n_episodes * val_fraction))))
+    perm = np.random.default_rng(seed).permutation(n_episodes)
+    return np.sort(perm[n_val:]), np.sort(perm[:n_val])
+
+
+def episode_rows(episode_starts: np.ndarray, episodes: np.ndarray) -> np.ndarray:
+    """(R,) int64 rows of the given episodes, in row order."""
+    starts = episode_starts[episodes]
+    lengths = episode_starts[episodes + 1] - starts
+    offsets = np.arange(lengths.sum()) - np.repeat(np.cumsum(lengths) - lengths, lengths)
+    return (np.repeat(starts, lengths) + offsets).astype(np.int64)
+
+
+def history_index(episode_starts: np.ndarray, n_rows: int, length: int) -> np.ndarray:
+    """(N, L) int64: row of each history step, or N (the padding row) before the episode."""
+    rows = np.arange(n_rows, dtype=np.int64)
+    start = np.repeat(episode_starts[:-1], np.diff(episode_starts))
+    idx = rows[:, None] - length + np.arange(length)[None, :]
+    return np.where(idx >= start[:, None], idx, n_rows)
+
+
+@dataclass
+class CorpusInputs:
+    """Every corpus row, encoded once (see the module docstring)."""
+
+    obs: torch.Tensor           # (N, d_o)
+    act: torch.Tensor | None    # (N, d_a_in), None in imitation mode
+    table: torch.Tensor | None  # (N + 1, F), None when L = 0
+    hist: torch.Tensor | None   # (N, L) int64
+
+    def batch(self, rows: torch.Tensor):
+        """Inputs of ``rows`` (B,): obs (B, d_o), act (B, d_a_in) or None, steps (B, L, F)."""
+        act = None if self.act is None else self.act[rows]
+        steps = None if self.table is None else self.table[self.hist[rows]]
+        return self.obs[rows], act, steps
+
+
+def encode_corpus(corpus, encoder: Encoder, history_length: int, use_action: bool,
+                  device: torch.device) -> CorpusInputs:
+    """Encode every row of ``corpus`` for the network."""
+    observations = corpus.observations
+    actions = corpus.actions
+    n = len(observations)
+    obs = encoder.observations(observations)
+    act_all = encoder.actions(actions)
+    table = hist = None
+    if history_length > 0:
+        rewards = corpus.rewards
+        rew = encoder.rewards(np.zeros(n, np.float32) if rewards is None else rewards)
+        ones = torch.ones((n, 1), dtype=torch.float32, device=device)
+        table = torch.cat([obs, act_all, rew, ones], dim=1)
+        table = torch.cat([table, torch.zeros((1, table.shape[1]), device=device)], dim=0)
+        hist = torch.as_tensor(history_index(corpus.episode_starts, n, history_length),
+                               device=device)
+    return CorpusInputs(obs, act_all if use_action else None, table, hist)
+
+
+def pick_device(name: str) -> torch.device:
+    if name == "cuda" or (name == "auto" and torch.cuda.is_available()):
+        if not torch.cuda.is_available():
+            raise AocError("--device cuda asked for, but torch sees no GPU: use --device cpu")
+        return torch.device("cuda")
+    return torch.device("cpu")
+
+
+def _dims(corpus, mode: str) -> dict:
+    discrete = corpus.discrete
+    d_a = corpus.action_dim
+    d_a_in = corpus.n_actions if discrete else d_a
+    if mode == "value":
+        out = 1
+    else:
+        out = corpus.n_actions if discrete else d_a
+    return {"observation": corpus.observation_dim, "action": d_a, "action_input": d_a_in,
+            "discrete": discrete, "n_actions": corpus.n_actions, "output": out,
+            "use_action": mode == "value"}
+
+
+def build_net(dims: dict, config: BeliefConfig) -> BeliefNet:
+    return BeliefNet(dims["observation"], dims["action_input"], dims["output"],
+                     config.history_length, hidden=config.hidden,
+                     belief_dim=config.belief_dim, use_action=dims["use_action"],
+                     belief_activation=config.belief_activation)
+
+
+class _Objective:
+    """Loss and validation metric of one mode, on encoded targets."""
+
+    def __init__(self, mode: str, discrete: bool):
+        self.classify = mode == "imitation" and discrete
+
+    def loss(self, out: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+        if self.classify:
+            return nn.functional.cross_entropy(out, y)
+        return nn.functional.mse_loss(out, y)
+
+    def metrics(self, out: torch.Tensor, y: torch.Tensor) -> dict:
+        """Loss and R^2 (uniform average over output dims) or accuracy, on all of ``out``."""
+        loss = float(self.loss(out, y))
+        if self.classify:
+            return {"loss": loss, "accuracy": float((out.argmax(1) == y).float().mean())}
+        sse = ((out - y) ** 2).sum(0)
+        sst = ((y - y.mean(0)) ** 2).sum(0)
+        r2 = torch.where(sst > 0, 1 - sse / sst.clamp_min(1e-12), torch.zeros_like(sst))
+        return {"loss": loss, "r2": float(r2.mean())}
+
+
+def _evaluate(net, inputs: CorpusInputs, rows: torch.Tensor, y: torch.Tensor, objective) -> dict:
+    outs = []
+    with torch.no_grad():
+        for i in range(0, len(rows), EVAL_BATCH):
+            outs.append(net(*inputs.batch(rows[i:i + EVAL_BATCH]))[1])
+    return objective.metrics(torch.cat(outs), y)
+
+
+def train_model(corpus, config: BeliefConfig, model_id: str = "default", overwrite: bool = False,
+                progress=None) -> dict:
+    """Learn b and l on ``corpus`` and write ``corpus.models_dir/<model_id>/``; final metrics.
+
+    ``progress``, when given, is called with a dict (``epoch``, ``max_epochs``, ``batch``,
+    ``batches``, ``train_loss`` running mean, ``val_loss`` and ``best_val_loss`` or None,
+    ``epoch_done``) every few batches and at the end of every epoch.
+    """
+    started = time.perf_counter()
+    config.validate()
+    check_name(model_id, "model")
+    if model_dir(corpus, model_id).exists() and not overwrite:
+        raise AocError(f"model {model_id!r} of corpus {corpus.name!r} already exists: pass "
+                       "--overwrite to replace it, or choose another --model")
+    values = None
+    if config.mode == "value":
+        values = value_targets(corpus, config.value, config.gamma)
+    train_eps, val_eps = split_episodes(corpus.n_episodes, config.val_fraction, config.seed)
+    starts = corpus.episode_starts
+    train_rows, val_rows = episode_rows(starts, train_eps), episode_rows(starts, val_eps)
+
+    device = pick_device(config.device)
+    threads = config.resolved_threads()
+    if device.type == "cpu":
+        torch.set_num_threads(threads)
+    dims = _dims(corpus, config.mode)
+    classify = config.mode == "imitation" and dims["discrete"]
+    if config.mode == "value":
+        targets = values
+    else:
+        targets = None if classify else corpus.actions
+    norm = Normalisation.fit(corpus.observations, corpus.actions, corpus.rewards,
+                             dims["discrete"], targets)
+    encoder = Encoder(norm, dims["discrete"], dims["n_actions"], device)
+    inputs = encode_corpus(corpus, encoder, config.history_length, dims["use_action"], device)
+    y_all = torch.as_tensor(corpus.actions, device=device) if classify \
+        else encoder.targets(targets)
+    objective = _Objective(config.mode, dims["discrete"])
+
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(config.seed)
+        net = build_net(dims, config).to(device)
+    optimiser = torch.optim.Adam(net.parameters(), lr=config.lr)
+    generator = torch.Generator().manual_seed(config.seed)
+    tr = torch.as_tensor(train_rows, device=device)
+    va = torch.as_tensor(val_rows, device=device)
+    y_val = y_all[va]
+    n_batches = max(1, math.ceil(len(tr) / config.batch_size))
+    report_every = max(1, n_batches // 20)
+
+    history: list[dict] = []
+    best = {"val_loss": math.inf, "epoch": 0, "state": copy.deepcopy(net.state_dict())}
+    stale = 0
+    for epoch in range(1, config.max_epochs + 1):
+        net.train()
+        perm = tr[torch.randperm(len(tr), generator=generator).to(device)]
+        total, count = 0.0, 0
+        for b in range(n_batches):
+            rows = perm[b * config.batch_size:(b + 1) * config.batch_size]
+            _, out = net(*inputs.batch(rows))
+            loss = objective.loss(out, y_all[rows])
+            optimiser.zero_grad(set_to_none=True)
+            loss.backward()
+            optimiser.step()
+            total += float(loss.detach()) * len(rows)
+            count += len(rows)
+            if progress is not None and (b + 1) % report_every == 0 and b + 1 < n_batches:
+                progress({"epoch": epoch, "max_epochs": config.max_epochs, "batch": b + 1,
+                          "batches": n_batches, "train_loss": total / count,
+                          "val_loss": history[-1]["val_loss"] if history else None,
+                          "best_val_loss": None if best["epoch"] == 0 else best["val_loss"],
+                          "epoch_done": False})
+        net.eval()
+        val = _evaluate(net, inputs, va, y_val, objective)
+        record = {"epoch": epoch, "train_loss": total / count, "val_loss": val["loss"]}
+        record.update({f"val_{k}": v for k, v in val.items() if k != "loss"})
+        record["seconds"] = time.perf_counter() - started
+        history.append(record)
+        if val["loss"] < best["val_loss"] - config.min_delta:
+            best = {"val_loss": val["loss"], "epoch": epoch,
+                    "state": copy.deepcopy(net.state_dict())}
+            stale = 0
+        else:
+            stale += 1
+        if progress is not None:
+            progress({"epoch": epoch, "max_epochs": config.max_epochs, "batch": n_batches,
+                      "batches": n_batches, "train_loss": record["train_loss"],
+                      "val_loss": val["loss"], "best_val_loss": best["val_loss"],
+                      "epoch_done": True})
+        if stale >= config.patience or not math.isfinite(val["loss"]):
+            break
+
+    net.load_state_dict(best["state"])
+    net.eval()
+    final_train = _evaluate(net, inputs, tr, y_all[tr], objective)
+    final_val = _evaluate(net, inputs, va, y_val, objective)
+    metrics = {"model": model_id, "mode": config.mode, "epochs": len(history),
+               "best_epoch": best["epoch"], "train_loss": final_train["loss"],
+               "val_loss": final_val["loss"]}
+    if classify:
+        majority = np.bincount(corpus.actions[val_rows], minlength=dims["n_actions"]).max()
+        metrics["val_accuracy"] = final_val["accuracy"]
+        metrics["val_majority_accuracy"] = float(majority / len(val_rows))
+    else:
+        metrics["val_r2"] = final_val["r2"]
+    metrics.update({"rows": corpus.n_rows, "train_rows": len(train_rows),
+                    "val_rows": len(val_rows), "device": device.type,
+                    "threads": threads if device.type == "cpu" else None})
+    metrics["seconds"] = time.perf_counter() - started
+    save_model(corpus, model_id, net=net.cpu(), config=config, dims=dims, norm=norm,
+               value=value_spec(config.value, config.gamma) if config.mode == "value" else None,
+               values=values, metrics=metrics, history=history,
+               split={"episodes": corpus.n_episodes, "val_episodes": len(val_eps),
+                      "train_rows": len(train_rows), "val_rows": len(val_rows)})
+    return metrics

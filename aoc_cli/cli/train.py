@@ -1,0 +1,80 @@
+"""`aoc train NAME`: learn the belief model of a corpus (value mode: AOC; imitation: ABC)."""
+
+from __future__ import annotations
+
+from typing import Optional
+
+import typer
+
+from aoc_cli.belief.config import BeliefConfig
+from aoc_cli.cli.common import FormatOption, get_store
+from aoc_cli.report.output import message, progress, resolve_format, write_object
+
+#: Flag defaults are the config's (the paper's) defaults.
+_D = BeliefConfig()
+
+
+def train(
+    name: str = typer.Argument(..., help="Corpus to train on."),
+    model: str = typer.Option("default", "--model", help="Model id (models/<ID>/ of the corpus)."),
+    mode: str = typer.Option(_D.mode, "--mode",
+                             help="value: b(o, a, h) predicts v (AOC); imitation: b(o, h) "
+                                  "predicts the action (ABC, reward-free data)."),
+    value: str = typer.Option(_D.value, "--value",
+                              help="Value target: return (discounted return-to-go), "
+                                   "mean-return, reward, or a numeric corpus column."),
+    gamma: float = typer.Option(_D.gamma, "--gamma", help="Discount of --value return."),
+    history_length: int = typer.Option(_D.history_length, "--history-length",
+                                       help="Previous transitions of the episode the GRU reads "
+                                            "(0: no history)."),
+    belief_dim: int = typer.Option(_D.belief_dim, "--belief-dim", help="Belief dimension d_b."),
+    hidden: int = typer.Option(_D.hidden, "--hidden", help="Units of the GRU and hidden layers."),
+    epochs: int = typer.Option(_D.max_epochs, "--epochs", help="Maximum epochs (early stopping ends "
+                                                     "sooner)."),
+    batch_size: int = typer.Option(_D.batch_size, "--batch-size", help="Mini-batch rows."),
+    lr: float = typer.Option(_D.lr, "--lr", help="Adam learning rate."),
+    patience: int = typer.Option(_D.patience, "--patience",
+                                 help="Stop after this many epochs without a better "
+                                      "validation loss."),
+    val_fraction: float = typer.Option(_D.val_fraction, "--val-fraction",
+                                       help="Share of episodes held out for validation."),
+    seed: int = typer.Option(_D.seed, "--seed", help="Seed of the split, initialisation and "
+                                               "batches (reproducible on CPU)."),
+    threads: Optional[int] = typer.Option(None, "--threads",
+                                          help="CPU threads (default: all cores)."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing model id."),
+    fmt: Optional[str] = FormatOption,
+) -> None:
+    """Train the belief model b and linear head l of corpus NAME; print the final metrics."""
+    from aoc_cli.belief import train_model
+
+    fmt = resolve_format(fmt)
+    config = BeliefConfig(mode=mode, value=value, gamma=gamma, history_length=history_length,
+                          belief_dim=belief_dim, hidden=hidden, max_epochs=epochs,
+                          batch_size=batch_size, lr=lr, patience=patience,
+                          val_fraction=val_fraction, seed=seed, threads=threads).validate()
+    corpus = get_store().corpus(name)
+    with progress(transient=True) as bar:
+        task = bar.add_task(f"training {name}/{model}", total=config.max_epochs)
+
+        def on_progress(event: dict) -> None:
+            val = event["val_loss"]
+            best = event["best_val_loss"]
+            text = (f"epoch {event['epoch']} batch {event['batch']}/{event['batches']} "
+                    f"train {event['train_loss']:.4f}"
+                    + ("" if val is None else f" val {val:.4f}")
+                    + ("" if best is None else f" best {best:.4f}"))
+            bar.update(task, completed=event["epoch"] - (0 if event["epoch_done"] else 1),
+                       description=text)
+
+        metrics = train_model(corpus, config, model, overwrite=overwrite, progress=on_progress)
+    score = (f"val R^2 {metrics['val_r2']:.4f}" if "val_r2" in metrics
+             else f"val accuracy {metrics['val_accuracy']:.4f} (majority "
+                  f"{metrics['val_majority_accuracy']:.4f})")
+    message(f"trained {name}/{model} ({metrics['mode']} mode): {metrics['epochs']} epochs, best "
+            f"{metrics['best_epoch']}, {score}, {metrics['seconds']:.1f} s")
+    write_object(metrics, fmt, title=f"aoc train {name} --model {model}")
+
+
+def register(app: typer.Typer) -> None:
+    app.command("train")(train)
