@@ -3,8 +3,16 @@
 import json
 
 import numpy as np
+import pytest
 
+from tests.cli.test_ingest import run_in_process
 from tests.formats.sources import flat_arrays, write_d4rl
+
+
+@pytest.fixture
+def aoc(capsys):
+    """The real entry point in this process (see tests/cli/test_ingest.py::run_in_process)."""
+    return lambda *args: run_in_process(capsys, *args)
 
 REQUIRED = {"name", "rows", "episodes", "observation_dim", "action_dim", "discrete",
             "has_rewards", "return_mean", "return_std", "tags"}

@@ -26,6 +26,43 @@ def snapshot(root):
     return out
 
 
+def run_in_process(capsys, *args: str):
+    """The real entry point ``aoc_cli.cli.app.main`` in this process: (code, stdout, stderr).
+
+    Same code path as the console script (argument parsing, AocError -> one line + exit 2),
+    without a Python start and the imports per call; ``test_real_process_*`` below runs the
+    console script in a subprocess to pin the process-level behaviour too.
+    """
+    from aoc_cli.cli.app import main
+
+    capsys.readouterr()
+    code = 0
+    try:
+        main(list(args))
+    except SystemExit as exit_:
+        code = exit_.code if isinstance(exit_.code, int) else (0 if exit_.code is None else 1)
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+@pytest.fixture
+def aoc(capsys):
+    """Overrides the subprocess runner of tests/conftest.py for speed (see run_in_process)."""
+    return lambda *args: run_in_process(capsys, *args)
+
+
+def test_real_process_exit_codes_and_one_line_errors(store, d4rl_file):
+    from tests.conftest import run_aoc
+
+    code, out, err = run_aoc("ingest", str(d4rl_file), "--name", "hopper", "-f", "json")
+    assert code == 0 and json.loads(out)["rows"] == 400, err
+    code, out, err = run_aoc("ingest", str(d4rl_file), "--name", "hopper")
+    assert code == 2 and out == ""
+    assert err.strip().splitlines() == [
+        "aoc: error: corpus 'hopper' already exists: pass --overwrite to replace it or "
+        "--append to add to it"]
+
+
 @pytest.fixture
 def d4rl_file(tmp_path):
     arrays, _ = flat_arrays()

@@ -39,8 +39,8 @@ def test_csv_rows_are_ordered_by_id_and_time_whatever_the_file_order(tmp_path):
     np.testing.assert_array_equal(c.actions, [r[4] for r in ordered])
     assert c.discrete and c.n_actions == 2
     np.testing.assert_allclose(c.rewards, [r[5] for r in ordered])
-    np.testing.assert_allclose(c.episode_returns(),
-                               [sum(r[5] for r in ordered if r[0] == p) for p in ("p10", "p2", "p7")])
+    np.testing.assert_allclose(
+        c.episode_returns(), [sum(r[5] for r in ordered if r[0] == p) for p in ("p10", "p2", "p7")])
     assert c.load().episode_ids == ["p10", "p2", "p7"]
     assert c.observation_space["names"] == ["obs_hr", "obs_bp"]
     codes, labels = c.tag("ward")
