@@ -105,8 +105,8 @@ def min_norm_point(
     H = (1.0 / (sq[r, j0] + 1.0))[:, None, None].copy()
     a = H[:, :, 0].copy()  # row sums of H^{-1}, kept up to date
     Ps = P[r, j0][:, None, :].copy()
-    Pl, sql = P, sq
-    blocked = np.where(valid, 0.0, np.inf)
+    Pl, sq1 = P, sq + 1.0
+    blocked = np.where(valid, 0.0, np.inf) if not valid.all() else None
     done = np.zeros(n_q, dtype=bool)
     failed = np.zeros(n_q, dtype=bool)
 
@@ -122,7 +122,7 @@ def min_norm_point(
     it = 0
     while it < max_iter:
         it += 1
-        if mu < m and (nact == mu).any():  # a corral may grow: widen the slot arrays
+        if mu < m and nact.max() == mu:  # a corral may grow: widen the slot arrays
             old, mu = mu, min(m, mu + 3)
             act, lam, a, Ps = (_widen(x, old, mu) for x in (act, lam, a, Ps))
             H = _widen(H, old, mu, square=True)
@@ -134,13 +134,15 @@ def min_norm_point(
         # major cycle: optimality test and entering point
         x = (lam[:, None, :] @ Ps)[:, 0]
         xP = (Pl @ x[:, :, None])[..., 0]
-        xP += blocked
+        if blocked is not None:
+            xP += blocked
         j = np.argmin(xP, axis=1)
         xx = np.einsum("qd,qd->q", x, x)
-        # a full corral (d + 1 points, or all k) with alpha > 0: x is optimal
-        optimal = (xx - xP[r, j] <= tol + 1e-10 * xx) | (nact == m)
-        add = ~(minor | done | optimal)
+        optimal = xx * (1.0 - 1e-10) - xP[r, j] <= tol
+        if mu == m:  # a full corral (d + 1 points, or all k) with alpha > 0: x is optimal
+            optimal |= nact == m
         done |= optimal & ~minor
+        add = ~(minor | done)
 
         # minor cycle: step towards alpha until a weight reaches zero; that point leaves
         ratio = np.where(neg, lam / np.maximum(lam - alpha, 1e-300), np.inf)
@@ -154,7 +156,7 @@ def min_norm_point(
         g = (Ps @ pj[:, :, None])[..., 0] + 1.0
         g *= act
         u = (H @ g[:, :, None])[..., 0]
-        sigma = sql[r, j] + 1.0 - np.einsum("qm,qm->q", g, u)
+        sigma = sq1[r, j] - np.einsum("qm,qm->q", g, u)
         c = H[r, :, s_out]
         c_out = c[r, s_out]
         u[r, s_in] -= 1.0
@@ -164,8 +166,7 @@ def min_norm_point(
             minor &= ~bad
             failed |= bad
             done |= bad
-        v = np.where(add[:, None], u, c)
-        v *= (add | minor)[:, None]
+        v = np.where(add[:, None], u, np.where(minor[:, None], c, 0.0))
         den = np.where(add, sigma, np.where(minor, -c_out, 1.0))
         w = v / den[:, None]
         H += v[:, :, None] * w[:, None, :]
@@ -193,7 +194,8 @@ def min_norm_point(
             keep = ~done
             live = live[keep]
             slot, act, nact, lam, H, a, Ps = slot[keep], act[keep], nact[keep], lam[keep], H[keep], a[keep], Ps[keep]
-            Pl, sql, blocked = Pl[keep], sql[keep], blocked[keep]
+            Pl, sq1 = Pl[keep], sq1[keep]
+            blocked = None if blocked is None else blocked[keep]
             done, failed = done[keep], failed[keep]
             r = np.arange(live.size)
     failed |= ~done
