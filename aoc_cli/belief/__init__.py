@@ -4,25 +4,42 @@
 >>> metrics = train_model(corpus, BeliefConfig(), "default")     # doctest: +SKIP
 >>> model = load_model(corpus)                                    # doctest: +SKIP
 >>> b = model.row_beliefs(corpus)            # (N, d_b) float32   # doctest: +SKIP
+
+Names are imported lazily, so that importing the config (as every CLI start does) does not
+import torch.
 """
 
-from aoc_cli.belief.artefact import BeliefModel, LinearHead, check_corpus, list_models, load_model
-from aoc_cli.belief.config import BeliefConfig
-from aoc_cli.belief.probe import logistic_probe
-from aoc_cli.belief.targets import discounted_return_to_go, mean_remaining_reward, value_targets
-from aoc_cli.belief.train import split_episodes, train_model
+from __future__ import annotations
 
-__all__ = [
-    "BeliefConfig",
-    "BeliefModel",
-    "LinearHead",
-    "check_corpus",
-    "discounted_return_to_go",
-    "list_models",
-    "load_model",
-    "logistic_probe",
-    "mean_remaining_reward",
-    "split_episodes",
-    "train_model",
-    "value_targets",
-]
+import importlib
+
+_WHERE = {
+    "BeliefConfig": "config",
+    "BeliefModel": "artefact",
+    "LinearHead": "artefact",
+    "check_corpus": "artefact",
+    "list_models": "artefact",
+    "load_model": "artefact",
+    "logistic_probe": "probe",
+    "discounted_return_to_go": "targets",
+    "mean_remaining_reward": "targets",
+    "value_targets": "targets",
+    "split_episodes": "data",
+    "episode_rows": "data",
+    "prepare": "data",
+    "train_model": "train",
+}
+
+__all__ = sorted(_WHERE)
+
+
+def __getattr__(name: str):
+    if name not in _WHERE:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{_WHERE[name]}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(list(globals()) + __all__)

@@ -22,16 +22,13 @@ import numpy as np
 import torch
 
 from aoc_cli.belief.config import BeliefConfig
+from aoc_cli.belief.data import model_dir
 from aoc_cli.belief.model import BeliefNet, Encoder, Normalisation
 from aoc_cli.errors import AocError
-from aoc_cli.store import History, atomic_dir, check_name, write_json, write_npy
+from aoc_cli.store import History, atomic_dir, write_json, write_npy
 
 FORMAT = "aoc-belief-model"
 FORMAT_VERSION = 1
-
-
-def model_dir(corpus, model_id: str) -> Path:
-    return Path(corpus.models_dir) / check_name(model_id, "model")
 
 
 def list_models(corpus) -> list[str]:

@@ -12,7 +12,6 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy.signal import lfilter
 
 from aoc_cli.belief.config import REWARD_TARGETS
 from aoc_cli.errors import AocError
@@ -28,6 +27,8 @@ def discounted_return_to_go(rewards: np.ndarray, episode_starts: np.ndarray,
     Episodes of similar length are padded into a matrix (zeros after the end contribute
     nothing) and filtered in reverse with one ``lfilter`` call per group: no Python per row.
     """
+    from scipy.signal import lfilter  # imported here: scipy.signal is slow to import
+
     rewards = np.asarray(rewards, dtype=np.float64)
     starts = np.asarray(episode_starts, dtype=np.int64)
     lengths = np.diff(starts)

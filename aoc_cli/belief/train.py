@@ -17,35 +17,15 @@ import numpy as np
 import torch
 from torch import nn
 
-from aoc_cli.belief.artefact import model_dir, save_model
+from aoc_cli.belief.artefact import save_model
 from aoc_cli.belief.config import BeliefConfig
+from aoc_cli.belief.data import TrainingData, prepare
 from aoc_cli.belief.model import BeliefNet, Encoder, Normalisation
-from aoc_cli.belief.targets import value_spec, value_targets
+from aoc_cli.belief.targets import value_spec
 from aoc_cli.errors import AocError
-from aoc_cli.store import check_name
 
 #: Rows per forward pass when evaluating (no gradients).
 EVAL_BATCH = 65536
-
-
-def split_episodes(n_episodes: int, val_fraction: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """(train episodes, validation episodes), sorted; at least one episode in each."""
-    if n_episodes < 2:
-        raise AocError(
-            f"the corpus has {n_episodes} episode(s): a validation split by episode needs at "
-            "least 2; collect or ingest more episodes"
-        )
-    n_val = min(n_episodes - 1, max(1, int(round(n_episodes * val_fraction))))
-    perm = np.random.default_rng(seed).permutation(n_episodes)
-    return np.sort(perm[n_val:]), np.sort(perm[:n_val])
-
-
-def episode_rows(episode_starts: np.ndarray, episodes: np.ndarray) -> np.ndarray:
-    """(R,) int64 rows of the given episodes, in row order."""
-    starts = episode_starts[episodes]
-    lengths = episode_starts[episodes + 1] - starts
-    offsets = np.arange(lengths.sum()) - np.repeat(np.cumsum(lengths) - lengths, lengths)
-    return (np.repeat(starts, lengths) + offsets).astype(np.int64)
 
 
 def history_index(episode_starts: np.ndarray, n_rows: int, length: int) -> np.ndarray:
@@ -151,25 +131,18 @@ def _evaluate(net, inputs: CorpusInputs, rows: torch.Tensor, y: torch.Tensor, ob
 
 
 def train_model(corpus, config: BeliefConfig, model_id: str = "default", overwrite: bool = False,
-                progress=None) -> dict:
+                progress=None, prepared: TrainingData | None = None) -> dict:
     """Learn b and l on ``corpus`` and write ``corpus.models_dir/<model_id>/``; final metrics.
 
     ``progress``, when given, is called with a dict (``epoch``, ``max_epochs``, ``batch``,
     ``batches``, ``train_loss`` running mean, ``val_loss`` and ``best_val_loss`` or None,
-    ``epoch_done``) every few batches and at the end of every epoch.
+    ``epoch_done``) every few batches and at the end of every epoch. ``prepared`` is the
+    result of :func:`aoc_cli.belief.data.prepare` for the same arguments, when already known.
     """
     started = time.perf_counter()
-    config.validate()
-    check_name(model_id, "model")
-    if model_dir(corpus, model_id).exists() and not overwrite:
-        raise AocError(f"model {model_id!r} of corpus {corpus.name!r} already exists: pass "
-                       "--overwrite to replace it, or choose another --model")
-    values = None
-    if config.mode == "value":
-        values = value_targets(corpus, config.value, config.gamma)
-    train_eps, val_eps = split_episodes(corpus.n_episodes, config.val_fraction, config.seed)
-    starts = corpus.episode_starts
-    train_rows, val_rows = episode_rows(starts, train_eps), episode_rows(starts, val_eps)
+    data = prepared or prepare(corpus, config, model_id, overwrite)
+    values, val_eps = data.values, data.val_episodes
+    train_rows, val_rows = data.train_rows, data.val_rows
 
     device = pick_device(config.device)
     threads = config.resolved_threads()

@@ -7,6 +7,7 @@ from typing import Optional
 import typer
 
 from aoc_cli.belief.config import BeliefConfig
+from aoc_cli.belief.data import prepare
 from aoc_cli.cli.common import FormatOption, get_store
 from aoc_cli.report.output import message, progress, resolve_format, write_object
 
@@ -46,14 +47,15 @@ def train(
     fmt: Optional[str] = FormatOption,
 ) -> None:
     """Train the belief model b and linear head l of corpus NAME; print the final metrics."""
-    from aoc_cli.belief import train_model
-
     fmt = resolve_format(fmt)
     config = BeliefConfig(mode=mode, value=value, gamma=gamma, history_length=history_length,
                           belief_dim=belief_dim, hidden=hidden, max_epochs=epochs,
                           batch_size=batch_size, lr=lr, patience=patience,
                           val_fraction=val_fraction, seed=seed, threads=threads).validate()
     corpus = get_store().corpus(name)
+    prepared = prepare(corpus, config, model, overwrite)
+    from aoc_cli.belief.train import train_model  # imports torch: only once the input is good
+
     with progress(transient=True) as bar:
         task = bar.add_task(f"training {name}/{model}", total=config.max_epochs)
 
@@ -67,7 +69,8 @@ def train(
             bar.update(task, completed=event["epoch"] - (0 if event["epoch_done"] else 1),
                        description=text)
 
-        metrics = train_model(corpus, config, model, overwrite=overwrite, progress=on_progress)
+        metrics = train_model(corpus, config, model, overwrite=overwrite, progress=on_progress,
+                              prepared=prepared)
     score = (f"val R^2 {metrics['val_r2']:.4f}" if "val_r2" in metrics
              else f"val accuracy {metrics['val_accuracy']:.4f} (majority "
                   f"{metrics['val_majority_accuracy']:.4f})")

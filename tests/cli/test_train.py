@@ -1,0 +1,61 @@
+import json
+
+import pytest
+
+from aoc_cli.store import Store
+
+from tests.belief.corpora import discrete_imitation, synthetic_value
+
+QUICK = ["--threads", "1", "--epochs", "2", "--hidden", "16", "--format", "json"]
+
+
+@pytest.fixture
+def corpora(store):
+    s = Store(store)
+    s.write("syn", synthetic_value(episodes=10, length=20))
+    s.write("free", discrete_imitation(episodes=10, length=20))
+    s.write("one", synthetic_value(episodes=1, length=20))
+    return s
+
+
+def test_train_prints_the_final_metrics_as_one_json_object(aoc, corpora):
+    code, out, err = aoc("train", "syn", "--value", "v", "--model", "m1", *QUICK)
+    assert code == 0, err
+    metrics = json.loads(out)
+    assert metrics["model"] == "m1" and metrics["mode"] == "value" and metrics["epochs"] == 2
+    assert {"train_loss", "val_loss", "val_r2", "seconds"} <= set(metrics)
+    assert "val R^2" in err
+    assert (corpora.corpus("syn").models_dir / "m1" / "weights.pt").is_file()
+
+
+def test_imitation_mode_on_a_reward_free_discrete_corpus_reports_accuracy(aoc, corpora):
+    code, out, err = aoc("train", "free", "--mode", "imitation", *QUICK)
+    assert code == 0, err
+    metrics = json.loads(out)
+    assert metrics["model"] == "default" and metrics["mode"] == "imitation"
+    assert 0.0 <= metrics["val_accuracy"] <= 1.0 and "val_r2" not in metrics
+
+
+@pytest.mark.parametrize("args, says", [
+    (["free"], "no rewards.*--mode imitation"),
+    (["syn", "--value", "nope"], "unknown --value 'nope'"),
+    (["syn", "--history-length", "-1"], "--history-length must be >= 0"),
+    (["one"], "1 episode.*at least 2"),
+    (["syn", "--mode", "fancy"], "unknown --mode"),
+    (["missing"], "no corpus 'missing'"),
+])
+def test_bad_input_exits_2_with_one_line(aoc, corpora, args, says):
+    import re
+
+    code, out, err = aoc("train", *args, *QUICK)
+    assert code == 2 and out == ""
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and re.search(says, lines[0]), err
+
+
+def test_existing_model_needs_overwrite(aoc, corpora):
+    assert aoc("train", "syn", "--value", "v", *QUICK)[0] == 0
+    code, _, err = aoc("train", "syn", "--value", "v", *QUICK)
+    assert code == 2 and "already exists: pass --overwrite" in err
+    code, out, err = aoc("train", "syn", "--value", "v", "--overwrite", *QUICK)
+    assert code == 0 and json.loads(out)["model"] == "default"
