@@ -144,47 +144,66 @@ def min_norm_point(
         done |= optimal & ~minor
         add = ~(minor | done)
 
-        # minor cycle: step towards alpha until a weight reaches zero; that point leaves
-        ratio = np.where(neg, lam / np.maximum(lam - alpha, 1e-300), np.inf)
-        s_out = np.argmin(ratio, axis=1)
-        theta = np.where(minor, np.minimum(ratio[r, s_out], 1.0), 0.0)
-        lam += theta[:, None] * (alpha - lam)
+        any_minor, any_add = bool(minor.any()), bool(add.any())
+        v = den = None
 
-        # one rank-one update of H^{-1}: drop s_out (minor) or add j at a free slot (add)
-        s_in = np.argmin(act, axis=1)
-        pj = Pl[r, j]
-        g = (Ps @ pj[:, :, None])[..., 0] + 1.0
-        g *= act
-        u = (H @ g[:, :, None])[..., 0]
-        sigma = sq1[r, j] - np.einsum("qm,qm->q", g, u)
-        c = H[r, :, s_out]
-        c_out = c[r, s_out]
-        u[r, s_in] -= 1.0
-        bad = (add & (sigma <= 1e-13)) | (minor & (c_out <= 0.0))
-        if bad.any():
-            add &= ~bad
-            minor &= ~bad
-            failed |= bad
-            done |= bad
-        v = np.where(add[:, None], u, np.where(minor[:, None], c, 0.0))
-        den = np.where(add, sigma, np.where(minor, -c_out, 1.0))
-        w = v / den[:, None]
-        H += v[:, :, None] * w[:, None, :]
-        a += v * w.sum(axis=1, keepdims=True)
-        rm = r[minor]
-        so = s_out[rm]
-        act[rm, so] = False
-        lam[rm, so] = 0.0
-        H[rm, so, :] = 0.0
-        H[rm, :, so] = 0.0
-        a[rm, so] = 0.0
-        ad = r[add]
-        si = s_in[ad]
-        act[ad, si] = True
-        slot[ad, si] = j[ad]
-        Ps[ad, si] = pj[ad]
-        nact += add
-        nact -= minor
+        # minor cycle: step towards alpha until a weight reaches zero; that point leaves
+        if any_minor:
+            ratio = np.where(neg, lam / np.maximum(lam - alpha, 1e-300), np.inf)
+            s_out = np.argmin(ratio, axis=1)
+            theta = np.where(minor, np.minimum(ratio[r, s_out], 1.0), 0.0)
+            lam += theta[:, None] * (alpha - lam)
+            c = H[r, :, s_out]  # drop slot s: H^{-1} <- H^{-1} - c c^T / c_s
+            c_out = c[r, s_out]
+            bad = minor & (c_out <= 0.0)
+            if bad.any():
+                minor &= ~bad
+                failed |= bad
+                done |= bad
+            v = c * minor[:, None]
+            den = np.where(minor, -c_out, 1.0)
+
+        # major cycle, continued: j enters at a free slot s: H^{-1} <- H^{-1} + (u-e_s)(u-e_s)^T / sigma
+        if any_add:
+            s_in = np.argmin(act, axis=1)
+            pj = Pl[r, j]
+            g = (Ps @ pj[:, :, None])[..., 0] + 1.0
+            g *= act
+            u = (H @ g[:, :, None])[..., 0]
+            sigma = sq1[r, j] - np.einsum("qm,qm->q", g, u)
+            u[r, s_in] -= 1.0
+            bad = add & (sigma <= 1e-13)
+            if bad.any():
+                add &= ~bad
+                failed |= bad
+                done |= bad
+            if v is None:
+                v = u * add[:, None]
+                den = np.where(add, sigma, 1.0)
+            else:
+                v = np.where(add[:, None], u, v)
+                den = np.where(add, sigma, den)
+
+        if v is not None:
+            w = v / den[:, None]
+            H += v[:, :, None] * w[:, None, :]
+            a += v * w.sum(axis=1, keepdims=True)
+        if any_minor:
+            rm = r[minor]
+            so = s_out[rm]
+            act[rm, so] = False
+            lam[rm, so] = 0.0
+            H[rm, so, :] = 0.0
+            H[rm, :, so] = 0.0
+            a[rm, so] = 0.0
+            nact -= minor
+        if any_add:
+            ad = r[add]
+            si = s_in[ad]
+            act[ad, si] = True
+            slot[ad, si] = j[ad]
+            Ps[ad, si] = pj[ad]
+            nact += add
 
         if done.all():
             break
