@@ -1,0 +1,70 @@
+"""What every experiment shares: the run context, sessions, and the scale of a run."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from aoc_cli.bench.methods import Runner
+from aoc_cli.bench.prepare import Artefacts
+
+SCALES = ("tiny", "quick", "full")
+
+
+@dataclass
+class Context:
+    """One bench run: where artefacts and outputs go, seeds, progress and log."""
+
+    experiment: str
+    scale: str
+    out: Path
+    artefacts: Artefacts
+    runner: Runner
+    seeds: list[int]
+    episodes: int | None = None          # override of the scale's episodes per setting
+    methods: list[str] | None = None     # override of the experiment's methods
+    log: object = None
+    plots: list[str] = field(default_factory=list)
+
+    def say(self, text: str) -> None:
+        if self.log is not None:
+            self.log(text)
+
+    def n_episodes(self, default: int) -> int:
+        return int(self.episodes) if self.episodes else int(default)
+
+    def pick_methods(self, default: list[str]) -> list[str]:
+        if not self.methods:
+            return list(default)
+        return [m for m in self.methods]
+
+
+def action_space_of(env) -> dict | None:
+    """The box of a gymnasium env's action space, as the controller takes it."""
+    import gymnasium as gym
+    import numpy as np
+
+    space = env.action_space
+    if isinstance(space, gym.spaces.Box):
+        return {"type": "box", "shape": [int(np.prod(space.shape))],
+                "low": np.asarray(space.low, float).reshape(-1).tolist(),
+                "high": np.asarray(space.high, float).reshape(-1).tolist()}
+    return None
+
+
+def session(corpus, env, model_id: str = "default", index_id: str = "default",
+            seed: int = 0, **config):
+    """An AOC session on ``corpus`` with ControllerConfig fields ``config``."""
+    from aoc_cli.control import ControllerConfig, open_session
+
+    return open_session(corpus, model_id, index_id, ControllerConfig(**config), None, seed,
+                        action_space_of(env))
+
+
+def belief_config(scale: dict, mode: str = "value", seed: int = 0):
+    """The belief model of a scale: the paper's network, the scale's epoch budget."""
+    from aoc_cli.belief import BeliefConfig
+
+    return BeliefConfig(mode=mode, max_epochs=int(scale["epochs"]),
+                        patience=int(scale.get("patience", 10)), seed=int(seed),
+                        threads=int(scale.get("threads", 1)))

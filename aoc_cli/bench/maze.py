@@ -1,0 +1,141 @@
+"""Maze experiments: adaptivity by re-sampling pi1 (maze-adapt) and conservatism (two-gates).
+
+* ``maze-adapt`` (paper Figure "behavior of AOC can be controlled by re-sampling" and its
+  appendix table): one corpus and one model; for each rate in x4, x3, x2, x1, x0.75, x0.5,
+  x0.25 a derived index re-samples pi1's rows (``resample={"policy=pi1": rate}``; an integer
+  part repeats them, a fraction keeps that share of pi1's episodes), with no retraining. AOC
+  runs from (0, 0) to (16, 0); reported: the success rate and how many rollouts pass the upper
+  and the lower gate. The gate of a rollout is where its path first crosses the wall line
+  x = 8 (from x < 8 to x >= 8): the crossing's y, interpolated on that step's segment, is the
+  upper gate when y > 11.625 (half way between the gap around y = 8, [7.25, 8.75], and the gap
+  at the top, [14.5, 16]) and the lower gate otherwise; a rollout that never crosses counts in
+  neither. Counts are per 100 rollouts. The raw-feature kNN and 1NN run at x1 for comparison.
+* ``two-gates`` (paper Table "epsilon contributes to the conservative behaviours"): AOC with
+  epsilon in {0.1, 0.3, 0.5, 0.7}; the return and a PNG of the trajectories per epsilon.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from aoc_cli.bench import paper
+from aoc_cli.bench.common import Context, belief_config, session
+from aoc_cli.bench.methods import row_values
+from aoc_cli.bench.results import result_row
+
+RATES = (4.0, 3.0, 2.0, 1.0, 0.75, 0.5, 0.25)
+EPSILONS = (0.1, 0.3, 0.5, 0.7)
+WALL_X = 8.0
+GATE_SPLIT = (8.75 + 14.5) / 2.0  # 11.625
+
+SCALES = {
+    "tiny": {"episodes_data": 120, "episodes": 3, "seeds": 1, "epochs": 2, "patience": 2,
+             "rates": (4.0, 1.0, 0.25), "compare": ["knn"]},
+    "quick": {"episodes_data": 1000, "episodes": 30, "seeds": 1, "epochs": 60, "patience": 8,
+              "rates": RATES, "compare": ["knn", "1nn"]},
+    "full": {"episodes_data": 1000, "episodes": 100, "seeds": 3, "epochs": 200,
+             "patience": 10, "rates": RATES, "compare": ["knn", "1nn", "knn-belief"]},
+}
+TWO_GATES_SCALES = {
+    "tiny": {"episodes_data": 60, "episodes": 3, "seeds": 1, "epochs": 2, "patience": 2,
+             "epsilons": (0.1, 0.7)},
+    "quick": {"episodes_data": 500, "episodes": 30, "seeds": 1, "epochs": 60, "patience": 8,
+              "epsilons": EPSILONS},
+    "full": {"episodes_data": 500, "episodes": 100, "seeds": 3, "epochs": 200, "patience": 10,
+             "epsilons": EPSILONS},
+}
+
+
+def gate_of(path: np.ndarray) -> str | None:
+    """'upper', 'lower' or None: the gate where a (T, 2) path first crosses x = 8."""
+    p = np.asarray(path, dtype=np.float64)
+    if len(p) < 2:
+        return None
+    x0, x1 = p[:-1, 0], p[1:, 0]
+    cross = np.flatnonzero((x0 < WALL_X) & (x1 >= WALL_X))
+    if len(cross) == 0:
+        return None
+    t = cross[0]
+    frac = (WALL_X - p[t, 0]) / (p[t + 1, 0] - p[t, 0])
+    y = p[t, 1] + frac * (p[t + 1, 1] - p[t, 1])
+    return "upper" if y > GATE_SPLIT else "lower"
+
+
+def gate_counts(results) -> tuple[float, float]:
+    """(upper, lower) rollouts per 100 (module docstring)."""
+    gates = [gate_of(np.asarray(r.observations)) for r in results]
+    n = max(len(gates), 1)
+    return 100.0 * gates.count("upper") / n, 100.0 * gates.count("lower") / n
+
+
+def _index_id(rate: float) -> str:
+    return "default" if rate == 1.0 else f"pi1x{rate:g}"
+
+
+def _plot(ctx: Context, task: str, results, name: str, title: str) -> None:
+    from aoc_cli.envs import TASKS
+
+    path = ctx.out / name
+    TASKS[task].plot_trajectories([np.asarray(r.observations)[:, :2] for r in results], path,
+                                  title=title)
+    ctx.plots.append(name)
+
+
+def run_maze_adapt(ctx: Context, scale: dict):
+    from aoc_cli.envs import make_env
+
+    env = make_env("maze")
+    rows = []
+    for seed in ctx.seeds:
+        corpus = ctx.artefacts.corpus("maze", episodes=scale["episodes_data"], seed=seed)
+        ctx.artefacts.model(corpus, "default", belief_config(scale, "value", seed))
+        for rate in scale["rates"]:
+            index_id = _index_id(rate)
+            resample = None if rate == 1.0 else {"policy=pi1": rate}
+            ctx.artefacts.index(corpus, "default", index_id, resample=resample, seed=seed)
+            s = session(corpus, env, index_id=index_id, seed=seed)
+            methods = ["aoc"] + (ctx.pick_methods(scale["compare"]) if rate == 1.0 else [])
+            for method in methods:
+                run = ctx.runner.run(method, s, env, ctx.n_episodes(scale["episodes"]), seed,
+                                     label=f"maze x{rate:g} seed {seed}")
+                values = row_values(run)
+                if run.status == "ok":
+                    values["upper_gate"], values["lower_gate"] = gate_counts(run.results)
+                    if seed == ctx.seeds[0]:
+                        _plot(ctx, "maze", run.results, f"maze_{method}_x{rate:g}.png",
+                              f"{method}, pi1 x{rate:g}: success "
+                              f"{values['success_rate']:.0%}")
+                rows.append(result_row("maze-adapt", "maze", method, f"rate={rate:g}", seed,
+                                       **values))
+
+    def figure(row):
+        fig = paper.maze(float(row["setting"].split("=")[1]))
+        return None if fig is None or row["method"] != "aoc" else fig
+
+    return rows, figure
+
+
+def run_two_gates(ctx: Context, scale: dict):
+    from aoc_cli.envs import make_env
+
+    env = make_env("two-gates")
+    rows = []
+    for seed in ctx.seeds:
+        corpus = ctx.artefacts.corpus("two-gates", episodes=scale["episodes_data"], seed=seed)
+        ctx.artefacts.model(corpus, "default", belief_config(scale, "value", seed))
+        ctx.artefacts.index(corpus, "default")
+        for eps in scale["epsilons"]:
+            s = session(corpus, env, seed=seed, epsilon=eps)
+            run = ctx.runner.run("aoc", s, env, ctx.n_episodes(scale["episodes"]), seed,
+                                 label=f"two-gates epsilon {eps:g} seed {seed}")
+            values = row_values(run)
+            if run.status == "ok" and seed == ctx.seeds[0]:
+                _plot(ctx, "two-gates", run.results, f"two_gates_epsilon{eps:g}.png",
+                      f"AOC, epsilon {eps:g}: return {values['return_mean']:.2f}")
+            rows.append(result_row("two-gates", "two-gates", "aoc", f"epsilon={eps:g}", seed,
+                                   **values))
+
+    def figure(row):
+        return paper.two_gates(float(row["setting"].split("=")[1]))
+
+    return rows, figure

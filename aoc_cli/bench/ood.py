@@ -1,0 +1,125 @@
+"""Out-of-distribution detection at control time (paper appendix "Identify Control Time OOD
+Examples with AOC").
+
+AOC runs as usual; from step T on, Gaussian noise (std ``noise`` times the action range)
+disturbs every applied action (``rollout(..., noise_after=T, noise_std=noise)``), so the
+history the controller sees leaves the data. The OOD monitor flags a step whose residual
+leaves the running 3-sigma band. Per episode:
+
+* delay: the first flagged step at or after T, minus T (episodes with no such flag have none);
+* flagged: whether any step at or after T was flagged (the share of episodes is reported);
+* false flags: flagged steps before T (no disturbance yet).
+
+The same seeds run without noise (``noise=0``) as the control: there every flag is a false
+alarm. The paper used BipedalWalker with a black-box sampler and noise after step 500; here
+the task is pendulum-het (random start) with the uniform sampler.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from aoc_cli.bench.common import Context, belief_config, session
+from aoc_cli.bench.methods import row_values
+from aoc_cli.bench.results import result_row
+
+SCALES = {
+    "tiny": {"task": "pendulum-het", "rows": 2_000, "T": 30, "noise": 0.5, "episodes": 1,
+             "seeds": 1, "epochs": 2, "patience": 2},
+    "quick": {"task": "pendulum-het", "rows": 30_000, "T": 100, "noise": 0.5, "episodes": 6,
+              "seeds": 1, "epochs": 40, "patience": 6},
+    "full": {"task": "pendulum-het", "rows": 100_000, "T": 100, "noise": 0.5, "episodes": 10,
+             "seeds": 3, "epochs": 200, "patience": 10},
+}
+
+
+def episode_flags(result, T: int) -> tuple[int | None, bool, int]:
+    """(delay, flagged after T, false flags before T) of one EpisodeResult."""
+    flags = np.asarray(result.ood, bool)
+    after = np.flatnonzero(flags[T:])
+    delay = int(after[0]) if len(after) else None
+    return delay, bool(len(after)), int(flags[:T].sum())
+
+
+def ood_values(results, T: int) -> dict:
+    stats = [episode_flags(r, T) for r in results]
+    delays = [d for d, _f, _n in stats if d is not None]
+    return {
+        "ood_delay": float(np.mean(delays)) if delays else None,
+        "ood_flagged": float(np.mean([f for _d, f, _n in stats])) if stats else None,
+        "ood_false_flags": float(np.mean([n for _d, _f, n in stats])) if stats else None,
+    }
+
+
+def _curves(results) -> dict:
+    """Per-step means over episodes: residual, band edge, reward (arrays of the longest run)."""
+    T = max(r.length for r in results)
+
+    def mean_of(get):
+        mat = np.full((len(results), T), np.nan)
+        for i, r in enumerate(results):
+            v = np.array([np.nan if x is None else x for x in get(r)], dtype=float)
+            v[~np.isfinite(v)] = np.nan
+            mat[i, :len(v)] = v[:T]
+        with np.errstate(all="ignore"):
+            return np.nanmean(mat, axis=0)
+
+    return {"residual": mean_of(lambda r: r.residuals),
+            "band": mean_of(lambda r: getattr(getattr(r, "monitor", None), "upper", [])),
+            "reward": mean_of(lambda r: r.rewards)}
+
+
+def plot_ood(curves: dict, T: int, path, title: str) -> None:
+    """Mean residual (with the mean 3-sigma band edge, shaded) and mean reward per step."""
+    from aoc_cli.report.plots import plt, save
+
+    fig, (ax_r, ax_res) = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    for label, c in curves.items():
+        t = np.arange(len(c["reward"]))
+        ax_r.plot(t, c["reward"], lw=1.2, label=label)
+        line, = ax_res.plot(t, c["residual"], lw=1.2, label=f"{label}: residual")
+        ax_res.fill_between(t, 0, c["band"], color=line.get_color(), alpha=0.12,
+                            label=f"{label}: 3-sigma band")
+    for ax in (ax_r, ax_res):
+        ax.axvline(T, color="grey", ls=":", lw=1)
+    ax_r.set_ylabel("reward (mean)")
+    ax_res.set_ylabel("corpus residual (mean)")
+    ax_res.set_xlabel(f"step (noise from step {T})")
+    ax_r.legend(fontsize=8)
+    ax_res.legend(fontsize=8, loc="upper left")
+    fig.suptitle(title)
+    save(fig, path)
+
+
+def run_ood(ctx: Context, scale: dict):
+    from aoc_cli.envs import make_env
+    from aoc_cli.report.plots import plot_rollout_curves
+
+    task, T = scale["task"], int(scale["T"])
+    env = make_env(task)
+    rows, curves = [], {}
+    for seed in ctx.seeds:
+        corpus = ctx.artefacts.corpus(task, rows=scale["rows"], seed=seed)
+        ctx.artefacts.model(corpus, "default", belief_config(scale, "value", seed))
+        ctx.artefacts.index(corpus, "default")
+        for noise in (0.0, float(scale["noise"])):
+            s = session(corpus, env, seed=seed)
+            run = ctx.runner.run("aoc", s, env, ctx.n_episodes(scale["episodes"]), seed,
+                                 noise_after=T if noise > 0 else None, noise_std=noise,
+                                 label=f"{task} noise {noise:g} seed {seed}")
+            values = row_values(run)
+            if run.status == "ok":
+                values.update(ood_values(run.results, T))
+                if seed == ctx.seeds[0]:
+                    curves[f"noise {noise:g}"] = _curves(run.results)
+                    name = f"ood_noise{noise:g}_episodes.png"
+                    plot_rollout_curves(run.results, ctx.out / name,
+                                        title=f"{task}: AOC, noise {noise:g} after step {T}",
+                                        noise_after=T)
+                    ctx.plots.append(name)
+            rows.append(result_row("ood", task, "aoc", f"noise={noise:g}", seed, **values))
+    if curves:
+        plot_ood(curves, T, ctx.out / "ood_mean.png",
+                 f"{task}: residual and reward per step, noise after step {T}")
+        ctx.plots.append("ood_mean.png")
+    return rows, lambda row: None

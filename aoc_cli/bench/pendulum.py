@@ -1,0 +1,124 @@
+"""Pendulum-Het experiments: methods x data sizes, the epsilon ablation, the k ablation.
+
+* ``pendulum-het`` (paper Table "Results on the Heterogeneous Pendulum"): every method at every
+  data size, evaluated in the normal system from gymnasium's random start (``pendulum-het``) and
+  from the paper's upright start (``pendulum-het-upright``), plus the data's own average return.
+  At the full scale the upright task has its own corpus (collected from the upright start, as
+  the paper did); at the quick and tiny scales it is evaluated with the random-start corpus and
+  models (the corpus covers the upright region; one training instead of two).
+* ``epsilon`` (paper Table "epsilon controls the conservation"): AOC with epsilon in
+  {0.3, 0.5, 0.9, 1.0} at the middle data size, random start.
+* ``k`` (paper Table "cardinality of the corpus subset"): AOC with k in {1, 10, 2 (d_b + 1), 100}.
+
+The paper's pendulum figures are for the upright start; they are shown beside both tasks.
+"""
+
+from __future__ import annotations
+
+from aoc_cli.bench import paper
+from aoc_cli.bench.common import Context, belief_config, session
+from aoc_cli.bench.methods import DATA, data_values, row_values
+from aoc_cli.bench.results import result_row
+
+TASKS = ("pendulum-het", "pendulum-het-upright")
+METHODS = ["aoc", "knn", "1nn", "knn-belief", "1nn-belief", "bc", "td3bc", "cql", "mpc",
+           "zero", "random"]
+
+SCALES = {
+    "tiny": {"sizes": [2_000], "paper_rows": [100_000], "episodes": 1, "seeds": 1,
+             "epochs": 2, "patience": 2, "upright_data": "shared", "mid": 2_000,
+             "ablation_tasks": ["pendulum-het"]},
+    "quick": {"sizes": [30_000], "paper_rows": [100_000], "episodes": 4, "seeds": 2,
+              "epochs": 40, "patience": 6, "upright_data": "shared", "mid": 30_000,
+              "ablation_tasks": ["pendulum-het"]},
+    "full": {"sizes": [100_000, 300_000, 600_000], "paper_rows": [100_000, 300_000, 600_000],
+             "episodes": 10, "seeds": 8, "epochs": 200, "patience": 10, "upright_data": "own",
+             "mid": 300_000, "ablation_tasks": ["pendulum-het", "pendulum-het-upright"]},
+}
+EPSILONS = (0.3, 0.5, 0.9, 1.0)
+
+
+def _k_values(d_b: int) -> list[int]:
+    return [1, 10, 2 * (d_b + 1), 100]
+
+
+def _prepare(ctx: Context, scale: dict, task: str, rows: int, seed: int, bc: bool):
+    """Corpus, value model (+ bc model) and default index for ``task`` at ``rows`` rows."""
+    data_task = task if (task == "pendulum-het" or scale["upright_data"] == "own") \
+        else "pendulum-het"
+    corpus = ctx.artefacts.corpus(data_task, rows=rows, seed=seed)
+    ctx.artefacts.model(corpus, "default", belief_config(scale, "value", seed))
+    if bc:
+        ctx.artefacts.model(corpus, "bc", belief_config(scale, "imitation", seed))
+    ctx.artefacts.index(corpus, "default")
+    return corpus
+
+
+def run_pendulum_het(ctx: Context, scale: dict) -> tuple[list[dict], callable]:
+    from aoc_cli.envs import make_env
+
+    methods = ctx.pick_methods(METHODS)
+    rows_out = []
+    for size, paper_rows in zip(scale["sizes"], scale["paper_rows"]):
+        setting = f"rows={size}"
+        for seed in ctx.seeds:
+            for task in TASKS:
+                corpus = _prepare(ctx, scale, task, size, seed, "bc" in methods)
+                env = make_env(task)
+                s = session(corpus, env, seed=seed)
+                rows_out.append(result_row("pendulum-het", task, DATA, setting, seed,
+                                           **data_values(corpus),
+                                           note=f"corpus {corpus.name}"))
+                for method in methods:
+                    run = ctx.runner.run(method, s, env, ctx.n_episodes(scale["episodes"]),
+                                         seed, label=f"{task} {setting} seed {seed}")
+                    rows_out.append(result_row("pendulum-het", task, method, setting, seed,
+                                               **row_values(run)))
+
+    sizes = dict(zip((f"rows={s}" for s in scale["sizes"]), scale["paper_rows"]))
+
+    def figure(row):
+        return paper.pendulum(row["method"], sizes.get(row["setting"], -1))
+
+    return rows_out, figure
+
+
+def _ablation(ctx: Context, scale: dict, name: str, settings) -> list[dict]:
+    from aoc_cli.envs import make_env
+
+    out = []
+    for seed in ctx.seeds:
+        for task in scale["ablation_tasks"]:
+            corpus = _prepare(ctx, scale, task, scale["mid"], seed, bc=False)
+            env = make_env(task)
+            for setting, config in settings(corpus):
+                s = session(corpus, env, seed=seed, **config)
+                run = ctx.runner.run("aoc", s, env, ctx.n_episodes(scale["episodes"]), seed,
+                                     label=f"{task} {setting} seed {seed}")
+                out.append(result_row(name, task, "aoc", setting, seed, **row_values(run)))
+    return out
+
+
+def run_epsilon(ctx: Context, scale: dict):
+    rows = _ablation(ctx, scale, "epsilon",
+                     lambda corpus: [(f"epsilon={e:g}", {"epsilon": e}) for e in EPSILONS])
+
+    def figure(row):
+        return paper.epsilon(float(row["setting"].split("=")[1]))
+
+    return rows, figure
+
+
+def run_k(ctx: Context, scale: dict):
+    from aoc_cli.belief import load_model
+
+    def settings(corpus):
+        d_b = load_model(corpus, "default").d_b
+        return [(f"k={k}", {"k": k}) for k in _k_values(d_b)]
+
+    rows = _ablation(ctx, scale, "k", settings)
+
+    def figure(row):
+        return paper.k(int(row["setting"].split("=")[1]))
+
+    return rows, figure

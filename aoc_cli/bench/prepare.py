@@ -1,0 +1,126 @@
+"""The artefacts an experiment needs, built through the library and reused when they exist.
+
+The bench keeps its own store (default ``bench/store``, ``--bench-store`` to change it), apart
+from the user's ``corpora/``. Names say what was built:
+
+* corpus ``<task>-<rows or episodes>-s<seed>`` (e.g. ``pendulum-het-30000r-s0``,
+  ``maze-1000e-s0``), collected by ``aoc_cli.envs.collect`` with that seed; reused when its
+  manifest records the same task, budget and seed;
+* model ``default`` (value mode) and ``bc`` (imitation mode) of a corpus, trained with
+  ``aoc_cli.belief.train_model``; reused when the saved config equals the wanted one and the
+  corpus hash matches (``load_model`` refuses stale models anyway);
+* index ``default`` and derived indexes (e.g. ``pi1x0.5``: ``--resample policy=pi1:0.5``),
+  built by ``aoc_cli.index.build.build_index``; reused when ``load_index`` accepts them and
+  they were built with the same rates.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import asdict
+from pathlib import Path
+
+from aoc_cli.belief import BeliefConfig
+from aoc_cli.errors import AocError
+from aoc_cli.store import Store
+
+#: BeliefConfig fields that do not change the trained model.
+_RUNTIME = ("threads", "device")
+
+
+def corpus_name(task: str, rows: int | None = None, episodes: int | None = None,
+                seed: int = 0) -> str:
+    budget = f"{rows}r" if rows is not None else f"{episodes}e"
+    return f"{task}-{budget}-s{seed}"
+
+
+class Artefacts:
+    """Builds or reuses corpora, models and indexes in the bench store; logs what it did."""
+
+    def __init__(self, store_root: str | Path, log=None, progress=None):
+        self.store = Store.open(store_root)
+        self.log = log or (lambda text: None)
+        self.progress = progress
+        self.built: list[dict] = []
+
+    def _task(self, label: str, total: int | None):
+        if self.progress is None:
+            return None
+        return self.progress.add_task(label, total=total)
+
+    def _done(self, task) -> None:
+        if task is not None and self.progress is not None:
+            self.progress.remove_task(task)
+
+    # -- corpus ----------------------------------------------------------------------------
+    def corpus(self, task: str, rows: int | None = None, episodes: int | None = None,
+               seed: int = 0):
+        from aoc_cli.envs import collect
+
+        name = corpus_name(task, rows, episodes, seed)
+        if self.store.exists(name):
+            c = self.store.corpus(name)
+            src = (c.manifest.get("sources") or [{}])[-1]
+            if src.get("task") == task and src.get("seed") == seed and \
+                    src.get("steps") == rows and src.get("episodes") == episodes:
+                return c
+        started = time.perf_counter()
+        bar = self._task(f"collect {name}", rows or episodes)
+
+        def tick(done, total):
+            if bar is not None:
+                self.progress.update(bar, completed=done, total=total)
+
+        data, _summary = collect(task, steps=rows, episodes=episodes, seed=seed, progress=tick)
+        self._done(bar)
+        c = self.store.write(name, data, overwrite=True)
+        self._record("collect", name, started)
+        return c
+
+    # -- models ----------------------------------------------------------------------------
+    def model(self, corpus, model_id: str, config: BeliefConfig):
+        """Train ``model_id`` with ``config`` unless an identical one exists."""
+        from aoc_cli.belief import train_model
+
+        path = Path(corpus.models_dir) / model_id / "config.json"
+        if path.is_file():
+            meta = json.loads(path.read_text())
+            saved = {k: v for k, v in meta.get("config", {}).items() if k not in _RUNTIME}
+            wanted = {k: v for k, v in asdict(config).items() if k not in _RUNTIME}
+            if saved == wanted and meta.get("corpus_hash") == corpus.hash:
+                return model_id
+        started = time.perf_counter()
+        bar = self._task(f"train {corpus.name}/{model_id}", config.max_epochs)
+
+        def tick(info):
+            if bar is not None and info.get("epoch_done"):
+                self.progress.update(bar, completed=info["epoch"],
+                                     description=f"train {corpus.name}/{model_id} "
+                                                 f"(val {info['val_loss']:.3g})")
+
+        train_model(corpus, config, model_id, overwrite=True, progress=tick)
+        self._done(bar)
+        self._record("train", f"{corpus.name}/{model_id}", started)
+        return model_id
+
+    # -- indexes ---------------------------------------------------------------------------
+    def index(self, corpus, model_id: str, index_id: str = "default",
+              resample: dict | None = None, seed: int = 0):
+        from aoc_cli.index.build import build_index, load_index
+
+        try:
+            ci = load_index(corpus, model_id, index_id)
+            if (ci.meta.get("resample") or {}) == (resample or {}):
+                return ci
+        except AocError:
+            pass
+        started = time.perf_counter()
+        ci = build_index(corpus, model_id, index_id=index_id, resample=resample, seed=seed)
+        self._record("index", f"{corpus.name}/{model_id}/{index_id}", started)
+        return ci
+
+    def _record(self, what: str, name: str, started: float) -> None:
+        seconds = time.perf_counter() - started
+        self.built.append({"step": what, "name": name, "seconds": round(seconds, 2)})
+        self.log(f"{what} {name}: {seconds:.1f} s")

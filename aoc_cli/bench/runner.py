@@ -1,0 +1,209 @@
+"""`aoc bench`: run an experiment end to end and write its tables and plots.
+
+>>> from aoc_cli.bench import run_experiment
+>>> report = run_experiment("two-gates", scale="quick", out="bench/two-gates")  # doctest: +SKIP
+
+Outputs in ``out``: results.csv, summary.json, summary.md and PNG plots (see
+:mod:`aoc_cli.bench.results`). Artefacts (corpora, models, indexes) go to the bench store and
+are reused across runs and experiments (:mod:`aoc_cli.bench.prepare`).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from aoc_cli.bench import lunar, maze, ood, paper, pendulum, plots
+from aoc_cli.bench.common import SCALES, Context
+from aoc_cli.bench.methods import Budget, Runner
+from aoc_cli.bench.prepare import Artefacts
+from aoc_cli.bench.results import summarize_rows, summary_markdown, write_outputs
+from aoc_cli.errors import AocError
+
+RETURN = [("return_mean", "return"), ("success_rate", "success")]
+
+
+@dataclass(frozen=True)
+class Experiment:
+    name: str
+    title: str
+    run: object
+    scales: dict
+    metrics: list
+    paper_label: str = "paper"
+
+
+EXPERIMENTS = {e.name: e for e in [
+    Experiment("pendulum-het", "Pendulum-Het: methods x data sizes", pendulum.run_pendulum_het,
+               pendulum.SCALES, [("return_mean", "return"), ("seconds_per_step", "s/step")],
+               "paper (upright start)"),
+    Experiment("epsilon", "Pendulum-Het: the residual quantile epsilon", pendulum.run_epsilon,
+               pendulum.SCALES, [("return_mean", "return"), ("mean_residual", "residual")],
+               "paper (upright, 300k)"),
+    Experiment("k", "Pendulum-Het: neighbours k", pendulum.run_k, pendulum.SCALES,
+               [("return_mean", "return"), ("mean_residual", "residual")],
+               "paper (upright, 300k)"),
+    Experiment("maze-adapt", "Maze: re-sampling pi1 (no retraining)", maze.run_maze_adapt,
+               maze.SCALES, [("success_rate", "success"), ("upper_gate", "upper gate /100"),
+                             ("lower_gate", "lower gate /100"), ("return_mean", "return")],
+               "paper (success / upper / lower)"),
+    Experiment("two-gates", "Two gates: epsilon and conservatism", maze.run_two_gates,
+               maze.TWO_GATES_SCALES, RETURN),
+    Experiment("lunar", "LunarLanderContinuous: methods x data sizes", lunar.run_lunar,
+               lunar.SCALES, [("return_mean", "return"), ("success_rate", "success"),
+                              ("seconds_per_step", "s/step")]),
+    Experiment("ood", "OOD detection: action noise after step T", ood.run_ood, ood.SCALES,
+               [("ood_delay", "delay (steps)"), ("ood_flagged", "flagged after T"),
+                ("ood_false_flags", "flags before T"), ("mean_residual", "residual"),
+                ("return_mean", "return")], "paper"),
+]}
+ORDER = list(EXPERIMENTS)
+
+#: Budgets of the black-box baselines per scale.
+BUDGETS = {
+    "tiny": Budget(offline_rl_steps=100, mpc_epochs=1, mpc_samples=20, mpc_horizon=5),
+    "quick": Budget(offline_rl_steps=10_000, mpc_epochs=15, mpc_samples=200, mpc_horizon=15),
+    "full": Budget(offline_rl_steps=100_000, mpc_epochs=30, mpc_samples=300, mpc_horizon=20),
+}
+
+
+def check(name: str, scale: str, seeds: int | None, episodes: int | None) -> None:
+    if name != "all" and name not in EXPERIMENTS:
+        raise AocError(f"unknown experiment {name!r}: use one of {', '.join(ORDER)} or all")
+    if scale not in SCALES:
+        raise AocError(f"unknown scale {scale!r}: use one of {', '.join(SCALES)}")
+    if seeds is not None and seeds < 1:
+        raise AocError(f"--seeds must be >= 1, got {seeds}")
+    if episodes is not None and episodes < 1:
+        raise AocError(f"--episodes must be >= 1, got {episodes}")
+
+
+def run_experiment(name: str, scale: str = "full", seeds: int | None = None,
+                   out: str | Path | None = None, store: str | Path = "bench/store",
+                   episodes: int | None = None, methods: list[str] | None = None,
+                   log=None, progress=None) -> dict:
+    """Run experiment ``name`` at ``scale`` (tiny | quick | full); write and return its report:
+    ``{"experiment", "out", "rows", "summary", "plots", "built", "seconds"}``."""
+    check(name, scale, seeds, episodes)
+    if methods:
+        from aoc_cli.baselines import BASELINES
+
+        unknown = [m for m in methods if m != "aoc" and m not in BASELINES]
+        if unknown:
+            raise AocError(f"unknown method(s) {', '.join(unknown)}: use aoc or "
+                           f"{', '.join(BASELINES)}")
+    exp = EXPERIMENTS[name]
+    params = exp.scales[scale]
+    out = Path(out) if out is not None else Path("bench") / name
+    out.mkdir(parents=True, exist_ok=True)
+    n_seeds = seeds if seeds is not None else int(params["seeds"])
+    artefacts = Artefacts(store, log=log, progress=progress)
+    runner = Runner(BUDGETS[scale], progress=progress, log=log)
+    ctx = Context(name, scale, out, artefacts, runner, list(range(n_seeds)), episodes,
+                  methods, log)
+    started = time.perf_counter()
+    rows, figure = exp.run(ctx, params)
+    summary = summarize_rows(rows, figure)
+    _plot(exp, summary, ctx)
+    seconds = time.perf_counter() - started
+    header = (f"Scale `{scale}`, seeds {n_seeds}, {seconds / 60:.1f} min. Mean ± std across "
+              "seeds (one seed: across its episodes). Plots: "
+              + ", ".join(f"[{p}]({p})" for p in ctx.plots))
+    markdown = summary_markdown(exp.title, summary, exp.metrics, header, exp.paper_label)
+    write_outputs(out, name, rows, summary, markdown,
+                  {"scale": scale, "seeds": n_seeds, "seconds": seconds, "plots": ctx.plots,
+                   "built": artefacts.built})
+    return {"experiment": name, "out": str(out), "rows": rows, "summary": summary,
+            "plots": ctx.plots, "built": artefacts.built, "seconds": seconds}
+
+
+def _plot(exp: Experiment, summary: list[dict], ctx: Context) -> None:
+    out = ctx.out
+    if exp.name in ("pendulum-het", "lunar"):
+        for task in dict.fromkeys(r["task"] for r in summary):
+            name = f"{task}_returns.png"
+            if plots.grouped_bars(summary, task, out / name, f"{task}: return by method"):
+                ctx.plots.append(name)
+    elif exp.name in ("epsilon", "k", "two-gates"):
+        for task in dict.fromkeys(r["task"] for r in summary):
+            name = f"{exp.name}_{task}.png"
+            if plots.setting_bars(summary, task, "aoc", out / name, f"{task}: AOC by {exp.name}"):
+                ctx.plots.append(name)
+    elif exp.name == "maze-adapt":
+        if plots.maze_adapt_curves(summary, paper.MAZE, out / "maze_adapt.png"):
+            ctx.plots.append("maze_adapt.png")
+
+
+# -- expected time --------------------------------------------------------------------------
+
+#: Seconds per unit on this project's 2-core machine (measured; see docs/results.md).
+COST = {
+    "train_row_epoch": 6e-5,        # belief model, one thread
+    "epochs_fraction": 0.5,         # early stopping ends at about this share of max_epochs
+    "step": {"aoc": 0.02, "knn-belief": 0.012, "1nn-belief": 0.012, "knn": 0.006,
+             "1nn": 0.006, "bc": 0.002, "td3bc": 0.002, "cql": 0.002, "mpc": 0.02,
+             "zero": 0.0002, "random": 0.0002},
+    "offline_rl_step": {"td3bc": 0.004, "cql": 0.008},
+    "mpc_row_epoch": 2e-5,
+    "episode_steps": {"pendulum-het": 200, "pendulum-het-upright": 200, "maze": 40,
+                      "two-gates": 32, "lunar": 400},
+    "rows_per_episode": {"maze": 20, "two-gates": 28},
+    "collect_row": {"lunar": 3e-4},
+}
+
+
+def expected_seconds(name: str, scale: str, seeds: int | None = None,
+                     episodes: int | None = None, methods: list[str] | None = None) -> float:
+    """A rough estimate of a run's time on this machine (artefact reuse not counted)."""
+    if name == "all":
+        return sum(expected_seconds(n, scale, seeds, episodes, methods) for n in ORDER)
+    exp = EXPERIMENTS[name]
+    p = exp.scales[scale]
+    budget = BUDGETS[scale]
+    n_seeds = seeds if seeds is not None else int(p["seeds"])
+    eps = episodes or int(p["episodes"])
+    epochs = p["epochs"] * COST["epochs_fraction"]
+    step = COST["step"]
+    total = 0.0
+
+    def train(rows, models=1):
+        return models * rows * epochs * COST["train_row_epoch"]
+
+    def blackbox(ms, rows):
+        t = 0.0
+        for m in ms:
+            if m in COST["offline_rl_step"]:
+                t += budget.offline_rl_steps * COST["offline_rl_step"][m]
+            elif m == "mpc":
+                t += rows * budget.mpc_epochs * COST["mpc_row_epoch"]
+        return t
+
+    if name == "pendulum-het":
+        ms = methods or pendulum.METHODS
+        tasks = len(pendulum.TASKS)
+        for rows in p["sizes"]:
+            corpora = 2 if p["upright_data"] == "own" else 1
+            total += n_seeds * corpora * (train(rows, 2 if "bc" in ms else 1) + blackbox(ms, rows))
+            total += n_seeds * tasks * eps * 200 * sum(step.get(m, 0.01) for m in ms)
+    elif name in ("epsilon", "k"):
+        tasks = len(p["ablation_tasks"])
+        total += n_seeds * train(p["mid"])
+        total += n_seeds * tasks * 4 * eps * 200 * step["aoc"]
+    elif name == "maze-adapt":
+        rows = p["episodes_data"] * COST["rows_per_episode"]["maze"]
+        total += n_seeds * train(rows)
+        total += n_seeds * len(p["rates"]) * eps * 40 * step["aoc"]
+        total += n_seeds * eps * 100 * sum(step.get(m, 0.01) for m in p["compare"])
+    elif name == "two-gates":
+        rows = p["episodes_data"] * COST["rows_per_episode"]["two-gates"]
+        total += n_seeds * (train(rows) + len(p["epsilons"]) * eps * 32 * step["aoc"])
+    elif name == "lunar":
+        ms = methods or p["methods"]
+        for rows in p["sizes"]:
+            total += n_seeds * (rows * COST["collect_row"]["lunar"]
+                                + train(rows, 2 if "bc" in ms else 1) + blackbox(ms, rows))
+            total += n_seeds * eps * 400 * sum(step.get(m, 0.01) for m in ms)
+    elif name == "ood":
+        total += n_seeds * (train(p["rows"]) + 2 * eps * 200 * step["aoc"])
+    return total

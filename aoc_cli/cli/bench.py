@@ -1,0 +1,78 @@
+"""`aoc bench EXPERIMENT`: the paper's experiments against the baselines, with tables and plots."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from aoc_cli.cli.common import FormatOption
+from aoc_cli.errors import AocError
+from aoc_cli.report import message, progress, resolve_format, write_records
+
+COLUMNS = ["experiment", "task", "method", "setting", "seeds", "return_mean",
+           "return_mean_std", "success_rate", "upper_gate", "lower_gate", "ood_delay",
+           "ood_flagged", "paper", "status"]
+
+
+def register(app: typer.Typer) -> None:
+    @app.command("bench")
+    def bench_command(
+        experiment: str = typer.Argument(
+            ..., help="pendulum-het, epsilon, k, maze-adapt, two-gates, lunar, ood, or all."),
+        quick: bool = typer.Option(False, "--quick", help="A reduced run (<= 15 min each)."),
+        tiny: bool = typer.Option(False, "--tiny", help="A smoke-test run (seconds; no effect "
+                                                        "to read from it)."),
+        seeds: Optional[int] = typer.Option(None, "--seeds", help="Seeds (default: the scale's)."),
+        episodes: Optional[int] = typer.Option(None, "--episodes",
+                                               help="Episodes per method and setting."),
+        methods: Optional[str] = typer.Option(None, "--methods",
+                                              help="Comma-separated methods (default: all)."),
+        out: Optional[Path] = typer.Option(None, "--out", help="Output folder (default "
+                                           "bench/EXPERIMENT; with all: OUT/EXPERIMENT)."),
+        bench_store: Path = typer.Option(Path("bench/store"), "--bench-store",
+                                         help="Store for the bench's corpora and models."),
+        fmt: Optional[str] = FormatOption,
+    ) -> None:
+        """Run an experiment end to end; write results.csv, summary.md/json and PNGs."""
+        from aoc_cli.bench import ORDER, expected_seconds, run_experiment
+        from aoc_cli.bench.runner import check
+
+        fmt = resolve_format(fmt)
+        if quick and tiny:
+            raise AocError("give --quick or --tiny, not both")
+        scale = "tiny" if tiny else "quick" if quick else "full"
+        check(experiment, scale, seeds, episodes)
+        chosen = [m.strip() for m in methods.split(",") if m.strip()] if methods else None
+        names = ORDER if experiment == "all" else [experiment]
+        eta = expected_seconds(experiment, scale, seeds, episodes, chosen)
+        message(f"aoc bench {experiment} ({scale}): expected time about "
+                f"{_duration(eta)} on a 2-core machine (less when the bench store at "
+                f"{bench_store} already holds the corpora and models)")
+        records = []
+        with progress() as bar:
+            overall = bar.add_task(f"bench {experiment}", total=len(names))
+            for name in names:
+                target = (out / name if out is not None else None) if experiment == "all" \
+                    else out
+                bar.update(overall, description=f"bench {name}")
+                report = run_experiment(name, scale, seeds, target, bench_store, episodes,
+                                        chosen, log=message, progress=bar)
+                bar.advance(overall)
+                for rec in report["summary"]:
+                    if rec["status"] != "ok":
+                        message(f"{name}: {rec['method']} {rec['status']} ({rec['note']})")
+                message(f"{name}: wrote {report['out']}/results.csv, summary.md, summary.json"
+                        f" and {len(report['plots'])} plots in {_duration(report['seconds'])}")
+                records += report["summary"]
+        rows = [{c: r.get(c) for c in COLUMNS} for r in records]
+        write_records(rows, fmt, columns=COLUMNS, title=f"aoc bench {experiment} ({scale})")
+
+
+def _duration(seconds: float) -> str:
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 5400:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"
