@@ -189,26 +189,38 @@ class BeliefIndex:
         return D, I
 
     def _pooled(self, Y: np.ndarray, k: int, sel: Selection | None, available: int):
-        """One search at the centroid serves every query it can certify (triangle inequality)."""
+        """One search at the centroid serves every query it can certify (triangle inequality).
+
+        The pool starts at k' = max(pool_factor k, pool_min) rows and grows 4x (at most twice)
+        while some query is not certified; queries still uncertified are searched directly.
+        """
         cfg = self.config
         kp = int(min(available, max(math.ceil(cfg.pool_factor * k), cfg.pool_min, k)))
         c = Y.mean(axis=0, keepdims=True)
-        with faiss_threads(1):  # one query: threads only add synchronisation
-            Dc, Ic = self.index.search(c, kp, params=self._params(sel, kp))
-        pool = Ic[0][Ic[0] >= 0]
-        if pool.size < k:
-            return self._direct(Y, k, sel)
-        d2, p = _exact_among(Y, self.vectors(pool), k)
-        pos = pool[p]
-        if pool.size >= available:
-            return d2, pos  # the pool is every available row
-        radius = math.sqrt(max(float(Dc[0, pool.size - 1]), 0.0))
         spread = np.sqrt(((Y.astype(np.float64) - c.astype(np.float64)) ** 2).sum(axis=1))
-        kth = np.sqrt(np.maximum(d2[:, -1], 0.0))
-        certified = kth <= (radius - spread) - 1e-5 * radius
-        if not certified.all():
-            rest = np.flatnonzero(~certified)
-            d2[rest], pos[rest] = self._direct(Y[rest], k, sel)
+        for attempt in range(3):
+            with faiss_threads(1):  # one query: threads only add synchronisation
+                Dc, Ic = self.index.search(c, kp, params=self._params(sel, kp))
+            pool = Ic[0][Ic[0] >= 0]
+            if pool.size < k:
+                return self._direct(Y, k, sel)
+            d2, p = _exact_among(Y, self.vectors(pool), k)
+            pos = pool[p]
+            if pool.size >= available:
+                return d2, pos  # the pool is every available row
+            if pool.size < kp:  # an IVF ran out of probed rows: the pool bounds nothing
+                return self._direct(Y, k, sel)
+            radius = math.sqrt(max(float(Dc[0, pool.size - 1]), 0.0))
+            kth = np.sqrt(np.maximum(d2[:, -1], 0.0))
+            certified = kth <= (radius - spread) - 1e-5 * radius
+            if certified.all() or kp >= available:
+                return d2, pos
+            if attempt < 2 and certified.mean() < 0.9:
+                kp = int(min(available, 4 * kp))
+                continue
+            break
+        rest = np.flatnonzero(~certified)
+        d2[rest], pos[rest] = self._direct(Y[rest], k, sel)
         return d2, pos
 
     # ---------------------------------------------------------------- adaptivity
