@@ -30,7 +30,7 @@ class Session:
     def meta(self) -> dict:
         return {
             "corpus": self.corpus.name, "corpus_hash": self.corpus.hash,
-            "model": self.model.model_id, "model_hash": self.model.hash,
+            "model": self.model.id, "model_hash": self.model.hash,
             "index": self.index.index_id, "mode": self.model.mode,
             "config": self.controller.config.to_dict(),
             "selection": None if self.controller.selection is None
@@ -47,6 +47,7 @@ def open_session(corpus, model_id: str | None = None, index_id: str = "default",
     from aoc_cli.index.build import load_index
 
     config = (config or ControllerConfig()).check()
+    _one_thread()
     index = load_index(corpus, model_id, index_id)
     bc_model = None
     if config.sampler == "bc" and index.model.mode == "value" and not corpus.discrete:
@@ -58,6 +59,16 @@ def open_session(corpus, model_id: str | None = None, index_id: str = "default",
     controller = Controller(corpus, index, config, selection=selection, bc_model=bc_model,
                             seed=seed, action_space=action_space)
     return Session(corpus, index, controller)
+
+
+def _one_thread() -> None:
+    """A control step is ~100 small queries: one thread each for torch and FAISS is fastest,
+    and two thread pools (torch's and FAISS's OpenMP) must not fight over the cores."""
+    import faiss
+    import torch
+
+    torch.set_num_threads(1)
+    faiss.omp_set_num_threads(1)
 
 
 def rollout(session: Session, env, episodes: int, seed: int = 0, policy=None,

@@ -130,9 +130,12 @@ def _decompose(beliefs, Y, k, values, index, reference, selection, config) -> De
         weights, failed = solved.weights, np.flatnonzero(~solved.ok)
     for q in failed:
         c = np.flatnonzero(valid[q])
-        w = reference_weights(B[q, c], Y[q])
-        weights[q] = 0.0
-        weights[q, c] = caratheodory(B[q, c], w)
+        w = caratheodory(B[q, c], reference_weights(B[q, c], Y[q]))
+        # keep whichever of the two answers has the smaller residual: near a zero residual
+        # the batched solver's certificate can fail while its point is the better one
+        if reference or np.sum((w @ P[q, c]) ** 2) <= np.sum((weights[q, c] @ P[q, c]) ** 2):
+            weights[q] = 0.0
+            weights[q, c] = w
     offset = np.einsum("qk,qkd->qd", weights, P)  # y* - y
     residual = np.sqrt((offset**2).sum(1))
 

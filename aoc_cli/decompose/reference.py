@@ -29,18 +29,24 @@ def reference_weights(neighbours: np.ndarray, query: np.ndarray) -> np.ndarray:
     scale = max(float(np.sqrt((P**2).sum(1).max())), 1e-300)
     P = P / scale
     G = P @ P.T + 1e-14 * np.eye(k)
-    w = qpsolvers.solve_qp(
-        G,
-        np.zeros(k),
-        A=np.ones((1, k)),
-        b=np.array([1.0]),
-        lb=np.zeros(k),
-        solver="piqp",
-        eps_abs=1e-12,
-        eps_rel=1e-12,
-        eps_duality_gap_abs=1e-14,
-        eps_duality_gap_rel=1e-14,
-    )
+    # The tightest tolerances first; near-degenerate neighbourhoods (duplicates, a query
+    # almost inside the hull) can stall piqp there, so loosen step by step before giving up.
+    w = None
+    for eps, gap in ((1e-12, 1e-14), (1e-10, 1e-12), (1e-8, 1e-10)):
+        w = qpsolvers.solve_qp(
+            G,
+            np.zeros(k),
+            A=np.ones((1, k)),
+            b=np.array([1.0]),
+            lb=np.zeros(k),
+            solver="piqp",
+            eps_abs=eps,
+            eps_rel=eps,
+            eps_duality_gap_abs=gap,
+            eps_duality_gap_rel=gap,
+        )
+        if w is not None:
+            break
     if w is None:
         raise RuntimeError("piqp found no solution of the corpus-residual QP")
     w = np.maximum(np.asarray(w, dtype=np.float64), 0.0)

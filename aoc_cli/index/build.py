@@ -3,8 +3,8 @@
 Layout under ``<corpus>/models/<model>/``::
 
     beliefs.npy                 (N, d_b) float32, memory-mappable, the belief of every row
-    index/<index_id>/index.faiss    the FAISS index over beliefs[rows]
-    index/<index_id>/rows.npy       (M,) int64: index id -> corpus row (copies when re-sampled)
+    index/<index_id>/index.faiss    the FAISS index (+ .json, its config)
+    index/<index_id>/index.faiss.rows.npy  (M,) int64: entry -> corpus row (derived indexes)
     index/<index_id>/index.json     what it was built from (corpus, model hashes), kind, size
 
 The ``default`` index holds every row once. Derived indexes re-sample or sub-sample rows by
@@ -32,13 +32,13 @@ TYPICAL_SAMPLE = 500
 
 @dataclass
 class CorpusIndex:
-    """A built index: model, beliefs of every corpus row, row values, the FAISS index."""
+    """A built index: model, beliefs of every corpus row (N, d_b), row values (N,), the FAISS
+    index (possibly derived: re-sampled or sub-sampled rows) and what it was built from."""
 
     index_id: str
     model: object
     beliefs: np.ndarray
     values: np.ndarray | None
-    rows: np.ndarray
     index: BeliefIndex
     meta: dict
 
@@ -46,9 +46,14 @@ class CorpusIndex:
     def typical_residual(self) -> float | None:
         return self.meta.get("typical_residual", {}).get("p50")
 
+    @property
+    def rows(self) -> np.ndarray:
+        """(M,) the corpus row of every index entry (repeats when re-sampled)."""
+        return self.index.row_of
+
     def decompose(self, queries: np.ndarray, k: int | None = None,
                   selection: np.ndarray | None = None):
-        """Decompose query beliefs (Q, d_b); returned ``rows`` are corpus rows (-1 padded).
+        """Decompose query beliefs (Q, d_b) over the corpus; ``rows`` are corpus rows.
 
         ``selection`` is an (N,) bool mask over corpus rows, applied at query time.
         """
@@ -56,24 +61,17 @@ class CorpusIndex:
         if queries.ndim != 2 or queries.shape[1] != self.beliefs.shape[1]:
             raise AocError(f"queries must be (Q, {self.beliefs.shape[1]}) beliefs, got "
                            f"{queries.shape}")
-        sel = None
-        if selection is not None:
-            sel = np.asarray(selection, bool)[self.rows]
-            if not sel.any():
-                raise AocError("the row selection leaves no rows of the corpus")
-        values = None if self.values is None else self.values[self.rows]
-        dec = decompose(self._index_beliefs, queries, k=k, values=values, index=self.index,
-                        selection=sel)
-        dec.rows = np.where(dec.rows >= 0, self.rows[np.maximum(dec.rows, 0)], -1)
-        return dec
+        return decompose(self.beliefs, queries, k=k, values=self.values, index=self.index,
+                         selection=selection)
 
-    @property
-    def _index_beliefs(self) -> np.ndarray:
-        if not hasattr(self, "_ib"):
-            identity = len(self.rows) == len(self.beliefs) and \
-                np.array_equal(self.rows, np.arange(len(self.beliefs)))
-            self._ib = self.beliefs if identity else np.asarray(self.beliefs[self.rows])
-        return self._ib
+
+def _load_model(corpus, model_id: str | None):
+    """The model to index or control with: the given id, else "default", else the latest."""
+    from aoc_cli.belief import list_models, load_model
+
+    if model_id is None and "default" in list_models(corpus):
+        model_id = "default"
+    return load_model(corpus, model_id)
 
 
 def _index_dir(corpus, model_id: str, index_id: str) -> Path:
@@ -85,10 +83,8 @@ def build_index(corpus, model_id: str | None = None, kind: str = "auto",
                 subsample: dict | None = None, seed: int = 0, progress=None,
                 **params) -> CorpusIndex:
     """Compute (or reuse) the beliefs of every row and build an index over them."""
-    from aoc_cli.belief import load_model
-
-    model = load_model(corpus, model_id)
-    model_dir = corpus.models_dir / model.model_id
+    model = _load_model(corpus, model_id)
+    model_dir = corpus.models_dir / model.id
     beliefs_path = model_dir / "beliefs.npy"
     meta_path = model_dir / "beliefs.json"
     fresh = meta_path.is_file() and json.loads(meta_path.read_text()).get("model_hash") == \
@@ -99,25 +95,25 @@ def build_index(corpus, model_id: str | None = None, kind: str = "auto",
         write_json(meta_path, {"model_hash": model.hash, "corpus_hash": corpus.hash,
                                "shape": list(beliefs.shape)})
     beliefs = np.load(beliefs_path, mmap_mode="r", allow_pickle=False)
-    rows = derived_rows(corpus, resample, subsample, seed)
     if (resample or subsample) and index_id == "default":
         raise AocError("a re-sampled or sub-sampled index needs its own --index-id "
                        "(the default index holds every row once)")
     start = time.perf_counter()
-    index = BeliefIndex.build(np.asarray(beliefs[rows]), kind=kind, **params)
+    index = BeliefIndex.build(beliefs, kind=kind, seed=seed, **params)
+    if resample or subsample:
+        index = index.resample(row_multiplicity(corpus, resample, subsample, seed))
     seconds = time.perf_counter() - start
-    out = _index_dir(corpus, model.model_id, index_id)
+    out = _index_dir(corpus, model.id, index_id)
     out.mkdir(parents=True, exist_ok=True)
     index.save(out / "index.faiss")
-    write_npy(out / "rows.npy", rows)
     meta = {
-        "index_id": index_id, "model": model.model_id, "model_hash": model.hash,
+        "index_id": index_id, "model": model.id, "model_hash": model.hash,
         "corpus": corpus.name, "corpus_hash": corpus.hash, "kind": index.kind,
-        "rows": int(len(rows)), "belief_dim": int(beliefs.shape[1]),
+        "rows": int(index.size), "belief_dim": int(beliefs.shape[1]),
         "resample": resample or {}, "subsample": subsample or {}, "seed": seed,
         "build_seconds": seconds, "built": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
     }
-    ci = CorpusIndex(index_id, model, beliefs, model.values, rows, index, meta)
+    ci = CorpusIndex(index_id, model, beliefs, model.values, index, meta)
     meta["typical_residual"] = typical_residual(ci, seed)
     write_json(out / "index.json", meta)
     return ci
@@ -138,8 +134,9 @@ def typical_residual(ci: CorpusIndex, seed: int = 0) -> dict:
             "p99": float(np.quantile(r, 0.99)), "sample": int(len(sample))}
 
 
-def derived_rows(corpus, resample: dict | None, subsample: dict | None, seed: int) -> np.ndarray:
-    """(M,) corpus rows of a derived index: ``{"policy=pi1": 4.0}`` style rates.
+def row_multiplicity(corpus, resample: dict | None, subsample: dict | None,
+                     seed: int) -> np.ndarray:
+    """(N,) int copies of each corpus row in a derived index, from ``{"policy=pi1": 4.0}``.
 
     Rates are per tag value: an integer part repeats the rows, a fractional part keeps that
     fraction of whole episodes (chosen with ``seed``), so trajectories stay whole.
@@ -164,10 +161,9 @@ def derived_rows(corpus, resample: dict | None, subsample: dict | None, seed: in
             extra[episodes[pick]] = True
         per_row = whole + extra[corpus.episode_of(np.arange(n))].astype(np.int64)
         counts[mask] = per_row[mask]
-    rows = np.repeat(np.arange(n, dtype=np.int64), counts)
-    if len(rows) == 0:
+    if counts.sum() == 0:
         raise AocError("the sampling rates leave no rows in the index")
-    return rows
+    return counts
 
 
 def parse_rates(items: list[str] | None, flag: str) -> dict[str, float]:
@@ -187,26 +183,23 @@ def parse_rates(items: list[str] | None, flag: str) -> dict[str, float]:
 
 def load_index(corpus, model_id: str | None = None, index_id: str = "default") -> CorpusIndex:
     """Load a built index, refusing one built from another corpus or model."""
-    from aoc_cli.belief import load_model
-
-    model = load_model(corpus, model_id)
-    out = _index_dir(corpus, model.model_id, index_id)
+    model = _load_model(corpus, model_id)
+    out = _index_dir(corpus, model.id, index_id)
     if not (out / "index.json").is_file():
-        hint = f"aoc index {corpus.name} --model {model.model_id}"
+        hint = f"aoc index {corpus.name} --model {model.id}"
         if index_id != "default":
             hint += f" --index-id {index_id} (with its --resample/--subsample)"
-        raise AocError(f"no index {index_id!r} for model {model.model_id!r} of corpus "
+        raise AocError(f"no index {index_id!r} for model {model.id!r} of corpus "
                        f"{corpus.name!r}: run `{hint}`")
     meta = json.loads((out / "index.json").read_text())
     if meta.get("corpus_hash") != corpus.hash or meta.get("model_hash") != model.hash:
         raise AocError(f"index {index_id!r} was built from another version of corpus "
-                       f"{corpus.name!r} or model {model.model_id!r}: rebuild it with "
-                       f"`aoc index {corpus.name} --model {model.model_id}`")
-    beliefs = np.load(corpus.models_dir / model.model_id / "beliefs.npy", mmap_mode="r",
+                       f"{corpus.name!r} or model {model.id!r}: rebuild it with "
+                       f"`aoc index {corpus.name} --model {model.id}`")
+    beliefs = np.load(corpus.models_dir / model.id / "beliefs.npy", mmap_mode="r",
                       allow_pickle=False)
-    rows = np.load(out / "rows.npy", allow_pickle=False)
-    index = BeliefIndex.load(out / "index.faiss")
-    return CorpusIndex(index_id, model, beliefs, model.values, rows, index, meta)
+    index = BeliefIndex.load(out / "index.faiss", beliefs)
+    return CorpusIndex(index_id, model, beliefs, model.values, index, meta)
 
 
 def row_selection(corpus, select: dict[str, list[str]] | None = None,
