@@ -48,9 +48,22 @@ class OfflineRLConfig:
         return asdict(self)
 
 
+def quiet_d3rlpy() -> None:
+    """d3rlpy logs every epoch through structlog to stdout, which must carry only data: keep
+    warnings and errors, on stderr."""
+    import logging
+    import sys
+
+    import structlog
+
+    structlog.configure(wrapper_class=structlog.make_filtering_bound_logger(logging.WARNING),
+                        logger_factory=structlog.PrintLoggerFactory(sys.stderr))
+
+
 def corpus_dataset(corpus, features: RawFeatures):
     """The corpus as a d3rlpy MDPDataset whose observations are the raw context features."""
     d3rlpy = require("d3rlpy", "td3bc/cql")
+    quiet_d3rlpy()
     obs = features.corpus_features(corpus)
     n = corpus.n_rows
     rewards = corpus.rewards
@@ -84,6 +97,7 @@ def train_agent(algo: str, corpus, history_length: int, config: OfflineRLConfig,
     d3rlpy = require("d3rlpy", algo)
     import torch
 
+    quiet_d3rlpy()
     if algo not in ALGOS:
         raise AocError(f"unknown offline RL algorithm {algo!r}: use {' or '.join(ALGOS)}")
     if algo == "td3bc" and corpus.discrete:

@@ -68,3 +68,13 @@ def belief_config(scale: dict, mode: str = "value", seed: int = 0):
     return BeliefConfig(mode=mode, max_epochs=int(scale["epochs"]),
                         patience=int(scale.get("patience", 10)), seed=int(seed),
                         threads=int(scale.get("threads", 1)))
+
+
+def make_task_env(task: str, scale: dict):
+    """The task's evaluation environment; a scale's ``max_steps`` shortens its episodes (tiny
+    runs only: the paper's horizons otherwise)."""
+    from aoc_cli.envs import make_env
+
+    if scale.get("max_steps"):
+        return make_env(task, max_episode_steps=int(scale["max_steps"]))
+    return make_env(task)

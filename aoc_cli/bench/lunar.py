@@ -9,7 +9,7 @@ gymnasium's heuristic lander with action noise of std 0, 0.25, 0.5 and 1 (see
 from __future__ import annotations
 
 from aoc_cli.bench import paper
-from aoc_cli.bench.common import Context, belief_config, session
+from aoc_cli.bench.common import Context, belief_config, make_task_env, session
 from aoc_cli.bench.methods import DATA, data_values, row_values
 from aoc_cli.bench.results import result_row
 
@@ -17,7 +17,7 @@ METHODS = ["aoc", "knn", "1nn", "knn-belief", "1nn-belief", "bc", "td3bc", "cql"
            "zero", "random"]
 SCALES = {
     "tiny": {"sizes": [3_000], "paper_rows": [100_000], "episodes": 1, "seeds": 1,
-             "epochs": 2, "patience": 2, "methods": ["aoc", "knn", "bc", "zero"]},
+             "epochs": 2, "patience": 2, "methods": ["aoc", "knn", "bc", "zero"], "max_steps": 40},
     "quick": {"sizes": [50_000], "paper_rows": [100_000], "episodes": 3, "seeds": 1,
               "epochs": 30, "patience": 6, "methods": ["aoc", "knn", "1nn", "bc", "td3bc",
                                                        "zero", "random"]},
@@ -28,10 +28,9 @@ SCALES = {
 
 
 def run_lunar(ctx: Context, scale: dict):
-    from aoc_cli.envs import make_env
 
     methods = ctx.pick_methods(scale["methods"])
-    env = make_env("lunar")
+    env = make_task_env("lunar", scale)
     rows = []
     for size in scale["sizes"]:
         setting = f"rows={size}"

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from aoc_cli.bench import paper
-from aoc_cli.bench.common import Context, belief_config, session
+from aoc_cli.bench.common import Context, belief_config, make_task_env, session
 from aoc_cli.bench.methods import row_values
 from aoc_cli.bench.results import result_row
 
@@ -29,15 +29,15 @@ WALL_X = 8.0
 GATE_SPLIT = (8.75 + 14.5) / 2.0  # 11.625
 
 SCALES = {
-    "tiny": {"episodes_data": 120, "episodes": 3, "seeds": 1, "epochs": 2, "patience": 2,
-             "rates": (4.0, 1.0, 0.25), "compare": ["knn"]},
+    "tiny": {"episodes_data": 120, "episodes": 2, "seeds": 1, "epochs": 2, "patience": 2,
+             "rates": (2.0, 1.0, 0.5), "compare": ["knn"], "max_steps": 30},
     "quick": {"episodes_data": 1000, "episodes": 30, "seeds": 1, "epochs": 60, "patience": 8,
               "rates": RATES, "compare": ["knn", "1nn"]},
     "full": {"episodes_data": 1000, "episodes": 100, "seeds": 3, "epochs": 200,
              "patience": 10, "rates": RATES, "compare": ["knn", "1nn", "knn-belief"]},
 }
 TWO_GATES_SCALES = {
-    "tiny": {"episodes_data": 60, "episodes": 3, "seeds": 1, "epochs": 2, "patience": 2,
+    "tiny": {"episodes_data": 60, "episodes": 2, "seeds": 1, "epochs": 2, "patience": 2,
              "epsilons": (0.1, 0.7)},
     "quick": {"episodes_data": 500, "episodes": 30, "seeds": 1, "epochs": 60, "patience": 8,
               "epsilons": EPSILONS},
@@ -82,9 +82,8 @@ def _plot(ctx: Context, task: str, results, name: str, title: str) -> None:
 
 
 def run_maze_adapt(ctx: Context, scale: dict):
-    from aoc_cli.envs import make_env
 
-    env = make_env("maze")
+    env = make_task_env("maze", scale)
     rows = []
     for seed in ctx.seeds:
         corpus = ctx.artefacts.corpus("maze", episodes=scale["episodes_data"], seed=seed)
@@ -116,9 +115,8 @@ def run_maze_adapt(ctx: Context, scale: dict):
 
 
 def run_two_gates(ctx: Context, scale: dict):
-    from aoc_cli.envs import make_env
 
-    env = make_env("two-gates")
+    env = make_task_env("two-gates", scale)
     rows = []
     for seed in ctx.seeds:
         corpus = ctx.artefacts.corpus("two-gates", episodes=scale["episodes_data"], seed=seed)

@@ -19,13 +19,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from aoc_cli.bench.common import Context, belief_config, session
+from aoc_cli.bench.common import Context, belief_config, make_task_env, session
 from aoc_cli.bench.methods import row_values
 from aoc_cli.bench.results import result_row
 
 SCALES = {
-    "tiny": {"task": "pendulum-het", "rows": 2_000, "T": 30, "noise": 0.5, "episodes": 1,
-             "seeds": 1, "epochs": 2, "patience": 2},
+    "tiny": {"task": "pendulum-het", "rows": 2_000, "T": 25, "noise": 0.5, "episodes": 1,
+             "seeds": 1, "epochs": 2, "patience": 2, "max_steps": 50},
     "quick": {"task": "pendulum-het", "rows": 30_000, "T": 100, "noise": 0.5, "episodes": 6,
               "seeds": 1, "epochs": 40, "patience": 6},
     "full": {"task": "pendulum-het", "rows": 100_000, "T": 100, "noise": 0.5, "episodes": 10,
@@ -92,11 +92,10 @@ def plot_ood(curves: dict, T: int, path, title: str) -> None:
 
 
 def run_ood(ctx: Context, scale: dict):
-    from aoc_cli.envs import make_env
     from aoc_cli.report.plots import plot_rollout_curves
 
     task, T = scale["task"], int(scale["T"])
-    env = make_env(task)
+    env = make_task_env(task, scale)
     rows, curves = [], {}
     for seed in ctx.seeds:
         corpus = ctx.artefacts.corpus(task, rows=scale["rows"], seed=seed)

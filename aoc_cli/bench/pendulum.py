@@ -16,7 +16,7 @@ The paper's pendulum figures are for the upright start; they are shown beside bo
 from __future__ import annotations
 
 from aoc_cli.bench import paper
-from aoc_cli.bench.common import Context, belief_config, session
+from aoc_cli.bench.common import Context, belief_config, make_task_env, session
 from aoc_cli.bench.methods import DATA, data_values, row_values
 from aoc_cli.bench.results import result_row
 
@@ -26,7 +26,7 @@ METHODS = ["aoc", "knn", "1nn", "knn-belief", "1nn-belief", "bc", "td3bc", "cql"
 
 SCALES = {
     "tiny": {"sizes": [2_000], "paper_rows": [100_000], "episodes": 1, "seeds": 1,
-             "epochs": 2, "patience": 2, "upright_data": "shared", "mid": 2_000,
+             "epochs": 2, "patience": 2, "upright_data": "shared", "mid": 2_000, "max_steps": 40,
              "ablation_tasks": ["pendulum-het"]},
     "quick": {"sizes": [30_000], "paper_rows": [100_000], "episodes": 4, "seeds": 2,
               "epochs": 40, "patience": 6, "upright_data": "shared", "mid": 30_000,
@@ -55,7 +55,6 @@ def _prepare(ctx: Context, scale: dict, task: str, rows: int, seed: int, bc: boo
 
 
 def run_pendulum_het(ctx: Context, scale: dict) -> tuple[list[dict], callable]:
-    from aoc_cli.envs import make_env
 
     methods = ctx.pick_methods(METHODS)
     rows_out = []
@@ -64,7 +63,7 @@ def run_pendulum_het(ctx: Context, scale: dict) -> tuple[list[dict], callable]:
         for seed in ctx.seeds:
             for task in TASKS:
                 corpus = _prepare(ctx, scale, task, size, seed, "bc" in methods)
-                env = make_env(task)
+                env = make_task_env(task, scale)
                 s = session(corpus, env, seed=seed)
                 rows_out.append(result_row("pendulum-het", task, DATA, setting, seed,
                                            **data_values(corpus),
@@ -84,13 +83,12 @@ def run_pendulum_het(ctx: Context, scale: dict) -> tuple[list[dict], callable]:
 
 
 def _ablation(ctx: Context, scale: dict, name: str, settings) -> list[dict]:
-    from aoc_cli.envs import make_env
 
     out = []
     for seed in ctx.seeds:
         for task in scale["ablation_tasks"]:
             corpus = _prepare(ctx, scale, task, scale["mid"], seed, bc=False)
-            env = make_env(task)
+            env = make_task_env(task, scale)
             for setting, config in settings(corpus):
                 s = session(corpus, env, seed=seed, **config)
                 run = ctx.runner.run("aoc", s, env, ctx.n_episodes(scale["episodes"]), seed,

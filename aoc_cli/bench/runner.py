@@ -62,13 +62,15 @@ ORDER = list(EXPERIMENTS)
 
 #: Budgets of the black-box baselines per scale.
 BUDGETS = {
-    "tiny": Budget(offline_rl_steps=100, mpc_epochs=1, mpc_samples=20, mpc_horizon=5),
+    "tiny": Budget(offline_rl_steps=20, mpc_epochs=1, mpc_samples=20, mpc_horizon=5),
     "quick": Budget(offline_rl_steps=10_000, mpc_epochs=15, mpc_samples=200, mpc_horizon=15),
     "full": Budget(offline_rl_steps=100_000, mpc_epochs=30, mpc_samples=300, mpc_horizon=20),
 }
 
 
-def check(name: str, scale: str, seeds: int | None, episodes: int | None) -> None:
+def check(name: str, scale: str, seeds: int | None, episodes: int | None,
+          methods: list[str] | None = None) -> None:
+    """Bad experiment, scale, counts or method names -> AocError."""
     if name != "all" and name not in EXPERIMENTS:
         raise AocError(f"unknown experiment {name!r}: use one of {', '.join(ORDER)} or all")
     if scale not in SCALES:
@@ -77,6 +79,13 @@ def check(name: str, scale: str, seeds: int | None, episodes: int | None) -> Non
         raise AocError(f"--seeds must be >= 1, got {seeds}")
     if episodes is not None and episodes < 1:
         raise AocError(f"--episodes must be >= 1, got {episodes}")
+    if methods:
+        from aoc_cli.baselines import BASELINES
+
+        unknown = [m for m in methods if m != "aoc" and m not in BASELINES]
+        if unknown:
+            raise AocError(f"unknown method(s) {', '.join(unknown)}: use aoc or "
+                           f"{', '.join(BASELINES)}")
 
 
 def run_experiment(name: str, scale: str = "full", seeds: int | None = None,
@@ -85,14 +94,7 @@ def run_experiment(name: str, scale: str = "full", seeds: int | None = None,
                    log=None, progress=None) -> dict:
     """Run experiment ``name`` at ``scale`` (tiny | quick | full); write and return its report:
     ``{"experiment", "out", "rows", "summary", "plots", "built", "seconds"}``."""
-    check(name, scale, seeds, episodes)
-    if methods:
-        from aoc_cli.baselines import BASELINES
-
-        unknown = [m for m in methods if m != "aoc" and m not in BASELINES]
-        if unknown:
-            raise AocError(f"unknown method(s) {', '.join(unknown)}: use aoc or "
-                           f"{', '.join(BASELINES)}")
+    check(name, scale, seeds, episodes, methods)
     exp = EXPERIMENTS[name]
     params = exp.scales[scale]
     out = Path(out) if out is not None else Path("bench") / name

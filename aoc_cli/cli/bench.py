@@ -43,8 +43,8 @@ def register(app: typer.Typer) -> None:
         if quick and tiny:
             raise AocError("give --quick or --tiny, not both")
         scale = "tiny" if tiny else "quick" if quick else "full"
-        check(experiment, scale, seeds, episodes)
         chosen = [m.strip() for m in methods.split(",") if m.strip()] if methods else None
+        check(experiment, scale, seeds, episodes, chosen)
         names = ORDER if experiment == "all" else [experiment]
         eta = expected_seconds(experiment, scale, seeds, episodes, chosen)
         message(f"aoc bench {experiment} ({scale}): expected time about "

@@ -1,0 +1,162 @@
+"""`aoc bench` at the tiny scale: every experiment writes outputs that parse and agree with each
+other; a small run shows a real effect; bad input is one line, exit 2."""
+
+from __future__ import annotations
+
+import json
+from collections import defaultdict
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from aoc_cli.bench import EXPERIMENTS, run_experiment
+from aoc_cli.bench.results import METRICS, read_csv
+
+
+@pytest.fixture(scope="module")
+def bench_store(tmp_path_factory):
+    """One bench store per test module and worker: experiments reuse each other's corpora."""
+    return tmp_path_factory.mktemp("bench") / "store"
+
+
+def _check_outputs(out, report):
+    rows = read_csv(out / "results.csv")
+    summary = json.loads((out / "summary.json").read_text())["summary"]
+    markdown = (out / "summary.md").read_text()
+    assert rows and summary
+    assert len(rows) == len(report["rows"])
+    # csv vs summary: every metric's summary mean is the mean of the seeds' csv values
+    groups = defaultdict(list)
+    for r in rows:
+        groups[(r["task"], r["method"], r["setting"])].append(r)
+    assert set(groups) == {(s["task"], s["method"], s["setting"]) for s in summary}
+    for s in summary:
+        members = [r for r in groups[(s["task"], s["method"], s["setting"])]
+                   if r["status"] == "ok"]
+        assert s["seeds"] == len(members)
+        for m in METRICS:
+            vals = [r[m] for r in members if r[m] is not None]
+            if vals:
+                assert s[m] == pytest.approx(float(np.mean(vals)), rel=1e-9, abs=1e-12)
+            else:
+                assert s[m] is None
+        # and the markdown table shows that mean
+        if s["status"] == "ok" and s.get("return_mean") is not None:
+            assert f"{s['return_mean']:.4g}" in markdown
+        assert f"| {s['method']} | {s['setting']} |" in markdown
+    for name in report["plots"]:
+        with Image.open(out / name) as im:
+            assert im.format == "PNG" and im.size[0] > 100
+    return rows, summary
+
+
+def test_pendulum_het_tiny_covers_every_method_task_and_the_data(tmp_path, bench_store):
+    out = tmp_path / "pendulum-het"
+    report = run_experiment("pendulum-het", "tiny", out=out, store=bench_store)
+    rows, summary = _check_outputs(out, report)
+    methods = {r["method"] for r in rows}
+    assert methods >= {"aoc", "knn", "1nn", "knn-belief", "1nn-belief", "bc", "td3bc", "cql",
+                       "mpc", "zero", "random", "data"}
+    assert {r["task"] for r in rows} == {"pendulum-het", "pendulum-het-upright"}
+    zero_upright = next(r for r in rows if r["method"] == "zero"
+                        and r["task"] == "pendulum-het-upright")
+    assert zero_upright["return_mean"] == pytest.approx(0.0, abs=1e-9)  # the trivial task
+    paper_aoc = next(s for s in summary if s["method"] == "aoc")["paper"]
+    assert paper_aoc == [-1.39, 1.39]
+    assert {p.split("_")[0] for p in report["plots"]} == {"pendulum-het",
+                                                          "pendulum-het-upright"}
+
+
+@pytest.mark.parametrize("name", ["epsilon", "k", "ood"])
+def test_pendulum_ablations_and_ood_tiny(tmp_path, bench_store, name):
+    out = tmp_path / name
+    report = run_experiment(name, "tiny", out=out, store=bench_store)
+    rows, summary = _check_outputs(out, report)
+    settings = [s["setting"] for s in summary]
+    if name == "epsilon":
+        assert settings == ["epsilon=0.3", "epsilon=0.5", "epsilon=0.9", "epsilon=1"]
+        assert summary[1]["paper"] == [-1.25, 0.4]
+    elif name == "k":
+        assert settings == ["k=1", "k=10", "k=42", "k=100"]
+        assert summary[2]["paper"] == [-1.25, 0.4]          # 2 (d_b + 1) is the paper's 20
+    else:
+        assert settings == ["noise=0", "noise=0.5"]
+        for r in rows:
+            assert r["ood_flagged"] in (0.0, 1.0) and r["ood_false_flags"] >= 0
+        assert "ood_mean.png" in report["plots"]
+
+
+def test_maze_adapt_tiny_counts_gates_and_draws_each_rate(tmp_path, bench_store):
+    out = tmp_path / "maze"
+    report = run_experiment("maze-adapt", "tiny", out=out, store=bench_store)
+    rows, summary = _check_outputs(out, report)
+    for r in rows:
+        assert 0 <= r["upper_gate"] + r["lower_gate"] <= 100
+    assert [s["setting"] for s in summary if s["method"] == "aoc"] == \
+        ["rate=2", "rate=1", "rate=0.5"]
+    assert {"maze_aoc_x2.png", "maze_aoc_x0.5.png", "maze_adapt.png"} <= set(report["plots"])
+    built = {b["name"].rsplit("/", 1)[-1] for b in report["built"] if b["step"] == "index"}
+    assert built == {"pi1x2", "default", "pi1x0.5"}  # derived indexes, one model
+
+
+def test_two_gates_and_lunar_tiny(tmp_path, bench_store):
+    for name in ("two-gates", "lunar"):
+        out = tmp_path / name
+        report = run_experiment(name, "tiny", out=out, store=bench_store)
+        rows, _summary = _check_outputs(out, report)
+        assert len({r["method"] for r in rows}) == (1 if name == "two-gates" else 5)
+
+
+def test_a_second_run_reuses_the_stored_artefacts(tmp_path, bench_store):
+    run_experiment("two-gates", "tiny", out=tmp_path / "a", store=bench_store)
+    again = run_experiment("two-gates", "tiny", out=tmp_path / "b", store=bench_store)
+    assert again["built"] == []
+
+
+def test_the_gate_of_a_path_is_where_it_crosses_x_8():
+    from aoc_cli.bench.maze import gate_of
+
+    assert gate_of(np.array([[0, 0], [7.5, 15], [8.5, 15.2], [16, 0]])) == "upper"
+    assert gate_of(np.array([[0, 0], [7.6, 7.9], [8.4, 8.1]])) == "lower"
+    assert gate_of(np.array([[0, 0], [7.9, 3.0]])) is None
+    # a path that crosses back: the first crossing counts
+    assert gate_of(np.array([[7, 8], [9, 8], [7.5, 15], [8.5, 15]])) == "lower"
+
+
+def test_aoc_is_more_conservative_with_a_small_epsilon_on_two_gates(tmp_path):
+    """A real effect (the paper's two-gates table): epsilon 0.1 keeps AOC on the data and
+    reaches the goal; epsilon 0.7 lets it extrapolate into the wall."""
+    from aoc_cli.bench import maze
+    from aoc_cli.bench.common import Context
+    from aoc_cli.bench.methods import Runner
+    from aoc_cli.bench.prepare import Artefacts
+
+    scale = {"episodes_data": 200, "episodes": 6, "epochs": 12, "patience": 4,
+             "epsilons": (0.1, 0.7)}
+    ctx = Context("two-gates", "small", tmp_path, Artefacts(tmp_path / "store"), Runner(),
+                  [0])
+    rows, _fig = maze.run_two_gates(ctx, scale)
+    by = {r["setting"]: r for r in rows}
+    assert by["epsilon=0.1"]["success_rate"] >= 0.8
+    assert by["epsilon=0.1"]["return_mean"] > by["epsilon=0.7"]["return_mean"] + 3.0
+
+
+def test_bench_cli_prints_the_summary_and_rejects_bad_input(aoc, tmp_path):
+    out, store = tmp_path / "tg", tmp_path / "store"
+    code, stdout, stderr = aoc("bench", "two-gates", "--tiny", "--out", str(out),
+                               "--bench-store", str(store), "--format", "json")
+    assert code == 0, stderr
+    printed = json.loads(stdout)
+    summary = json.loads((out / "summary.json").read_text())["summary"]
+    assert [(p["setting"], p["return_mean"]) for p in printed] == \
+        [(s["setting"], s["return_mean"]) for s in summary]
+    assert "expected time" in stderr
+    for args, needle in [(["bench", "nope"], "unknown experiment"),
+                         (["bench", "k", "--quick", "--tiny"], "not both"),
+                         (["bench", "k", "--tiny", "--seeds", "0"], "--seeds"),
+                         (["bench", "lunar", "--tiny", "--methods", "aoc,foo"], "foo")]:
+        code, _o, err = aoc(*args, "--bench-store", str(store))
+        assert code == 2 and needle in err and len(err.strip().splitlines()) == 1
+    assert set(EXPERIMENTS) == {"pendulum-het", "epsilon", "k", "maze-adapt", "two-gates",
+                                "lunar", "ood"}
