@@ -6,6 +6,7 @@ queries that look like one control step: the beliefs of one state under 100 cand
 y_i = base + A a_i with a_i uniform in [-1, 1]^2 and A a random (20, 2) matrix of scale
 --spread (the action moves the belief along a 2-d subspace). Reported:
 
+  build s       index build time (or load time, with --cache and an index built before)
   ms/batch      median over batches x repeats of neighbours + decomposition
   recall        neighbour recall of the k = 42 rows against exact search (faiss flat)
   paper ms      the paper's procedure on the same queries, in torch, batched over the 100
@@ -117,15 +118,29 @@ def paper_procedure(beliefs_t, queries: np.ndarray, steps: int = 1000) -> float:
 
 
 def run(n: int, args) -> dict:
+    cache = None
+    if args.cache:
+        os.makedirs(args.cache, exist_ok=True)
+        cache = os.path.join(args.cache, f"beliefs-{n}-{args.seed}-{args.kind}")
     t = time.perf_counter()
-    beliefs = generate(n, seed=args.seed)
+    if cache and os.path.exists(cache + ".npy"):
+        beliefs = np.load(cache + ".npy")
+    else:
+        beliefs = generate(n, seed=args.seed)
+        if cache:
+            np.save(cache + ".npy", beliefs)
     gen_s = time.perf_counter() - t
     values = np.random.default_rng(1).standard_normal(n).astype(np.float32)
     base_rss = rss_mb()
     reset_peak()
     t = time.perf_counter()
     config = IndexConfig(kind=args.kind, threads=args.threads)
-    index = BeliefIndex.build(beliefs, config)
+    if cache and os.path.exists(cache + ".faiss"):
+        index = BeliefIndex.load(cache + ".faiss", beliefs=beliefs)
+    else:
+        index = BeliefIndex.build(beliefs, config)
+        if cache:
+            index.save(cache + ".faiss")
     build_s = time.perf_counter() - t
     batches = control_steps(beliefs, args.batches, 100, args.spread, seed=args.seed + 1)
 
@@ -190,6 +205,7 @@ def main(argv=None) -> int:
     parser.add_argument("--spread", type=float, default=0.1, help="scale of the action directions in belief space")
     parser.add_argument("--threads", type=int, default=2, help="FAISS / torch threads")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--cache", default="", help="folder to keep generated beliefs and built indexes in")
     args = parser.parse_args(argv)
     faiss.omp_set_num_threads(args.threads)
     print(f"# d={D} k={K} batch=100 spread={args.spread} threads={args.threads} load={os.getloadavg()[0]:.1f}")

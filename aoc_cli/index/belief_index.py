@@ -179,7 +179,7 @@ class BeliefIndex:
                 dist[:, :kk], pos[:, :kk] = self._pooled(Y, kk, sel, available)
             else:
                 dist[:, :kk], pos[:, :kk] = self._direct(Y, kk, sel)
-        rows = np.where(pos >= 0, self.row_of[np.maximum(pos, 0)], -1)
+        rows = pos if self._row_of is None else np.where(pos >= 0, self._row_of[np.maximum(pos, 0)], -1)
         return np.sqrt(np.maximum(dist, 0.0)), rows
 
     def _direct(self, Y: np.ndarray, k: int, sel: Selection | None) -> tuple[np.ndarray, np.ndarray]:
@@ -191,14 +191,15 @@ class BeliefIndex:
     def _pooled(self, Y: np.ndarray, k: int, sel: Selection | None, available: int):
         """One search at the centroid serves every query it can certify (triangle inequality).
 
-        The pool starts at k' = max(pool_factor k, pool_min) rows and grows 4x (at most twice)
-        while some query is not certified; queries still uncertified are searched directly.
+        The pool starts at k' = max(pool_factor k, pool_min) rows and doubles (at most three
+        times) while over 10% of the queries are not certified; queries still uncertified are
+        searched directly.
         """
         cfg = self.config
         kp = int(min(available, max(math.ceil(cfg.pool_factor * k), cfg.pool_min, k)))
         c = Y.mean(axis=0, keepdims=True)
         spread = np.sqrt(((Y.astype(np.float64) - c.astype(np.float64)) ** 2).sum(axis=1))
-        for attempt in range(3):
+        for attempt in range(4):
             with faiss_threads(1):  # one query: threads only add synchronisation
                 Dc, Ic = self.index.search(c, kp, params=self._params(sel, kp))
             pool = Ic[0][Ic[0] >= 0]
@@ -215,8 +216,8 @@ class BeliefIndex:
             certified = kth <= (radius - spread) - 1e-5 * radius
             if certified.all() or kp >= available:
                 return d2, pos
-            if attempt < 2 and certified.mean() < 0.9:
-                kp = int(min(available, 4 * kp))
+            if attempt < 3 and certified.mean() < 0.9:
+                kp = int(min(available, 2 * kp))
                 continue
             break
         rest = np.flatnonzero(~certified)
@@ -369,7 +370,12 @@ def _exact_among(Y: np.ndarray, V: np.ndarray, k: int) -> tuple[np.ndarray, np.n
     Vc = np.asarray(V, dtype=np.float32) - centre
     D = (Yc * Yc).sum(1)[:, None] - 2.0 * (Yc @ Vc.T) + (Vc * Vc).sum(1)[None, :]
     if k < V.shape[0]:
-        part = np.argpartition(D, k - 1, axis=1)[:, :k]
+        # the k smallest per row; np.partition + a mask is much faster than argpartition
+        mask = D <= np.partition(D, k - 1, axis=1)[:, k - 1 : k]
+        if (mask.sum(1) == k).all():
+            part = np.nonzero(mask)[1].reshape(-1, k)
+        else:  # ties at the k-th distance
+            part = np.argpartition(D, k - 1, axis=1)[:, :k]
     else:
         part = np.broadcast_to(np.arange(V.shape[0]), D.shape)
     diff = V[part].astype(np.float64) - np.asarray(Y, dtype=np.float64)[:, None, :]

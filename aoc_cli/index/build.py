@@ -90,7 +90,13 @@ def build_index(corpus, model_id: str | None = None, kind: str = "auto",
     fresh = meta_path.is_file() and json.loads(meta_path.read_text()).get("model_hash") == \
         model.hash and beliefs_path.is_file()
     if not fresh:
-        beliefs = model.row_beliefs(corpus, progress=progress).astype(np.float32)
+        callback = None
+        if progress is not None:
+            task = progress.add_task("beliefs of every row", total=corpus.n_rows)
+
+            def callback(done, total):
+                progress.update(task, completed=done, total=total)
+        beliefs = model.row_beliefs(corpus, progress=callback).astype(np.float32)
         write_npy(beliefs_path, beliefs)
         write_json(meta_path, {"model_hash": model.hash, "corpus_hash": corpus.hash,
                                "shape": list(beliefs.shape)})

@@ -19,10 +19,13 @@ class IndexConfig:
     k = 2(d_b + 1) neighbours, DESIGN.md "The method, precisely", step 1).
 
     kind: "flat" is exact brute force; "hnsw" (graph) and "ivf" (inverted lists) are approximate;
-        "auto" picks flat below `auto_flat_max` rows, hnsw up to `auto_hnsw_max`, ivf beyond.
+        "auto" picks flat up to `auto_flat_max` rows and ivf beyond: IVF-Flat keeps the index
+        at ~1.1x the belief array (HNSW with M = 32 needs ~4x), and a control step's batch
+        costs one search of the index (see pool_factor), so HNSW's faster single queries
+        matter little.
     hnsw_m, hnsw_ef_construction, hnsw_ef_search: graph degree and beam widths (the search beam
         is raised to at least the number of neighbours asked for).
-    ivf_nlist: number of inverted lists (0: 4 sqrt(N) rounded to a power of two, at most 16384);
+    ivf_nlist: number of inverted lists (0: sqrt(N) rounded down to a power of two, at most 4096);
         ivf_nprobe: lists visited per query; ivf_train_max: rows used to train the coarse quantiser.
     pool_factor, pool_min: batched search. The Q queries of one control step lie close together,
         so the index is searched once, at their centroid c, for k' = max(pool_factor * k,
@@ -37,7 +40,6 @@ class IndexConfig:
 
     kind: str = "auto"
     auto_flat_max: int = 200_000
-    auto_hnsw_max: int = 2_000_000
     hnsw_m: int = 32
     hnsw_ef_construction: int = 64
     hnsw_ef_search: int = 128
@@ -59,14 +61,14 @@ class IndexConfig:
             return self.kind
         if n_rows <= self.auto_flat_max:
             return "flat"
-        return "hnsw" if n_rows <= self.auto_hnsw_max else "ivf"
+        return "ivf"
 
     def nlist(self, n_rows: int) -> int:
-        """Inverted lists for IVF: the configured number, or about 4 sqrt(N)."""
+        """Inverted lists for IVF: the configured number, or about sqrt(N)."""
         if self.ivf_nlist > 0:
             return min(self.ivf_nlist, max(1, n_rows))
-        target = 4.0 * math.sqrt(max(n_rows, 1))
-        return int(min(16384, max(1, 2 ** round(math.log2(max(target, 1.0))))))
+        target = math.sqrt(max(n_rows, 1))
+        return int(min(4096, max(1, 2 ** math.floor(math.log2(max(target, 1.0))))))
 
     def to_json(self) -> str:
         return json.dumps(asdict(self), indent=2, sort_keys=True)

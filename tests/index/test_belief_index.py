@@ -98,7 +98,7 @@ def test_save_and_load_round_trip_gives_the_same_answers(corpus, kind, tmp_path)
 def test_auto_kind_is_flat_for_small_corpora_and_approximate_for_large():
     config = IndexConfig()
     assert config.resolved_kind(10_000) == "flat"
-    assert config.resolved_kind(600_000) == "hnsw"
+    assert config.resolved_kind(600_000) == "ivf"
     assert config.resolved_kind(10_000_000) == "ivf"
     assert BeliefIndex.build(mixture(500, d=4)).kind == "flat"
 
