@@ -33,3 +33,27 @@ def run_aoc(*args: str, input: str | None = None, env=None, cwd=None):
 @pytest.fixture
 def aoc():
     return run_aoc
+
+
+def run_in_process(capsys, *args: str):
+    """The real entry point ``aoc_cli.cli.app.main`` in this process: (code, stdout, stderr).
+
+    Same code path as the console script (argument parsing, AocError -> one line + exit 2),
+    without a Python start and the imports per call.
+    """
+    from aoc_cli.cli.app import main
+
+    capsys.readouterr()
+    code = 0
+    try:
+        main(list(args))
+    except SystemExit as exit_:
+        code = exit_.code if isinstance(exit_.code, int) else (0 if exit_.code is None else 1)
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+@pytest.fixture
+def aoc_inproc(capsys):
+    """Run ``aoc ARGS...`` in this process: ``aoc_inproc("info", "x") -> (code, out, err)``."""
+    return lambda *args: run_in_process(capsys, *args)

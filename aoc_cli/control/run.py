@@ -84,7 +84,8 @@ def rollout(session: Session, env, episodes: int, seed: int = 0, policy=None,
     task = progress.add_task("rollout", total=episodes) if progress is not None else None
     for e in range(episodes):
         monitor = OODMonitor(warmup=cfg.ood_warmup, sigmas=cfg.ood_sigmas,
-                             floor=0.1 * float(typical.get("p50") or 0.0))
+                             floor=0.1 * float(typical.get("p50") or 0.0),
+                             minimum=float(typical.get("p99") or 0.0))
         res = run_episode(env, policy, session.model.history_length, session.corpus, e,
                           seed + e, monitor, noise_after, noise_std,
                           keep_decisions=audit is not None)

@@ -45,6 +45,9 @@ class Task:
     goal: tuple[float, ...] | None = None
     success_test: str | None = None
     extra: dict = field(default_factory=dict)
+    #: Controller settings this task is run with unless the user overrides them (e.g. the
+    #: maze's 2-d uniform candidates are mostly off the experts' paths: epsilon 0.1).
+    controller: dict = field(default_factory=dict)
 
     @property
     def defines_success(self) -> bool:

@@ -1,0 +1,141 @@
+"""`aoc explain NAME`: the supporting examples, weights and residual behind a decision."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+from aoc_cli.cli.common import FormatOption, get_store
+from aoc_cli.errors import AocError
+from aoc_cli.report import resolve_format, write_object, write_records
+
+
+def register(app: typer.Typer) -> None:
+    @app.command("explain")
+    def explain_command(
+        name: str = typer.Argument(..., help="Corpus name."),
+        input: Optional[str] = typer.Option(None, "--input", "-i", help="JSONL queries (a file, or - for stdin)."),
+        audit: Optional[Path] = typer.Option(None, "--audit", help="An audit log written by `aoc rollout --audit`."),
+        episode: int = typer.Option(0, "--episode", help="Episode of the audit log."),
+        step: int = typer.Option(0, "--step", help="Step of that episode."),
+        compare: Optional[List[str]] = typer.Option(None, "--compare", help="Actions to explain side by side, e.g. --compare 0 --compare 1 or --compare 0.5,-1."),
+        model: Optional[str] = typer.Option(None, "--model", help="Model id."),
+        index_id: str = typer.Option("default", "--index", help="Index id."),
+        candidates: int = typer.Option(100, "--candidates", "-K"),
+        epsilon: float = typer.Option(0.5, "--epsilon"),
+        k: Optional[int] = typer.Option(None, "--k"),
+        seed: int = typer.Option(0, "--seed"),
+        fmt: Optional[str] = FormatOption,
+    ) -> None:
+        """Explain decisions: from JSONL queries, or a recorded step of an audit log."""
+        from aoc_cli.control import (ControllerConfig, decision_record, open_session,
+                                     parse_query, read_audit_step, replay_decision)
+
+        fmt = resolve_format(fmt)
+        if (input is None) == (audit is None):
+            raise AocError("give either --input FILE|- (JSONL queries) or --audit FILE "
+                           "--episode E --step T")
+        corpus = get_store().corpus(name)
+        config = ControllerConfig(candidates=candidates, epsilon=epsilon, k=k).check()
+        records = []
+        if audit is not None:
+            recorded = read_audit_step(audit, episode, step)
+            meta = recorded["meta"]
+            if meta.get("config"):
+                config = ControllerConfig(**meta["config"]).check()
+            session = open_session(corpus, meta.get("model", model), meta.get("index", index_id),
+                                   config, seed=seed)
+            decision = replay_decision(session, recorded)
+            rec = decision_record(decision, corpus, session.index, step=step,
+                                  observation=recorded["observation"],
+                                  typical_residual=session.index.typical_residual)
+            rec["episode"] = episode
+            rec["recorded_action"] = recorded["action"].tolist()
+            records.append(rec)
+        else:
+            session = open_session(corpus, model, index_id, config, seed=seed)
+            lines = _read_lines(input)
+            if not lines:
+                raise AocError("the input holds no queries")
+            parsed_compare = [_parse_action(c) for c in compare or []]
+            for lineno, line in lines:
+                obs, hist, action, q_compare = parse_query(line, lineno, corpus,
+                                                           session.model.history_length)
+                from aoc_cli.control import explain_query
+
+                for rec in explain_query(session, obs, hist, action,
+                                         compare=parsed_compare or q_compare):
+                    rec["query"] = lineno
+                    records.append(rec)
+        _print(records, fmt)
+
+
+def _parse_action(text: str):
+    try:
+        values = [float(x) for x in text.split(",")]
+    except ValueError:
+        raise AocError(f"--compare expects numbers (comma-separated for several dims), got {text!r}") from None
+    return values if len(values) > 1 else values[0]
+
+
+def _read_lines(source: str) -> list[tuple[int, str]]:
+    if source == "-":
+        text = sys.stdin.read()
+    else:
+        path = Path(source)
+        if not path.is_file():
+            raise AocError(f"no such input file: {source}")
+        text = path.read_text()
+    return [(i + 1, line) for i, line in enumerate(text.splitlines()) if line.strip()]
+
+
+def _flat(rec: dict) -> list[dict]:
+    """One row per supporting example, with the decision's figures repeated (for CSV)."""
+    base = {k: rec.get(k) for k in ("query", "episode", "step", "action", "value", "residual")
+            if k in rec}
+    rows = []
+    for s in rec["support"]:
+        row = dict(base)
+        row.update({f"support_{k}": v for k, v in s.items() if k != "tags"})
+        row.update({f"tag_{k}": v for k, v in s["tags"].items()})
+        rows.append(row)
+    return rows
+
+
+def _print(records: list[dict], fmt: str) -> None:
+    if fmt == "json":
+        write_object({"decisions": records}, "json") if len(records) > 1 else \
+            write_object(records[0], "json")
+    elif fmt == "jsonl":
+        for rec in records:
+            write_object(rec, "jsonl")
+    elif fmt == "csv":
+        write_records([row for rec in records for row in _flat(rec)], "csv")
+    else:
+        from aoc_cli.report import console
+
+        for rec in records:
+            typical = rec.get("typical_residual")
+            head = {"action": rec["action"], "value (v_hat)": rec["value"],
+                    "residual": rec["residual"]}
+            if typical:
+                head["typical residual"] = typical
+                head["residual / typical"] = rec["residual"] / typical if typical else None
+            if "candidates" in rec:
+                c = rec["candidates"]
+                head["candidates passed"] = f"{c['passed']} of {c['count']}"
+                head["best rejected v_hat"] = c["best_rejected_value"]
+            if "recorded_action" in rec:
+                head["recorded action"] = rec["recorded_action"]
+            title = "decision" + (f" (query {rec['query']})" if "query" in rec else "") + \
+                (f" (episode {rec['episode']}, step {rec['step']})" if "episode" in rec else "")
+            write_object(head, "table", title=title)
+            rows = [{"row": s["row"], "episode": s["episode"], "step": s["step"],
+                     **s["tags"], "action": s["action"], "value": s["value"],
+                     "weight": s["weight"], "distance": s["distance"]} for s in rec["support"]]
+            write_records(rows, "table", title="minimal corpus subset")
+            for w in rec["warnings"]:
+                console.print(f"[yellow]warning:[/] {w}")

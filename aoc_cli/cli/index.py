@@ -1,0 +1,45 @@
+"""`aoc index NAME`: beliefs of every corpus row and the nearest-neighbour index."""
+
+from __future__ import annotations
+
+from typing import List, Optional
+
+import typer
+
+from aoc_cli.cli.common import FormatOption, get_store
+from aoc_cli.report import progress, write_object
+
+
+def register(app: typer.Typer) -> None:
+    @app.command("index")
+    def index_command(
+        name: str = typer.Argument(..., help="Corpus name."),
+        model: Optional[str] = typer.Option(None, "--model", help="Model id (default: the only one)."),
+        kind: str = typer.Option("auto", "--kind", help="auto|flat|hnsw|ivf (auto: flat for small corpora)."),
+        index_id: str = typer.Option("default", "--index-id", help="Name of the index (derived indexes need their own)."),
+        resample: Optional[List[str]] = typer.Option(None, "--resample", help="TAG=VALUE:RATE, e.g. policy=pi1:4 (repeat those rows)."),
+        subsample: Optional[List[str]] = typer.Option(None, "--subsample", help="TAG=VALUE:RATE, e.g. policy=pi1:0.5 (keep a share of those episodes)."),
+        seed: int = typer.Option(0, "--seed", help="Seed of sub-sampling and of the typical-residual sample."),
+        fmt: Optional[str] = FormatOption,
+    ) -> None:
+        """Compute every row's belief and build the index the controller searches."""
+        from aoc_cli.index.build import build_index, parse_rates
+
+        corpus = get_store().corpus(name)
+        rates_r = parse_rates(resample, "--resample")
+        rates_s = parse_rates(subsample, "--subsample")
+        for key, rate in rates_s.items():
+            if rate > 1:
+                from aoc_cli.errors import AocError
+
+                raise AocError(f"--subsample rates are <= 1 (got {rate} for {key}); use --resample")
+        with progress() as p:
+            ci = build_index(corpus, model, kind=kind, index_id=index_id, resample=rates_r,
+                             subsample=rates_s, seed=seed, progress=p)
+        meta = ci.meta
+        write_object({
+            "corpus": corpus.name, "model": meta["model"], "index": meta["index_id"],
+            "kind": meta["kind"], "rows": meta["rows"], "belief_dim": meta["belief_dim"],
+            "typical_residual": meta.get("typical_residual", {}).get("p50"),
+            "build_seconds": meta["build_seconds"],
+        }, fmt, title=f"index {meta['index_id']} of {corpus.name}")

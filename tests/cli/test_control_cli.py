@@ -1,0 +1,167 @@
+"""`aoc index`, `aoc rollout` and `aoc explain` from the command line."""
+
+import csv
+import io
+import json
+import re
+
+import numpy as np
+import pytest
+
+from tests.control.corpora import maze_store
+
+
+@pytest.fixture(scope="module")
+def maze_root(tmp_path_factory):
+    root = tmp_path_factory.mktemp("cli-maze")
+    maze_store(root)
+    return root
+
+
+@pytest.fixture
+def run(aoc_inproc, maze_root):
+    return lambda *args: aoc_inproc("--store", str(maze_root), *args)
+
+
+def one_line_error(code, out, err, pattern):
+    assert code == 2 and out == "", (code, out, err)
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and re.search(pattern, lines[0]), err
+
+
+def test_rollout_json_has_episodes_and_summary_that_agree(run):
+    code, out, err = run("rollout", "maze", "--env", "maze", "-n", "3", "--seed", "7", "-f", "json")
+    assert code == 0, err
+    doc = json.loads(out)
+    eps = doc["episodes"]
+    assert len(eps) == 3 and {"return", "length", "success", "ood_steps", "mean_residual"} <= set(eps[0])
+    s = doc["summary"]
+    assert s["return_mean"] == pytest.approx(np.mean([e["return"] for e in eps]))
+    assert s["success_rate"] == pytest.approx(np.mean([e["success"] for e in eps]))
+    assert s["seconds_per_step"] > 0
+
+
+def test_rollout_csv_and_jsonl_carry_the_same_numbers_as_json(run):
+    args = ("rollout", "maze", "--env", "maze", "-n", "2", "--seed", "11")
+    doc = json.loads(run(*args, "-f", "json")[1])
+    lines = [json.loads(x) for x in run(*args, "-f", "jsonl")[1].splitlines()]
+    rows = list(csv.DictReader(io.StringIO(run(*args, "-f", "csv")[1])))
+    code, table, _ = run(*args, "-f", "table")
+    for e, l, r in zip(doc["episodes"], lines, rows):
+        assert l["return"] == pytest.approx(e["return"])
+        assert float(r["return"]) == pytest.approx(e["return"], rel=1e-5)
+        assert f"{e['return']:.6g}" in table
+
+
+def test_audit_log_replays_the_recorded_decision_exactly(run, tmp_path):
+    audit = tmp_path / "audit.h5"
+    code, _, err = run("rollout", "maze", "--env", "maze", "-n", "1", "--seed", "3",
+                       "--audit", str(audit), "-f", "json")
+    assert code == 0 and audit.is_file(), err
+    code, out, err = run("explain", "maze", "--audit", str(audit), "--episode", "0",
+                         "--step", "4", "-f", "json")
+    assert code == 0, err
+    rec = json.loads(out)
+    assert rec["action"] == rec["recorded_action"]
+    assert abs(sum(s["weight"] for s in rec["support"]) - 1) < 1e-9
+    assert rec["candidates"]["passed"] <= rec["candidates"]["count"]
+    # the same numbers in the table
+    code, table, _ = run("explain", "maze", "--audit", str(audit), "--episode", "0",
+                         "--step", "4", "-f", "table")
+    assert f"{rec['residual']:.6g}" in table and f"{rec['support'][0]['weight']:.6g}" in table
+    code, out, err = run("explain", "maze", "--audit", str(audit), "--episode", "0", "--step", "999")
+    one_line_error(code, out, err, "no step 999")
+    code, out, err = run("explain", "maze", "--audit", str(audit), "--episode", "5", "--step", "0")
+    one_line_error(code, out, err, "no episode 5")
+
+
+def test_explain_jsonl_queries_and_compare(run, tmp_path):
+    queries = tmp_path / "q.jsonl"
+    queries.write_text(
+        json.dumps({"observation": [2.0, 2.0], "history": [[1.3, 1.3, 0.7, 0.7, -0.1]]}) + "\n"
+        + json.dumps({"observation": [2.0, 2.0], "action": [0.7, 0.7]}) + "\n")
+    code, out, err = run("explain", "maze", "--input", str(queries), "-f", "jsonl")
+    assert code == 0, err
+    recs = [json.loads(x) for x in out.splitlines()]
+    assert len(recs) == 2 and all(isinstance(r["residual"], float) for r in recs)
+    assert recs[1]["action"] == [0.7, 0.7]
+    for r in recs:
+        rows = [s["row"] for s in r["support"]]
+        assert len(rows) <= 21 and all(isinstance(x, int) for x in rows)
+    code, out, err = run("explain", "maze", "--input", str(queries), "--compare", "1,0",
+                         "--compare", "0.7,0.7", "-f", "csv")
+    assert code == 0, err
+    rows = list(csv.DictReader(io.StringIO(out)))
+    assert {r["action"] for r in rows} == {"[1.0,0.0]", "[0.7,0.7]"}
+    assert {"support_row", "support_weight", "tag_policy"} <= set(rows[0])
+
+
+def test_rollout_select_uses_only_that_policy(run, tmp_path, maze_root):
+    from aoc_cli.control import read_audit_step
+    from aoc_cli.store import Store
+
+    audit = tmp_path / "a.h5"
+    code, _, err = run("rollout", "maze", "--env", "maze", "-n", "1", "--select", "policy=pi2",
+                       "--audit", str(audit), "-f", "json")
+    assert code == 0, err
+    corpus = Store(maze_root).corpus("maze")
+    codes, labels = corpus.tag("policy")
+    import h5py
+
+    with h5py.File(audit) as f:
+        rows = f["episode_0/support_rows"][()]
+    assert set(codes[rows[rows >= 0]]) == {labels.index("pi2")}
+
+
+@pytest.mark.parametrize("args, pattern", [
+    (["rollout", "maze", "--env", "NoSuchEnv-v9"], "unknown environment|NoSuchEnv"),
+    (["rollout", "maze", "--env", "pendulum-het"], "observations have 3 dimensions"),
+    (["rollout", "maze", "--env", "maze", "--epsilon", "0"], "--epsilon must be in"),
+    (["rollout", "maze", "--env", "maze", "--epsilon", "1.5"], "--epsilon must be in"),
+    (["rollout", "maze", "--env", "maze", "--k", "0"], "--k must be >= 1"),
+    (["rollout", "nope", "--env", "maze"], "no corpus 'nope'"),
+    (["rollout", "maze", "--env", "maze", "--select", "policy=pi9"], "has no value 'pi9'"),
+    (["index", "maze", "--model", "nope"], "no model 'nope'"),
+    (["index", "maze", "--resample", "policy=pi1"], "TAG=VALUE:RATE"),
+    (["explain", "maze"], "either --input"),
+])
+def test_bad_input_is_one_line_and_exit_2(run, args, pattern):
+    one_line_error(*run(*args), pattern)
+
+
+@pytest.mark.parametrize("line, pattern", [
+    ("{not json", "line 1 of the input is not valid JSON"),
+    (json.dumps({"observation": [1.0, 2.0, 3.0]}), "line 1: observation has 3 numbers"),
+    (json.dumps({"observation": [1.0, 2.0], "history": [[1, 2, 3]]}), "history step 0 has 3"),
+    (json.dumps({"observation": [1.0, 2.0], "action": [1, 2, 3]}), "has 2 numbers, got 3"),
+])
+def test_malformed_queries_name_the_line(run, tmp_path, line, pattern):
+    q = tmp_path / "bad.jsonl"
+    q.write_text(line + "\n")
+    one_line_error(*run("explain", "maze", "--input", str(q)), pattern)
+
+
+def test_index_refuses_a_model_whose_corpus_changed(aoc_inproc, tmp_path):
+    from aoc_cli.envs import collect
+    from aoc_cli.store import Store
+
+    root = tmp_path / "s"
+    maze_store(root)
+    data, _ = collect("maze", episodes=40, seed=1)
+    Store(root).write("maze", data, append=True)
+    code, out, err = aoc_inproc("--store", str(root), "rollout", "maze", "--env", "maze")
+    one_line_error(code, out, err, "trained on a different version.*--overwrite")
+
+
+def test_derived_index_resamples_a_policy_without_retraining(run, maze_root):
+    code, out, err = run("index", "maze", "--index-id", "pi1x3", "--resample", "policy=pi1:3",
+                         "-f", "json")
+    assert code == 0, err
+    from aoc_cli.store import Store
+
+    corpus = Store(maze_root).corpus("maze")
+    codes, labels = corpus.tag("policy")
+    n_pi1 = int((codes == labels.index("pi1")).sum())
+    assert json.loads(out)["rows"] == corpus.n_rows + 2 * n_pi1
+    code, out, err = run("rollout", "maze", "--env", "maze", "--index", "pi1x3", "-n", "1", "-f", "json")
+    assert code == 0, err

@@ -1,0 +1,117 @@
+"""The accountable controller on small trained corpora: decisions, support, selection, OOD."""
+
+import numpy as np
+import pytest
+
+from aoc_cli.control import ControllerConfig, HistoryBuffer, open_session, rollout
+from aoc_cli.envs import make_env
+from aoc_cli.errors import AocError
+from aoc_cli.index.build import row_selection
+
+from tests.control.corpora import corridor_store, maze_store
+
+
+@pytest.fixture(scope="module")
+def maze(tmp_path_factory):
+    return maze_store(tmp_path_factory.mktemp("maze")).corpus("maze")
+
+
+@pytest.fixture(scope="module")
+def corridor(tmp_path_factory):
+    return corridor_store(tmp_path_factory.mktemp("corridor")).corpus("corridor")
+
+
+def maze_session(corpus, **kw):
+    from aoc_cli.envs import TASKS
+
+    config = ControllerConfig(**{**TASKS["maze"].controller, **kw})
+    return open_session(corpus, config=config, seed=0)
+
+
+def test_maze_controller_reaches_the_goal_and_chains_the_experts(maze):
+    session = maze_session(maze)
+    results, summary = rollout(session, make_env("maze"), 8, seed=100, audit=None)
+    assert summary["success_rate"] >= 0.6, summary
+    # supporting rows: pi1/pi2 before the wall, pi3/pi4 after it (by weight)
+    env = make_env("maze")
+    from aoc_cli.control.rollout import run_episode
+
+    res = next(r for r in (run_episode(env, session.controller, session.model.history_length,
+                                       maze, 0, 100 + i, keep_decisions=True) for i in range(8))
+               if r.success)
+    codes, labels = maze.tag("policy")
+    early, late = [], []
+    for obs, d in zip(res.observations, res.decisions):
+        share = {lab: d.support_weights[codes[d.support_rows] == i].sum()
+                 for i, lab in enumerate(labels)}
+        (early if obs[0] < 6 else late if obs[0] > 10 else []).append(share)
+    assert early and late
+    assert np.mean([s["pi1"] + s["pi2"] for s in early]) > 0.8
+    assert np.mean([s["pi3"] + s["pi4"] for s in late]) > 0.8
+
+
+def test_decision_is_the_best_value_among_candidates_within_the_epsilon_quantile(maze):
+    session = maze_session(maze, epsilon=0.3)
+    h = HistoryBuffer(session.model.history_length, 2, 2, False).history()
+    d = session.controller.decide(np.array([1.0, 1.0], np.float32), h)
+    q = np.quantile(d.candidate_residuals, 0.3)
+    assert np.array_equal(d.passed, d.candidate_residuals <= q + 1e-12 * max(1, q))
+    assert d.passed[d.chosen]
+    assert d.candidate_values[d.chosen] == d.candidate_values[d.passed].max()
+    np.testing.assert_array_equal(d.action, d.candidates[d.chosen])
+    # the record's figures are the decomposition's
+    assert abs(d.support_weights.sum() - 1) < 1e-9
+    values = session.index.values[d.support_rows]
+    assert abs(values @ d.support_weights - d.value) < 1e-6
+
+
+def test_epsilon_one_keeps_every_candidate(maze):
+    session = maze_session(maze, epsilon=1.0)
+    h = HistoryBuffer(session.model.history_length, 2, 2, False).history()
+    d = session.controller.decide(np.array([2.0, 1.0], np.float32), h)
+    assert d.passed.all() and d.candidate_values[d.chosen] == d.candidate_values.max()
+
+
+def test_select_restricts_supporting_rows_to_the_tag(maze):
+    selection = row_selection(maze, {"policy": ["pi1"]})
+    session = open_session(maze, config=ControllerConfig(epsilon=0.1), selection=selection)
+    results, _ = rollout(session, make_env("maze"), 1, seed=3, audit=None)
+    codes, labels = maze.tag("policy")
+    from aoc_cli.control.rollout import run_episode
+
+    res = run_episode(make_env("maze"), session.controller, session.model.history_length, maze,
+                      0, 5, keep_decisions=True)
+    rows = np.concatenate([d.support_rows for d in res.decisions])
+    assert len(rows) and set(codes[rows]) == {labels.index("pi1")}
+
+
+def test_selection_that_leaves_no_rows_is_refused(maze):
+    with pytest.raises(AocError, match="no rows"):
+        row_selection(maze, {"policy": ["pi1"]}, {"policy": ["pi1"]})
+    with pytest.raises(AocError, match="has no value"):
+        row_selection(maze, {"policy": ["pi9"]})
+
+
+def test_noise_injected_after_step_t_is_flagged_out_of_distribution(maze):
+    session = maze_session(maze, ood_warmup=4)
+    env = make_env("maze")
+    calm, _ = rollout(session, env, 3, seed=40)
+    noisy, _ = rollout(session, env, 3, seed=40, noise_after=4, noise_std=1.0)
+    # the disturbed action of step 4 shows in the history of step 5: flagged within 3 steps
+    assert all(any(r.ood[4:8]) for r in noisy), [np.flatnonzero(r.ood)[:5] for r in noisy]
+    assert not any(any(r.ood[:8]) for r in calm), [np.flatnonzero(r.ood)[:5] for r in calm]
+
+
+def test_imitation_decision_is_the_weight_argmax_of_the_supporting_actions(corridor):
+    session = open_session(corridor)
+    assert session.model.mode == "imitation"
+    actions = corridor.actions
+    buf = HistoryBuffer(session.model.history_length, 2, 1, True)
+    agree = 0
+    for x in np.linspace(0.2, 9.8, 25):
+        obs = np.array([x, np.sin(x)], np.float32)
+        d = session.controller.decide(obs, buf.history())
+        totals = np.bincount(actions[d.support_rows], weights=d.support_weights, minlength=2)
+        assert int(d.action) == int(np.argmax(totals))
+        agree += int(d.action) == int(x < 5)
+    assert agree >= 22  # the expert's rule, recovered from the corpus
