@@ -135,8 +135,11 @@ def run(n: int, args) -> dict:
     reset_peak()
     t = time.perf_counter()
     config = IndexConfig(kind=args.kind, threads=args.threads)
+    if args.nprobe:
+        config.ivf_nprobe = args.nprobe
     if cache and os.path.exists(cache + ".faiss"):
         index = BeliefIndex.load(cache + ".faiss", beliefs=beliefs)
+        index.config = config  # search parameters of this run (nprobe, pool), not the saved ones
     else:
         index = BeliefIndex.build(beliefs, config)
         if cache:
@@ -205,6 +208,7 @@ def main(argv=None) -> int:
     parser.add_argument("--spread", type=float, default=0.1, help="scale of the action directions in belief space")
     parser.add_argument("--threads", type=int, default=2, help="FAISS / torch threads")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--nprobe", type=int, default=0, help="IVF lists visited (0: IndexConfig default)")
     parser.add_argument("--cache", default="", help="folder to keep generated beliefs and built indexes in")
     args = parser.parse_args(argv)
     faiss.omp_set_num_threads(args.threads)

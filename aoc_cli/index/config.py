@@ -44,7 +44,7 @@ class IndexConfig:
     hnsw_ef_construction: int = 64
     hnsw_ef_search: int = 128
     ivf_nlist: int = 0
-    ivf_nprobe: int = 48
+    ivf_nprobe: int = 16
     ivf_train_max: int = 200_000
     pool_factor: float = 4.0
     pool_min: int = 128
