@@ -25,6 +25,8 @@ class Context:
     methods: list[str] | None = None     # override of the experiment's methods
     log: object = None
     plots: list[str] = field(default_factory=list)
+    #: ControllerConfig overrides for AOC where the experiment does not vary them (--epsilon).
+    aoc_config: dict = field(default_factory=dict)
 
     def say(self, text: str) -> None:
         if self.log is not None:
@@ -52,12 +54,16 @@ def action_space_of(env) -> dict | None:
     return None
 
 
-def session(corpus, env, model_id: str = "default", index_id: str = "default",
-            seed: int = 0, **config):
-    """An AOC session on ``corpus`` with ControllerConfig fields ``config``."""
+def session(corpus, env, task: str | None = None, model_id: str = "default",
+            index_id: str = "default", seed: int = 0, **config):
+    """An AOC session on ``corpus``: ControllerConfig fields ``config`` over the task's own
+    controller settings (as `aoc rollout --env TASK` uses them) over the paper's defaults."""
     from aoc_cli.control import ControllerConfig, open_session
+    from aoc_cli.envs import TASKS
 
-    return open_session(corpus, model_id, index_id, ControllerConfig(**config), None, seed,
+    settings = dict(getattr(TASKS.get(task), "controller", None) or {}) if task else {}
+    settings.update(config)
+    return open_session(corpus, model_id, index_id, ControllerConfig(**settings), None, seed,
                         action_space_of(env))
 
 

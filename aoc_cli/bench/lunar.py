@@ -18,9 +18,9 @@ METHODS = ["aoc", "knn", "1nn", "knn-belief", "1nn-belief", "bc", "td3bc", "cql"
 SCALES = {
     "tiny": {"sizes": [3_000], "paper_rows": [100_000], "episodes": 1, "seeds": 1,
              "epochs": 2, "patience": 2, "methods": ["aoc", "knn", "bc", "zero"], "max_steps": 40},
-    "quick": {"sizes": [50_000], "paper_rows": [100_000], "episodes": 3, "seeds": 1,
-              "epochs": 30, "patience": 6, "methods": ["aoc", "knn", "1nn", "bc", "td3bc",
-                                                       "zero", "random"]},
+    "quick": {"sizes": [30_000], "paper_rows": [100_000], "episodes": 2, "seeds": 1,
+              "epochs": 30, "patience": 6, "methods": ["aoc", "knn", "bc", "td3bc", "zero",
+                                                       "random"]},
     "full": {"sizes": [100_000, 200_000, 300_000, 500_000, 1_000_000],
              "paper_rows": [100_000, 200_000, 300_000, 500_000, 1_000_000], "episodes": 10,
              "seeds": 3, "epochs": 200, "patience": 10, "methods": METHODS},
@@ -40,7 +40,7 @@ def run_lunar(ctx: Context, scale: dict):
             if "bc" in methods:
                 ctx.artefacts.model(corpus, "bc", belief_config(scale, "imitation", seed))
             ctx.artefacts.index(corpus, "default")
-            s = session(corpus, env, seed=seed)
+            s = session(corpus, env, "lunar", seed=seed, **ctx.aoc_config)
             rows.append(result_row("lunar", "lunar", DATA, setting, seed,
                                    **data_values(corpus), note=f"corpus {corpus.name}"))
             for method in methods:

@@ -9,7 +9,8 @@
   x = 8 (from x < 8 to x >= 8): the crossing's y, interpolated on that step's segment, is the
   upper gate when y > 11.625 (half way between the gap around y = 8, [7.25, 8.75], and the gap
   at the top, [14.5, 16]) and the lower gate otherwise; a rollout that never crosses counts in
-  neither. Counts are per 100 rollouts. The raw-feature kNN and 1NN run at x1 for comparison.
+  neither. Counts are per 100 rollouts. The raw-feature kNN runs at x1 for comparison. AOC uses
+  the maze task's own controller settings (epsilon 0.1, as `aoc rollout --env maze` does).
 * ``two-gates`` (paper Table "epsilon contributes to the conservative behaviours"): AOC with
   epsilon in {0.1, 0.3, 0.5, 0.7}; the return and a PNG of the trajectories per epsilon.
 """
@@ -31,8 +32,8 @@ GATE_SPLIT = (8.75 + 14.5) / 2.0  # 11.625
 SCALES = {
     "tiny": {"episodes_data": 120, "episodes": 2, "seeds": 1, "epochs": 2, "patience": 2,
              "rates": (2.0, 1.0, 0.5), "compare": ["knn"], "max_steps": 30},
-    "quick": {"episodes_data": 1000, "episodes": 30, "seeds": 1, "epochs": 60, "patience": 8,
-              "rates": RATES, "compare": ["knn", "1nn"]},
+    "quick": {"episodes_data": 1000, "episodes": 20, "seeds": 1, "epochs": 60, "patience": 8,
+              "rates": RATES, "compare": ["knn"]},
     "full": {"episodes_data": 1000, "episodes": 100, "seeds": 3, "epochs": 200,
              "patience": 10, "rates": RATES, "compare": ["knn", "1nn", "knn-belief"]},
 }
@@ -92,7 +93,7 @@ def run_maze_adapt(ctx: Context, scale: dict):
             index_id = _index_id(rate)
             resample = None if rate == 1.0 else {"policy=pi1": rate}
             ctx.artefacts.index(corpus, "default", index_id, resample=resample, seed=seed)
-            s = session(corpus, env, index_id=index_id, seed=seed)
+            s = session(corpus, env, "maze", index_id=index_id, seed=seed, **ctx.aoc_config)
             methods = ["aoc"] + (ctx.pick_methods(scale["compare"]) if rate == 1.0 else [])
             for method in methods:
                 run = ctx.runner.run(method, s, env, ctx.n_episodes(scale["episodes"]), seed,
@@ -123,7 +124,7 @@ def run_two_gates(ctx: Context, scale: dict):
         ctx.artefacts.model(corpus, "default", belief_config(scale, "value", seed))
         ctx.artefacts.index(corpus, "default")
         for eps in scale["epsilons"]:
-            s = session(corpus, env, seed=seed, epsilon=eps)
+            s = session(corpus, env, "two-gates", seed=seed, epsilon=eps)
             run = ctx.runner.run("aoc", s, env, ctx.n_episodes(scale["episodes"]), seed,
                                  label=f"two-gates epsilon {eps:g} seed {seed}")
             values = row_values(run)

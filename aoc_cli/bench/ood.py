@@ -26,7 +26,7 @@ from aoc_cli.bench.results import result_row
 SCALES = {
     "tiny": {"task": "pendulum-het", "rows": 2_000, "T": 25, "noise": 0.5, "episodes": 1,
              "seeds": 1, "epochs": 2, "patience": 2, "max_steps": 50},
-    "quick": {"task": "pendulum-het", "rows": 30_000, "T": 100, "noise": 0.5, "episodes": 6,
+    "quick": {"task": "pendulum-het", "rows": 30_000, "T": 100, "noise": 0.5, "episodes": 4,
               "seeds": 1, "epochs": 40, "patience": 6},
     "full": {"task": "pendulum-het", "rows": 100_000, "T": 100, "noise": 0.5, "episodes": 10,
              "seeds": 3, "epochs": 200, "patience": 10},
@@ -102,7 +102,7 @@ def run_ood(ctx: Context, scale: dict):
         ctx.artefacts.model(corpus, "default", belief_config(scale, "value", seed))
         ctx.artefacts.index(corpus, "default")
         for noise in (0.0, float(scale["noise"])):
-            s = session(corpus, env, seed=seed)
+            s = session(corpus, env, task, seed=seed, **ctx.aoc_config)
             run = ctx.runner.run("aoc", s, env, ctx.n_episodes(scale["episodes"]), seed,
                                  noise_after=T if noise > 0 else None, noise_std=noise,
                                  label=f"{task} noise {noise:g} seed {seed}")

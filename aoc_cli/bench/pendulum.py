@@ -28,9 +28,11 @@ SCALES = {
     "tiny": {"sizes": [2_000], "paper_rows": [100_000], "episodes": 1, "seeds": 1,
              "epochs": 2, "patience": 2, "upright_data": "shared", "mid": 2_000, "max_steps": 40,
              "ablation_tasks": ["pendulum-het"]},
-    "quick": {"sizes": [30_000], "paper_rows": [100_000], "episodes": 4, "seeds": 2,
+    "quick": {"sizes": [30_000], "paper_rows": [100_000], "episodes": 4, "seeds": 1,
               "epochs": 40, "patience": 6, "upright_data": "shared", "mid": 30_000,
-              "ablation_tasks": ["pendulum-het"]},
+              "ablation_tasks": ["pendulum-het"],
+              "methods": ["aoc", "knn", "1nn", "knn-belief", "1nn-belief", "bc", "td3bc", "mpc",
+                          "zero", "random"]},
     "full": {"sizes": [100_000, 300_000, 600_000], "paper_rows": [100_000, 300_000, 600_000],
              "episodes": 10, "seeds": 8, "epochs": 200, "patience": 10, "upright_data": "own",
              "mid": 300_000, "ablation_tasks": ["pendulum-het", "pendulum-het-upright"]},
@@ -56,7 +58,7 @@ def _prepare(ctx: Context, scale: dict, task: str, rows: int, seed: int, bc: boo
 
 def run_pendulum_het(ctx: Context, scale: dict) -> tuple[list[dict], callable]:
 
-    methods = ctx.pick_methods(METHODS)
+    methods = ctx.pick_methods(scale.get("methods", METHODS))
     rows_out = []
     for size, paper_rows in zip(scale["sizes"], scale["paper_rows"]):
         setting = f"rows={size}"
@@ -64,7 +66,7 @@ def run_pendulum_het(ctx: Context, scale: dict) -> tuple[list[dict], callable]:
             for task in TASKS:
                 corpus = _prepare(ctx, scale, task, size, seed, "bc" in methods)
                 env = make_task_env(task, scale)
-                s = session(corpus, env, seed=seed)
+                s = session(corpus, env, task, seed=seed, **ctx.aoc_config)
                 rows_out.append(result_row("pendulum-het", task, DATA, setting, seed,
                                            **data_values(corpus),
                                            note=f"corpus {corpus.name}"))
@@ -90,7 +92,7 @@ def _ablation(ctx: Context, scale: dict, name: str, settings) -> list[dict]:
             corpus = _prepare(ctx, scale, task, scale["mid"], seed, bc=False)
             env = make_task_env(task, scale)
             for setting, config in settings(corpus):
-                s = session(corpus, env, seed=seed, **config)
+                s = session(corpus, env, task, seed=seed, **{**ctx.aoc_config, **config})
                 run = ctx.runner.run("aoc", s, env, ctx.n_episodes(scale["episodes"]), seed,
                                      label=f"{task} {setting} seed {seed}")
                 out.append(result_row(name, task, "aoc", setting, seed, **row_values(run)))

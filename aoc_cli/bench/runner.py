@@ -63,13 +63,13 @@ ORDER = list(EXPERIMENTS)
 #: Budgets of the black-box baselines per scale.
 BUDGETS = {
     "tiny": Budget(offline_rl_steps=20, mpc_epochs=1, mpc_samples=20, mpc_horizon=5),
-    "quick": Budget(offline_rl_steps=10_000, mpc_epochs=15, mpc_samples=200, mpc_horizon=15),
+    "quick": Budget(offline_rl_steps=3_000, mpc_epochs=15, mpc_samples=200, mpc_horizon=15),
     "full": Budget(offline_rl_steps=100_000, mpc_epochs=30, mpc_samples=300, mpc_horizon=20),
 }
 
 
 def check(name: str, scale: str, seeds: int | None, episodes: int | None,
-          methods: list[str] | None = None) -> None:
+          methods: list[str] | None = None, epsilon: float | None = None) -> None:
     """Bad experiment, scale, counts or method names -> AocError."""
     if name != "all" and name not in EXPERIMENTS:
         raise AocError(f"unknown experiment {name!r}: use one of {', '.join(ORDER)} or all")
@@ -79,6 +79,11 @@ def check(name: str, scale: str, seeds: int | None, episodes: int | None,
         raise AocError(f"--seeds must be >= 1, got {seeds}")
     if episodes is not None and episodes < 1:
         raise AocError(f"--episodes must be >= 1, got {episodes}")
+    if epsilon is not None:
+        if name in ("epsilon", "two-gates"):
+            raise AocError(f"--epsilon does not apply to {name}: epsilon is what it varies")
+        if not 0.0 < epsilon <= 1.0:
+            raise AocError(f"--epsilon must be in (0, 1], got {epsilon}")
     if methods:
         from aoc_cli.baselines import BASELINES
 
@@ -91,10 +96,10 @@ def check(name: str, scale: str, seeds: int | None, episodes: int | None,
 def run_experiment(name: str, scale: str = "full", seeds: int | None = None,
                    out: str | Path | None = None, store: str | Path = "bench/store",
                    episodes: int | None = None, methods: list[str] | None = None,
-                   log=None, progress=None) -> dict:
+                   log=None, progress=None, epsilon: float | None = None) -> dict:
     """Run experiment ``name`` at ``scale`` (tiny | quick | full); write and return its report:
     ``{"experiment", "out", "rows", "summary", "plots", "built", "seconds"}``."""
-    check(name, scale, seeds, episodes, methods)
+    check(name, scale, seeds, episodes, methods, epsilon)
     exp = EXPERIMENTS[name]
     params = exp.scales[scale]
     out = Path(out) if out is not None else Path("bench") / name
@@ -103,18 +108,21 @@ def run_experiment(name: str, scale: str = "full", seeds: int | None = None,
     artefacts = Artefacts(store, log=log, progress=progress)
     runner = Runner(BUDGETS[scale], progress=progress, log=log)
     ctx = Context(name, scale, out, artefacts, runner, list(range(n_seeds)), episodes,
-                  methods, log)
+                  methods, log, aoc_config={} if epsilon is None else {"epsilon": epsilon})
     started = time.perf_counter()
     rows, figure = exp.run(ctx, params)
     summary = summarize_rows(rows, figure)
     _plot(exp, summary, ctx)
     seconds = time.perf_counter() - started
-    header = (f"Scale `{scale}`, seeds {n_seeds}, {seconds / 60:.1f} min. Mean ± std across "
+    header = (f"Scale `{scale}`, seeds {n_seeds}, {seconds / 60:.1f} min"
+              + (f", AOC with epsilon = {epsilon:g}" if epsilon is not None else "")
+              + ". Mean ± std across "
               "seeds (one seed: across its episodes). Plots: "
               + ", ".join(f"[{p}]({p})" for p in ctx.plots))
     markdown = summary_markdown(exp.title, summary, exp.metrics, header, exp.paper_label)
     write_outputs(out, name, rows, summary, markdown,
                   {"scale": scale, "seeds": n_seeds, "seconds": seconds, "plots": ctx.plots,
+                   "aoc_config": ctx.aoc_config,
                    "built": artefacts.built})
     return {"experiment": name, "out": str(out), "rows": rows, "summary": summary,
             "plots": ctx.plots, "built": artefacts.built, "seconds": seconds}
@@ -139,17 +147,16 @@ def _plot(exp: Experiment, summary: list[dict], ctx: Context) -> None:
 
 # -- expected time --------------------------------------------------------------------------
 
-#: Seconds per unit on this project's 2-core machine (measured; see docs/results.md).
+#: Seconds per unit on this project's 2-core machine, measured while other jobs shared it
+#: (see docs/results.md); an idle machine is faster.
 COST = {
-    "train_row_epoch": 6e-5,        # belief model, one thread
-    "epochs_fraction": 0.5,         # early stopping ends at about this share of max_epochs
-    "step": {"aoc": 0.02, "knn-belief": 0.012, "1nn-belief": 0.012, "knn": 0.006,
-             "1nn": 0.006, "bc": 0.002, "td3bc": 0.002, "cql": 0.002, "mpc": 0.02,
+    "train_row_epoch": 1.0e-4,      # belief model, one thread
+    "epochs": 35,                   # early stopping ends near here (at most max_epochs)
+    "step": {"aoc": 0.07, "knn-belief": 0.06, "1nn-belief": 0.05, "knn": 0.05,
+             "1nn": 0.04, "bc": 0.002, "td3bc": 0.001, "cql": 0.001, "mpc": 0.01,
              "zero": 0.0002, "random": 0.0002},
-    "offline_rl_step": {"td3bc": 0.004, "cql": 0.008},
+    "offline_rl_step": {"td3bc": 0.033, "cql": 0.25},
     "mpc_row_epoch": 2e-5,
-    "episode_steps": {"pendulum-het": 200, "pendulum-het-upright": 200, "maze": 40,
-                      "two-gates": 32, "lunar": 400},
     "rows_per_episode": {"maze": 20, "two-gates": 28},
     "collect_row": {"lunar": 3e-4},
 }
@@ -165,7 +172,7 @@ def expected_seconds(name: str, scale: str, seeds: int | None = None,
     budget = BUDGETS[scale]
     n_seeds = seeds if seeds is not None else int(p["seeds"])
     eps = episodes or int(p["episodes"])
-    epochs = p["epochs"] * COST["epochs_fraction"]
+    epochs = min(p["epochs"], COST["epochs"])
     step = COST["step"]
     total = 0.0
 
@@ -182,7 +189,7 @@ def expected_seconds(name: str, scale: str, seeds: int | None = None,
         return t
 
     if name == "pendulum-het":
-        ms = methods or pendulum.METHODS
+        ms = methods or p.get("methods", pendulum.METHODS)
         tasks = len(pendulum.TASKS)
         for rows in p["sizes"]:
             corpora = 2 if p["upright_data"] == "own" else 1
@@ -195,7 +202,7 @@ def expected_seconds(name: str, scale: str, seeds: int | None = None,
     elif name == "maze-adapt":
         rows = p["episodes_data"] * COST["rows_per_episode"]["maze"]
         total += n_seeds * train(rows)
-        total += n_seeds * len(p["rates"]) * eps * 40 * step["aoc"]
+        total += n_seeds * len(p["rates"]) * eps * 35 * step["aoc"]
         total += n_seeds * eps * 100 * sum(step.get(m, 0.01) for m in p["compare"])
     elif name == "two-gates":
         rows = p["episodes_data"] * COST["rows_per_episode"]["two-gates"]
