@@ -60,7 +60,8 @@ def built(corpus):
 def test_flat_search_is_exact_for_single_batched_and_spread_queries(corpus, built):
     index = built("flat")
     rng = np.random.default_rng(3)
-    for queries in (control_step(corpus), rng.standard_normal((30, 20)).astype(np.float32) * 3, corpus[:1]):
+    batches = [control_step(corpus, noise=n) for n in (0.01, 0.05, 0.2, 0.5)]  # pooled, grown, direct
+    for queries in batches + [rng.standard_normal((30, 20)).astype(np.float32) * 3, corpus[:1]]:
         dist, rows = index.search(queries, 42)
         truth = exact(corpus, queries, 42)
         assert (np.sort(rows, 1) == np.sort(truth, 1)).all()
