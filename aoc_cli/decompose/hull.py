@@ -75,9 +75,9 @@ def minimal_subset(
     in_slot = np.take_along_axis(sup, order, axis=1)  # (n, s_max) real slot?
     Z_S = np.take_along_axis(zt, order[:, :, None], axis=1) * in_slot[:, :, None]
     H = Z_S @ Z_S.transpose(0, 2, 1) + in_slot[:, :, None] * in_slot[:, None, :]
-    H += np.eye(s_max) * (~in_slot)[:, :, None]
+    H += np.eye(s_max) * ((~in_slot)[:, :, None] + 1e-12)  # ridge: a degenerate support stays solvable
     rhs = np.einsum("qsd,qkd->qsk", Z_S, zt) + in_slot[:, :, None]
-    sol = np.linalg.solve(H, np.concatenate([rhs, in_slot[:, :, None].astype(float)], axis=2))
+    sol = _solve(H, np.concatenate([rhs, in_slot[:, :, None].astype(float)], axis=2))
     T, lam = sol[:, :, :k], sol[:, :, k]
     fit = np.einsum("qsk,qsd->qkd", T, Z_S) - zt
     in_aff = (fit**2).sum(-1) + (T.sum(1) - 1.0) ** 2 <= 1e-14
@@ -115,7 +115,7 @@ def minimal_subset(
             cost_S = np.where(in_slot, sq[r[:, None], np.maximum(slot_col, 0)], 0.0)
             reduced = sq - np.einsum("qs,qsk->qk", cost_S, T)
             leave, piv = ratio_test()
-            reduced = np.where(eligible & (piv > 1e-12), reduced, 0.0)
+            reduced = np.where(eligible & (piv > 1e-9), reduced, 0.0)
             enter = np.argmin(reduced, axis=1)
             go = reduced[r, enter] < -1e-12
             if not go.any():
@@ -137,14 +137,33 @@ def minimal_subset(
     cols = np.maximum(slot_col, 0)
     Z_S = np.take_along_axis(zt, cols[:, :, None], axis=1) * in_slot[:, :, None]
     H = Z_S @ Z_S.transpose(0, 2, 1) + in_slot[:, :, None] * in_slot[:, None, :]
-    H += np.eye(s_max) * (~in_slot)[:, :, None]
-    lam = np.linalg.solve(H, in_slot[:, :, None].astype(float))[:, :, 0]
+    H += np.eye(s_max) * ((~in_slot)[:, :, None] + 1e-12)
+    lam = _solve(H, in_slot[:, :, None].astype(float))[:, :, 0]
+    # keep an exchange only if its weights are a valid convex combination giving y* back
+    miss = np.sqrt((np.einsum("qs,qsd->qd", lam, Z_S) ** 2).sum(1))
+    good = (miss <= 1e-9) & (np.where(in_slot, lam, 0.0) >= -1e-9).all(1) & (np.abs(lam.sum(1) - 1) <= 1e-9)
     lam = np.where(in_slot, np.maximum(lam, 0.0), 0.0)
     lam /= lam.sum(1, keepdims=True)
     new_w = np.zeros((n, k))
     new_w[np.nonzero(in_slot)[0], slot_col[in_slot]] = lam[in_slot]
     weights = weights.copy()
     support = support.copy()
-    weights[todo] = new_w
-    support[todo] = new_w > 0
+    weights[todo[good]] = new_w[good]
+    support[todo[good]] = new_w[good] > 0
     return weights, support, pivots
+
+
+def _solve(H: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """Batched ``H x = rhs``; a problem whose H is numerically singular (exact duplicate
+    neighbours) gets the least-squares answer instead of failing the batch. The checks after
+    the exchanges reject any such answer that is not a valid convex combination."""
+    try:
+        return np.linalg.solve(H, rhs)
+    except np.linalg.LinAlgError:
+        out = np.empty(rhs.shape)
+        for q in range(H.shape[0]):
+            try:
+                out[q] = np.linalg.solve(H[q], rhs[q])
+            except np.linalg.LinAlgError:
+                out[q] = np.linalg.lstsq(H[q], rhs[q], rcond=None)[0]
+        return out

@@ -138,7 +138,11 @@ def min_norm_point(
             xP += blocked
         j = np.argmin(xP, axis=1)
         xx = np.einsum("qd,qd->q", x, x)
-        optimal = xx * (1.0 - 1e-10) - xP[r, j] <= tol
+        gap = xx - xP[r, j]  # Frank-Wolfe gap of the best entering point
+        # optimal: no gap, or moving towards p_j could lower ||x||^2 by less than 1e-12 of
+        # itself (gap^2 / ||p_j - x||^2); adding such a point only degenerates the corral
+        step = sq1[r, j] - 1.0 - 2.0 * xP[r, j] + xx  # ||p_j - x||^2
+        optimal = (gap - 1e-10 * xx <= tol) | (gap * gap <= 1e-12 * xx * step)
         if mu == m:  # a full corral (d + 1 points, or all k) with alpha > 0: x is optimal
             optimal |= nact == m
         done |= optimal & ~minor
@@ -172,10 +176,13 @@ def min_norm_point(
             u = (H @ g[:, :, None])[..., 0]
             sigma = sq1[r, j] - np.einsum("qm,qm->q", g, u)
             u[r, s_in] -= 1.0
-            bad = add & (sigma <= 1e-13)
+            bad = add & (sigma <= 1e-12)
             if bad.any():
+                # j lies (numerically) in the corral's affine hull, where <p, x> = <x, x>: a gap
+                # of the size of its distance from that hull is rounding, and x is optimal
+                rounding = bad & (gap <= 10.0 * np.sqrt(np.maximum(sigma, 0.0)) + 1e-12)
                 add &= ~bad
-                failed |= bad
+                failed |= bad & ~rounding
                 done |= bad
             if v is None:
                 v = u * add[:, None]

@@ -59,12 +59,15 @@ def reference_residual(neighbours: np.ndarray, query: np.ndarray) -> float:
     return float(np.linalg.norm(w @ np.asarray(neighbours, dtype=np.float64) - query))
 
 
-def caratheodory(neighbours: np.ndarray, weights: np.ndarray, tol: float = 1e-9) -> np.ndarray:
+def caratheodory(
+    neighbours: np.ndarray, weights: np.ndarray, tol: float = 1e-7, rank_tol: float = 1e-7
+) -> np.ndarray:
     """Reduce a convex combination to at most d + 1 affinely independent points, same point.
 
     While the support is affinely dependent, move the weights along a null vector v of
     [B_S^T; 1^T] (sum v b = 0, sum v = 0) until one weight reaches zero (Caratheodory).
-    Weights below tol * max(w) are dropped first.
+    Weights below tol * max(w) (an interior-point solver's noise) are dropped first; points
+    count as dependent below rank_tol relative singular value (float32 beliefs carry ~1e-7).
     """
     B = np.asarray(neighbours, dtype=np.float64)
     w = np.where(weights > tol * weights.max(), weights, 0.0)
@@ -74,7 +77,7 @@ def caratheodory(neighbours: np.ndarray, weights: np.ndarray, tol: float = 1e-9)
         S = np.flatnonzero(w > 0)
         A = np.vstack([((B[S] - w @ B) / scale).T, np.ones(S.size)])
         _, sv, vt = np.linalg.svd(A)
-        rank = int((sv > 1e-10 * sv[0]).sum())
+        rank = int((sv > rank_tol * sv[0]).sum())
         if rank >= S.size:
             return w
         v = vt[-1]

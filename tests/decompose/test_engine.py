@@ -109,6 +109,27 @@ def test_collinear_and_coplanar_neighbours(rank):
     assert (result.rows >= 0).sum(1).max() <= rank + 1
 
 
+def test_degenerate_float32_beliefs_on_a_relu_surface_stay_valid():
+    """Beliefs of a trained network: float32, on a low-dimensional ReLU surface, duplicated.
+    Nearly dependent neighbours must not break the solver; the answers stay valid and agree
+    with the reference to the precision the data carries."""
+    rng = np.random.default_rng(11)
+    basis = rng.standard_normal((2, 20))
+    beliefs = np.maximum(rng.standard_normal((3000, 2)) @ basis, 0.0)
+    beliefs = np.vstack([beliefs, beliefs[:500]]).astype(np.float32)
+    queries = beliefs[rng.integers(0, 3000, 60)] + 0.01 * rng.standard_normal((60, 20)) * (rng.random((60, 1)) < 0.5)
+    queries = np.maximum(queries, 0.0)
+    result = decompose(beliefs, queries)
+    check_subset(result, beliefs.astype(np.float64), queries)
+    for q in range(len(queries)):
+        B = beliefs[result.neighbours[q]].astype(np.float64)
+        scale = float(np.linalg.norm(B - queries[q], axis=1).max())
+        ref = reference_residual(B, queries[q])
+        assert abs(result.residual[q] - ref) <= 1e-5 * ref + 1e-6 * scale
+        x = result.projection[q] - queries[q]
+        assert ((B - queries[q]) @ x >= x @ x - 1e-7 * scale**2).all()
+
+
 def test_k_larger_than_the_corpus_uses_every_row():
     rng = np.random.default_rng(3)
     beliefs = rng.standard_normal((5, 3))
