@@ -117,6 +117,8 @@ class BeliefIndex:
     def select(self, selection) -> Selection:
         """Prepare a row restriction: a boolean mask over corpus rows (N,) or an array of rows."""
         if isinstance(selection, Selection):
+            if selection.mask.size != self.size:
+                raise AocError("this selection was prepared for another index; prepare it with this index's select()")
             return selection
         sel = np.asarray(selection)
         if sel.dtype == bool:

@@ -129,6 +129,9 @@ def test_selection_that_leaves_no_rows_raises():
         index.search(np.zeros((1, 3)), 5, selection=np.ones(7, dtype=bool))
     with pytest.raises(AocError, match=r"\[0, 100\)"):
         index.search(np.zeros((1, 3)), 5, selection=np.array([100]))
+    other = index.subsample(0.5)
+    with pytest.raises(AocError, match="another index"):
+        other.search(np.zeros((1, 3)), 5, selection=index.select(np.arange(10)))
 
 
 def test_resample_copies_rows_and_its_id_map_points_back_to_them():
