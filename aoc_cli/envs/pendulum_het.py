@@ -15,7 +15,7 @@ Behaviour policies (per system, each good in its own system): energy-based swing
 ``u = clip(k_E theta_dot (E* - E))`` with ``E = theta_dot^2 / 2 + 15 (cos theta - 1)``, ``E* = 0``,
 switching to LQR balancing ``u = -K [theta, theta_dot]`` (discrete Riccati on the linearised
 system with the reward's weights Q = diag(1, 0.1), R = 0.001) when ``|theta| < 0.8``; the
-commanded torque is ``s`` times that. Run with Gaussian action noise of std 0, 0.5, 1 and 2,
+commanded torque is ``s`` times that. Run with Gaussian action noise of std 0, 0.2, 0.5 and 1,
 plus uniformly random torques: five policies in equal shares, half of the rows from each system.
 """
 
@@ -38,7 +38,7 @@ MAX_TORQUE = 2.0
 MAX_SPEED = 8.0
 DT, G, M, L = 0.05, 10.0, 1.0, 1.0
 #: Gaussian action-noise levels (std of the torque noise) of the swing-up controller.
-NOISE_LEVELS = (0.0, 0.5, 1.0, 2.0)
+NOISE_LEVELS = (0.0, 0.2, 0.5, 1.0)
 POLICIES = tuple(f"swingup-noise{n:g}" for n in NOISE_LEVELS) + ("random",)
 #: Energy gain and the |theta| below which the LQR balancer takes over.
 ENERGY_GAIN, BALANCE_ANGLE = 0.3, 0.8
