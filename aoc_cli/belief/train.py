@@ -136,7 +136,8 @@ def train_model(corpus, config: BeliefConfig, model_id: str = "default", overwri
 
     ``progress``, when given, is called with a dict (``epoch``, ``max_epochs``, ``batch``,
     ``batches``, ``train_loss`` running mean, ``val_loss`` and ``best_val_loss`` or None,
-    ``epoch_done``) every few batches and at the end of every epoch. ``prepared`` is the
+    ``epoch_done``) every few batches, and at the end of every epoch with the epoch's metrics
+    (also ``val_r2`` or ``val_accuracy``, ``seconds``). ``prepared`` is the
     result of :func:`aoc_cli.belief.data.prepare` for the same arguments, when already known.
     """
     started = time.perf_counter()
@@ -208,9 +209,8 @@ def train_model(corpus, config: BeliefConfig, model_id: str = "default", overwri
         else:
             stale += 1
         if progress is not None:
-            progress({"epoch": epoch, "max_epochs": config.max_epochs, "batch": n_batches,
-                      "batches": n_batches, "train_loss": record["train_loss"],
-                      "val_loss": val["loss"], "best_val_loss": best["val_loss"],
+            progress({**record, "max_epochs": config.max_epochs, "batch": n_batches,
+                      "batches": n_batches, "best_val_loss": best["val_loss"],
                       "epoch_done": True})
         if stale >= config.patience or not math.isfinite(val["loss"]):
             break

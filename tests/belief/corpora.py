@@ -81,3 +81,28 @@ def history_dependent(episodes: int = 80, length: int = 40, seed: int = 0) -> Co
         terminals=terminals, truncations=np.zeros(n, bool), episode_starts=starts,
         observation_space=box_space(2), action_space=discrete_space(3),
     )
+
+
+def hidden_system(episodes: int = 80, length: int = 30, seed: int = 0) -> CorpusData:
+    """Two systems, hidden per episode: x' = 0.8 x + s a with s = +1 or -1 (tag ``system``).
+    The value column ``v = s (1 + a)`` rewards actions aligned with the system, so only the
+    history (how x moved under the previous actions) tells a good action from a bad one.
+    The rewards are noise: they say nothing about s."""
+    rng = np.random.default_rng(seed)
+    n, starts, terminals = _episodes(episodes, length)
+    s = np.where(np.arange(episodes) % 2 == 0, 1.0, -1.0)
+    x = rng.uniform(-1, 1, episodes)
+    obs = np.empty((length, episodes), np.float32)
+    act = rng.uniform(-1, 1, (length, episodes)).astype(np.float32)
+    for t in range(length):
+        obs[t] = x
+        x = 0.8 * x + s * act[t]
+    system = np.repeat((s < 0).astype(np.int32), length)
+    actions = act.T.reshape(n, 1)
+    return CorpusData(
+        observations=obs.T.reshape(n, 1), actions=actions, rewards=rng.standard_normal(n),
+        terminals=terminals, truncations=np.zeros(n, bool), episode_starts=starts,
+        observation_space=box_space(1), action_space=box_space(1, -1, 1),
+        tags={"system": (system, ["plus", "minus"])},
+        columns={"v": np.repeat(s, length) * (1.0 + actions[:, 0])},
+    )

@@ -1,0 +1,101 @@
+"""Belief-model benchmark (issue 4): time to train on pendulum-het to early stop, and the four
+pendulum-het figures (does the history identify the dynamics?).
+
+    .venv/bin/python benchmarks/train.py time    [--rows 100000] [--repeats 3] [--threads 2]
+    .venv/bin/python benchmarks/train.py figures [--rows 100000] [--seed 0] [--threads 2]
+
+``time``: collect ``--rows`` pendulum-het rows (collect seed = run index), store them, and train
+the default value-mode model (L = 4, d_b = 20, batch 500, Adam 1e-3, patience 10) to early stop
+with the library call ``train_model``; reported: the median and every run's seconds, epochs and
+validation R^2. Goal: <= 120 s for 100k rows on this machine.
+
+``figures``: one corpus (collect seed ``--seed``), the default model with L = 4 and the same
+model with L = 0; reports the validation R^2 of each, and the accuracy of a logistic probe that
+predicts the ``system`` tag (normal / converse) of the validation episodes' rows, fitted on the
+training episodes' rows, from the L = 4 beliefs, the L = 0 beliefs, and the raw (o, a).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import numpy as np  # noqa: E402
+
+from aoc_cli.belief import (BeliefConfig, episode_rows, load_model, logistic_probe,  # noqa: E402
+                            split_episodes, train_model)
+from aoc_cli.envs import collect  # noqa: E402
+from aoc_cli.store import Store  # noqa: E402
+
+
+def pendulum_corpus(store: Store, name: str, rows: int, seed: int):
+    data, _summary = collect("pendulum-het", steps=rows, seed=seed)
+    return store.write(name, data)
+
+
+def run_time(args) -> None:
+    runs = []
+    with tempfile.TemporaryDirectory() as tmp:
+        store = Store(tmp)
+        for seed in range(args.repeats):
+            corpus = pendulum_corpus(store, f"p{seed}", args.rows, seed)
+            t0 = time.perf_counter()
+            m = train_model(corpus, BeliefConfig(threads=args.threads), "default")
+            runs.append({"seconds": time.perf_counter() - t0, "epochs": m["epochs"],
+                         "best_epoch": m["best_epoch"], "val_r2": m["val_r2"]})
+            print(json.dumps(runs[-1]), flush=True)
+    med = statistics.median(r["seconds"] for r in runs)
+    print(f"rows {args.rows}: median {med:.1f} s to early stop over {len(runs)} runs; "
+          f"seconds {[round(r['seconds'], 1) for r in runs]}, epochs "
+          f"{[r['epochs'] for r in runs]}, val R^2 {[round(r['val_r2'], 3) for r in runs]}, "
+          f"s/epoch {[round(r['seconds'] / r['epochs'], 2) for r in runs]}")
+
+
+def system_probe(corpus, features: np.ndarray, config: BeliefConfig) -> float:
+    """Probe accuracy on the validation episodes of ``config``'s split."""
+    train_eps, val_eps = split_episodes(corpus.n_episodes, config.val_fraction, config.seed)
+    tr = episode_rows(corpus.episode_starts, train_eps)
+    va = episode_rows(corpus.episode_starts, val_eps)
+    system = corpus.tag("system")[0]
+    return logistic_probe(features[tr], system[tr], features[va], system[va])
+
+
+def run_figures(args) -> None:
+    with tempfile.TemporaryDirectory() as tmp:
+        corpus = pendulum_corpus(Store(tmp), "p", args.rows, args.seed)
+        out = {"rows": corpus.n_rows, "episodes": corpus.n_episodes}
+        for L in (4, 0):
+            config = BeliefConfig(history_length=L, threads=args.threads)
+            t0 = time.perf_counter()
+            m = train_model(corpus, config, f"L{L}")
+            beliefs = load_model(corpus, f"L{L}").row_beliefs(corpus)
+            out[f"L{L}"] = {"val_r2": m["val_r2"], "epochs": m["epochs"],
+                            "seconds": time.perf_counter() - t0,
+                            "probe_beliefs": system_probe(corpus, beliefs, config)}
+            print(json.dumps({f"L{L}": out[f"L{L}"]}), flush=True)
+        oa = np.concatenate([corpus.observations, corpus.actions], axis=1)
+        out["probe_observation_action"] = system_probe(corpus, oa, BeliefConfig())
+        print(json.dumps(out, indent=2))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("what", choices=["time", "figures"])
+    ap.add_argument("--rows", type=int, default=100_000)
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--threads", type=int, default=2)
+    args = ap.parse_args()
+    run_time(args) if args.what == "time" else run_figures(args)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,56 @@
+"""The paper's point: the history identifies the dynamics. Checked on a synthetic corpus where
+the value depends on a hidden system, and on pendulum-het (``aoc_cli.envs.collect``)."""
+
+import numpy as np
+import pytest
+
+from aoc_cli.belief import (BeliefConfig, episode_rows, load_model, logistic_probe,
+                            split_episodes, train_model)
+from aoc_cli.envs import collect
+from aoc_cli.store import Store
+
+from tests.belief.corpora import hidden_system
+
+FAST = dict(threads=1, hidden=64, patience=5)
+
+
+def system_probes(corpus, beliefs, config):
+    """(probe accuracy on beliefs, on (o, a)) for the validation episodes of the split."""
+    train_eps, val_eps = split_episodes(corpus.n_episodes, config.val_fraction, config.seed)
+    tr = episode_rows(corpus.episode_starts, train_eps)
+    va = episode_rows(corpus.episode_starts, val_eps)
+    system = corpus.tag("system")[0]
+    oa = np.concatenate([corpus.observations, corpus.actions], axis=1)
+    return (logistic_probe(beliefs[tr], system[tr], beliefs[va], system[va]),
+            logistic_probe(oa[tr], system[tr], oa[va], system[va]))
+
+
+def test_beliefs_with_history_identify_a_hidden_system_the_value_depends_on(tmp_path):
+    corpus = Store(tmp_path).write("hs", hidden_system())
+    cfg = dict(value="v", max_epochs=20, batch_size=50, **FAST)
+    config = BeliefConfig(history_length=4, **cfg)
+    with_history = train_model(corpus, config, "L4")
+    without = train_model(corpus, BeliefConfig(history_length=0, **cfg), "L0")
+    assert with_history["val_r2"] > 0.8
+    assert with_history["val_r2"] > without["val_r2"] + 0.5
+    on_beliefs, on_oa = system_probes(corpus, load_model(corpus, "L4").row_beliefs(corpus),
+                                      config)
+    assert on_oa < 0.65           # (o, a) says nothing about the system
+    assert on_beliefs > 0.9       # the belief does (all but the first row of each episode)
+
+
+@pytest.fixture(scope="module")
+def pendulum(tmp_path_factory):
+    data, _summary = collect("pendulum-het", steps=20_000, seed=0)
+    return Store(tmp_path_factory.mktemp("store")).write("pendulum", data)
+
+
+def test_pendulum_het_value_is_better_predicted_with_the_history(pendulum):
+    # Measured at this size (seeds 0 and 1): L = 4 0.76 / 0.79, L = 0 0.70 / 0.72.
+    # docs/belief.md has the figures at 100k rows and why the system probe is not asserted
+    # in value mode.
+    cfg = dict(max_epochs=15, **FAST)
+    with_history = train_model(pendulum, BeliefConfig(history_length=4, **cfg), "L4")
+    without = train_model(pendulum, BeliefConfig(history_length=0, **cfg), "L0")
+    assert with_history["val_r2"] > without["val_r2"] + 0.03
+    assert without["val_r2"] > 0.5
