@@ -55,7 +55,7 @@ def action_space_of(env) -> dict | None:
 
 
 def session(corpus, env, task: str | None = None, model_id: str = "default",
-            index_id: str = "default", seed: int = 0, **config):
+            index_id: str = "default", seed: int = 0, selection=None, **config):
     """An AOC session on ``corpus``: ControllerConfig fields ``config`` over the task's own
     controller settings (as `aoc rollout --env TASK` uses them) over the paper's defaults."""
     from aoc_cli.control import ControllerConfig, open_session
@@ -63,8 +63,8 @@ def session(corpus, env, task: str | None = None, model_id: str = "default",
 
     settings = dict(getattr(TASKS.get(task), "controller", None) or {}) if task else {}
     settings.update(config)
-    return open_session(corpus, model_id, index_id, ControllerConfig(**settings), None, seed,
-                        action_space_of(env))
+    return open_session(corpus, model_id, index_id, ControllerConfig(**settings), selection,
+                        seed, action_space_of(env))
 
 
 def belief_config(scale: dict, mode: str = "value", seed: int = 0):

@@ -130,10 +130,17 @@ class Runner:
                 if bar is not None:
                     self.progress.update(bar, advance=advance)
 
-        results, summary = rollout(session, env, episodes, seed=episode_seed(seed),
-                                   policy=policy, noise_after=noise_after,
-                                   noise_std=noise_std, progress=_Proxy())
-        self._drop(bar)
+        try:
+            results, summary = rollout(session, env, episodes, seed=episode_seed(seed),
+                                       policy=policy, noise_after=noise_after,
+                                       noise_std=noise_std, progress=_Proxy())
+        except (AocError, ArithmeticError, ValueError, RuntimeError) as err:
+            # one failing method must not lose the others' results: reported as failed
+            self.log(f"{method} {label}: failed: {type(err).__name__}: {err}")
+            return MethodRun(method, status="failed", note=f"{type(err).__name__}: {err}",
+                             seconds=time.perf_counter() - started)
+        finally:
+            self._drop(bar)
         return MethodRun(method, results, summary, seconds=time.perf_counter() - started)
 
 

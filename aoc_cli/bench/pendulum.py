@@ -5,7 +5,8 @@
   from the paper's upright start (``pendulum-het-upright``), plus the data's own average return.
   At the full scale the upright task has its own corpus (collected from the upright start, as
   the paper did); at the quick and tiny scales it is evaluated with the random-start corpus and
-  models (the corpus covers the upright region; one training instead of two).
+  models (the corpus covers the upright region; one training instead of two). A diagnostic
+  row, ``aoc-normal-rows``, is AOC restricted to the evaluation system's rows (see ORACLE).
 * ``epsilon`` (paper Table "epsilon controls the conservation"): AOC with epsilon in
   {0.3, 0.5, 0.9, 1.0} at the middle data size, random start.
 * ``k`` (paper Table "cardinality of the corpus subset"): AOC with k in {1, 10, 2 (d_b + 1), 100}.
@@ -21,8 +22,8 @@ from aoc_cli.bench.methods import DATA, data_values, row_values
 from aoc_cli.bench.results import result_row
 
 TASKS = ("pendulum-het", "pendulum-het-upright")
-METHODS = ["aoc", "knn", "1nn", "knn-belief", "1nn-belief", "bc", "td3bc", "cql", "mpc",
-           "zero", "random"]
+METHODS = ["aoc", "aoc-normal-rows", "knn", "1nn", "knn-belief", "1nn-belief", "bc", "td3bc",
+           "cql", "mpc", "zero", "random"]
 
 SCALES = {
     "tiny": {"sizes": [2_000], "paper_rows": [100_000], "episodes": 1, "seeds": 1,
@@ -31,13 +32,24 @@ SCALES = {
     "quick": {"sizes": [30_000], "paper_rows": [100_000], "episodes": 4, "seeds": 1,
               "epochs": 40, "patience": 6, "upright_data": "shared", "mid": 30_000,
               "ablation_tasks": ["pendulum-het"],
-              "methods": ["aoc", "knn", "1nn", "knn-belief", "1nn-belief", "bc", "td3bc", "mpc",
-                          "zero", "random"]},
+              "methods": ["aoc", "aoc-normal-rows", "knn", "1nn", "knn-belief", "1nn-belief",
+                          "bc", "td3bc", "mpc", "zero", "random"]},
     "full": {"sizes": [100_000, 300_000, 600_000], "paper_rows": [100_000, 300_000, 600_000],
              "episodes": 10, "seeds": 8, "epochs": 200, "patience": 10, "upright_data": "own",
              "mid": 300_000, "ablation_tasks": ["pendulum-het", "pendulum-het-upright"]},
 }
 EPSILONS = (0.3, 0.5, 0.9, 1.0)
+#: A diagnostic, not a method of the paper: AOC (same model, same index) whose decompositions
+#: may only use rows of the evaluation system (``--select system=normal``). The gap between it
+#: and ``aoc`` is what the belief fails to tell apart about the two systems.
+ORACLE = "aoc-normal-rows"
+
+
+def _oracle(ctx: Context, corpus, env, task: str, seed: int):
+    from aoc_cli.index.build import row_selection
+
+    normal = row_selection(corpus, {"system": ["normal"]})
+    return session(corpus, env, task, seed=seed, selection=normal, **ctx.aoc_config)
 
 
 def _k_values(d_b: int) -> list[int]:
@@ -71,8 +83,14 @@ def run_pendulum_het(ctx: Context, scale: dict) -> tuple[list[dict], callable]:
                                            **data_values(corpus),
                                            note=f"corpus {corpus.name}"))
                 for method in methods:
-                    run = ctx.runner.run(method, s, env, ctx.n_episodes(scale["episodes"]),
-                                         seed, label=f"{task} {setting} seed {seed}")
+                    if method == ORACLE:
+                        run = ctx.runner.run("aoc", _oracle(ctx, corpus, env, task, seed), env,
+                                             ctx.n_episodes(scale["episodes"]), seed,
+                                             label=f"{ORACLE} {task} {setting} seed {seed}")
+                        run.method = ORACLE
+                    else:
+                        run = ctx.runner.run(method, s, env, ctx.n_episodes(scale["episodes"]),
+                                             seed, label=f"{task} {setting} seed {seed}")
                     rows_out.append(result_row("pendulum-het", task, method, setting, seed,
                                                **row_values(run)))
 

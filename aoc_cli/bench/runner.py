@@ -87,7 +87,8 @@ def check(name: str, scale: str, seeds: int | None, episodes: int | None,
     if methods:
         from aoc_cli.baselines import BASELINES
 
-        unknown = [m for m in methods if m != "aoc" and m not in BASELINES]
+        unknown = [m for m in methods if m not in ("aoc", "aoc-normal-rows")
+                   and m not in BASELINES]
         if unknown:
             raise AocError(f"unknown method(s) {', '.join(unknown)}: use aoc or "
                            f"{', '.join(BASELINES)}")
@@ -152,7 +153,7 @@ def _plot(exp: Experiment, summary: list[dict], ctx: Context) -> None:
 COST = {
     "train_row_epoch": 1.0e-4,      # belief model, one thread
     "epochs": 35,                   # early stopping ends near here (at most max_epochs)
-    "step": {"aoc": 0.07, "knn-belief": 0.06, "1nn-belief": 0.05, "knn": 0.05,
+    "step": {"aoc": 0.07, "aoc-normal-rows": 0.07, "knn-belief": 0.06, "1nn-belief": 0.05, "knn": 0.05,
              "1nn": 0.04, "bc": 0.002, "td3bc": 0.001, "cql": 0.001, "mpc": 0.01,
              "zero": 0.0002, "random": 0.0002},
     "offline_rl_step": {"td3bc": 0.033, "cql": 0.25},
