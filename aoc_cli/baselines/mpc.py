@@ -110,6 +110,10 @@ class MPCPolicy:
         self.seed = int(seed)
         self.episodes = 0
         if model is None:
+            from aoc_cli.report import message
+
+            message(f"training the mpc dynamics model on corpus {session.corpus.name!r} for "
+                    f"{self.config.epochs} epochs")
             model = train_dynamics(session.corpus, session.model.history_length, self.config,
                                    progress)
         self.net, self.features = model

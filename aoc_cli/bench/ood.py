@@ -12,7 +12,9 @@ leaves the running 3-sigma band. Per episode:
 
 The same seeds run without noise (``noise=0``) as the control: there every flag is a false
 alarm. The paper used BipedalWalker with a black-box sampler and noise after step 500; here
-the task is pendulum-het (random start) with the uniform sampler.
+the tasks are pendulum-het (random start; its data holds uniformly random torques, so noisy
+actions are not out of distribution there) and the maze (experts with small noise, noise
+after step 12), with the uniform sampler and each task's controller settings.
 """
 
 from __future__ import annotations
@@ -24,12 +26,20 @@ from aoc_cli.bench.methods import row_values
 from aoc_cli.bench.results import result_row
 
 SCALES = {
-    "tiny": {"task": "pendulum-het", "rows": 2_000, "T": 25, "noise": 0.5, "episodes": 1,
-             "seeds": 1, "epochs": 2, "patience": 2, "max_steps": 50},
-    "quick": {"task": "pendulum-het", "rows": 30_000, "T": 100, "noise": 0.5, "episodes": 4,
-              "seeds": 1, "epochs": 40, "patience": 6},
-    "full": {"task": "pendulum-het", "rows": 100_000, "T": 100, "noise": 0.5, "episodes": 10,
-             "seeds": 3, "epochs": 200, "patience": 10},
+    "tiny": {"tasks": [
+        {"task": "pendulum-het", "rows": 2_000, "T": 25, "epochs": 2, "patience": 2,
+         "max_steps": 50},
+        {"task": "maze", "episodes": 120, "T": 12, "epochs": 2, "patience": 2,
+         "max_steps": 30}],
+        "noise": 0.5, "episodes": 1, "seeds": 1},
+    "quick": {"tasks": [
+        {"task": "pendulum-het", "rows": 30_000, "T": 100, "epochs": 40, "patience": 6},
+        {"task": "maze", "episodes": 1000, "T": 12, "epochs": 60, "patience": 8}],
+        "noise": 0.5, "episodes": 4, "seeds": 1},
+    "full": {"tasks": [
+        {"task": "pendulum-het", "rows": 100_000, "T": 100, "epochs": 200, "patience": 10},
+        {"task": "maze", "episodes": 1000, "T": 12, "epochs": 200, "patience": 10}],
+        "noise": 0.5, "episodes": 10, "seeds": 3},
 }
 
 
@@ -61,7 +71,10 @@ def _curves(results) -> dict:
             v = np.array([np.nan if x is None else x for x in get(r)], dtype=float)
             v[~np.isfinite(v)] = np.nan
             mat[i, :len(v)] = v[:T]
-        with np.errstate(all="ignore"):
+        import warnings
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # steps no episode reached
             return np.nanmean(mat, axis=0)
 
     return {"residual": mean_of(lambda r: r.residuals),
@@ -94,12 +107,22 @@ def plot_ood(curves: dict, T: int, path, title: str) -> None:
 def run_ood(ctx: Context, scale: dict):
     from aoc_cli.report.plots import plot_rollout_curves
 
-    task, T = scale["task"], int(scale["T"])
-    env = make_task_env(task, scale)
+    rows = []
+    for spec in scale["tasks"]:
+        rows += _run_task(ctx, scale, spec)
+    return rows, lambda row: None
+
+
+def _run_task(ctx: Context, scale: dict, spec: dict) -> list[dict]:
+    from aoc_cli.report.plots import plot_rollout_curves
+
+    task, T = spec["task"], int(spec["T"])
+    env = make_task_env(task, spec)
     rows, curves = [], {}
     for seed in ctx.seeds:
-        corpus = ctx.artefacts.corpus(task, rows=scale["rows"], seed=seed)
-        ctx.artefacts.model(corpus, "default", belief_config(scale, "value", seed))
+        corpus = ctx.artefacts.corpus(task, rows=spec.get("rows"), episodes=spec.get("episodes"),
+                                      seed=seed)
+        ctx.artefacts.model(corpus, "default", belief_config(spec, "value", seed))
         ctx.artefacts.index(corpus, "default")
         for noise in (0.0, float(scale["noise"])):
             s = session(corpus, env, task, seed=seed, **ctx.aoc_config)
@@ -111,14 +134,15 @@ def run_ood(ctx: Context, scale: dict):
                 values.update(ood_values(run.results, T))
                 if seed == ctx.seeds[0]:
                     curves[f"noise {noise:g}"] = _curves(run.results)
-                    name = f"ood_noise{noise:g}_episodes.png"
+                    name = f"ood_{task}_noise{noise:g}_episodes.png"
                     plot_rollout_curves(run.results, ctx.out / name,
                                         title=f"{task}: AOC, noise {noise:g} after step {T}",
                                         noise_after=T)
                     ctx.plots.append(name)
             rows.append(result_row("ood", task, "aoc", f"noise={noise:g}", seed, **values))
     if curves:
-        plot_ood(curves, T, ctx.out / "ood_mean.png",
+        name = f"ood_{task}_mean.png"
+        plot_ood(curves, T, ctx.out / name,
                  f"{task}: residual and reward per step, noise after step {T}")
-        ctx.plots.append("ood_mean.png")
-    return rows, lambda row: None
+        ctx.plots.append(name)
+    return rows

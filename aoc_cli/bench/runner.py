@@ -173,7 +173,7 @@ def expected_seconds(name: str, scale: str, seeds: int | None = None,
     budget = BUDGETS[scale]
     n_seeds = seeds if seeds is not None else int(p["seeds"])
     eps = episodes or int(p["episodes"])
-    epochs = min(p["epochs"], COST["epochs"])
+    epochs = min(p.get("epochs", COST["epochs"]), COST["epochs"])
     step = COST["step"]
     total = 0.0
 
@@ -215,5 +215,8 @@ def expected_seconds(name: str, scale: str, seeds: int | None = None,
                                 + train(rows, 2 if "bc" in ms else 1) + blackbox(ms, rows))
             total += n_seeds * eps * 400 * sum(step.get(m, 0.01) for m in ms)
     elif name == "ood":
-        total += n_seeds * (train(p["rows"]) + 2 * eps * 200 * step["aoc"])
+        for spec in p["tasks"]:
+            rows = spec.get("rows") or spec.get("episodes", 0) * COST["rows_per_episode"]["maze"]
+            total += n_seeds * (rows * min(spec["epochs"], COST["epochs"])
+                                * COST["train_row_epoch"] + 2 * eps * 150 * step["aoc"])
     return total

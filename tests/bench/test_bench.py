@@ -73,7 +73,7 @@ def test_pendulum_ablations_and_ood_tiny(tmp_path, bench_store, name):
     out = tmp_path / name
     report = run_experiment(name, "tiny", out=out, store=bench_store)
     rows, summary = _check_outputs(out, report)
-    settings = [s["setting"] for s in summary]
+    settings = [s["setting"] for s in summary if s["task"] == "pendulum-het"]
     if name == "epsilon":
         assert settings == ["epsilon=0.3", "epsilon=0.5", "epsilon=0.9", "epsilon=1"]
         assert summary[1]["paper"] == [-1.25, 0.4]
@@ -84,7 +84,8 @@ def test_pendulum_ablations_and_ood_tiny(tmp_path, bench_store, name):
         assert settings == ["noise=0", "noise=0.5"]
         for r in rows:
             assert r["ood_flagged"] in (0.0, 1.0) and r["ood_false_flags"] >= 0
-        assert "ood_mean.png" in report["plots"]
+        assert {"ood_pendulum-het_mean.png", "ood_maze_mean.png"} <= set(report["plots"])
+        assert {r["task"] for r in rows} == {"pendulum-het", "maze"}
 
 
 def test_maze_adapt_tiny_counts_gates_and_draws_each_rate(tmp_path, bench_store):
