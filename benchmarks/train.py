@@ -13,12 +13,16 @@ validation R^2. Goal: <= 120 s for 100k rows on this machine.
 model with L = 0; reports the validation R^2 of each, and the accuracy of a logistic probe that
 predicts the ``system`` tag (normal / converse) of the validation episodes' rows, fitted on the
 training episodes' rows, from the L = 4 beliefs, the L = 0 beliefs, and the raw (o, a).
+Diagnostics beside the four figures: the same value models given the true system as a fourth
+observation (how much the value depends on the system at all), and the probe on the beliefs of
+an imitation-mode model (L = 4), whose target, the action, does depend on the system.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import shutil
 import statistics
 import sys
 import tempfile
@@ -33,7 +37,7 @@ import numpy as np  # noqa: E402
 from aoc_cli.belief import (BeliefConfig, episode_rows, load_model, logistic_probe,  # noqa: E402
                             split_episodes, train_model)
 from aoc_cli.envs import collect  # noqa: E402
-from aoc_cli.store import Store  # noqa: E402
+from aoc_cli.store import Store, box_space  # noqa: E402
 
 
 def pendulum_corpus(store: Store, name: str, rows: int, seed: int):
@@ -83,6 +87,30 @@ def run_figures(args) -> None:
             print(json.dumps({f"L{L}": out[f"L{L}"]}), flush=True)
         oa = np.concatenate([corpus.observations, corpus.actions], axis=1)
         out["probe_observation_action"] = system_probe(corpus, oa, BeliefConfig())
+        system = corpus.tag("system")[0]
+        _, val_eps = split_episodes(corpus.n_episodes, 0.2, 0)
+        va = episode_rows(corpus.episode_starts, val_eps)
+        out["probe_chance"] = float(max(system[va].mean(), 1 - system[va].mean()))
+        print(json.dumps({k: out[k] for k in ("probe_observation_action", "probe_chance")}),
+              flush=True)
+        # Diagnostic 1: does the value depend on the system? Give the model the true system.
+        data = corpus.load()
+        data.observations = np.concatenate(
+            [data.observations, system[:, None].astype(np.float32)], axis=1)
+        data.observation_space = box_space(4)
+        oracle = Store(tmp).write("oracle", data)
+        for L in (4, 0):
+            m = train_model(oracle, BeliefConfig(history_length=L, threads=args.threads), "o")
+            out[f"L{L}_with_true_system"] = {"val_r2": m["val_r2"], "epochs": m["epochs"]}
+            print(json.dumps({f"L{L}_with_true_system": out[f"L{L}_with_true_system"]}),
+                  flush=True)
+            shutil.rmtree(oracle.models_dir / "o")
+        # Diagnostic 2: imitation-mode beliefs (the action depends on the system).
+        config = BeliefConfig(mode="imitation", threads=args.threads)
+        m = train_model(corpus, config, "imitation")
+        beliefs = load_model(corpus, "imitation").row_beliefs(corpus)
+        out["imitation_L4"] = {"val_r2": m["val_r2"], "epochs": m["epochs"],
+                               "probe_beliefs": system_probe(corpus, beliefs, config)}
         print(json.dumps(out, indent=2))
 
 

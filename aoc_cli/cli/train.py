@@ -71,11 +71,11 @@ def train(
 
         metrics = train_model(corpus, config, model, overwrite=overwrite, progress=on_progress,
                               prepared=prepared)
-    score = (f"val R^2 {metrics['val_r2']:.4f}" if "val_r2" in metrics
-             else f"val accuracy {metrics['val_accuracy']:.4f} (majority "
-                  f"{metrics['val_majority_accuracy']:.4f})")
-    message(f"trained {name}/{model} ({metrics['mode']} mode): {metrics['epochs']} epochs, best "
-            f"{metrics['best_epoch']}, {score}, {metrics['seconds']:.1f} s")
+    score = (f"val R^2 {metrics['val_r2']:.3f}" if "val_r2" in metrics
+             else f"val accuracy {metrics['val_accuracy']:.3f} (majority "
+                  f"{metrics['val_majority_accuracy']:.3f})")
+    message(f"trained {name}/{model}: {metrics['mode']}, {metrics['epochs']} epochs (best "
+            f"{metrics['best_epoch']}), {score}, {metrics['seconds']:.0f} s")
     write_object(metrics, fmt, title=f"aoc train {name} --model {model}")
 
 

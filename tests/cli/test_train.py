@@ -18,16 +18,6 @@ def corpora(store):
     return s
 
 
-def test_train_prints_the_final_metrics_as_one_json_object(aoc, corpora):
-    code, out, err = aoc("train", "syn", "--value", "v", "--model", "m1", *QUICK)
-    assert code == 0, err
-    metrics = json.loads(out)
-    assert metrics["model"] == "m1" and metrics["mode"] == "value" and metrics["epochs"] == 2
-    assert {"train_loss", "val_loss", "val_r2", "seconds"} <= set(metrics)
-    assert "val R^2" in err
-    assert (corpora.corpus("syn").models_dir / "m1" / "weights.pt").is_file()
-
-
 def test_imitation_mode_on_a_reward_free_discrete_corpus_reports_accuracy(aoc, corpora):
     code, out, err = aoc("train", "free", "--mode", "imitation", *QUICK)
     assert code == 0, err
@@ -53,9 +43,18 @@ def test_bad_input_exits_2_with_one_line(aoc, corpora, args, says):
     assert len(lines) == 1 and re.search(says, lines[0]), err
 
 
-def test_existing_model_needs_overwrite(aoc, corpora):
-    assert aoc("train", "syn", "--value", "v", *QUICK)[0] == 0
-    code, _, err = aoc("train", "syn", "--value", "v", *QUICK)
+def test_train_prints_metrics_and_an_existing_model_needs_overwrite(aoc, corpora):
+    code, out, err = aoc("train", "syn", "--value", "v", "--model", "m1", *QUICK)
+    assert code == 0, err
+    metrics = json.loads(out)
+    assert metrics["model"] == "m1" and metrics["mode"] == "value" and metrics["epochs"] == 2
+    assert {"train_loss", "val_loss", "val_r2", "seconds"} <= set(metrics)
+    assert "val R^2" in err
+    assert (corpora.corpus("syn").models_dir / "m1" / "weights.pt").is_file()
+    code, _, err = aoc("train", "syn", "--value", "v", "--model", "m1", *QUICK)
     assert code == 2 and "already exists: pass --overwrite" in err
-    code, out, err = aoc("train", "syn", "--value", "v", "--overwrite", *QUICK)
-    assert code == 0 and json.loads(out)["model"] == "default"
+    code, out, err = aoc("train", "syn", "--value", "v", "--model", "m1", "--overwrite",
+                         "--epochs", "1", "--threads", "1", "--hidden", "16", "--format", "csv")
+    assert code == 0, err
+    header, row = out.strip().splitlines()
+    assert row.startswith("m1,value,1,")
