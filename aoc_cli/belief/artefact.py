@@ -243,13 +243,14 @@ def check_corpus(model: BeliefModel, corpus) -> None:
 
 
 def load_model(corpus, model_id: str | None = None, device: str | None = None) -> BeliefModel:
-    """Load model ``model_id`` of ``corpus`` (None: the only, else the latest trained)."""
+    """Load model ``model_id`` of ``corpus`` (None: ``default`` when it exists, else the only
+    one, else the latest trained)."""
     ids = list_models(corpus)
     if model_id is None:
         if not ids:
             raise AocError(f"corpus {corpus.name!r} has no trained model: run "
                            f"`aoc train {corpus.name}`")
-        model_id = ids[-1]
+        model_id = "default" if "default" in ids else ids[-1]
     path = model_dir(corpus, model_id)
     if not (path / "config.json").is_file():
         known = ", ".join(ids) or "none"

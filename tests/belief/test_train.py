@@ -150,6 +150,10 @@ def test_bad_requests_are_refused_with_what_to_do(tmp_path):
         train_model(corpus, BeliefConfig(value="v", threads=1, max_epochs=1), "x")
     train_model(corpus, BeliefConfig(value="v", threads=1, max_epochs=2), "x", overwrite=True)
     assert load_model(corpus, "x").meta["metrics"]["epochs"] == 2
+    assert load_model(corpus).id == "x"            # the only model
+    train_model(corpus, BeliefConfig(value="v", threads=1, max_epochs=1), "default")
+    train_model(corpus, BeliefConfig(value="v", threads=1, max_epochs=1), "z")
+    assert load_model(corpus).id == "default"      # "default" before the latest
     with pytest.raises(AocError, match="has no model 'y'"):
         load_model(corpus, "y")
 
