@@ -190,7 +190,8 @@ class BeliefIndex:
         D = np.where(I >= 0, D.astype(np.float64), np.inf)
         return D, I
 
-    def _pooled(self, Y: np.ndarray, k: int, sel: Selection | None, available: int):
+    def _pooled(self, Y: np.ndarray, k: int, sel: Selection | None, available: int,
+                depth: int = 0):
         """One search at the centroid serves every query it can certify (triangle inequality).
 
         The pool starts at k' = max(pool_factor k, pool_min) rows and doubles (at most twice)
@@ -225,7 +226,46 @@ class BeliefIndex:
                 continue
             break
         rest = np.flatnonzero(~certified)
-        d2[rest], pos[rest] = self._direct(Y[rest], k, sel)
+        d2[rest], pos[rest] = self._split(Y[rest], k, sel, available, depth)
+        return d2, pos
+
+    def _split(self, Y: np.ndarray, k: int, sel: Selection | None, available: int, depth: int):
+        """Uncertified queries: cut them into groups along their main direction, search every
+        group's centroid in one FAISS call and certify each group against its own pool.
+
+        Real control steps spread their candidates along a curve in belief space (the action
+        moves the belief): one centroid cannot certify the whole batch, but groups with an
+        eighth of its spread can, for the price of one more index scan. Queries still
+        uncertified are grouped again (three rounds at most), then searched directly.
+        """
+        n = Y.shape[0]
+        if depth > 2 or n < 6:
+            return self._direct(Y, k, sel)
+        centred = Y.astype(np.float64) - Y.mean(axis=0)
+        direction = np.linalg.svd(centred, full_matrices=False)[2][0]
+        groups = np.array_split(np.argsort(centred @ direction, kind="stable"), min(8, n // 3))
+        C = np.stack([Y[g].mean(axis=0) for g in groups]).astype(np.float32)
+        cfg = self.config
+        kp = int(min(available, 2 * max(math.ceil(cfg.pool_factor * k), cfg.pool_min, k)))
+        with faiss_threads(1):
+            Dc, Ic = self.index.search(C, kp, params=self._params(sel, kp))
+        d2 = np.empty((n, k))
+        pos = np.empty((n, k), dtype=np.int64)
+        todo = np.zeros(n, dtype=bool)
+        for j, g in enumerate(groups):
+            pool = Ic[j][Ic[j] >= 0]
+            if pool.size < kp:  # too few rows (selection, IVF): the pool bounds nothing
+                todo[g] = True
+                continue
+            gd2, gp = _exact_among(Y[g], self.vectors(pool), k)
+            d2[g], pos[g] = gd2, pool[gp]
+            radius = math.sqrt(max(float(Dc[j, pool.size - 1]), 0.0))
+            spread = np.sqrt(((Y[g].astype(np.float64) - C[j].astype(np.float64)) ** 2).sum(axis=1))
+            kth = np.sqrt(np.maximum(gd2[:, -1], 0.0))
+            todo[g] = ~(kth <= (radius - spread) - 1e-5 * radius)
+        rest = np.flatnonzero(todo)
+        if rest.size:
+            d2[rest], pos[rest] = self._split(Y[rest], k, sel, available, depth + 1)
         return d2, pos
 
     # ---------------------------------------------------------------- adaptivity

@@ -1,0 +1,97 @@
+"""Benchmark: seconds per control step (K = 100 candidates) end to end.
+
+For each size: collect pendulum-het rows, train the belief model (a short training: the
+benchmark measures the step, not the policy), index, then time ``Controller.decide`` on states
+of real rollouts (belief pass for the K candidates + neighbours + decomposition + choice),
+median over steps, and split into the belief pass and the decomposition. One thread for torch
+and FAISS (as `aoc rollout` runs).
+
+Usage: .venv/bin/python benchmarks/control.py --sizes 100k,600k [--steps 200] [--store DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import tempfile
+import time
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+
+from aoc_cli.belief import BeliefConfig, train_model  # noqa: E402
+from aoc_cli.control import HistoryBuffer, open_session  # noqa: E402
+from aoc_cli.control.controller import repeat_history  # noqa: E402
+from aoc_cli.envs import collect, make_env  # noqa: E402
+from aoc_cli.index.build import build_index  # noqa: E402
+from aoc_cli.store import Store  # noqa: E402
+
+
+def parse_size(text: str) -> int:
+    text = text.strip().lower()
+    mult = {"k": 1_000, "m": 1_000_000}.get(text[-1], 1)
+    return int(float(text.rstrip("km")) * mult)
+
+
+def prepare(store: Store, rows: int) -> str:
+    name = f"pend{rows}"
+    if not store.exists(name):
+        data, _ = collect("pendulum-het", steps=rows, seed=0)
+        store.write(name, data)
+    corpus = store.corpus(name)
+    if not (corpus.models_dir / "default" / "config.json").is_file():
+        train_model(corpus, BeliefConfig(seed=0, max_epochs=2, patience=1), "default")
+    build_index(corpus, "default")
+    return name
+
+
+def time_steps(store: Store, name: str, steps: int) -> dict:
+    corpus = store.corpus(name)
+    session = open_session(corpus)
+    ctl, model, index = session.controller, session.model, session.index
+    env = make_env("pendulum-het")
+    buf = HistoryBuffer(model.history_length, corpus.observation_dim, 1, False)
+    obs, _ = env.reset(seed=1)
+    total, belief, decomp = [], [], []
+    for _ in range(steps):
+        h = buf.history()
+        t0 = time.perf_counter()
+        d = ctl.decide(obs, h)
+        total.append(time.perf_counter() - t0)
+        cand = d.candidates
+        o = np.repeat(np.asarray(obs, np.float32)[None], len(cand), 0)
+        t0 = time.perf_counter()
+        b = model.beliefs(o, cand, repeat_history(h, len(cand)))
+        belief.append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        index.decompose(b)
+        decomp.append(time.perf_counter() - t0)
+        nxt, r, term, trunc, _ = env.step(np.asarray(d.action, np.float32))
+        buf.push(obs, d.action, r)
+        obs = nxt
+        if term or trunc:
+            obs, _ = env.reset()
+            buf.reset()
+    ms = lambda xs: 1000 * float(np.median(xs))  # noqa: E731
+    return {"rows": corpus.n_rows, "step_ms": ms(total), "belief_ms": ms(belief),
+            "decompose_ms": ms(decomp), "kind": index.index.kind}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sizes", default="100k,600k")
+    ap.add_argument("--steps", type=int, default=200)
+    ap.add_argument("--store", default=None, help="reuse corpora across runs (default: a temp dir)")
+    args = ap.parse_args()
+    store = Store(args.store or tempfile.mkdtemp(prefix="aoc-bench-control-"))
+    print(f"{'rows':>8} {'kind':>5} {'step ms':>8} {'belief ms':>10} {'decompose ms':>13}")
+    for size in args.sizes.split(","):
+        name = prepare(store, parse_size(size))
+        r = time_steps(store, name, args.steps)
+        print(f"{r['rows']:>8} {r['kind']:>5} {r['step_ms']:>8.2f} {r['belief_ms']:>10.2f} "
+              f"{r['decompose_ms']:>13.2f}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
