@@ -165,3 +165,16 @@ def test_derived_index_resamples_a_policy_without_retraining(run, maze_root):
     assert json.loads(out)["rows"] == corpus.n_rows + 2 * n_pi1
     code, out, err = run("rollout", "maze", "--env", "maze", "--index", "pi1x3", "-n", "1", "-f", "json")
     assert code == 0, err
+
+
+@pytest.mark.parametrize("kind", ["hnsw", "ivf"])
+def test_approximate_index_kinds_build_and_answer_like_the_exact_one(run, tmp_path, kind):
+    code, out, err = run("index", "maze", "--kind", kind, "--index-id", kind, "-f", "json")
+    assert code == 0, err
+    assert json.loads(out)["kind"] == kind
+    q = tmp_path / "q.jsonl"
+    q.write_text(json.dumps({"observation": [3.0, 2.5], "action": [0.6, 0.7]}) + "\n")
+    exact = json.loads(run("explain", "maze", "-i", str(q), "-f", "json")[1])
+    approx = json.loads(run("explain", "maze", "-i", str(q), "--index", kind, "-f", "json")[1])
+    assert approx["residual"] == pytest.approx(exact["residual"], rel=1e-6, abs=1e-9)
+    assert approx["value"] == pytest.approx(exact["value"], rel=1e-6, abs=1e-9)
