@@ -1,9 +1,31 @@
 #!/usr/bin/env bash
-# The whole aoc flow on a built-in task, in a throwaway store. Run by `make demo`.
+# The whole aoc flow on the heterogeneous pendulum, in a throwaway store. Run by `make demo`.
+#   collect -> info -> train -> index -> rollout (with an audit log) -> explain
 set -euo pipefail
 cd "$(dirname "$0")/.."
 AOC=.venv/bin/aoc
 export AOC_STORE="${AOC_STORE:-$(mktemp -d)/corpora}"
-echo "demo store: $AOC_STORE" >&2
-$AOC --help >/dev/null
-echo "aoc is installed; more of the flow arrives with the next issues." >&2
+OUT="${DEMO_OUT:-$(dirname "$AOC_STORE")}"
+step() { printf '\n\033[1m== %s\033[0m\n' "$*" >&2; }
+
+step "collect 30k rows of behaviour data on pendulum-het (store: $AOC_STORE)"
+$AOC collect pendulum-het --steps 30000 --name pendulum --seed 0 --format table
+
+step "what is in the corpus"
+$AOC info pendulum --format table
+
+step "train the belief model (value mode: discounted return-to-go)"
+$AOC train pendulum --seed 0 --format table
+
+step "beliefs of every row and the nearest-neighbour index"
+$AOC index pendulum --format table
+
+step "run the controller for 3 episodes (random start, normal system) with an audit log"
+$AOC rollout pendulum --env pendulum-het --episodes 3 --seed 100 \
+    --audit "$OUT/audit.h5" --plot "$OUT/rollout.png" --format table
+
+step "explain the decision at step 50 of episode 0, from the audit log"
+$AOC explain pendulum --audit "$OUT/audit.h5" --episode 0 --step 50 --format table
+
+echo >&2
+echo "demo done: store $AOC_STORE, audit log $OUT/audit.h5, plot $OUT/rollout.png" >&2
