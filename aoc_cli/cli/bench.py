@@ -31,6 +31,9 @@ def register(app: typer.Typer) -> None:
                                               help="Comma-separated methods (default: all)."),
         out: Optional[Path] = typer.Option(None, "--out", help="Output folder (default "
                                            "bench/EXPERIMENT; with all: OUT/EXPERIMENT)."),
+        epsilon: Optional[float] = typer.Option(
+            None, "--epsilon", help="AOC's epsilon where the experiment does not vary it "
+                                    "(default: the task's setting, else 0.5)."),
         bench_store: Path = typer.Option(Path("bench/store"), "--bench-store",
                                          help="Store for the bench's corpora and models."),
         fmt: Optional[str] = FormatOption,
@@ -44,7 +47,7 @@ def register(app: typer.Typer) -> None:
             raise AocError("give --quick or --tiny, not both")
         scale = "tiny" if tiny else "quick" if quick else "full"
         chosen = [m.strip() for m in methods.split(",") if m.strip()] if methods else None
-        check(experiment, scale, seeds, episodes, chosen)
+        check(experiment, scale, seeds, episodes, chosen, epsilon)
         names = ORDER if experiment == "all" else [experiment]
         eta = expected_seconds(experiment, scale, seeds, episodes, chosen)
         message(f"aoc bench {experiment} ({scale}): expected time about "
@@ -57,8 +60,12 @@ def register(app: typer.Typer) -> None:
                 target = (out / name if out is not None else None) if experiment == "all" \
                     else out
                 bar.update(overall, description=f"bench {name}")
+                if epsilon is not None and name in ("epsilon", "two-gates"):
+                    message(f"{name}: --epsilon ignored (epsilon is what it varies)")
                 report = run_experiment(name, scale, seeds, target, bench_store, episodes,
-                                        chosen, log=message, progress=bar)
+                                        chosen, log=message, progress=bar,
+                                        epsilon=None if name in ("epsilon", "two-gates")
+                                        else epsilon)
                 bar.advance(overall)
                 for rec in report["summary"]:
                     if rec["status"] != "ok":
