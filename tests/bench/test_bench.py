@@ -158,7 +158,9 @@ def test_bench_cli_prints_the_summary_and_rejects_bad_input(aoc, tmp_path):
     for args, needle in [(["bench", "nope"], "unknown experiment"),
                          (["bench", "k", "--quick", "--tiny"], "not both"),
                          (["bench", "k", "--tiny", "--seeds", "0"], "--seeds"),
-                         (["bench", "lunar", "--tiny", "--methods", "aoc,foo"], "foo")]:
+                         (["bench", "lunar", "--tiny", "--methods", "aoc,foo"], "foo"),
+                         (["bench", "epsilon", "--tiny", "--epsilon", "0.2"], "does not apply"),
+                         (["bench", "ood", "--tiny", "--epsilon", "1.5"], "(0, 1]")]:
         code, _o, err = aoc(*args, "--bench-store", str(store))
         assert code == 2 and needle in err and len(err.strip().splitlines()) == 1
     assert set(EXPERIMENTS) == {"pendulum-het", "epsilon", "k", "maze-adapt", "two-gates",
