@@ -178,3 +178,13 @@ def test_approximate_index_kinds_build_and_answer_like_the_exact_one(run, tmp_pa
     approx = json.loads(run("explain", "maze", "-i", str(q), "--index", kind, "-f", "json")[1])
     assert approx["residual"] == pytest.approx(exact["residual"], rel=1e-6, abs=1e-9)
     assert approx["value"] == pytest.approx(exact["value"], rel=1e-6, abs=1e-9)
+
+
+def test_index_of_a_corpus_without_a_model_says_to_train(aoc_inproc, tmp_path):
+    from aoc_cli.envs import collect
+    from aoc_cli.store import Store
+
+    data, _ = collect("maze", episodes=8, seed=0)
+    Store(tmp_path).write("bare", data)
+    code, out, err = aoc_inproc("--store", str(tmp_path), "index", "bare")
+    one_line_error(code, out, err, r"no trained model: run `aoc train bare`")
