@@ -7,6 +7,7 @@ from pathlib import Path
 
 from aoc_cli.bench.methods import Runner
 from aoc_cli.bench.prepare import Artefacts
+from aoc_cli.control.rollout import action_space_of  # noqa: F401  (used by bench modules)
 
 SCALES = ("tiny", "quick", "full")
 
@@ -39,19 +40,6 @@ class Context:
         if not self.methods:
             return list(default)
         return [m for m in self.methods]
-
-
-def action_space_of(env) -> dict | None:
-    """The box of a gymnasium env's action space, as the controller takes it."""
-    import gymnasium as gym
-    import numpy as np
-
-    space = env.action_space
-    if isinstance(space, gym.spaces.Box):
-        return {"type": "box", "shape": [int(np.prod(space.shape))],
-                "low": np.asarray(space.low, float).reshape(-1).tolist(),
-                "high": np.asarray(space.high, float).reshape(-1).tolist()}
-    return None
 
 
 def session(corpus, env, task: str | None = None, model_id: str = "default",

@@ -58,7 +58,9 @@ def register(app: typer.Typer) -> None:
         environment = make_env(env)
         selection = row_selection(corpus, parse_selection(select, "--select"),
                                   parse_selection(exclude, "--exclude"))
-        action_space = _space_of(environment)
+        from aoc_cli.control.rollout import action_space_of
+
+        action_space = action_space_of(environment)
         session = open_session(corpus, model, index_id, config, selection, seed, action_space)
         baseline = None
         if policy != "aoc":
@@ -94,18 +96,6 @@ def task_config(env: str, **given):
     settings = dict(task.controller) if task is not None else {}
     settings.update({k: v for k, v in given.items() if v is not None})
     return ControllerConfig(**settings).check()
-
-
-def _space_of(env) -> dict | None:
-    import gymnasium as gym
-    import numpy as np
-
-    space = env.action_space
-    if isinstance(space, gym.spaces.Box):
-        return {"type": "box", "shape": [int(np.prod(space.shape))],
-                "low": np.asarray(space.low, float).reshape(-1).tolist(),
-                "high": np.asarray(space.high, float).reshape(-1).tolist()}
-    return None
 
 
 def _plot(env_name: str, results, path: Path, noise_after) -> None:

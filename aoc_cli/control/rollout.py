@@ -60,6 +60,16 @@ def flatten_observation(env: gym.Env, observation) -> np.ndarray:
     return np.asarray(observation, dtype=np.float32).reshape(-1)
 
 
+def action_space_of(env: gym.Env) -> dict | None:
+    """The box of a gymnasium env's action space, as the controller takes it (None: discrete)."""
+    space = env.action_space
+    if isinstance(space, gym.spaces.Box):
+        return {"type": "box", "shape": [int(np.prod(space.shape))],
+                "low": np.asarray(space.low, float).reshape(-1).tolist(),
+                "high": np.asarray(space.high, float).reshape(-1).tolist()}
+    return None
+
+
 def check_spaces(env: gym.Env, corpus) -> None:
     """The environment must have the corpus's observation and action spaces."""
     obs_dim = int(gym.spaces.flatdim(env.observation_space))

@@ -9,6 +9,8 @@ import h5py
 import numpy as np
 import pytest
 
+from tests.conftest import run_in_process
+
 from tests.formats.sources import flat_arrays, write_csv, write_d4rl
 
 
@@ -24,25 +26,6 @@ def snapshot(root):
             p = os.path.join(dirpath, f)
             out[os.path.relpath(p, root)] = hashlib.md5(open(p, "rb").read()).hexdigest()
     return out
-
-
-def run_in_process(capsys, *args: str):
-    """The real entry point ``aoc_cli.cli.app.main`` in this process: (code, stdout, stderr).
-
-    Same code path as the console script (argument parsing, AocError -> one line + exit 2),
-    without a Python start and the imports per call; ``test_real_process_*`` below runs the
-    console script in a subprocess to pin the process-level behaviour too.
-    """
-    from aoc_cli.cli.app import main
-
-    capsys.readouterr()
-    code = 0
-    try:
-        main(list(args))
-    except SystemExit as exit_:
-        code = exit_.code if isinstance(exit_.code, int) else (0 if exit_.code is None else 1)
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 @pytest.fixture
