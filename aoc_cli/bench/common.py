@@ -7,7 +7,7 @@ from pathlib import Path
 
 from aoc_cli.bench.methods import Runner
 from aoc_cli.bench.prepare import Artefacts
-from aoc_cli.control.rollout import action_space_of  # noqa: F401  (used by bench modules)
+from aoc_cli.control.rollout import action_space_of
 
 SCALES = ("tiny", "quick", "full")
 
