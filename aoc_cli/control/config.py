@@ -16,7 +16,14 @@ class ControllerConfig:
     .. math:: \pi(o_t, h_t) = \arg\max_{a:\ r(a) \le q_\epsilon(r)} \hat v(a)
 
     where :math:`q_\epsilon` is the epsilon-quantile of the K residuals (ties: the smaller
-    residual). In imitation mode (ABC) there are no candidates: the decision is the weighted
+    residual). With ``residual_cap`` c set, the threshold is also capped by the corpus's own
+    typical residual (the paper's absolute form, :math:`r \le \epsilon`, in corpus units):
+
+    .. math:: \tau = \min(q_\epsilon(r),\ c\, r_{90}),
+
+    :math:`r_{90}` the 90th percentile of the residuals of held-out corpus rows decomposed
+    against the other rows (``index.json`` ``typical_residual.p90``); when no candidate has
+    :math:`r \le \tau`, the smallest-residual candidate is kept. In imitation mode (ABC) there are no candidates: the decision is the weighted
     action of the minimal corpus subset of :math:`b(o_t, h_t)`.
     """
 
@@ -24,6 +31,9 @@ class ControllerConfig:
     """K, candidate actions per step (a discrete space uses every action)."""
     epsilon: float = 0.5
     """Keep candidates whose residual is within this quantile of the K residuals, in (0, 1]."""
+    residual_cap: float | None = None
+    """c: also drop candidates whose residual exceeds c x the corpus's typical p90 residual
+    (None: no cap; ignored for an index built without ``typical_residual``)."""
     k: int | None = None
     """Nearest corpus beliefs per query; None = 2 (d_b + 1)."""
     sampler: str = "uniform"
@@ -50,6 +60,8 @@ class ControllerConfig:
             raise AocError(f"--epsilon must be in (0, 1], got {self.epsilon}")
         if self.candidates < 1:
             raise AocError(f"--candidates must be >= 1, got {self.candidates}")
+        if self.residual_cap is not None and not self.residual_cap > 0:
+            raise AocError(f"--residual-cap must be > 0, got {self.residual_cap}")
         if self.k is not None and self.k < 1:
             raise AocError(f"--k must be >= 1, got {self.k}")
         if self.sampler not in ("uniform", "bc"):

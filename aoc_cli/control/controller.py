@@ -7,7 +7,8 @@ One step, top to bottom:
 2. one batched belief pass, ``b_t = b(o_t, a, h_t)`` for every candidate, (K, d_b);
 3. one batched decomposition against the corpus beliefs: corpus residual, minimal corpus
    subset and value estimate ``v_hat = sum_c w^c v^c`` for every candidate;
-4. keep the candidates whose residual is within the epsilon-quantile of the K residuals;
+4. keep the candidates whose residual is within the epsilon-quantile of the K residuals
+   (and, with ``residual_cap`` c, within c x the corpus's typical p90 residual);
 5. the argmax of ``v_hat`` among them (ties: the smaller residual).
 
 In imitation mode (ABC) the belief is ``b(o_t, h_t)`` and the decision is the weighted action
@@ -136,8 +137,7 @@ class Controller:
         residual = np.asarray(dec.residual, dtype=np.float64)
         value = np.asarray(dec.value, dtype=np.float64)
         if choose:
-            threshold = float(np.quantile(residual, self.config.epsilon))
-            passed = residual <= threshold + 1e-12 * max(1.0, threshold)
+            threshold, passed = self.candidate_filter(residual)
             order = np.lexsort((residual, -value))  # by value desc, then residual asc
             chosen = int(next(i for i in order if passed[i]))
         else:
@@ -158,6 +158,31 @@ class Controller:
         )
         decision.warnings = self.heterogeneity(decision)
         return decision
+
+    def candidate_filter(self, residual: np.ndarray) -> tuple[float, np.ndarray]:
+        """(threshold, passed (K,) bool): residual <= min(q_epsilon, c x typical p90).
+
+        With no candidate under the threshold (possible only with the cap), the
+        smallest-residual candidates pass and the threshold is their residual.
+        """
+        threshold = float(np.quantile(residual, self.config.epsilon))
+        cap = self.residual_cap
+        if cap is not None:
+            threshold = min(threshold, cap)
+        passed = residual <= threshold + 1e-12 * max(1.0, threshold)
+        if not passed.any():
+            threshold = float(residual.min())
+            passed = residual <= threshold + 1e-12 * max(1.0, threshold)
+        return threshold, passed
+
+    @property
+    def residual_cap(self) -> float | None:
+        """c x the index's typical p90 residual, or None (no cap set, or none recorded)."""
+        if self.config.residual_cap is None:
+            return None
+        meta = getattr(self.index, "meta", None) or {}
+        p90 = (meta.get("typical_residual") or {}).get("p90")
+        return None if p90 is None else float(self.config.residual_cap) * float(p90)
 
     def _imitate(self, observation: np.ndarray, history: History) -> Decision:
         belief = self.model.beliefs(observation[None], None, history)

@@ -115,3 +115,33 @@ def test_imitation_decision_is_the_weight_argmax_of_the_supporting_actions(corri
         assert int(d.action) == int(np.argmax(totals))
         agree += int(d.action) == int(x < 5)
     assert agree >= 22  # the expert's rule, recovered from the corpus
+
+
+def test_residual_cap_keeps_candidates_under_c_times_the_typical_p90(maze):
+    session = maze_session(maze, epsilon=0.5, residual_cap=2.0)
+    p90 = session.index.meta["typical_residual"]["p90"]
+    assert session.controller.residual_cap == pytest.approx(2.0 * p90)
+    h = HistoryBuffer(session.model.history_length, 2, 2, False).history()
+    d = session.controller.decide(np.array([0.0, 0.0], np.float32), h)
+    r = d.candidate_residuals
+    q = np.quantile(r, 0.5)
+    expected = r <= min(q, 2.0 * p90) + 1e-12
+    assert expected.sum() < (r <= q + 1e-12).sum()  # the cap bites at the start (uniform 2-d)
+    assert np.array_equal(d.passed, expected)
+    assert d.residual <= 2.0 * p90
+    assert d.candidate_values[d.chosen] == d.candidate_values[d.passed].max()
+
+
+def test_residual_cap_falls_back_to_the_smallest_residual_when_none_pass(maze):
+    session = maze_session(maze, epsilon=0.5, residual_cap=1e-9)
+    h = HistoryBuffer(session.model.history_length, 2, 2, False).history()
+    d = session.controller.decide(np.array([3.0, 12.0], np.float32), h)  # off the data
+    assert d.candidate_residuals.min() > session.controller.residual_cap  # nothing under it
+    assert d.passed.sum() >= 1
+    assert d.residual == d.candidate_residuals.min()
+    assert np.all(d.candidate_residuals[d.passed] == d.candidate_residuals.min())
+
+
+def test_residual_cap_must_be_positive():
+    with pytest.raises(AocError, match="residual-cap"):
+        ControllerConfig(residual_cap=0.0).check()
