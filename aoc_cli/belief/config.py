@@ -50,6 +50,9 @@ class BeliefConfig:
     belief_dim: int = 20
     #: Units of the GRU (one layer) and of the first two fully connected layers.
     hidden: int = 128
+    #: Value mode: weight of the auxiliary loss that makes b(o, a, h) also predict the change of
+    #: observation o' - o through a second linear head (0 = the paper's objective exactly).
+    dynamics_weight: float = 0.0
     #: Activation of the belief layer: ``tanh`` (bounded, no dead units) or ``relu``.
     belief_activation: str = "tanh"
     lr: float = 1e-3
@@ -80,6 +83,8 @@ class BeliefConfig:
                            ("batch_size", "--batch-size"), ("max_epochs", "--epochs")):
             if getattr(self, name) < 1:
                 raise AocError(f"{flag} must be >= 1, got {getattr(self, name)}")
+        if not self.dynamics_weight >= 0:
+            raise AocError(f"--dynamics-weight must be >= 0, got {self.dynamics_weight}")
         if self.patience < 1:
             raise AocError(f"--patience must be >= 1, got {self.patience}")
         if not self.lr > 0:

@@ -9,6 +9,8 @@ n actions (discrete, one-hot: d_a_in = n), F = d_o + d_a_in + 2 features per his
         --fc1-relu--> (Q, hidden) --fc2-relu--> (Q, hidden) --fc3-act--> belief (Q, d_b)
     belief --head (linear)--> (Q, out): standardised value (1), standardised action (d_a)
                                         or action logits (n)
+    belief --dynamics (linear)--> (Q, d_o): standardised o' - o (value mode, training only;
+                                            absent when the dynamics weight is 0)
 """
 
 from __future__ import annotations
@@ -125,7 +127,7 @@ class BeliefNet(nn.Module):
 
     def __init__(self, d_o: int, d_a_in: int, out_dim: int, history_length: int,
                  hidden: int = 128, belief_dim: int = 20, use_action: bool = True,
-                 belief_activation: str = "tanh"):
+                 belief_activation: str = "tanh", dynamics_dim: int = 0):
         super().__init__()
         self.history_length = int(history_length)
         self.use_action = bool(use_action)
@@ -137,6 +139,8 @@ class BeliefNet(nn.Module):
         self.fc2 = nn.Linear(hidden, hidden)
         self.fc3 = nn.Linear(hidden, belief_dim)
         self.head = nn.Linear(belief_dim, out_dim)
+        #: Auxiliary linear head b -> next-observation change; used by training only.
+        self.dynamics = nn.Linear(belief_dim, dynamics_dim) if dynamics_dim > 0 else None
         self.belief_activation = torch.tanh if belief_activation == "tanh" else torch.relu
 
     def belief(self, obs: torch.Tensor, act: torch.Tensor | None,

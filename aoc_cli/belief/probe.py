@@ -14,12 +14,26 @@ from scipy.optimize import minimize
 from scipy.special import log_softmax, softmax
 
 
+def quadratic_features(x: np.ndarray) -> np.ndarray:
+    """(n, d) -> (n, d + d (d + 1) / 2): x and every product x_i x_j (i <= j). A logistic probe
+    on these reads what the representation holds as an interaction: a belief that encodes the
+    *effective* torque s a and the commanded a holds the system s = sign(a * s a), which no
+    linear probe can read."""
+    x = np.asarray(x, dtype=np.float64)
+    i, j = np.triu_indices(x.shape[1])
+    return np.concatenate([x, x[:, i] * x[:, j]], axis=1)
+
+
 def logistic_probe(train_x: np.ndarray, train_y: np.ndarray, test_x: np.ndarray,
-                   test_y: np.ndarray, l2: float = 1e-4, max_iter: int = 500) -> float:
+                   test_y: np.ndarray, l2: float = 1e-4, max_iter: int = 500,
+                   quadratic: bool = False) -> float:
     """Accuracy on (test_x (M, d), test_y (M,)) of a logistic regression fitted on
-    (train_x (n, d), train_y (n,) int labels)."""
+    (train_x (n, d), train_y (n,) int labels); with ``quadratic``, on
+    :func:`quadratic_features` of both."""
     train_x = np.asarray(train_x, dtype=np.float64)
     test_x = np.asarray(test_x, dtype=np.float64)
+    if quadratic:
+        train_x, test_x = quadratic_features(train_x), quadratic_features(test_x)
     mean = train_x.mean(0)
     std = np.where(train_x.std(0) > 1e-12, train_x.std(0), 1.0)
     x = (train_x - mean) / std

@@ -93,41 +93,82 @@ def _dims(corpus, mode: str) -> dict:
             "use_action": mode == "value"}
 
 
+def dynamics_targets(corpus) -> tuple[np.ndarray, np.ndarray]:
+    """The auxiliary target o' - o: (N, d_o) float64 and (N,) bool, false on each episode's
+    last row (its next observation is not in the corpus)."""
+    obs = np.asarray(corpus.observations, dtype=np.float64)
+    delta = np.zeros_like(obs)
+    delta[:-1] = obs[1:] - obs[:-1]
+    valid = np.ones(len(obs), dtype=bool)
+    valid[np.asarray(corpus.episode_starts[1:], dtype=np.int64) - 1] = False
+    delta[~valid] = 0.0
+    return delta, valid
+
+
 def build_net(dims: dict, config: BeliefConfig) -> BeliefNet:
     return BeliefNet(dims["observation"], dims["action_input"], dims["output"],
                      config.history_length, hidden=config.hidden,
                      belief_dim=config.belief_dim, use_action=dims["use_action"],
-                     belief_activation=config.belief_activation)
+                     belief_activation=config.belief_activation,
+                     dynamics_dim=dims.get("dynamics", 0))
+
+
+def _r2(out: torch.Tensor, y: torch.Tensor) -> float:
+    """R^2, uniform average over the output dims."""
+    sse = ((out - y) ** 2).sum(0)
+    sst = ((y - y.mean(0)) ** 2).sum(0)
+    r2 = torch.where(sst > 0, 1 - sse / sst.clamp_min(1e-12), torch.zeros_like(sst))
+    return float(r2.mean())
 
 
 class _Objective:
-    """Loss and validation metric of one mode, on encoded targets."""
+    """Loss and validation metric of one mode, on encoded targets; with a dynamics weight,
+    plus that weight times the squared error of the auxiliary head on the standardised o' - o
+    (rows whose next observation is known only)."""
 
-    def __init__(self, mode: str, discrete: bool):
+    def __init__(self, mode: str, discrete: bool, dynamics_weight: float = 0.0,
+                 dyn: torch.Tensor | None = None, dyn_valid: torch.Tensor | None = None):
         self.classify = mode == "imitation" and discrete
+        self.weight = float(dynamics_weight) if dyn is not None else 0.0
+        self.dyn, self.dyn_valid = dyn, dyn_valid
 
-    def loss(self, out: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+    def main_loss(self, out: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
         if self.classify:
             return nn.functional.cross_entropy(out, y)
         return nn.functional.mse_loss(out, y)
 
-    def metrics(self, out: torch.Tensor, y: torch.Tensor) -> dict:
-        """Loss and R^2 (uniform average over output dims) or accuracy, on all of ``out``."""
-        loss = float(self.loss(out, y))
+    def dynamics_loss(self, net, b: torch.Tensor, rows: torch.Tensor) -> torch.Tensor:
+        err = ((net.dynamics(b) - self.dyn[rows]) ** 2).mean(1)
+        valid = self.dyn_valid[rows]
+        return (err * valid).sum() / valid.sum().clamp_min(1)
+
+    def loss(self, net, b, out, y, rows) -> torch.Tensor:
+        loss = self.main_loss(out, y)
+        if self.weight > 0:
+            loss = loss + self.weight * self.dynamics_loss(net, b, rows)
+        return loss
+
+    def metrics(self, net, b, out, y, rows) -> dict:
+        """Loss, and R^2 or accuracy, on all of ``out``; ``dynamics_r2`` with the head."""
+        main = self.main_loss(out, y)
         if self.classify:
-            return {"loss": loss, "accuracy": float((out.argmax(1) == y).float().mean())}
-        sse = ((out - y) ** 2).sum(0)
-        sst = ((y - y.mean(0)) ** 2).sum(0)
-        r2 = torch.where(sst > 0, 1 - sse / sst.clamp_min(1e-12), torch.zeros_like(sst))
-        return {"loss": loss, "r2": float(r2.mean())}
+            return {"loss": float(main), "accuracy": float((out.argmax(1) == y).float().mean())}
+        result = {"loss": float(main), "r2": _r2(out, y)}
+        if self.weight > 0:
+            result["loss"] = float(main + self.weight * self.dynamics_loss(net, b, rows))
+            keep = self.dyn_valid[rows]
+            result["dynamics_r2"] = _r2(net.dynamics(b[keep]), self.dyn[rows][keep])
+        return result
 
 
 def _evaluate(net, inputs: CorpusInputs, rows: torch.Tensor, y: torch.Tensor, objective) -> dict:
-    outs = []
+    beliefs, outs = [], []
     with torch.no_grad():
         for i in range(0, len(rows), EVAL_BATCH):
-            outs.append(net(*inputs.batch(rows[i:i + EVAL_BATCH]))[1])
-    return objective.metrics(torch.cat(outs), y)
+            b, out = net(*inputs.batch(rows[i:i + EVAL_BATCH]))
+            beliefs.append(b)
+            outs.append(out)
+        return objective.metrics(net, torch.cat(beliefs), torch.cat(outs), y, rows)
 
 
 def train_model(corpus, config: BeliefConfig, model_id: str = "default", overwrite: bool = False,
@@ -150,6 +191,8 @@ def train_model(corpus, config: BeliefConfig, model_id: str = "default", overwri
     if device.type == "cpu":
         torch.set_num_threads(threads)
     dims = _dims(corpus, config.mode)
+    if config.mode == "value" and config.dynamics_weight > 0:
+        dims["dynamics"] = dims["observation"]
     classify = config.mode == "imitation" and dims["discrete"]
     if config.mode == "value":
         targets = values
@@ -161,7 +204,16 @@ def train_model(corpus, config: BeliefConfig, model_id: str = "default", overwri
     inputs = encode_corpus(corpus, encoder, config.history_length, dims["use_action"], device)
     y_all = torch.as_tensor(corpus.actions, device=device) if classify \
         else encoder.targets(targets)
-    objective = _Objective(config.mode, dims["discrete"])
+    dyn = dyn_valid = None
+    if dims.get("dynamics", 0) > 0:
+        delta, valid = dynamics_targets(corpus)
+        mean, std = (delta[valid].mean(0), delta[valid].std(0)) if valid.any() \
+            else (np.zeros(delta.shape[1]), np.ones(delta.shape[1]))
+        std = np.where(std > 1e-6, std, 1.0)
+        dyn = torch.as_tensor((delta - mean) / std, dtype=torch.float32, device=device)
+        dyn_valid = torch.as_tensor(valid, dtype=torch.float32, device=device).bool()
+    objective = _Objective(config.mode, dims["discrete"], config.dynamics_weight, dyn,
+                           dyn_valid)
 
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(config.seed)
@@ -183,8 +235,8 @@ def train_model(corpus, config: BeliefConfig, model_id: str = "default", overwri
         total, count = 0.0, 0
         for b in range(n_batches):
             rows = perm[b * config.batch_size:(b + 1) * config.batch_size]
-            _, out = net(*inputs.batch(rows))
-            loss = objective.loss(out, y_all[rows])
+            beliefs, out = net(*inputs.batch(rows))
+            loss = objective.loss(net, beliefs, out, y_all[rows], rows)
             optimiser.zero_grad(set_to_none=True)
             loss.backward()
             optimiser.step()
@@ -228,6 +280,8 @@ def train_model(corpus, config: BeliefConfig, model_id: str = "default", overwri
         metrics["val_majority_accuracy"] = float(majority / len(val_rows))
     else:
         metrics["val_r2"] = final_val["r2"]
+        if "dynamics_r2" in final_val:
+            metrics["val_dynamics_r2"] = final_val["dynamics_r2"]
     metrics.update({"rows": corpus.n_rows, "train_rows": len(train_rows),
                     "val_rows": len(val_rows), "device": device.type,
                     "threads": threads if device.type == "cpu" else None})

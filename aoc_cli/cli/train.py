@@ -28,6 +28,10 @@ def train(
     history_length: int = typer.Option(_D.history_length, "--history-length",
                                        help="Previous transitions of the episode the GRU reads "
                                             "(0: no history)."),
+    dynamics_weight: float = typer.Option(_D.dynamics_weight, "--dynamics-weight",
+                                          help="Value mode: weight of the auxiliary loss that "
+                                               "makes the belief also predict o' - o "
+                                               "(0: the paper's objective alone)."),
     belief_dim: int = typer.Option(_D.belief_dim, "--belief-dim", help="Belief dimension d_b."),
     hidden: int = typer.Option(_D.hidden, "--hidden", help="Units of the GRU and hidden layers."),
     epochs: int = typer.Option(_D.max_epochs, "--epochs", help="Maximum epochs (early stopping ends "
@@ -49,6 +53,7 @@ def train(
     """Train the belief model b and linear head l of corpus NAME; print the final metrics."""
     fmt = resolve_format(fmt)
     config = BeliefConfig(mode=mode, value=value, gamma=gamma, history_length=history_length,
+                          dynamics_weight=dynamics_weight,
                           belief_dim=belief_dim, hidden=hidden, max_epochs=epochs,
                           batch_size=batch_size, lr=lr, patience=patience,
                           val_fraction=val_fraction, seed=seed, threads=threads).validate()

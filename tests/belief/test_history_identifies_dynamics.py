@@ -55,3 +55,37 @@ def test_pendulum_het_value_is_better_predicted_with_the_history(pendulum):
     without = train_model(pendulum, BeliefConfig(history_length=0, **cfg), "L0")
     assert with_history["val_r2"] > without["val_r2"] + 0.03
     assert without["val_r2"] > 0.5
+
+
+def test_dynamics_head_makes_beliefs_encode_a_system_the_value_ignores(tmp_path):
+    # The rewards (and so the value) are noise, independent of s: a value-only belief has no
+    # reason to encode s. The auxiliary head predicts x' - x = -0.2 x + s a, which needs s
+    # (from the history) times a: with it the belief holds s as an interaction with a.
+    corpus = Store(tmp_path).write("hs", hidden_system())
+    cfg = dict(value="reward", max_epochs=25, batch_size=50, **FAST)
+    dyn = train_model(corpus, BeliefConfig(dynamics_weight=1.0, **cfg), "dyn")
+    flat = train_model(corpus, BeliefConfig(dynamics_weight=1.0, history_length=0, **cfg),
+                       "flat")
+    plain = train_model(corpus, BeliefConfig(**cfg), "plain")
+    assert dyn["val_dynamics_r2"] > 0.85                # the history identifies s
+    assert flat["val_dynamics_r2"] < 0.5                # without it, s a is a coin flip
+    assert "val_dynamics_r2" not in plain
+    split = split_episodes(corpus.n_episodes, 0.2, 0)
+    tr, va = (episode_rows(corpus.episode_starts, e) for e in split)
+    system = corpus.tag("system")[0]
+
+    def probe(x):
+        return logistic_probe(x[tr], system[tr], x[va], system[va], quadratic=True)
+
+    assert probe(load_model(corpus, "dyn").row_beliefs(corpus)) > 0.85
+    assert probe(np.concatenate([corpus.observations, corpus.actions], axis=1)) < 0.65
+    # The head is for training only: the saved model's beliefs and value are b and l alone,
+    # and the model round-trips with the head's weights.
+    model = load_model(corpus, "dyn")
+    assert model.net.dynamics is not None and model.net.dynamics.out_features == 1
+
+
+def test_dynamics_weight_must_not_be_negative(store, aoc):
+    code, out, err = aoc("train", "nothing", "--dynamics-weight", "-1")
+    assert code == 2 and out == ""
+    assert err.strip().splitlines() == ["aoc: error: --dynamics-weight must be >= 0, got -1.0"]
