@@ -173,14 +173,10 @@ class BeliefModel:
             q = max(q, len(steps))
         parts = [self.encoder.observations(obs),
                  None if act is None else self.encoder.actions(act), steps]
-        out = []
-        for p in parts:  # broadcast a leading dimension of 1 (one observation, K candidates)
-            if p is not None and len(p) != q:
-                if len(p) != 1:
-                    raise AocError(f"inputs have different row counts ({len(p)} vs {q})")
-                p = p.expand(q, *p.shape[1:])
-            out.append(p)
-        return out
+        for p in parts:  # a leading dimension of 1 broadcasts (one observation, K candidates)
+            if p is not None and len(p) not in (1, q):
+                raise AocError(f"inputs have different row counts ({len(p)} vs {q})")
+        return parts, q
 
     def beliefs(self, observations, actions=None, history: History | None = None,
                 batch: int = 65536) -> np.ndarray:
@@ -195,13 +191,24 @@ class BeliefModel:
         return out[:, 0] if self.mode == "value" else out
 
     def _run(self, observations, actions, history, batch):
-        obs, act, steps = self._inputs(observations, actions, history)
+        (obs, act, steps), q = self._inputs(observations, actions, history)
+        memory = None
+        with torch.no_grad():
+            if steps is not None and len(steps) == 1 and q > 1:
+                memory = history_memory(self.net, steps)  # one history: run the GRU once
+            obs, act = (None if p is None else p.expand(q, *p.shape[1:]) for p in (obs, act))
+            if memory is None and steps is not None:
+                steps = steps.expand(q, *steps.shape[1:])
         beliefs, outs = [], []
         with torch.no_grad():
-            for i in range(0, len(obs), batch):
+            for i in range(0, q, batch):
                 sl = slice(i, i + batch)
-                b, out = self.net(obs[sl], None if act is None else act[sl],
-                                  None if steps is None else steps[sl])
+                a = None if act is None else act[sl]
+                if memory is None:
+                    b = self.net.belief(obs[sl], a, None if steps is None else steps[sl])
+                else:
+                    b = belief_from_memory(self.net, memory.expand(len(obs[sl]), -1), obs[sl], a)
+                out = self.net.head(b)
                 if self.encoder.t_std is not None:
                     out = self.encoder.untarget(out)
                 beliefs.append(b.cpu().numpy().astype(np.float32))
@@ -230,6 +237,26 @@ class BeliefModel:
                 if progress is not None:
                     progress(i + len(rows), n)
         return out
+
+
+def history_memory(net: BeliefNet, steps: torch.Tensor) -> torch.Tensor:
+    """The GRU's summary of histories: steps (R, L, F) -> (R, hidden), as in BeliefNet.belief."""
+    _, h_n = net.gru(steps)
+    return h_n[-1]
+
+
+def belief_from_memory(net: BeliefNet, memory: torch.Tensor | None, obs: torch.Tensor,
+                       act: torch.Tensor | None) -> torch.Tensor:
+    """BeliefNet.belief given the GRU summary (Q, hidden) (None without history), obs (Q, d_o),
+    act (Q, d_a_in): the control step computes the summary of its one history once and
+    broadcasts it to the K candidates."""
+    parts = [] if memory is None else [memory]
+    parts.append(obs)
+    if net.use_action:
+        parts.append(act)
+    x = torch.relu(net.fc1(torch.cat(parts, dim=-1)))
+    x = torch.relu(net.fc2(x))
+    return net.belief_activation(net.fc3(x))
 
 
 def check_corpus(model: BeliefModel, corpus) -> None:

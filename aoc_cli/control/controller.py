@@ -131,8 +131,8 @@ class Controller:
         Without ``choose`` the first candidate is reported (used to explain a given action).
         """
         n = len(candidates)
-        obs = np.repeat(observation[None, :], n, axis=0)
-        beliefs = self.model.beliefs(obs, candidates, repeat_history(history, n))
+        # one observation and one history broadcast to the n candidates (the GRU runs once)
+        beliefs = self.model.beliefs(observation[None, :], candidates, history)
         dec = self.index.decompose(beliefs, k=self.config.k, selection=self.selection)
         residual = np.asarray(dec.residual, dtype=np.float64)
         value = np.asarray(dec.value, dtype=np.float64)

@@ -21,6 +21,7 @@ import numpy as np
 
 from aoc_cli.errors import AocError
 from aoc_cli.index.config import IndexConfig
+from aoc_cli.index.grouped import ScanData, grouped_search
 from aoc_cli.index.threads import faiss_threads, single_threaded_blas
 
 
@@ -63,6 +64,7 @@ class BeliefIndex:
         self._row_of = None if row_of is None else np.asarray(row_of, dtype=np.int64)
         self.beliefs = beliefs
         self._store = _storage_view(index, kind)
+        self._scan: ScanData | None = None  # built on the first batched search of a flat index
 
     # ---------------------------------------------------------------- building
     @classmethod
@@ -177,6 +179,8 @@ class BeliefIndex:
                 # a small selection: exact over the selected rows, whatever the kind
                 d2, p = _exact_among(Y, self.vectors(sel.positions), kk)
                 dist[:, :kk], pos[:, :kk] = d2, sel.positions[p]
+            elif Y.shape[0] >= 2 and self.kind == "flat" and self._store is not None:
+                dist[:, :kk], pos[:, :kk] = self._grouped(Y, kk, sel, available)
             elif Y.shape[0] >= 2:
                 dist[:, :kk], pos[:, :kk] = self._pooled(Y, kk, sel, available)
             else:
@@ -189,6 +193,13 @@ class BeliefIndex:
             D, I = self.index.search(Y, k, params=self._params(sel, k))
         D = np.where(I >= 0, D.astype(np.float64), np.inf)
         return D, I
+
+    def _grouped(self, Y: np.ndarray, k: int, sel: Selection | None, available: int):
+        """Exact search of a flat index: one scan at group centroids (see grouped.py)."""
+        if self._scan is None:
+            self._scan = ScanData.of(self._store)
+        out = grouped_search(Y, self._scan, k, None if sel is None else sel.mask)
+        return self._direct(Y, k, sel) if out is None else out
 
     def _pooled(self, Y: np.ndarray, k: int, sel: Selection | None, available: int,
                 depth: int = 0):
