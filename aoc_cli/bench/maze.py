@@ -124,7 +124,7 @@ def run_two_gates(ctx: Context, scale: dict):
         ctx.artefacts.model(corpus, "default", belief_config(scale, "value", seed))
         ctx.artefacts.index(corpus, "default")
         for eps in scale["epsilons"]:
-            s = session(corpus, env, "two-gates", seed=seed, epsilon=eps)
+            s = session(corpus, env, "two-gates", seed=seed, **{**ctx.aoc_config, "epsilon": eps})
             run = ctx.runner.run("aoc", s, env, ctx.n_episodes(scale["episodes"]), seed,
                                  label=f"two-gates epsilon {eps:g} seed {seed}")
             values = row_values(run)

@@ -97,10 +97,16 @@ def check(name: str, scale: str, seeds: int | None, episodes: int | None,
 def run_experiment(name: str, scale: str = "full", seeds: int | None = None,
                    out: str | Path | None = None, store: str | Path = "bench/store",
                    episodes: int | None = None, methods: list[str] | None = None,
-                   log=None, progress=None, epsilon: float | None = None) -> dict:
+                   log=None, progress=None, epsilon: float | None = None,
+                   residual_cap: float | None = None) -> dict:
     """Run experiment ``name`` at ``scale`` (tiny | quick | full); write and return its report:
-    ``{"experiment", "out", "rows", "summary", "plots", "built", "seconds"}``."""
+    ``{"experiment", "out", "rows", "summary", "plots", "built", "seconds"}``.
+
+    ``epsilon`` and ``residual_cap`` (ControllerConfig fields) apply to AOC wherever the
+    experiment does not vary them."""
     check(name, scale, seeds, episodes, methods, epsilon)
+    if residual_cap is not None and not residual_cap > 0:
+        raise AocError(f"--residual-cap must be > 0, got {residual_cap}")
     exp = EXPERIMENTS[name]
     params = exp.scales[scale]
     out = Path(out) if out is not None else Path("bench") / name
@@ -108,8 +114,11 @@ def run_experiment(name: str, scale: str = "full", seeds: int | None = None,
     n_seeds = seeds if seeds is not None else int(params["seeds"])
     artefacts = Artefacts(store, log=log, progress=progress)
     runner = Runner(BUDGETS[scale], progress=progress, log=log)
+    aoc_config = {} if epsilon is None else {"epsilon": epsilon}
+    if residual_cap is not None:
+        aoc_config["residual_cap"] = residual_cap
     ctx = Context(name, scale, out, artefacts, runner, list(range(n_seeds)), episodes,
-                  methods, log, aoc_config={} if epsilon is None else {"epsilon": epsilon})
+                  methods, log, aoc_config=aoc_config)
     started = time.perf_counter()
     rows, figure = exp.run(ctx, params)
     summary = summarize_rows(rows, figure)
@@ -117,6 +126,7 @@ def run_experiment(name: str, scale: str = "full", seeds: int | None = None,
     seconds = time.perf_counter() - started
     header = (f"Scale `{scale}`, seeds {n_seeds}, {seconds / 60:.1f} min"
               + (f", AOC with epsilon = {epsilon:g}" if epsilon is not None else "")
+              + (f", residual cap {residual_cap:g} x typical p90" if residual_cap else "")
               + ". Mean ± std across "
               "seeds (one seed: across its episodes). Plots: "
               + ", ".join(f"[{p}]({p})" for p in ctx.plots))

@@ -117,6 +117,32 @@ def test_a_second_run_reuses_the_stored_artefacts(tmp_path, bench_store):
     assert again["built"] == []
 
 
+def test_residual_cap_reaches_every_aoc_session_and_is_recorded(tmp_path, bench_store,
+                                                                  monkeypatch):
+    from aoc_cli.bench import maze
+    from aoc_cli.errors import AocError
+
+    with pytest.raises(AocError, match="residual-cap"):
+        run_experiment("two-gates", "tiny", out=tmp_path / "bad", store=bench_store,
+                       residual_cap=0.0)
+    configs = []
+    real = maze.session
+
+    def spy(*args, **kw):
+        s = real(*args, **kw)
+        configs.append(s.controller.config)
+        return s
+
+    monkeypatch.setattr(maze, "session", spy)
+    out = tmp_path / "capped"
+    run_experiment("two-gates", "tiny", out=out, store=bench_store, residual_cap=2.5)
+    assert [c.epsilon for c in configs] == [0.1, 0.7]  # epsilon still varies
+    assert all(c.residual_cap == 2.5 for c in configs)
+    meta = json.loads((out / "summary.json").read_text())
+    assert meta["aoc_config"] == {"residual_cap": 2.5}
+    assert "residual cap 2.5" in (out / "summary.md").read_text()
+
+
 def test_the_gate_of_a_path_is_where_it_crosses_x_8():
     from aoc_cli.bench.maze import gate_of
 
