@@ -69,6 +69,44 @@ def gate_counts(results) -> tuple[float, float]:
     return 100.0 * gates.count("upper") / n, 100.0 * gates.count("lower") / n
 
 
+#: The first move of each route from (0, 0): unit heading to pi1's goal (8, 16) and to
+#: pi2's (8, 8), at the experts' mean speed 0.75.
+START_PROBES = {"pi1": np.array([8.0, 16.0]) / np.hypot(8.0, 16.0) * 0.75,
+                "pi2": np.array([8.0, 8.0]) / np.hypot(8.0, 8.0) * 0.75}
+
+
+def start_probe(session) -> dict:
+    """How the decomposition sees each route's first move at (0, 0), empty history.
+
+    For the pi1-like and the pi2-like move: ``value_<p>`` (v_hat), ``residual_<p>``,
+    ``pi1_nearest_<p>`` (the share of pi1 entries among its k nearest index entries, copies
+    counted), ``distinct_nearest_<p>`` (distinct corpus rows among them) and ``pi1_support_<p>``
+    (pi1's weight in its minimal corpus subset). Explains maze-adapt's gate shares: re-sampling
+    changes the nearest entries, the decision follows v_hat among candidates that pass.
+    """
+    from aoc_cli.control import HistoryBuffer
+    from aoc_cli.control.controller import repeat_history
+
+    ctl, corpus = session.controller, session.corpus
+    codes, labels = corpus.tag("policy")
+    pi1 = codes == labels.index("pi1")
+    moves = np.stack(list(START_PROBES.values()))
+    history = HistoryBuffer(session.model.history_length, 2, 2, False).history()
+    beliefs = ctl.model.beliefs(np.zeros((len(moves), 2), np.float32), moves,
+                                repeat_history(history, len(moves)))
+    dec = session.index.decompose(beliefs, k=ctl.config.k, selection=ctl.selection)
+    out = {}
+    for j, name in enumerate(START_PROBES):
+        nearest = dec.neighbours[j][dec.neighbours[j] >= 0]
+        rows, w = dec.rows[j], dec.weights[j]
+        out.update({f"value_{name}": float(dec.value[j]),
+                    f"residual_{name}": float(dec.residual[j]),
+                    f"pi1_nearest_{name}": float(pi1[nearest].mean()),
+                    f"distinct_nearest_{name}": int(len(np.unique(nearest))),
+                    f"pi1_support_{name}": float(w[(rows >= 0) & pi1[np.maximum(rows, 0)]].sum())})
+    return out
+
+
 def _index_id(rate: float) -> str:
     return "default" if rate == 1.0 else f"pi1x{rate:g}"
 

@@ -143,6 +143,30 @@ def test_residual_cap_reaches_every_aoc_session_and_is_recorded(tmp_path, bench_
     assert "residual cap 2.5" in (out / "summary.md").read_text()
 
 
+def test_pi1_copies_fill_the_nearest_entries_of_the_start_moves(bench_store):
+    """maze-adapt's mechanism, measured: x2 copies of pi1 crowd the k nearest entries of both
+    first moves (fewer distinct rows), while v_hat stays a weighted mean of row values."""
+    from aoc_cli.bench.common import belief_config, session
+    from aoc_cli.bench.maze import SCALES, start_probe
+    from aoc_cli.bench.prepare import Artefacts
+    from aoc_cli.envs import make_env
+
+    art = Artefacts(bench_store)
+    corpus = art.corpus("maze", episodes=SCALES["tiny"]["episodes_data"], seed=0)
+    art.model(corpus, "default", belief_config(SCALES["tiny"], "value", 0))
+    art.index(corpus, "default")
+    art.index(corpus, "default", "pi1x2", resample={"policy=pi1": 2.0})
+    env = make_env("maze")
+    x1 = start_probe(session(corpus, env, "maze"))
+    x2 = start_probe(session(corpus, env, "maze", index_id="pi1x2"))
+    for move in ("pi1", "pi2"):
+        assert x2[f"pi1_nearest_{move}"] > x1[f"pi1_nearest_{move}"]
+        assert x2[f"distinct_nearest_{move}"] < x1[f"distinct_nearest_{move}"]
+        assert 0.0 <= x2[f"pi1_support_{move}"] <= 1.0 + 1e-9
+    values = session(corpus, env, "maze").index.values
+    assert values.min() - 1e-9 <= x1["value_pi1"] <= values.max() + 1e-9
+
+
 def test_the_gate_of_a_path_is_where_it_crosses_x_8():
     from aoc_cli.bench.maze import gate_of
 
