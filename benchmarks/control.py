@@ -3,8 +3,9 @@
 For each size: collect pendulum-het rows, train the belief model (a short training: the
 benchmark measures the step, not the policy), index, then time ``Controller.decide`` on states
 of real rollouts (belief pass for the K candidates + neighbours + decomposition + choice),
-median over steps, and split into the belief pass and the decomposition. One thread for torch
-and FAISS (as `aoc rollout` runs).
+median over steps, and split into the belief pass, the decomposition and, inside it, the
+neighbour search. One thread for torch, FAISS and BLAS (as `aoc rollout` runs). The 1-minute
+load average is printed with each line: the machine is shared.
 
 Usage: .venv/bin/python benchmarks/control.py --sizes 100k,600k [--steps 200] [--store DIR]
 """
@@ -19,10 +20,10 @@ import time
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
+import torch  # noqa: E402
 
 from aoc_cli.belief import BeliefConfig, train_model  # noqa: E402
 from aoc_cli.control import HistoryBuffer, open_session  # noqa: E402
-from aoc_cli.control.controller import repeat_history  # noqa: E402
 from aoc_cli.envs import collect, make_env  # noqa: E402
 from aoc_cli.index.build import build_index  # noqa: E402
 from aoc_cli.store import Store  # noqa: E402
@@ -53,20 +54,21 @@ def time_steps(store: Store, name: str, steps: int) -> dict:
     env = make_env("pendulum-het")
     buf = HistoryBuffer(model.history_length, corpus.observation_dim, 1, False)
     obs, _ = env.reset(seed=1)
-    total, belief, decomp = [], [], []
+    total, belief, decomp, search = [], [], [], []
     for _ in range(steps):
         h = buf.history()
         t0 = time.perf_counter()
         d = ctl.decide(obs, h)
         total.append(time.perf_counter() - t0)
-        cand = d.candidates
-        o = np.repeat(np.asarray(obs, np.float32)[None], len(cand), 0)
         t0 = time.perf_counter()
-        b = model.beliefs(o, cand, repeat_history(h, len(cand)))
+        b = model.beliefs(np.asarray(obs, np.float32)[None], d.candidates, h)  # as decide()
         belief.append(time.perf_counter() - t0)
         t0 = time.perf_counter()
         index.decompose(b)
         decomp.append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        index.index.search(b, 2 * (b.shape[1] + 1))  # step 1 of the decomposition alone
+        search.append(time.perf_counter() - t0)
         nxt, r, term, trunc, _ = env.step(np.asarray(d.action, np.float32))
         buf.push(obs, d.action, r)
         obs = nxt
@@ -75,7 +77,7 @@ def time_steps(store: Store, name: str, steps: int) -> dict:
             buf.reset()
     ms = lambda xs: 1000 * float(np.median(xs))  # noqa: E731
     return {"rows": corpus.n_rows, "step_ms": ms(total), "belief_ms": ms(belief),
-            "decompose_ms": ms(decomp), "kind": index.index.kind}
+            "decompose_ms": ms(decomp), "search_ms": ms(search), "kind": index.index.kind}
 
 
 def main() -> None:
@@ -84,13 +86,16 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=200)
     ap.add_argument("--store", default=None, help="reuse corpora across runs (default: a temp dir)")
     args = ap.parse_args()
+    torch.set_num_threads(1)
     store = Store(args.store or tempfile.mkdtemp(prefix="aoc-bench-control-"))
-    print(f"{'rows':>8} {'kind':>5} {'step ms':>8} {'belief ms':>10} {'decompose ms':>13}")
+    print(f"{'rows':>8} {'kind':>5} {'step ms':>8} {'belief ms':>10} {'decompose ms':>13} "
+          f"{'search ms':>10} {'load':>5}")
     for size in args.sizes.split(","):
         name = prepare(store, parse_size(size))
         r = time_steps(store, name, args.steps)
         print(f"{r['rows']:>8} {r['kind']:>5} {r['step_ms']:>8.2f} {r['belief_ms']:>10.2f} "
-              f"{r['decompose_ms']:>13.2f}", flush=True)
+              f"{r['decompose_ms']:>13.2f} {r['search_ms']:>10.2f} {os.getloadavg()[0]:>5.2f}",
+              flush=True)
 
 
 if __name__ == "__main__":

@@ -162,8 +162,10 @@ class BeliefIndex:
         queries: (Q, d) beliefs. selection: None, a row mask (N,) bool, an array of rows, or a
         prepared `Selection`. Returns distances (Q, k) float64, Euclidean, ascending, and rows
         (Q, k) int64 corpus rows; when fewer than k rows are available the tail is padded with
-        inf / -1. A batch is served by one search at its centroid when that answer is
-        certified (see IndexConfig.pool_factor); the rest is searched query by query.
+        inf / -1. A batch of a flat index is searched exactly by one scan at the centroids of
+        groups of nearby queries (grouped.py); a batch of an approximate index is served by
+        one search at its centroid when that answer is certified (see
+        IndexConfig.pool_factor), the rest by groups and then query by query.
         """
         Y = _as_queries(queries, self.dim)
         if k < 1:

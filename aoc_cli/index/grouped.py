@@ -12,7 +12,8 @@ Q N d_b multiply-adds and Q N memory traffic. Instead:
    among the ~`POOL0` rows nearest c_g;
 3. a row b with ||b - c_g|| > R_g = max_i (||y_i - c_g|| + u_i) is farther than u_i from every
    query i of the group (triangle inequality), so the rows within R_g of c_g hold each query's
-   exact k nearest rows: rank them exactly (float64).
+   exact k nearest rows: rank them exactly (float64), `CHUNKS` consecutive groups at a time
+   against the union of their balls (neighbouring balls overlap).
 
 The centroid distances are float32; the ball test adds a margin bounding their rounding error
 (a sum of d_b + 2 products: gamma_{d_b+2} (||c|| + ||b||)^2, doubled), so a row may be kept
@@ -29,9 +30,9 @@ import numpy as np
 QUERIES_PER_GROUP = 6
 MAX_GROUPS = 16
 #: About this many rows nearest each centroid bound its queries' k-th distances.
-POOL0 = 256
+POOL0 = 128
 #: Consecutive groups whose balls are searched together (fewer, larger searches).
-CHUNKS = 4
+CHUNKS = 8
 
 
 @dataclass
