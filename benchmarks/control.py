@@ -8,6 +8,7 @@ neighbour search. One thread for torch, FAISS and BLAS (as `aoc rollout` runs). 
 load average is printed with each line: the machine is shared.
 
 Usage: .venv/bin/python benchmarks/control.py --sizes 100k,600k [--steps 200] [--store DIR]
+       [--kind auto|flat|ivf|hnsw]   (auto: flat up to 200k rows, IVF beyond; flat is exact)
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ def parse_size(text: str) -> int:
     return int(float(text.rstrip("km")) * mult)
 
 
-def prepare(store: Store, rows: int) -> str:
+def prepare(store: Store, rows: int, kind: str = "auto") -> str:
     name = f"pend{rows}"
     if not store.exists(name):
         data, _ = collect("pendulum-het", steps=rows, seed=0)
@@ -43,7 +44,7 @@ def prepare(store: Store, rows: int) -> str:
     corpus = store.corpus(name)
     if not (corpus.models_dir / "default" / "config.json").is_file():
         train_model(corpus, BeliefConfig(seed=0, max_epochs=2, patience=1), "default")
-    build_index(corpus, "default")
+    build_index(corpus, "default", kind=kind)
     return name
 
 
@@ -85,13 +86,14 @@ def main() -> None:
     ap.add_argument("--sizes", default="100k,600k")
     ap.add_argument("--steps", type=int, default=200)
     ap.add_argument("--store", default=None, help="reuse corpora across runs (default: a temp dir)")
+    ap.add_argument("--kind", default="auto", help="index kind: auto, flat (exact), ivf, hnsw")
     args = ap.parse_args()
     torch.set_num_threads(1)
     store = Store(args.store or tempfile.mkdtemp(prefix="aoc-bench-control-"))
     print(f"{'rows':>8} {'kind':>5} {'step ms':>8} {'belief ms':>10} {'decompose ms':>13} "
           f"{'search ms':>10} {'load':>5}")
     for size in args.sizes.split(","):
-        name = prepare(store, parse_size(size))
+        name = prepare(store, parse_size(size), args.kind)
         r = time_steps(store, name, args.steps)
         print(f"{r['rows']:>8} {r['kind']:>5} {r['step_ms']:>8.2f} {r['belief_ms']:>10.2f} "
               f"{r['decompose_ms']:>13.2f} {r['search_ms']:>10.2f} {os.getloadavg()[0]:>5.2f}",
