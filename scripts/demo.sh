@@ -14,8 +14,8 @@ $AOC collect pendulum-het --steps 30000 --name pendulum --seed 0 --format table
 step "what is in the corpus"
 $AOC info pendulum --format table
 
-step "train the belief model (value mode: discounted return-to-go)"
-$AOC train pendulum --seed 0 --format table
+step "train the belief model (value mode: discounted return-to-go; the auxiliary dynamics head tells the two systems apart)"
+$AOC train pendulum --seed 0 --dynamics-weight 1 --format table
 
 step "beliefs of every row and the nearest-neighbour index"
 $AOC index pendulum --format table

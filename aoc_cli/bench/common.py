@@ -55,13 +55,14 @@ def session(corpus, env, task: str | None = None, model_id: str = "default",
                         seed, action_space_of(env))
 
 
-def belief_config(scale: dict, mode: str = "value", seed: int = 0):
-    """The belief model of a scale: the paper's network, the scale's epoch budget."""
+def belief_config(scale: dict, mode: str = "value", seed: int = 0, **overrides):
+    """The belief model of a scale: the paper's network, the scale's epoch budget, and any
+    other BeliefConfig field in ``overrides``."""
     from aoc_cli.belief import BeliefConfig
 
     return BeliefConfig(mode=mode, max_epochs=int(scale["epochs"]),
                         patience=int(scale.get("patience", 10)), seed=int(seed),
-                        threads=int(scale.get("threads", 1)))
+                        threads=int(scale.get("threads", 1)), **overrides)
 
 
 def make_task_env(task: str, scale: dict):

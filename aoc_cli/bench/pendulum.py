@@ -43,6 +43,10 @@ EPSILONS = (0.3, 0.5, 0.9, 1.0)
 #: may only use rows of the evaluation system (``--select system=normal``). The gap between it
 #: and ``aoc`` is what the belief fails to tell apart about the two systems.
 ORACLE = "aoc-normal-rows"
+#: The value model's auxiliary dynamics head (``aoc train --dynamics-weight``): without it the
+#: belief does not tell the two systems apart and AOC sits at the do-nothing level; with it AOC
+#: on the mixed corpus matches AOC on the normal system's rows (docs/belief.md).
+DYNAMICS_WEIGHT = 1.0
 
 
 def _oracle(ctx: Context, corpus, env, task: str, seed: int):
@@ -61,7 +65,8 @@ def _prepare(ctx: Context, scale: dict, task: str, rows: int, seed: int, bc: boo
     data_task = task if (task == "pendulum-het" or scale["upright_data"] == "own") \
         else "pendulum-het"
     corpus = ctx.artefacts.corpus(data_task, rows=rows, seed=seed)
-    ctx.artefacts.model(corpus, "default", belief_config(scale, "value", seed))
+    ctx.artefacts.model(corpus, "default", belief_config(scale, "value", seed,
+                                                         dynamics_weight=DYNAMICS_WEIGHT))
     if bc:
         ctx.artefacts.model(corpus, "bc", belief_config(scale, "imitation", seed))
     ctx.artefacts.index(corpus, "default")
