@@ -86,7 +86,9 @@ class Artefacts:
         path = Path(corpus.models_dir) / model_id / "config.json"
         if path.is_file():
             meta = json.loads(path.read_text())
-            saved = {k: v for k, v in meta.get("config", {}).items() if k not in _RUNTIME}
+            # through BeliefConfig, so a field added since the model was saved takes its default
+            known = asdict(BeliefConfig.from_dict(meta.get("config", {})))
+            saved = {k: v for k, v in known.items() if k not in _RUNTIME}
             wanted = {k: v for k, v in asdict(config).items() if k not in _RUNTIME}
             if saved == wanted and meta.get("corpus_hash") == corpus.hash:
                 return model_id
