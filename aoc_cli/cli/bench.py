@@ -34,6 +34,10 @@ def register(app: typer.Typer) -> None:
         epsilon: Optional[float] = typer.Option(
             None, "--epsilon", help="AOC's epsilon where the experiment does not vary it "
                                     "(default: the task's setting, else 0.5)."),
+        residual_cap: Optional[float] = typer.Option(
+            None, "--residual-cap", help="AOC's residual cap c (candidates above c x the "
+                                         "corpus's typical p90 residual are dropped; default: "
+                                         "no cap)."),
         bench_store: Path = typer.Option(Path("bench/store"), "--bench-store",
                                          help="Store for the bench's corpora and models."),
         fmt: Optional[str] = FormatOption,
@@ -48,6 +52,8 @@ def register(app: typer.Typer) -> None:
         scale = "tiny" if tiny else "quick" if quick else "full"
         chosen = [m.strip() for m in methods.split(",") if m.strip()] if methods else None
         check(experiment, scale, seeds, episodes, chosen, epsilon)
+        if residual_cap is not None and not residual_cap > 0:
+            raise AocError(f"--residual-cap must be > 0, got {residual_cap}")
         names = ORDER if experiment == "all" else [experiment]
         eta = expected_seconds(experiment, scale, seeds, episodes, chosen)
         message(f"aoc bench {experiment} ({scale}): expected time about "
@@ -65,7 +71,7 @@ def register(app: typer.Typer) -> None:
                 report = run_experiment(name, scale, seeds, target, bench_store, episodes,
                                         chosen, log=message, progress=bar,
                                         epsilon=None if name in ("epsilon", "two-gates")
-                                        else epsilon)
+                                        else epsilon, residual_cap=residual_cap)
                 bar.advance(overall)
                 for rec in report["summary"]:
                     if rec["status"] != "ok":

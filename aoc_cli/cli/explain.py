@@ -27,6 +27,7 @@ def register(app: typer.Typer) -> None:
         candidates: int = typer.Option(100, "--candidates", "-K"),
         epsilon: float = typer.Option(0.5, "--epsilon"),
         k: Optional[int] = typer.Option(None, "--k"),
+        residual_cap: Optional[float] = typer.Option(None, "--residual-cap", help="Residual cap c of the candidate filter (default: none)."),
         seed: int = typer.Option(0, "--seed"),
         fmt: Optional[str] = FormatOption,
     ) -> None:
@@ -39,7 +40,8 @@ def register(app: typer.Typer) -> None:
             raise AocError("give either --input FILE|- (JSONL queries) or --audit FILE "
                            "--episode E --step T")
         corpus = get_store().corpus(name)
-        config = ControllerConfig(candidates=candidates, epsilon=epsilon, k=k).check()
+        config = ControllerConfig(candidates=candidates, epsilon=epsilon, k=k,
+                                  residual_cap=residual_cap).check()
         records = []
         if audit is not None:
             recorded = read_audit_step(audit, episode, step)

@@ -35,6 +35,7 @@ def register(app: typer.Typer) -> None:
         candidates: int = typer.Option(100, "--candidates", "-K", help="Candidate actions per step."),
         epsilon: Optional[float] = typer.Option(None, "--epsilon", help="Residual quantile of candidates kept, in (0, 1] (default: the task's, else 0.5)."),
         k: Optional[int] = typer.Option(None, "--k", help="Nearest corpus beliefs per query (default 2(d_b+1))."),
+        residual_cap: Optional[float] = typer.Option(None, "--residual-cap", help="Also drop candidates whose residual exceeds this many times the corpus's typical p90 residual (default: no cap)."),
         sampler: str = typer.Option("uniform", "--sampler", help="uniform|bc"),
         select: Optional[List[str]] = typer.Option(None, "--select", help="Only rows with TAG=VALUE[,VALUE]."),
         exclude: Optional[List[str]] = typer.Option(None, "--exclude", help="No rows with TAG=VALUE[,VALUE]."),
@@ -54,7 +55,8 @@ def register(app: typer.Typer) -> None:
         if episodes < 1:
             raise AocError(f"--episodes must be >= 1, got {episodes}")
         corpus = get_store().corpus(name)
-        config = task_config(env, candidates=candidates, epsilon=epsilon, k=k, sampler=sampler)
+        config = task_config(env, candidates=candidates, epsilon=epsilon, k=k, sampler=sampler,
+                             residual_cap=residual_cap)
         environment = make_env(env)
         selection = row_selection(corpus, parse_selection(select, "--select"),
                                   parse_selection(exclude, "--exclude"))

@@ -75,6 +75,21 @@ def test_audit_log_replays_the_recorded_decision_exactly(run, tmp_path):
     one_line_error(code, out, err, "no episode 5")
 
 
+def test_residual_cap_reaches_the_controller_and_the_audit_log(run, tmp_path):
+    audit = tmp_path / "capped.h5"
+    code, _, err = run("rollout", "maze", "--env", "maze", "-n", "1", "--seed", "3",
+                       "--epsilon", "0.5", "--residual-cap", "1e-9", "--audit", str(audit),
+                       "-f", "json")
+    assert code == 0, err
+    code, out, err = run("explain", "maze", "--audit", str(audit), "--episode", "0",
+                         "--step", "2", "-f", "json")
+    assert code == 0, err
+    rec = json.loads(out)
+    # a cap far below every residual: only the fallback, the smallest-residual candidate, passes
+    assert rec["candidates"]["passed"] == 1
+    assert rec["action"] == rec["recorded_action"]
+
+
 def test_explain_jsonl_queries_and_compare(run, tmp_path):
     queries = tmp_path / "q.jsonl"
     queries.write_text(
@@ -119,6 +134,8 @@ def test_rollout_select_uses_only_that_policy(run, tmp_path, maze_root):
     (["rollout", "maze", "--env", "maze", "--epsilon", "0"], "--epsilon must be in"),
     (["rollout", "maze", "--env", "maze", "--epsilon", "1.5"], "--epsilon must be in"),
     (["rollout", "maze", "--env", "maze", "--k", "0"], "--k must be >= 1"),
+    (["rollout", "maze", "--env", "maze", "--residual-cap", "0"], "--residual-cap must be > 0"),
+    (["bench", "two-gates", "--tiny", "--residual-cap", "-1"], "--residual-cap must be > 0"),
     (["rollout", "nope", "--env", "maze"], "no corpus 'nope'"),
     (["rollout", "maze", "--env", "maze", "--select", "policy=pi9"], "has no value 'pi9'"),
     (["index", "maze", "--model", "nope"], "no model 'nope'"),
