@@ -74,9 +74,8 @@ class NearestNeighbourController:
         obs = np.repeat(np.asarray(observation, np.float32).reshape(1, -1), n, axis=0)
         if self.space == "raw":
             return self.features.transform(obs, candidates, history)
-        from aoc_cli.control.controller import repeat_history
-
-        return self.session.model.beliefs(obs, candidates, repeat_history(history, n))
+        # the one-row history is shared by the K candidates (the GRU runs once)
+        return self.session.model.beliefs(obs, candidates, history)
 
     def estimate(self, observation, candidates, history) -> tuple[np.ndarray, np.ndarray]:
         """(K,) value estimates and (K, k) corpus rows of the candidates' neighbours."""

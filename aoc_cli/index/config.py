@@ -27,8 +27,9 @@ class IndexConfig:
         is raised to at least the number of neighbours asked for).
     ivf_nlist: number of inverted lists (0: sqrt(N) rounded down to a power of two, at most 4096);
         ivf_nprobe: lists visited per query; ivf_train_max: rows used to train the coarse quantiser.
-    pool_factor, pool_min: batched search. The Q queries of one control step lie close together,
-        so the index is searched once, at their centroid c, for k' = max(pool_factor * k,
+    pool_factor, pool_min: batched search with an approximate kind (a flat index answers a batch
+        with the exact grouped scan of ``aoc_cli/index/grouped.py`` instead). The Q queries of
+        one control step lie close together, so the index is searched once, at their centroid c, for k' = max(pool_factor * k,
         pool_min) rows. A row outside that pool is at least d_k'(c) - ||y_i - c|| from query i
         (triangle inequality), so query i's k nearest rows inside the pool are its exact k
         nearest whenever its k-th distance is below that bound ("certified"). Uncertified
