@@ -10,7 +10,6 @@ seeded random half), so the same code answers "the k nearest rows of the re-weig
 from __future__ import annotations
 
 import json
-import math
 import os
 import tempfile
 from dataclasses import asdict
@@ -22,6 +21,7 @@ import numpy as np
 from aoc_cli.errors import AocError
 from aoc_cli.index.config import IndexConfig
 from aoc_cli.index.grouped import ScanData, grouped_search
+from aoc_cli.index.pooled import exact_among as _exact_among, pooled_search
 from aoc_cli.index.threads import faiss_threads, single_threaded_blas
 
 
@@ -184,7 +184,7 @@ class BeliefIndex:
             elif Y.shape[0] >= 2 and self.kind == "flat" and self._store is not None:
                 dist[:, :kk], pos[:, :kk] = self._grouped(Y, kk, sel, available)
             elif Y.shape[0] >= 2:
-                dist[:, :kk], pos[:, :kk] = self._pooled(Y, kk, sel, available)
+                dist[:, :kk], pos[:, :kk] = pooled_search(self, Y, kk, sel, available)
             else:
                 dist[:, :kk], pos[:, :kk] = self._direct(Y, kk, sel)
         rows = pos if self._row_of is None else np.where(pos >= 0, self._row_of[np.maximum(pos, 0)], -1)
@@ -202,89 +202,6 @@ class BeliefIndex:
             self._scan = ScanData.of(self._store)
         out = grouped_search(Y, self._scan, k, None if sel is None else sel.mask)
         return self._direct(Y, k, sel) if out is None else out
-
-    def _pooled(self, Y: np.ndarray, k: int, sel: Selection | None, available: int,
-                depth: int = 0):
-        """One search at the centroid serves every query it can certify (triangle inequality).
-
-        The pool starts at k' = max(pool_factor k, pool_min) rows and doubles (at most twice)
-        while 30-95% of the queries are certified; queries still uncertified are searched
-        directly. (In d = 20 the k'-th distance grows like k'^(1/20): when the batch spreads
-        over a distance comparable to the k-th neighbour distance no affordable pool certifies
-        it, so doubling further does not pay.)
-        """
-        cfg = self.config
-        kp = int(min(available, max(math.ceil(cfg.pool_factor * k), cfg.pool_min, k)))
-        c = Y.mean(axis=0, keepdims=True)
-        spread = np.sqrt(((Y.astype(np.float64) - c.astype(np.float64)) ** 2).sum(axis=1))
-        for attempt in range(3):
-            with faiss_threads(1):  # one query: threads only add synchronisation
-                Dc, Ic = self.index.search(c, kp, params=self._params(sel, kp))
-            pool = Ic[0][Ic[0] >= 0]
-            if pool.size < k:
-                return self._direct(Y, k, sel)
-            d2, p = _exact_among(Y, self.vectors(pool), k)
-            pos = pool[p]
-            if pool.size >= available:
-                return d2, pos  # the pool is every available row
-            if pool.size < kp:  # an IVF ran out of probed rows: the pool bounds nothing
-                return self._direct(Y, k, sel)
-            radius = math.sqrt(max(float(Dc[0, pool.size - 1]), 0.0))
-            kth = np.sqrt(np.maximum(d2[:, -1], 0.0))
-            certified = kth <= (radius - spread) - 1e-5 * radius
-            if certified.all() or kp >= available:
-                return d2, pos
-            if attempt < 2 and 0.3 <= certified.mean() < 0.95:
-                kp = int(min(available, 2 * kp))
-                continue
-            break
-        rest = np.flatnonzero(~certified)
-        d2[rest], pos[rest] = self._split(Y[rest], k, sel, available, depth)
-        return d2, pos
-
-    def _split(self, Y: np.ndarray, k: int, sel: Selection | None, available: int, depth: int):
-        """Uncertified queries: cut them into groups along their main direction, search every
-        group's centroid in one FAISS call and certify each group against its own pool.
-
-        Real control steps spread their candidates along a curve in belief space (the action
-        moves the belief): one centroid cannot certify the whole batch, but groups with an
-        eighth of its spread can, for the price of one more index scan. Queries still
-        uncertified are grouped again (three rounds at most), then searched directly.
-        IVF: one round of 16 groups with six times the pool (an IVF search costs its probed
-        lists whatever k; measured 1.4x faster on pendulum control steps, same recall).
-        """
-        n = Y.shape[0]
-        ivf = self.kind == "ivf"
-        if depth > (0 if ivf else 2) or n < 6:
-            return self._direct(Y, k, sel)
-        centred = Y.astype(np.float64) - Y.mean(axis=0)
-        direction = np.linalg.svd(centred, full_matrices=False)[2][0]
-        n_groups = min(16 if ivf else 8, n // 3)
-        groups = np.array_split(np.argsort(centred @ direction, kind="stable"), n_groups)
-        C = np.stack([Y[g].mean(axis=0) for g in groups]).astype(np.float32)
-        cfg = self.config
-        base = max(math.ceil(cfg.pool_factor * k), cfg.pool_min, k)
-        kp = int(min(available, (6 if ivf else 2) * base))
-        with faiss_threads(1):
-            Dc, Ic = self.index.search(C, kp, params=self._params(sel, kp))
-        d2 = np.empty((n, k))
-        pos = np.empty((n, k), dtype=np.int64)
-        todo = np.zeros(n, dtype=bool)
-        for j, g in enumerate(groups):
-            pool = Ic[j][Ic[j] >= 0]
-            if pool.size < kp:  # too few rows (selection, IVF): the pool bounds nothing
-                todo[g] = True
-                continue
-            gd2, gp = _exact_among(Y[g], self.vectors(pool), k)
-            d2[g], pos[g] = gd2, pool[gp]
-            radius = math.sqrt(max(float(Dc[j, pool.size - 1]), 0.0))
-            spread = np.sqrt(((Y[g].astype(np.float64) - C[j].astype(np.float64)) ** 2).sum(axis=1))
-            kth = np.sqrt(np.maximum(gd2[:, -1], 0.0))
-            todo[g] = ~(kth <= (radius - spread) - 1e-5 * radius)
-        rest = np.flatnonzero(todo)
-        if rest.size:
-            d2[rest], pos[rest] = self._split(Y[rest], k, sel, available, depth + 1)
-        return d2, pos
 
     # ---------------------------------------------------------------- adaptivity
     def resample(self, multiplicity, seed: int | None = None) -> "BeliefIndex":
@@ -419,31 +336,6 @@ def _kind_of(index: faiss.Index) -> str:
     if isinstance(index, faiss.IndexIVF):
         return "ivf"
     return "flat"
-
-
-def _exact_among(Y: np.ndarray, V: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
-    """Squared distances (float64, ascending) and positions (into V) of the k nearest rows of V.
-
-    Candidates are ranked in float32 after centring on the mean of V (so the expansion
-    |y|^2 - 2 y.v + |v|^2 does not cancel), then the k kept distances are recomputed exactly.
-    """
-    centre = V.mean(axis=0, dtype=np.float64).astype(np.float32)
-    Yc = np.asarray(Y, dtype=np.float32) - centre
-    Vc = np.asarray(V, dtype=np.float32) - centre
-    D = (Yc * Yc).sum(1)[:, None] - 2.0 * (Yc @ Vc.T) + (Vc * Vc).sum(1)[None, :]
-    if k < V.shape[0]:
-        # the k smallest per row; np.partition + a mask is much faster than argpartition
-        mask = D <= np.partition(D, k - 1, axis=1)[:, k - 1 : k]
-        if (mask.sum(1) == k).all():
-            part = np.nonzero(mask)[1].reshape(-1, k)
-        else:  # ties at the k-th distance
-            part = np.argpartition(D, k - 1, axis=1)[:, :k]
-    else:
-        part = np.broadcast_to(np.arange(V.shape[0]), D.shape)
-    diff = V[part].astype(np.float64) - np.asarray(Y, dtype=np.float64)[:, None, :]
-    dp = np.einsum("qkd,qkd->qk", diff, diff)
-    order = np.argsort(dp, axis=1, kind="stable")
-    return np.take_along_axis(dp, order, axis=1), np.take_along_axis(part, order, axis=1)
 
 
 def _as_beliefs(beliefs) -> np.ndarray:

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from aoc_cli.index import BeliefIndex
-from aoc_cli.index.belief_index import _exact_among
+from aoc_cli.index.pooled import exact_among as _exact_among
 from aoc_cli.index.grouped import ScanData, grouped_search
 
 
