@@ -6,7 +6,8 @@
   At the full scale the upright task has its own corpus (collected from the upright start, as
   the paper did); at the quick and tiny scales it is evaluated with the random-start corpus and
   models (the corpus covers the upright region; one training instead of two). A diagnostic
-  row, ``aoc-normal-rows``, is AOC restricted to the evaluation system's rows (see ORACLE).
+  row, ``aoc-normal-rows``, is AOC restricted to the evaluation system's rows (see ORACLE);
+  ``aoc-dynamics`` is AOC with aoc's auxiliary dynamics head (see DYNAMICS).
 * ``epsilon`` (paper Table "epsilon controls the conservation"): AOC with epsilon in
   {0.3, 0.5, 0.9, 1.0} at the middle data size, random start.
 * ``k`` (paper Table "cardinality of the corpus subset"): AOC with k in {1, 10, 2 (d_b + 1), 100}.
@@ -22,7 +23,7 @@ from aoc_cli.bench.methods import DATA, data_values, row_values
 from aoc_cli.bench.results import result_row
 
 TASKS = ("pendulum-het", "pendulum-het-upright")
-METHODS = ["aoc", "aoc-normal-rows", "knn", "1nn", "knn-belief", "1nn-belief", "bc", "td3bc",
+METHODS = ["aoc", "aoc-dynamics", "aoc-normal-rows", "knn", "1nn", "knn-belief", "1nn-belief", "bc", "td3bc",
            "cql", "mpc", "zero", "random"]
 
 SCALES = {
@@ -32,7 +33,7 @@ SCALES = {
     "quick": {"sizes": [30_000], "paper_rows": [100_000], "episodes": 4, "seeds": 1,
               "epochs": 40, "patience": 6, "upright_data": "shared", "mid": 30_000,
               "ablation_tasks": ["pendulum-het"],
-              "methods": ["aoc", "aoc-normal-rows", "knn", "1nn", "knn-belief", "1nn-belief",
+              "methods": ["aoc", "aoc-dynamics", "aoc-normal-rows", "knn", "1nn", "knn-belief", "1nn-belief",
                           "bc", "td3bc", "mpc", "zero", "random"]},
     "full": {"sizes": [100_000, 300_000, 600_000], "paper_rows": [100_000, 300_000, 600_000],
              "episodes": 10, "seeds": 8, "epochs": 200, "patience": 10, "upright_data": "own",
@@ -43,9 +44,10 @@ EPSILONS = (0.3, 0.5, 0.9, 1.0)
 #: may only use rows of the evaluation system (``--select system=normal``). The gap between it
 #: and ``aoc`` is what the belief fails to tell apart about the two systems.
 ORACLE = "aoc-normal-rows"
-#: The value model's auxiliary dynamics head (``aoc train --dynamics-weight``): without it the
-#: belief does not tell the two systems apart and AOC sits at the do-nothing level; with it AOC
-#: on the mixed corpus matches AOC on the normal system's rows (docs/belief.md).
+#: aoc's extension, not the paper's objective: AOC whose value model (``dynamics``, its own
+#: index) also learns the auxiliary dynamics head (``aoc train --dynamics-weight 1``), which
+#: gives the belief a reason to tell the two systems apart (docs/belief.md).
+DYNAMICS = "aoc-dynamics"
 DYNAMICS_WEIGHT = 1.0
 
 
@@ -60,13 +62,18 @@ def _k_values(d_b: int) -> list[int]:
     return [1, 10, 2 * (d_b + 1), 100]
 
 
-def _prepare(ctx: Context, scale: dict, task: str, rows: int, seed: int, bc: bool):
-    """Corpus, value model (+ bc model) and default index for ``task`` at ``rows`` rows."""
+def _prepare(ctx: Context, scale: dict, task: str, rows: int, seed: int, bc: bool,
+             dynamics: bool = False):
+    """Corpus, value model (+ bc model, + the dynamics-head model and its index) and default
+    index for ``task`` at ``rows`` rows."""
     data_task = task if (task == "pendulum-het" or scale["upright_data"] == "own") \
         else "pendulum-het"
     corpus = ctx.artefacts.corpus(data_task, rows=rows, seed=seed)
-    ctx.artefacts.model(corpus, "default", belief_config(scale, "value", seed,
-                                                         dynamics_weight=DYNAMICS_WEIGHT))
+    ctx.artefacts.model(corpus, "default", belief_config(scale, "value", seed))
+    if dynamics:
+        ctx.artefacts.model(corpus, "dynamics", belief_config(scale, "value", seed,
+                                                              dynamics_weight=DYNAMICS_WEIGHT))
+        ctx.artefacts.index(corpus, "dynamics")
     if bc:
         ctx.artefacts.model(corpus, "bc", belief_config(scale, "imitation", seed))
     ctx.artefacts.index(corpus, "default")
@@ -81,7 +88,8 @@ def run_pendulum_het(ctx: Context, scale: dict) -> tuple[list[dict], callable]:
         setting = f"rows={size}"
         for seed in ctx.seeds:
             for task in TASKS:
-                corpus = _prepare(ctx, scale, task, size, seed, "bc" in methods)
+                corpus = _prepare(ctx, scale, task, size, seed, "bc" in methods,
+                                  DYNAMICS in methods)
                 env = make_task_env(task, scale)
                 s = session(corpus, env, task, seed=seed, **ctx.aoc_config)
                 rows_out.append(result_row("pendulum-het", task, DATA, setting, seed,
@@ -93,6 +101,12 @@ def run_pendulum_het(ctx: Context, scale: dict) -> tuple[list[dict], callable]:
                                              ctx.n_episodes(scale["episodes"]), seed,
                                              label=f"{ORACLE} {task} {setting} seed {seed}")
                         run.method = ORACLE
+                    elif method == DYNAMICS:
+                        dyn = session(corpus, env, task, model_id="dynamics", seed=seed,
+                                      **ctx.aoc_config)
+                        run = ctx.runner.run("aoc", dyn, env, ctx.n_episodes(scale["episodes"]),
+                                             seed, label=f"{DYNAMICS} {task} {setting} seed {seed}")
+                        run.method = DYNAMICS
                     else:
                         run = ctx.runner.run(method, s, env, ctx.n_episodes(scale["episodes"]),
                                              seed, label=f"{task} {setting} seed {seed}")

@@ -87,7 +87,7 @@ def check(name: str, scale: str, seeds: int | None, episodes: int | None,
     if methods:
         from aoc_cli.baselines import BASELINES
 
-        unknown = [m for m in methods if m not in ("aoc", "aoc-normal-rows")
+        unknown = [m for m in methods if m not in ("aoc", "aoc-normal-rows", "aoc-dynamics")
                    and m not in BASELINES]
         if unknown:
             raise AocError(f"unknown method(s) {', '.join(unknown)}: use aoc or "
@@ -163,7 +163,7 @@ def _plot(exp: Experiment, summary: list[dict], ctx: Context) -> None:
 COST = {
     "train_row_epoch": 1.0e-4,      # belief model, one thread
     "epochs": 35,                   # early stopping ends near here (at most max_epochs)
-    "step": {"aoc": 0.07, "aoc-normal-rows": 0.07, "knn-belief": 0.06, "1nn-belief": 0.05, "knn": 0.05,
+    "step": {"aoc": 0.07, "aoc-normal-rows": 0.07, "aoc-dynamics": 0.07, "knn-belief": 0.06, "1nn-belief": 0.05, "knn": 0.05,
              "1nn": 0.04, "bc": 0.002, "td3bc": 0.001, "cql": 0.001, "mpc": 0.01,
              "zero": 0.0002, "random": 0.0002},
     "offline_rl_step": {"td3bc": 0.033, "cql": 0.25},
@@ -204,7 +204,8 @@ def expected_seconds(name: str, scale: str, seeds: int | None = None,
         tasks = len(pendulum.TASKS)
         for rows in p["sizes"]:
             corpora = 2 if p["upright_data"] == "own" else 1
-            total += n_seeds * corpora * (train(rows, 2 if "bc" in ms else 1) + blackbox(ms, rows))
+            models = 1 + ("bc" in ms) + 1.4 * ("aoc-dynamics" in ms)  # the head: ~40% more epochs
+            total += n_seeds * corpora * (train(rows, models) + blackbox(ms, rows))
             total += n_seeds * tasks * eps * 200 * sum(step.get(m, 0.01) for m in ms)
     elif name in ("epsilon", "k"):
         tasks = len(p["ablation_tasks"])

@@ -56,8 +56,15 @@ def test_pendulum_het_tiny_covers_every_method_task_and_the_data(tmp_path, bench
     report = run_experiment("pendulum-het", "tiny", out=out, store=bench_store)
     rows, summary = _check_outputs(out, report)
     methods = {r["method"] for r in rows}
-    assert methods >= {"aoc", "knn", "1nn", "knn-belief", "1nn-belief", "bc", "td3bc", "cql",
-                       "mpc", "zero", "random", "data"}
+    assert methods >= {"aoc", "aoc-dynamics", "aoc-normal-rows", "knn", "1nn", "knn-belief",
+                       "1nn-belief", "bc", "td3bc", "cql", "mpc", "zero", "random", "data"}
+    # aoc-dynamics runs its own model, trained with the auxiliary head; aoc the paper's
+    from aoc_cli.belief import load_model
+    from aoc_cli.store import Store
+    corpus = Store(bench_store).corpus(next(n for n in (r["note"] for r in rows
+                                                         if r["method"] == "data")).split()[-1])
+    assert load_model(corpus, "dynamics").config.dynamics_weight == 1.0
+    assert load_model(corpus, "default").config.dynamics_weight == 0.0
     assert {r["task"] for r in rows} == {"pendulum-het", "pendulum-het-upright"}
     zero_upright = next(r for r in rows if r["method"] == "zero"
                         and r["task"] == "pendulum-het-upright")
