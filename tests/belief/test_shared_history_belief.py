@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import torch
 
-from aoc_cli.belief.artefact import belief_from_memory, history_memory
 from aoc_cli.belief.model import BeliefNet
 
 
@@ -19,8 +18,8 @@ def test_gru_once_gives_the_beliefs_of_the_repeated_history():
         steps = torch.randn(1, max(history_length, 1), 3 + 1 + 2) if history_length else None
         with torch.no_grad():
             repeated = net.belief(obs, act, None if steps is None else steps.expand(k, -1, -1))
-            memory = None if steps is None else history_memory(net, steps).expand(k, -1)
-            shared = belief_from_memory(net, memory, obs, act)
+            memory = None if steps is None else net.memory(steps).expand(k, -1)
+            shared = net.belief_from_memory(memory, obs, act)
         assert shared.shape == (k, 20)
         # identical up to float32 rounding (the GRU's GEMM blocks by batch size)
         torch.testing.assert_close(shared, repeated, rtol=0, atol=1e-6)
