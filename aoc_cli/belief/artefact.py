@@ -195,7 +195,7 @@ class BeliefModel:
         memory = None
         with torch.no_grad():
             if steps is not None and len(steps) == 1 and q > 1:
-                memory = history_memory(self.net, steps)  # one history: run the GRU once
+                memory = self.net.memory(steps)  # one history: run the GRU once
             obs, act = (None if p is None else p.expand(q, *p.shape[1:]) for p in (obs, act))
             if memory is None and steps is not None:
                 steps = steps.expand(q, *steps.shape[1:])
@@ -207,7 +207,7 @@ class BeliefModel:
                 if memory is None:
                     b = self.net.belief(obs[sl], a, None if steps is None else steps[sl])
                 else:
-                    b = belief_from_memory(self.net, memory.expand(len(obs[sl]), -1), obs[sl], a)
+                    b = self.net.belief_from_memory(memory.expand(len(obs[sl]), -1), obs[sl], a)
                 out = self.net.head(b)
                 if self.encoder.t_std is not None:
                     out = self.encoder.untarget(out)
@@ -237,26 +237,6 @@ class BeliefModel:
                 if progress is not None:
                     progress(i + len(rows), n)
         return out
-
-
-def history_memory(net: BeliefNet, steps: torch.Tensor) -> torch.Tensor:
-    """The GRU's summary of histories: steps (R, L, F) -> (R, hidden), as in BeliefNet.belief."""
-    _, h_n = net.gru(steps)
-    return h_n[-1]
-
-
-def belief_from_memory(net: BeliefNet, memory: torch.Tensor | None, obs: torch.Tensor,
-                       act: torch.Tensor | None) -> torch.Tensor:
-    """BeliefNet.belief given the GRU summary (Q, hidden) (None without history), obs (Q, d_o),
-    act (Q, d_a_in): the control step computes the summary of its one history once and
-    broadcasts it to the K candidates."""
-    parts = [] if memory is None else [memory]
-    parts.append(obs)
-    if net.use_action:
-        parts.append(act)
-    x = torch.relu(net.fc1(torch.cat(parts, dim=-1)))
-    x = torch.relu(net.fc2(x))
-    return net.belief_activation(net.fc3(x))
 
 
 def check_corpus(model: BeliefModel, corpus) -> None:

@@ -146,10 +146,21 @@ class BeliefNet(nn.Module):
     def belief(self, obs: torch.Tensor, act: torch.Tensor | None,
                steps: torch.Tensor | None) -> torch.Tensor:
         """obs (Q, d_o), act (Q, d_a_in) or None, steps (Q, L, F) -> belief (Q, d_b)."""
-        parts = []
-        if self.gru is not None:
-            _, h_n = self.gru(steps)
-            parts.append(h_n[-1])
+        return self.belief_from_memory(self.memory(steps), obs, act)
+
+    def memory(self, steps: torch.Tensor | None) -> torch.Tensor | None:
+        """The GRU's summary of histories: steps (R, L, F) -> (R, hidden); None when L = 0."""
+        if self.gru is None:
+            return None
+        _, h_n = self.gru(steps)
+        return h_n[-1]
+
+    def belief_from_memory(self, memory: torch.Tensor | None, obs: torch.Tensor,
+                           act: torch.Tensor | None) -> torch.Tensor:
+        """The belief given the history summary (Q, hidden) (or None), obs (Q, d_o) and act
+        (Q, d_a_in): a control step summarises its one history once and broadcasts it to the
+        K candidates."""
+        parts = [] if memory is None else [memory]
         parts.append(obs)
         if self.use_action:
             parts.append(act)
