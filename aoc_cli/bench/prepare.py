@@ -35,6 +35,17 @@ def corpus_name(task: str, rows: int | None = None, episodes: int | None = None,
     return f"{task}-{budget}-s{seed}"
 
 
+def _same_policies(corpus, task: str) -> bool:
+    """Whether the corpus was collected with the task's current behaviour policies (a corpus
+    of an earlier behaviour mix, e.g. other noise levels, is collected again)."""
+    from aoc_cli.envs import TASKS
+
+    known = TASKS.get(task)
+    if known is None or "policy" not in corpus.manifest.get("tags", {}):
+        return True
+    return list(corpus.tag("policy")[1]) == list(known.policies)
+
+
 class Artefacts:
     """Builds or reuses corpora, models and indexes in the bench store; logs what it did."""
 
@@ -63,7 +74,8 @@ class Artefacts:
             c = self.store.corpus(name)
             src = (c.manifest.get("sources") or [{}])[-1]
             if src.get("task") == task and src.get("seed") == seed and \
-                    src.get("steps") == rows and src.get("episodes") == episodes:
+                    src.get("steps") == rows and src.get("episodes") == episodes and \
+                    _same_policies(c, task):
                 return c
         started = time.perf_counter()
         bar = self._task(f"collect {name}", rows or episodes)

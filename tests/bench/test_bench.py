@@ -222,3 +222,22 @@ def test_bench_cli_prints_the_summary_and_rejects_bad_input(aoc, tmp_path):
         assert code == 2 and needle in err and len(err.strip().splitlines()) == 1
     assert set(EXPERIMENTS) == {"pendulum-het", "epsilon", "k", "maze-adapt", "two-gates",
                                 "lunar", "ood"}
+
+
+def test_a_stored_corpus_of_an_earlier_behaviour_mix_is_collected_again(tmp_path):
+    from aoc_cli.bench.prepare import Artefacts, corpus_name
+    from aoc_cli.envs import TASKS, collect
+    from aoc_cli.store import Store
+
+    store = Store(tmp_path)
+    art = Artefacts(tmp_path)
+    first = art.corpus("pendulum-het", rows=400, seed=0)
+    assert art.corpus("pendulum-het", rows=400, seed=0).hash == first.hash   # reused
+    # the same name, but policies of another mix (as before a change of noise levels)
+    data, _ = collect("pendulum-het", steps=400, seed=0)
+    codes, labels = data.tags["policy"]
+    data.tags["policy"] = (codes, [f"old-{x}" for x in labels])
+    store.write(corpus_name("pendulum-het", 400, None, 0), data, overwrite=True)
+    again = art.corpus("pendulum-het", rows=400, seed=0)
+    assert list(again.tag("policy")[1]) == list(TASKS["pendulum-het"].policies)
+    assert again.hash == first.hash
