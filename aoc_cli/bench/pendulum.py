@@ -9,8 +9,10 @@
   row, ``aoc-normal-rows``, is AOC restricted to the evaluation system's rows (see ORACLE);
   ``aoc-dynamics`` is AOC with aoc's auxiliary dynamics head (see DYNAMICS).
 * ``epsilon`` (paper Table "epsilon controls the conservation"): AOC with epsilon in
-  {0.3, 0.5, 0.9, 1.0} at the middle data size, random start.
-* ``k`` (paper Table "cardinality of the corpus subset"): AOC with k in {1, 10, 2 (d_b + 1), 100}.
+  {0.3, 0.5, 0.9, 1.0} at the middle data size, on the scale's ablation tasks (the quick
+  scale: random and upright start), with the paper's model and with the dynamics head.
+* ``k`` (paper Table "cardinality of the corpus subset"): AOC with k in {1, 10, 2 (d_b + 1), 100},
+  likewise.
 
 The paper's pendulum figures are for the upright start; they are shown beside both tasks.
 """
@@ -32,7 +34,7 @@ SCALES = {
              "ablation_tasks": ["pendulum-het"]},
     "quick": {"sizes": [30_000], "paper_rows": [100_000], "episodes": 4, "seeds": 1,
               "epochs": 40, "patience": 6, "upright_data": "shared", "mid": 30_000,
-              "ablation_tasks": ["pendulum-het"],
+              "ablation_tasks": ["pendulum-het", "pendulum-het-upright"],
               "methods": ["aoc", "aoc-dynamics", "aoc-normal-rows", "knn", "1nn", "knn-belief", "1nn-belief",
                           "bc", "td3bc", "mpc", "zero", "random"]},
     "full": {"sizes": [100_000, 300_000, 600_000], "paper_rows": [100_000, 300_000, 600_000],
@@ -126,13 +128,16 @@ def _ablation(ctx: Context, scale: dict, name: str, settings) -> list[dict]:
     out = []
     for seed in ctx.seeds:
         for task in scale["ablation_tasks"]:
-            corpus = _prepare(ctx, scale, task, scale["mid"], seed, bc=False)
+            corpus = _prepare(ctx, scale, task, scale["mid"], seed, bc=False, dynamics=True)
             env = make_task_env(task, scale)
             for setting, config in settings(corpus):
-                s = session(corpus, env, task, seed=seed, **{**ctx.aoc_config, **config})
-                run = ctx.runner.run("aoc", s, env, ctx.n_episodes(scale["episodes"]), seed,
-                                     label=f"{task} {setting} seed {seed}")
-                out.append(result_row(name, task, "aoc", setting, seed, **row_values(run)))
+                for method, model_id in (("aoc", "default"), (DYNAMICS, "dynamics")):
+                    s = session(corpus, env, task, model_id=model_id, seed=seed,
+                                **{**ctx.aoc_config, **config})
+                    run = ctx.runner.run("aoc", s, env, ctx.n_episodes(scale["episodes"]), seed,
+                                         label=f"{method} {task} {setting} seed {seed}")
+                    out.append(result_row(name, task, method, setting, seed,
+                                          **row_values(run)))
     return out
 
 

@@ -209,8 +209,8 @@ def expected_seconds(name: str, scale: str, seeds: int | None = None,
             total += n_seeds * tasks * eps * 200 * sum(step.get(m, 0.01) for m in ms)
     elif name in ("epsilon", "k"):
         tasks = len(p["ablation_tasks"])
-        total += n_seeds * train(p["mid"])
-        total += n_seeds * tasks * 4 * eps * 200 * step["aoc"]
+        total += n_seeds * train(p["mid"], 2.4)   # the paper's model and the dynamics head's
+        total += n_seeds * tasks * 2 * 4 * eps * 200 * step["aoc"]
     elif name == "maze-adapt":
         rows = p["episodes_data"] * COST["rows_per_episode"]["maze"]
         total += n_seeds * train(rows)

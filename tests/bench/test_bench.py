@@ -80,14 +80,21 @@ def test_pendulum_ablations_and_ood_tiny(tmp_path, bench_store, name):
     out = tmp_path / name
     report = run_experiment(name, "tiny", out=out, store=bench_store)
     rows, summary = _check_outputs(out, report)
-    settings = [s["setting"] for s in summary if s["task"] == "pendulum-het"]
+    aoc = [s for s in summary if s["task"] == "pendulum-het" and s["method"] == "aoc"]
+    settings = [s["setting"] for s in aoc]
+    if name in ("epsilon", "k"):
+        # the same settings with the dynamics-head model
+        dyn = [s["setting"] for s in summary
+               if s["task"] == "pendulum-het" and s["method"] == "aoc-dynamics"]
+        assert dyn == settings
     if name == "epsilon":
         assert settings == ["epsilon=0.3", "epsilon=0.5", "epsilon=0.9", "epsilon=1"]
-        assert summary[1]["paper"] == [-1.25, 0.4]
+        assert aoc[1]["paper"] == [-1.25, 0.4]
     elif name == "k":
         assert settings == ["k=1", "k=10", "k=42", "k=100"]
-        assert summary[2]["paper"] == [-1.25, 0.4]          # 2 (d_b + 1) is the paper's 20
+        assert aoc[2]["paper"] == [-1.25, 0.4]              # 2 (d_b + 1) is the paper's 20
     else:
+        settings = [s["setting"] for s in summary if s["task"] == "pendulum-het"]
         assert settings == ["noise=0", "noise=0.5"]
         for r in rows:
             assert r["ood_flagged"] in (0.0, 1.0) and r["ood_false_flags"] >= 0
