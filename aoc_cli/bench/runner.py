@@ -149,7 +149,12 @@ def _plot(exp: Experiment, summary: list[dict], ctx: Context) -> None:
     elif exp.name in ("epsilon", "k", "two-gates"):
         for task in dict.fromkeys(r["task"] for r in summary):
             name = f"{exp.name}_{task}.png"
-            if plots.setting_bars(summary, task, "aoc", out / name, f"{task}: AOC by {exp.name}"):
+            methods = {r["method"] for r in summary if r["task"] == task}
+            drawn = plots.grouped_bars(summary, task, out / name,
+                                       f"{task}: AOC by {exp.name}") if len(methods) > 1 \
+                else plots.setting_bars(summary, task, "aoc", out / name,
+                                        f"{task}: AOC by {exp.name}")
+            if drawn:
                 ctx.plots.append(name)
     elif exp.name == "maze-adapt":
         if plots.maze_adapt_curves(summary, paper.MAZE, out / "maze_adapt.png"):
