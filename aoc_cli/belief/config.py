@@ -85,6 +85,9 @@ class BeliefConfig:
                 raise AocError(f"{flag} must be >= 1, got {getattr(self, name)}")
         if not self.dynamics_weight >= 0:
             raise AocError(f"--dynamics-weight must be >= 0, got {self.dynamics_weight}")
+        if self.dynamics_weight > 0 and self.mode != "value":
+            raise AocError("--dynamics-weight needs --mode value (the imitation belief b(o, h) "
+                           "has no action to predict the next observation from)")
         if self.patience < 1:
             raise AocError(f"--patience must be >= 1, got {self.patience}")
         if not self.lr > 0:

@@ -89,6 +89,9 @@ def test_dynamics_weight_must_not_be_negative(store, aoc):
     code, out, err = aoc("train", "nothing", "--dynamics-weight", "-1")
     assert code == 2 and out == ""
     assert err.strip().splitlines() == ["aoc: error: --dynamics-weight must be >= 0, got -1.0"]
+    code, out, err = aoc("train", "nothing", "--mode", "imitation", "--dynamics-weight", "1")
+    assert code == 2 and out == "" and len(err.strip().splitlines()) == 1
+    assert "--dynamics-weight needs --mode value" in err
 
 
 def test_pendulum_het_dynamics_head_makes_the_system_readable_from_the_beliefs(tmp_path):
