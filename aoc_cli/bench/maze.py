@@ -85,15 +85,14 @@ def start_probe(session) -> dict:
     changes the nearest entries, the decision follows v_hat among candidates that pass.
     """
     from aoc_cli.control import HistoryBuffer
-    from aoc_cli.control.controller import repeat_history
 
     ctl, corpus = session.controller, session.corpus
     codes, labels = corpus.tag("policy")
     pi1 = codes == labels.index("pi1")
     moves = np.stack(list(START_PROBES.values()))
     history = HistoryBuffer(session.model.history_length, 2, 2, False).history()
-    beliefs = ctl.model.beliefs(np.zeros((len(moves), 2), np.float32), moves,
-                                repeat_history(history, len(moves)))
+    # the start observation and the empty history broadcast to the moves (the GRU runs once)
+    beliefs = ctl.model.beliefs(np.zeros((1, 2), np.float32), moves, history)
     dec = session.index.decompose(beliefs, k=ctl.config.k, selection=ctl.selection)
     out = {}
     for j, name in enumerate(START_PROBES):

@@ -51,11 +51,6 @@ class Decision:
     warnings: list[str] = field(default_factory=list)
 
 
-def repeat_history(history: History, times: int) -> History:
-    """A one-row history repeated ``times`` times along the row axis."""
-    return History(*(np.repeat(np.asarray(x), times, axis=0) for x in history))
-
-
 def action_bounds(action_space: dict, actions: np.ndarray | None = None):
     """(low (d_a,), high (d_a,)) of a box action space; from the data when not recorded."""
     if "low" in action_space and "high" in action_space:
