@@ -192,22 +192,17 @@ class BeliefModel:
 
     def _run(self, observations, actions, history, batch):
         (obs, act, steps), q = self._inputs(observations, actions, history)
-        memory = None
-        with torch.no_grad():
-            if steps is not None and len(steps) == 1 and q > 1:
-                memory = self.net.memory(steps)  # one history: run the GRU once
-            obs, act = (None if p is None else p.expand(q, *p.shape[1:]) for p in (obs, act))
-            if memory is None and steps is not None:
-                steps = steps.expand(q, *steps.shape[1:])
+        obs, act = (None if p is None else p.expand(q, *p.shape[1:]) for p in (obs, act))
         beliefs, outs = [], []
         with torch.no_grad():
+            # one history for every row (a control step's K candidates): the GRU runs once
+            shared = self.net.memory(steps) if steps is not None and len(steps) == 1 else None
             for i in range(0, q, batch):
                 sl = slice(i, i + batch)
-                a = None if act is None else act[sl]
-                if memory is None:
-                    b = self.net.belief(obs[sl], a, None if steps is None else steps[sl])
-                else:
-                    b = self.net.belief_from_memory(memory.expand(len(obs[sl]), -1), obs[sl], a)
+                n = len(obs[sl])
+                memory = shared.expand(n, -1) if shared is not None \
+                    else None if steps is None else self.net.memory(steps[sl])
+                b = self.net.belief_from_memory(memory, obs[sl], None if act is None else act[sl])
                 out = self.net.head(b)
                 if self.encoder.t_std is not None:
                     out = self.encoder.untarget(out)
