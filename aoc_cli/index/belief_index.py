@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 from dataclasses import asdict
 from pathlib import Path
 
@@ -23,6 +22,7 @@ from aoc_cli.index.config import IndexConfig
 from aoc_cli.index.grouped import ScanData, grouped_search
 from aoc_cli.index.pooled import exact_among as _exact_among, pooled_search
 from aoc_cli.index.threads import faiss_threads, single_threaded_blas
+from aoc_cli.store.atomic import atomic_path, write_json, write_npy
 
 
 class Selection:
@@ -255,7 +255,8 @@ class BeliefIndex:
         derived index to `path`.rows.npy), each atomically (temp file + os.replace)."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        _atomic(path, lambda tmp: faiss.write_index(self.index, tmp))
+        with atomic_path(path) as tmp:
+            faiss.write_index(self.index, str(tmp))
         meta = {
             "kind": self.kind,
             "n_rows": self.n_rows,
@@ -264,10 +265,10 @@ class BeliefIndex:
             "derived": self.derived,
             "config": asdict(self.config),
         }
-        _atomic(Path(f"{path}.json"), lambda tmp: Path(tmp).write_text(json.dumps(meta, indent=2)))
+        write_json(f"{path}.json", meta)
         rows_path = Path(f"{path}.rows.npy")
         if self.derived:
-            _atomic(rows_path, lambda tmp: _save_npy(tmp, self._row_of))
+            write_npy(rows_path, self._row_of)
         elif rows_path.exists():
             rows_path.unlink()
 
@@ -358,26 +359,6 @@ def _as_queries(queries, dim: int) -> np.ndarray:
     return np.ascontiguousarray(Y, dtype=np.float32)
 
 
-def _save_npy(path: str, array: np.ndarray) -> None:
-    with open(path, "wb") as handle:
-        np.save(handle, array)
-
-
 def _set_threads(config: IndexConfig) -> None:
     if config.threads > 0:
         faiss.omp_set_num_threads(config.threads)
-
-
-def _atomic(path: Path, write) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
-        write(tmp)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the file the usual mode
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise

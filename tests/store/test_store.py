@@ -131,3 +131,19 @@ def test_failed_write_leaves_previous_state(tmp_path, monkeypatch):
     after = json.loads((tmp_path / "c" / "manifest.json").read_text())
     assert before == after
     assert sorted(os.listdir(tmp_path)) == ["c"]
+
+
+def test_atomic_files_get_the_mode_of_a_plain_open(tmp_path):
+    # mkstemp creates 0600 files; what the store writes is readable like any file it makes
+    import os
+
+    from aoc_cli.store.atomic import write_json
+
+    old = os.umask(0o022)
+    try:
+        write_json(tmp_path / "a.json", {"x": 1})
+        (tmp_path / "plain").write_text("x")
+    finally:
+        os.umask(old)
+    assert (tmp_path / "a.json").stat().st_mode & 0o777 == 0o644
+    assert (tmp_path / "plain").stat().st_mode & 0o777 == 0o644
