@@ -68,9 +68,14 @@ BUDGETS = {
 }
 
 
+#: AOC's rows in the bench: the paper's AOC and aoc's two diagnostics (see bench/pendulum.py).
+AOC_METHODS = ("aoc", "aoc-normal-rows", "aoc-dynamics")
+
+
 def check(name: str, scale: str, seeds: int | None, episodes: int | None,
-          methods: list[str] | None = None, epsilon: float | None = None) -> None:
-    """Bad experiment, scale, counts or method names -> AocError."""
+          methods: list[str] | None = None, epsilon: float | None = None,
+          residual_cap: float | None = None) -> None:
+    """Bad experiment, scale, counts, method names or AOC settings -> AocError."""
     if name != "all" and name not in EXPERIMENTS:
         raise AocError(f"unknown experiment {name!r}: use one of {', '.join(ORDER)} or all")
     if scale not in SCALES:
@@ -87,11 +92,12 @@ def check(name: str, scale: str, seeds: int | None, episodes: int | None,
     if methods:
         from aoc_cli.baselines import BASELINES
 
-        unknown = [m for m in methods if m not in ("aoc", "aoc-normal-rows", "aoc-dynamics")
-                   and m not in BASELINES]
+        unknown = [m for m in methods if m not in AOC_METHODS and m not in BASELINES]
         if unknown:
-            raise AocError(f"unknown method(s) {', '.join(unknown)}: use aoc or "
-                           f"{', '.join(BASELINES)}")
+            raise AocError(f"unknown method(s) {', '.join(unknown)}: use "
+                           f"{', '.join([*AOC_METHODS, *BASELINES])}")
+    if residual_cap is not None and not residual_cap > 0:
+        raise AocError(f"--residual-cap must be > 0, got {residual_cap}")
 
 
 def run_experiment(name: str, scale: str = "full", seeds: int | None = None,
@@ -104,9 +110,7 @@ def run_experiment(name: str, scale: str = "full", seeds: int | None = None,
 
     ``epsilon`` and ``residual_cap`` (ControllerConfig fields) apply to AOC wherever the
     experiment does not vary them."""
-    check(name, scale, seeds, episodes, methods, epsilon)
-    if residual_cap is not None and not residual_cap > 0:
-        raise AocError(f"--residual-cap must be > 0, got {residual_cap}")
+    check(name, scale, seeds, episodes, methods, epsilon, residual_cap)
     exp = EXPERIMENTS[name]
     params = exp.scales[scale]
     out = Path(out) if out is not None else Path("bench") / name

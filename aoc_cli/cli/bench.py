@@ -51,9 +51,7 @@ def register(app: typer.Typer) -> None:
             raise AocError("give --quick or --tiny, not both")
         scale = "tiny" if tiny else "quick" if quick else "full"
         chosen = [m.strip() for m in methods.split(",") if m.strip()] if methods else None
-        check(experiment, scale, seeds, episodes, chosen, epsilon)
-        if residual_cap is not None and not residual_cap > 0:
-            raise AocError(f"--residual-cap must be > 0, got {residual_cap}")
+        check(experiment, scale, seeds, episodes, chosen, epsilon, residual_cap)
         names = ORDER if experiment == "all" else [experiment]
         eta = expected_seconds(experiment, scale, seeds, episodes, chosen)
         message(f"aoc bench {experiment} ({scale}): expected time about "
