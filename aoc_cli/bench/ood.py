@@ -105,8 +105,6 @@ def plot_ood(curves: dict, T: int, path, title: str) -> None:
 
 
 def run_ood(ctx: Context, scale: dict):
-    from aoc_cli.report.plots import plot_rollout_curves
-
     rows = []
     for spec in scale["tasks"]:
         rows += _run_task(ctx, scale, spec)
