@@ -8,17 +8,14 @@
 Names are imported lazily, so that importing the config (as every CLI start does) does not
 import torch.
 
-OpenMP threads wait passively (``OMP_WAIT_POLICY=PASSIVE`` unless set otherwise, effective when
-torch is first imported after this package): with the default busy-waiting, two torch threads
-on two cores shared with other processes ran a training step ~30x slower (measured here).
+OpenMP threads wait passively: ``aoc_cli`` (imported before this package) sets
+``OMP_WAIT_POLICY=PASSIVE`` unless set otherwise; with the default busy-waiting, two torch
+threads on two cores shared with other processes ran a training step ~30x slower.
 """
 
 from __future__ import annotations
 
 import importlib
-import os
-
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 _WHERE = {
     "BeliefConfig": "config",
