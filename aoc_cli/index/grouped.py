@@ -31,6 +31,8 @@ QUERIES_PER_GROUP = 6
 MAX_GROUPS = 16
 #: About this many rows nearest each centroid bound its queries' k-th distances.
 POOL0 = 128
+#: Columns of the strided sample of the centroid distances that sets the stage-1 thresholds.
+SAMPLE = 4096
 #: Consecutive groups whose balls are searched together (fewer, larger searches).
 CHUNKS = 8
 
@@ -41,13 +43,15 @@ class ScanData:
 
     rows: (M, d) float32 (a view of the index storage); aug_t: (d + 1, M) float32, the rows
     transposed with their squared norms as the last line; norms: (M,) float64 ||v||^2;
-    vmax: max ||v||.
+    vmax: max ||v||; rows64: (M, d) float64 copy of the rows (the exact ranking gathers from
+    it: a contiguous float64 gather is faster than a float32 gather and a cast).
     """
 
     rows: np.ndarray
     aug_t: np.ndarray
     norms: np.ndarray
     vmax: float
+    rows64: np.ndarray
 
     @classmethod
     def of(cls, rows: np.ndarray) -> "ScanData":
@@ -55,7 +59,8 @@ class ScanData:
         aug_t = np.empty((rows.shape[1] + 1, rows.shape[0]), dtype=np.float32)
         aug_t[:-1] = rows.T
         aug_t[-1] = norms
-        return cls(rows, aug_t, norms, float(np.sqrt(norms.max(initial=0.0))))
+        return cls(rows, aug_t, norms, float(np.sqrt(norms.max(initial=0.0))),
+                   np.ascontiguousarray(rows, dtype=np.float64))
 
 
 def grouped_search(Y: np.ndarray, scan: ScanData, k: int, mask: np.ndarray | None = None):
@@ -65,9 +70,13 @@ def grouped_search(Y: np.ndarray, scan: ScanData, k: int, mask: np.ndarray | Non
     Returns (squared distances (Q, k) float64 ascending, positions (Q, k) int64 into the rows).
     """
     n, d = Y.shape
-    V, M = scan.rows, scan.rows.shape[0]
-    groups = _groups(Y, min(MAX_GROUPS, max(1, n // QUERIES_PER_GROUP)))
-    C = np.stack([Y[g].mean(axis=0, dtype=np.float64) for g in groups]).astype(np.float32)
+    M = scan.rows.shape[0]
+    Y64 = Y.astype(np.float64)
+    groups = _groups(Y64, min(MAX_GROUPS, max(1, n // QUERIES_PER_GROUP)))
+    sizes = np.array([g.size for g in groups])
+    label = np.repeat(np.arange(len(groups)), sizes)[np.argsort(np.concatenate(groups))]
+    starts = np.concatenate(([0], np.cumsum(sizes)[:-1]))
+    C = (np.add.reduceat(Y64[np.concatenate(groups)], starts, axis=0) / sizes[:, None]).astype(np.float32)
     C_aug = np.empty((len(groups), d + 1), dtype=np.float32)
     C_aug[:, :-1] = -2.0 * C
     C_aug[:, -1] = 1.0
@@ -81,7 +90,7 @@ def grouped_search(Y: np.ndarray, scan: ScanData, k: int, mask: np.ndarray | Non
     margin = 2.0 * gamma * (np.sqrt(cc) + scan.vmax) ** 2
     # stage 1: about POOL0 rows nearest each centroid (threshold from a strided sample); each
     # query's k-th distance among their union bounds its k-th neighbour distance from above
-    step = max(1, POOL0 // 32)
+    step = max(1, M // SAMPLE)
     sample = D2[:, ::step]
     j = min(sample.shape[1] - 1, POOL0 // step)
     thresholds = np.partition(sample, j, axis=1)[:, j]
@@ -89,52 +98,72 @@ def grouped_search(Y: np.ndarray, scan: ScanData, k: int, mask: np.ndarray | Non
         if np.isfinite(thresholds).all() else np.zeros(0, np.int64)
     if near.size < k:
         near = np.argpartition(D2.min(axis=0), k - 1)[:k]
-    Y64 = Y.astype(np.float64)
     yy = (Y64 * Y64).sum(axis=1)
-    d2 = _sq_dist(Y64, yy, V[near], scan.norms[near])
-    u = np.sqrt(np.maximum(np.partition(d2, k - 1, axis=1)[:, k - 1], 0.0) + 1e-12)
+    d2 = _sq_dist(Y64, yy, scan, near)
+    # u^2 on the scale of the expanded float64 distances, with room for their rounding
+    # (a few ulps of ||y||^2 + ||b||^2) so each query's k nearest rows are all at most u^2
+    u2 = np.maximum(np.partition(d2, k - 1, axis=1)[:, k - 1], 0.0) + 1e-12 \
+        + 1e-13 * (yy + scan.vmax**2)
+    u = np.sqrt(u2)
     # stage 2: rows within R_g of some centroid c_g hold every query's k nearest rows
-    label = np.empty(n, dtype=np.int64)
-    for g, members in enumerate(groups):
-        label[members] = g
     spread = np.sqrt(((Y64 - C64[label]) ** 2).sum(axis=1))
     radius = np.zeros(len(groups))
     np.maximum.at(radius, label, spread + u)
     limit = radius**2 - cc + margin  # (G,) on the D2 scale
-    d2_out = np.empty((n, k))
-    pos_out = np.empty((n, k), dtype=np.int64)
+    inball = D2 <= limit[:, None]
+    union = np.flatnonzero(inball.any(axis=0))  # the balls of all groups, then per chunk
+    inball = inball[:, union]
+    chosen = np.empty((n, k), dtype=np.int64)
     for chunk in np.array_split(np.arange(len(groups)), min(CHUNKS, len(groups))):
-        ball = np.flatnonzero((D2[chunk] <= limit[chunk, None]).any(axis=0))
-        queries = np.concatenate([groups[g] for g in chunk])
-        if ball.size < k:
+        cols = np.flatnonzero(inball[chunk].any(axis=0) if chunk.size > 1 else inball[chunk[0]])
+        if cols.size < k:
             return None
-        d2 = _sq_dist(Y64[queries], yy[queries], V[ball], scan.norms[ball])
-        part = np.argpartition(d2, k - 1, axis=1)[:, :k] if ball.size > k else \
-            np.broadcast_to(np.arange(k), (len(queries), k))
-        rows = ball[part]
-        diff = V[rows].astype(np.float64) - Y64[queries][:, None, :]
-        exact = np.einsum("qkd,qkd->qk", diff, diff)
-        order = np.argsort(exact, axis=1, kind="stable")
-        d2_out[queries] = np.take_along_axis(exact, order, axis=1)
-        pos_out[queries] = np.take_along_axis(rows, order, axis=1)
-    return d2_out, pos_out
+        ball = union[cols]
+        queries = np.concatenate([groups[g] for g in chunk])
+        d2 = _sq_dist(Y64[queries], yy[queries], scan, ball)
+        chosen[queries] = ball[_k_smallest(d2, u2[queries], k)]
+    # the exact distances of the chosen rows, ascending
+    diff = scan.rows64.take(chosen, axis=0)
+    diff -= Y64[:, None, :]
+    exact = np.einsum("qkd,qkd->qk", diff, diff)
+    order = np.argsort(exact, axis=1, kind="stable")
+    return np.take_along_axis(exact, order, axis=1), np.take_along_axis(chosen, order, axis=1)
 
 
-def _sq_dist(Y: np.ndarray, yy: np.ndarray, rows: np.ndarray, norms: np.ndarray) -> np.ndarray:
-    """(q, p) float64 squared distances of queries Y (q, d) float64 to rows (p, d)."""
-    d2 = Y @ rows.T.astype(np.float64)
-    d2 *= -2.0
+def _k_smallest(d2: np.ndarray, bound: np.ndarray, k: int) -> np.ndarray:
+    """(q, k) columns of the k smallest entries of each row of d2 (q, p).
+
+    bound: (q,) a value at least each row's k-th smallest entry (from stage 1): only the few
+    entries under it are ordered (a sort of ~k entries a row instead of a selection among p).
+    """
+    q, p = d2.shape
+    if p <= k:
+        return np.broadcast_to(np.arange(k), (q, k))
+    qi, ci = np.nonzero(d2 <= bound[:, None])
+    counts = np.bincount(qi, minlength=q)
+    if counts.min() < k:  # the bound was beaten by rounding: select among all entries
+        return np.argpartition(d2, k - 1, axis=1)[:, :k]
+    if (counts == k).all():
+        return ci.reshape(q, k)
+    order = np.lexsort((d2[qi, ci], qi))  # by query, then by distance
+    first = np.concatenate(([0], np.cumsum(counts)[:-1]))
+    return ci[order[first[:, None] + np.arange(k)]]
+
+
+def _sq_dist(Y: np.ndarray, yy: np.ndarray, scan: ScanData, cols: np.ndarray) -> np.ndarray:
+    """(q, p) float64 squared distances of queries Y (q, d) float64 to the rows at cols (p,)."""
+    d2 = (-2.0 * Y) @ scan.rows64.take(cols, axis=0).T
     d2 += yy[:, None]
-    d2 += norms[None, :]
+    d2 += scan.norms.take(cols)[None, :]
     return d2
 
 
 def _groups(Y: np.ndarray, n_groups: int) -> list[np.ndarray]:
     """Equal slabs of the queries along their main direction (the action moves the belief
-    along a curve, so neighbouring candidates land in the same slab)."""
+    along a curve, so neighbouring candidates land in the same slab). Y: (Q, d) float64."""
     if n_groups <= 1:
         return [np.arange(Y.shape[0])]
-    centred = Y.astype(np.float64) - Y.mean(axis=0, dtype=np.float64)
-    direction = np.linalg.svd(centred, full_matrices=False)[2][0]
+    centred = Y - Y.mean(axis=0)
+    direction = np.linalg.eigh(centred.T @ centred)[1][:, -1]
     order = np.argsort(centred @ direction, kind="stable")
     return np.array_split(order, n_groups)

@@ -104,3 +104,19 @@ def test_exact_among_and_grouped_scan_agree_on_the_distances(beliefs, corpus):
     d2, pos = grouped_search(queries, ScanData.of(corpus), 42)
     assert (np.sort(pos, 1) == np.sort(pos_all, 1)).all()
     np.testing.assert_allclose(d2, d2_all, rtol=1e-9)
+
+
+def test_k_smallest_under_a_bound_matches_a_full_selection():
+    from aoc_cli.index.grouped import _k_smallest
+
+    rng = np.random.default_rng(3)
+    d2 = rng.random((9, 300))
+    d2[2, :5] = d2[2, 5]  # ties at the k-th value
+    k = 7
+    kth = np.sort(d2, axis=1)[:, k - 1]
+    for bound in (kth, kth + 0.05, np.where(np.arange(9) == 4, kth - 0.01, kth + 0.01)):
+        # exact k-th, a loose bound (more than k entries under it), one bound beaten
+        cols = _k_smallest(d2, bound, k)
+        got = np.sort(np.take_along_axis(d2, cols, axis=1), axis=1)
+        np.testing.assert_array_equal(got, np.sort(d2, axis=1)[:, :k])
+        assert all(len(set(c)) == k for c in cols.tolist())
