@@ -119,7 +119,7 @@ def _decompose(beliefs, Y, k, values, index, reference, selection, config) -> De
     # 1. neighbours: the k nearest corpus beliefs of every query
     _, neighbours = index.search(Y, k, selection)
     valid = neighbours >= 0
-    B = np.asarray(beliefs[np.maximum(neighbours, 0)], dtype=np.float64)
+    B = np.asarray(np.take(beliefs, np.maximum(neighbours, 0), axis=0), dtype=np.float64)
     P = B - Y[:, None, :]  # neighbours relative to the query, p_c = b_c - y
 
     # 2. corpus residual and projection: min_{w in simplex} ||B^T w - y||, exactly
@@ -154,7 +154,7 @@ def _decompose(beliefs, Y, k, values, index, reference, selection, config) -> De
     rows = np.where(used, np.take_along_axis(neighbours, order, axis=1), -1)
     w_out = np.where(used, w_out, 0.0)
     w_out /= w_out.sum(1, keepdims=True)
-    dist = np.sqrt((np.take_along_axis(P, order[:, :, None], axis=1) ** 2).sum(-1))
+    dist = np.sqrt(np.take_along_axis(np.einsum("qkd,qkd->qk", P, P), order, axis=1))
     dist = np.where(used, dist, np.nan)
 
     # 4. value estimate: v_hat = sum_c w_c v_c over the subset

@@ -108,7 +108,8 @@ class BeliefIndex:
         positions = np.asarray(positions, dtype=np.int64)
         if self.beliefs is not None:
             rows = positions if self._row_of is None else self._row_of[positions]
-            return np.asarray(self.beliefs[rows], dtype=np.float32)
+            # take: a gather along the rows, ~2x faster than fancy indexing (also on a memmap)
+            return np.asarray(np.take(self.beliefs, rows, axis=0), dtype=np.float32)
         if self._store is not None:
             return self._store[positions]
         if isinstance(self.index, faiss.IndexIVF) and self.index.direct_map.type == 0:
