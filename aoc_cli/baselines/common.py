@@ -30,15 +30,17 @@ class ActionSpace:
     """The corpus's action space at control time: bounds of a box, or n discrete actions."""
 
     def __init__(self, session, env=None):
-        ctl = session.controller
-        self.discrete = bool(session.corpus.discrete)
-        self.n_actions = session.corpus.n_actions
+        from aoc_cli.control.controller import action_bounds
+
+        corpus = session.corpus
+        self.discrete = bool(corpus.discrete)
+        self.n_actions = corpus.n_actions
         if self.discrete:
             self.low = self.high = None
             self.dim = 1
         else:
-            self.low = np.asarray(ctl.low, np.float64)
-            self.high = np.asarray(ctl.high, np.float64)
+            space = getattr(session, "action_space", None) or corpus.action_space
+            self.low, self.high = action_bounds(space, corpus.actions)
             if env is not None and hasattr(env.action_space, "low"):
                 low = np.asarray(env.action_space.low, np.float64).reshape(-1)
                 high = np.asarray(env.action_space.high, np.float64).reshape(-1)

@@ -11,6 +11,9 @@ from aoc_cli.cli.common import FormatOption, get_store
 from aoc_cli.errors import AocError
 from aoc_cli.report import message, progress, resolve_format, write_object, write_records
 
+#: Policies that need no model or index: they run on a corpus before anything is trained.
+MODEL_FREE = ("zero", "random")
+
 
 def parse_selection(items: list[str] | None, flag: str) -> dict[str, list[str]]:
     """``["policy=pi1,pi3", "system=normal"]`` -> ``{"policy": ["pi1", "pi3"], ...}``."""
@@ -48,6 +51,7 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Run episodes; print returns, success, OOD flags and residuals."""
         from aoc_cli.control import open_session, rollout
+        from aoc_cli.control.run import model_free_session
         from aoc_cli.envs import make_env
         from aoc_cli.index.build import row_selection
 
@@ -63,7 +67,12 @@ def register(app: typer.Typer) -> None:
         from aoc_cli.control.rollout import action_space_of
 
         action_space = action_space_of(environment)
-        session = open_session(corpus, model, index_id, config, selection, seed, action_space)
+        if policy in MODEL_FREE:
+            # these act without looking at the data: no model or index is needed (or opened)
+            session = model_free_session(corpus, action_space)
+        else:
+            session = open_session(corpus, model, index_id, config, selection, seed,
+                                   action_space)
         baseline = None
         if policy != "aoc":
             from aoc_cli.baselines import make_baseline

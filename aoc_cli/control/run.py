@@ -21,13 +21,21 @@ class Session:
 
     corpus: object
     index: object
-    controller: Controller
+    controller: Controller | None
+    action_space: dict | None = None
 
     @property
     def model(self):
         return self.index.model
 
+    @property
+    def history_length(self) -> int:
+        """L of the model (0 for a model-free session: the zero and random baselines)."""
+        return 0 if self.index is None else int(self.model.history_length)
+
     def meta(self) -> dict:
+        if self.index is None:
+            return {"corpus": self.corpus.name, "corpus_hash": self.corpus.hash, "model": None}
         return {
             "corpus": self.corpus.name, "corpus_hash": self.corpus.hash,
             "model": self.model.id, "model_hash": self.model.hash,
@@ -58,7 +66,13 @@ def open_session(corpus, model_id: str | None = None, index_id: str = "default",
                            "--mode imitation`")
     controller = Controller(corpus, index, config, selection=selection, bc_model=bc_model,
                             seed=seed, action_space=action_space)
-    return Session(corpus, index, controller)
+    return Session(corpus, index, controller, action_space)
+
+
+def model_free_session(corpus, action_space: dict | None = None) -> Session:
+    """A session without model or index, for the policies that need neither (zero, random):
+    they run on a corpus before anything is trained."""
+    return Session(corpus, None, None, action_space)
 
 
 def _one_thread() -> None:
@@ -78,15 +92,18 @@ def rollout(session: Session, env, episodes: int, seed: int = 0, policy=None,
     another ``policy`` with a ``decide(observation, history)`` method)."""
     check_spaces(env, session.corpus)
     policy = policy or session.controller
-    cfg = session.controller.config
-    typical = session.index.meta.get("typical_residual", {})
+    if policy is None:
+        raise AocError("a model-free session runs only a given policy (zero or random)")
+    cfg = session.controller.config if session.controller is not None else None
+    typical = session.index.meta.get("typical_residual", {}) if session.index is not None else {}
     results = []
     task = progress.add_task("rollout", total=episodes) if progress is not None else None
     for e in range(episodes):
-        monitor = OODMonitor(warmup=cfg.ood_warmup, sigmas=cfg.ood_sigmas,
-                             floor=0.1 * float(typical.get("p50") or 0.0),
-                             minimum=float(typical.get("p99") or 0.0))
-        res = run_episode(env, policy, session.model.history_length, session.corpus, e,
+        monitor = None if cfg is None else OODMonitor(
+            warmup=cfg.ood_warmup, sigmas=cfg.ood_sigmas,
+            floor=0.1 * float(typical.get("p50") or 0.0),
+            minimum=float(typical.get("p99") or 0.0))
+        res = run_episode(env, policy, session.history_length, session.corpus, e,
                           seed + e, monitor, noise_after, noise_std,
                           keep_decisions=audit is not None)
         res.monitor = monitor

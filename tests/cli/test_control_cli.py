@@ -205,3 +205,35 @@ def test_index_of_a_corpus_without_a_model_says_to_train(aoc_inproc, tmp_path):
     Store(tmp_path).write("bare", data)
     code, out, err = aoc_inproc("--store", str(tmp_path), "index", "bare")
     one_line_error(code, out, err, r"no trained model: run `aoc train bare`")
+
+
+def test_zero_and_random_run_on_a_corpus_without_a_model(aoc_inproc, tmp_path):
+    """The trivial baselines act without the data: no model or index is needed; the AOC
+    controller on the same corpus still says what to train."""
+    from aoc_cli.envs import collect, make_env
+    from aoc_cli.store import Store
+
+    data, _ = collect("pendulum-het", steps=400, seed=0)
+    Store(tmp_path).write("bare", data)
+    args = ("--store", str(tmp_path), "rollout", "bare", "--env", "pendulum-het", "-n", "2",
+            "--seed", "5")
+    code, out, err = aoc_inproc(*args, "--policy", "zero", "-f", "json")
+    assert code == 0, err
+    doc = json.loads(out)
+    # the do-nothing return, replayed by hand on the same seeds
+    expected = []
+    for seed in (5, 6):
+        env = make_env("pendulum-het")
+        env.reset(seed=seed)
+        total, done = 0.0, False
+        while not done:
+            _o, r, term, trunc, _i = env.step(np.zeros(1, np.float32))
+            total, done = total + r, term or trunc
+        expected.append(total)
+    assert [e["return"] for e in doc["episodes"]] == pytest.approx(expected)
+    assert all(e["mean_residual"] is None for e in doc["episodes"])
+    code, out, err = aoc_inproc(*args, "--policy", "random", "-f", "json")
+    assert code == 0, err
+    returns = [e["return"] for e in json.loads(out)["episodes"]]
+    assert returns != pytest.approx(expected)
+    one_line_error(*aoc_inproc(*args), r"no trained model: run `aoc train bare`")
