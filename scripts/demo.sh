@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The whole aoc flow on the heterogeneous pendulum, in a throwaway store. Run by `make demo`.
-#   collect -> info -> train -> index -> rollout (with an audit log) -> explain
+#   collect -> info -> train -> index -> rollout (upright, with an audit log; random start) -> explain
 set -euo pipefail
 cd "$(dirname "$0")/.."
 AOC=.venv/bin/aoc
@@ -20,9 +20,12 @@ $AOC train pendulum --seed 0 --dynamics-weight 1 --format table
 step "beliefs of every row and the nearest-neighbour index"
 $AOC index pendulum --format table
 
-step "run the controller for 3 episodes (random start, normal system) with an audit log"
-$AOC rollout pendulum --env pendulum-het --episodes 3 --seed 100 \
+step "run the controller for 3 episodes from the paper's upright start (normal system), with an audit log"
+$AOC rollout pendulum --env pendulum-het-upright --episodes 3 --seed 100 \
     --audit "$OUT/audit.h5" --plot "$OUT/rollout.png" --format table
+
+step "the same controller from a random start: a swing-up, which AOC does not solve (docs/belief.md)"
+$AOC rollout pendulum --env pendulum-het --episodes 2 --seed 100 --format table
 
 step "explain the decision at step 50 of episode 0, from the audit log"
 $AOC explain pendulum --audit "$OUT/audit.h5" --episode 0 --step 50 --format table
