@@ -1,8 +1,15 @@
 """lunar: gymnasium's LunarLanderContinuous-v3 with its own heuristic lander as the expert.
 
-Behaviour data: ``gymnasium.envs.box2d.lunar_lander.heuristic`` plus Gaussian action noise of std
-0, 0.25, 0.5 and 1 (clipped to [-1, 1]; the stored action is the one sent to the environment),
-the four levels in turn, one episode each. Success (gymnasium's ``reward_threshold``): an episode
+Behaviour data: ``gymnasium.envs.box2d.lunar_lander.heuristic`` plus *persistent* Gaussian action
+noise (Ornstein-Uhlenbeck, i.e. AR(1) with correlation 0.9 from one step to the next, as in
+DDPG's exploration) of stationary std 0, 0.25, 0.5 and 1, clipped to [-1, 1] (the stored action
+is the one sent to the environment); the four levels in turn, one episode each.
+
+Why persistent: AOC's value v^c is the return of the behaviour policy *after* the row's action.
+With independent noise the heuristic corrects a deviation at the next step, so the logged
+returns barely depend on the action taken and AOC's argmax ranks noise (30k rows, 4 episodes,
+seeds 100-103: AOC -80 with independent noise against its data's 185; +145 with persistent
+noise against its data's 160; docs/results.md, "lunar"). Success (gymnasium's ``reward_threshold``): an episode
 return of at least 200, reported as ``info["success"]`` at the episode's last step by
 :class:`LanderSuccess` (False on every other step).
 """
@@ -20,8 +27,10 @@ from aoc_cli.store import box_space
 GYM_ID = "LunarLanderContinuous-v3"
 HORIZON = 1000
 SUCCESS_RETURN = 200.0
+#: Stationary std of the behaviour's action noise, and its correlation from step to step.
 NOISE_LEVELS = (0.0, 0.25, 0.5, 1.0)
-POLICIES = tuple(f"heuristic-noise{n:g}" for n in NOISE_LEVELS)
+NOISE_CORRELATION = 0.9
+POLICIES = tuple(f"heuristic-ou{n:g}" for n in NOISE_LEVELS)
 
 
 class LanderSuccess(gymnasium.Wrapper):
@@ -47,22 +56,29 @@ def make(**kw) -> gymnasium.Env:
     return LanderSuccess(gymnasium.make(GYM_ID, **kw))
 
 
-def expert_action(env: gymnasium.Env, observation: np.ndarray, noise: float,
-                  rng: np.random.Generator) -> np.ndarray:
-    """The heuristic lander's action (2,) plus N(0, noise^2), clipped to [-1, 1], float32."""
+def expert_action(env: gymnasium.Env, observation: np.ndarray,
+                  deviation: np.ndarray | None = None) -> np.ndarray:
+    """The heuristic lander's action (2,) plus ``deviation`` (2,), clipped to [-1, 1], float32."""
     a = np.asarray(heuristic(env.unwrapped, observation), dtype=np.float64)
-    if noise > 0:
-        a = a + noise * rng.standard_normal(2)
+    if deviation is not None:
+        a = a + deviation
     return np.clip(a, -1.0, 1.0).astype(np.float32)
 
 
 def run_episode(env: gymnasium.Env, policy: str, rng: np.random.Generator) -> Episode:
-    """One episode of ``policy`` (a name of POLICIES); the reset seed is drawn from ``rng``."""
-    noise = float(policy.rsplit("noise", 1)[1])
+    """One episode of ``policy`` (a name of POLICIES); the reset seed is drawn from ``rng``.
+
+    The deviation from the heuristic is AR(1): d_0 ~ N(0, s^2), d_{t+1} = rho d_t +
+    sqrt(1 - rho^2) s e_t (e_t standard normal), so every d_t has std s (the level).
+    """
+    std = float(policy.rsplit("ou", 1)[1])
+    rho = NOISE_CORRELATION
     obs, _info = env.reset(seed=int(rng.integers(2**31 - 1)))
+    deviation = std * rng.standard_normal(2)
     observations, actions, rewards = [], [], []
     while True:
-        a = expert_action(env, obs, noise, rng)
+        a = expert_action(env, obs, deviation)
+        deviation = rho * deviation + np.sqrt(1.0 - rho**2) * std * rng.standard_normal(2)
         observations.append(obs)
         actions.append(a)
         obs, reward, terminated, truncated, info = env.step(a)
