@@ -8,12 +8,14 @@ Q N d_b multiply-adds and Q N memory traffic. Instead:
 1. cut the Q queries into G groups of nearby queries (slabs along the batch's main direction)
    and compute the squared distance of each centroid c_g to every row: one (G, d_b + 1) x
    (d_b + 1, N) GEMM against the rows augmented with their squared norms;
-2. per group, an upper bound u_i on each query's k-th neighbour distance: its k-th distance
-   among the ~`POOL0` rows nearest c_g;
+2. an upper bound u_i on each query's k-th neighbour distance: its k-th distance among the
+   union of the ~`POOL0` rows nearest each centroid;
 3. a row b with ||b - c_g|| > R_g = max_i (||y_i - c_g|| + u_i) is farther than u_i from every
    query i of the group (triangle inequality), so the rows within R_g of c_g hold each query's
-   exact k nearest rows: rank them exactly (float64), `CHUNKS` consecutive groups at a time
-   against the union of their balls (neighbouring balls overlap).
+   exact k nearest rows: rank them (float64), `CHUNKS` consecutive groups at a time against
+   the union of their balls (neighbouring balls overlap). Only the few rows within u_i of
+   query i can be among its k nearest, so those are sorted instead of selecting among the
+   whole ball; the k chosen rows of every query are then re-ranked exactly in one pass.
 
 The centroid distances are float32; the ball test adds a margin bounding their rounding error
 (a sum of d_b + 2 products: gamma_{d_b+2} (||c|| + ||b||)^2, doubled), so a row may be kept
@@ -110,15 +112,14 @@ def grouped_search(Y: np.ndarray, scan: ScanData, k: int, mask: np.ndarray | Non
     radius = np.zeros(len(groups))
     np.maximum.at(radius, label, spread + u)
     limit = radius**2 - cc + margin  # (G,) on the D2 scale
-    inball = D2 <= limit[:, None]
-    union = np.flatnonzero(inball.any(axis=0))  # the balls of all groups, then per chunk
-    inball = inball[:, union]
     chosen = np.empty((n, k), dtype=np.int64)
     for chunk in np.array_split(np.arange(len(groups)), min(CHUNKS, len(groups))):
-        cols = np.flatnonzero(inball[chunk].any(axis=0) if chunk.size > 1 else inball[chunk[0]])
-        if cols.size < k:
+        inside = D2[chunk[0]] <= limit[chunk[0]]
+        for g in chunk[1:]:
+            inside |= D2[g] <= limit[g]
+        ball = np.flatnonzero(inside)
+        if ball.size < k:
             return None
-        ball = union[cols]
         queries = np.concatenate([groups[g] for g in chunk])
         d2 = _sq_dist(Y64[queries], yy[queries], scan, ball)
         chosen[queries] = ball[_k_smallest(d2, u2[queries], k)]
