@@ -39,7 +39,7 @@ class ActionSpace:
             self.low = self.high = None
             self.dim = 1
         else:
-            space = getattr(session, "action_space", None) or corpus.action_space
+            space = session.action_space or corpus.action_space
             self.low, self.high = action_bounds(space, corpus.actions)
             if env is not None and hasattr(env.action_space, "low"):
                 low = np.asarray(env.action_space.low, np.float64).reshape(-1)
