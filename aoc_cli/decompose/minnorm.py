@@ -129,7 +129,8 @@ def min_norm_point(
         alpha = a / a.sum(axis=1, keepdims=True)
         neg = act & (alpha <= 0.0)
         minor = neg.any(axis=1)
-        lam = np.where(minor[:, None], lam, alpha)
+        any_minor = bool(minor.any())
+        lam = np.where(minor[:, None], lam, alpha) if any_minor else alpha
 
         # major cycle: optimality test and entering point
         x = (lam[:, None, :] @ Ps)[:, 0]
@@ -137,18 +138,19 @@ def min_norm_point(
         if blocked is not None:
             xP += blocked
         j = np.argmin(xP, axis=1)
+        xPj, sq1j = xP[r, j], sq1[r, j]
         xx = np.einsum("qd,qd->q", x, x)
-        gap = xx - xP[r, j]  # Frank-Wolfe gap of the best entering point
+        gap = xx - xPj  # Frank-Wolfe gap of the best entering point
         # optimal: no gap, or moving towards p_j could lower ||x||^2 by less than 1e-12 of
         # itself (gap^2 / ||p_j - x||^2); adding such a point only degenerates the corral
-        step = sq1[r, j] - 1.0 - 2.0 * xP[r, j] + xx  # ||p_j - x||^2
+        step = sq1j - 1.0 - 2.0 * xPj + xx  # ||p_j - x||^2
         optimal = (gap - 1e-10 * xx <= tol) | (gap * gap <= 1e-12 * xx * step)
         if mu == m:  # a full corral (d + 1 points, or all k) with alpha > 0: x is optimal
             optimal |= nact == m
         done |= optimal & ~minor
         add = ~(minor | done)
 
-        any_minor, any_add = bool(minor.any()), bool(add.any())
+        any_add = bool(add.any())
         v = den = None
 
         # minor cycle: step towards alpha until a weight reaches zero; that point leaves
@@ -174,7 +176,7 @@ def min_norm_point(
             g = (Ps @ pj[:, :, None])[..., 0] + 1.0
             g *= act
             u = (H @ g[:, :, None])[..., 0]
-            sigma = sq1[r, j] - np.einsum("qm,qm->q", g, u)
+            sigma = sq1j - np.einsum("qm,qm->q", g, u)
             u[r, s_in] -= 1.0
             bad = add & (sigma <= 1e-12)
             if bad.any():
