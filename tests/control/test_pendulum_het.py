@@ -17,14 +17,16 @@ from aoc_cli.envs import collect, make_env
 from aoc_cli.index.build import build_index
 from aoc_cli.store import Store
 
-EPISODES = 3
+EPISODES = 6
 
 
 @pytest.fixture(scope="module")
 def pendulum(tmp_path_factory):
     """(corpus, data's mean episode return): 30k rows, collect seed 0, model 'dyn' + index.
-    Measured with these settings: data -386; upright AOC -0.14 / -253 / -0.11 at epsilon
-    0.5, -904 / -999 / -1180 at 1.0."""
+    Measured with these settings (6 episodes, seeds 100-105): data -386; upright AOC -105
+    (four episodes -0.1 to -0.2, two fell: -253, -375) at epsilon 0.5, -931 at 1.0.
+    Other seeds, to size the margins: model seed 1: -0.10 against -660 at 1.0; corpus seed 1:
+    -187 (one episode of six fell, -1121) against -1072, the data -363."""
     import torch
 
     torch.set_num_threads(1)
@@ -53,7 +55,7 @@ def test_upright_aoc_beats_the_data_and_epsilon_one_does_worse(pendulum):
     corpus, data_mean = pendulum
     aoc = mean_return(corpus, "pendulum-het-upright", epsilon=0.5)
     unfiltered = mean_return(corpus, "pendulum-het-upright", epsilon=1.0)
-    assert aoc > data_mean + 150, (aoc, data_mean)
+    assert aoc > data_mean + 100, (aoc, data_mean)
     assert unfiltered < aoc - 300, (unfiltered, aoc)
 
 
