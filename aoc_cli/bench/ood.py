@@ -11,7 +11,10 @@ leaves the running 3-sigma band. Per episode:
 * false flags: flagged steps before T (no disturbance yet).
 
 The same seeds run without noise (``noise=0``) as the control: there every flag is a false
-alarm. The paper used BipedalWalker with a black-box sampler and noise after step 500; here
+alarm. Each run is scored against two bands: the monitor's running band of the episode's own
+earlier steps (``band=running``), and a reference band per step learned from clean rollouts
+on other episode seeds (``band=reference``, :func:`aoc_cli.control.monitor.reference_band`),
+which knows that some steps always have a larger residual (the maze's hand-over). The paper used BipedalWalker with a black-box sampler and noise after step 500; here
 the tasks are pendulum-het (random start; its data holds uniformly random torques, so noisy
 actions are not out of distribution there) and the maze (experts with small noise, noise
 after step 12), with the uniform sampler and each task's controller settings.
@@ -24,6 +27,10 @@ import numpy as np
 from aoc_cli.bench.common import Context, belief_config, make_task_env, session
 from aoc_cli.bench.methods import row_values
 from aoc_cli.bench.results import result_row
+from aoc_cli.control.monitor import flags_against, reference_band
+
+#: The clean reference rollouts of bench seed s use the episode seeds of bench seed s + this.
+REFERENCE_SEEDS = 500
 
 SCALES = {
     "tiny": {"tasks": [
@@ -43,16 +50,17 @@ SCALES = {
 }
 
 
-def episode_flags(result, T: int) -> tuple[int | None, bool, int]:
-    """(delay, flagged after T, false flags before T) of one EpisodeResult."""
-    flags = np.asarray(result.ood, bool)
+def episode_flags(flags, T: int) -> tuple[int | None, bool, int]:
+    """(delay, flagged after T, false flags before T) of one episode's per-step flags."""
+    flags = np.asarray(flags, bool)
     after = np.flatnonzero(flags[T:])
     delay = int(after[0]) if len(after) else None
     return delay, bool(len(after)), int(flags[:T].sum())
 
 
-def ood_values(results, T: int) -> dict:
-    stats = [episode_flags(r, T) for r in results]
+def ood_values(flag_runs, T: int) -> dict:
+    """Mean delay, share flagged after T and false flags per episode, from per-step flags."""
+    stats = [episode_flags(f, T) for f in flag_runs]
     delays = [d for d, _f, _n in stats if d is not None]
     return {
         "ood_delay": float(np.mean(delays)) if delays else None,
@@ -82,8 +90,9 @@ def _curves(results) -> dict:
             "reward": mean_of(lambda r: r.rewards)}
 
 
-def plot_ood(curves: dict, T: int, path, title: str) -> None:
-    """Mean residual (with the mean 3-sigma band edge, shaded) and mean reward per step."""
+def plot_ood(curves: dict, T: int, path, title: str, reference=None) -> None:
+    """Mean residual (with the mean 3-sigma band edge, shaded) and mean reward per step;
+    ``reference`` (T,), the reference band, dashed."""
     from aoc_cli.report.plots import plt, save
 
     fig, (ax_r, ax_res) = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
@@ -93,6 +102,9 @@ def plot_ood(curves: dict, T: int, path, title: str) -> None:
         line, = ax_res.plot(t, c["residual"], lw=1.2, label=f"{label}: residual")
         ax_res.fill_between(t, 0, c["band"], color=line.get_color(), alpha=0.12,
                             label=f"{label}: 3-sigma band")
+    if reference is not None:
+        ax_res.plot(np.arange(len(reference)), reference, color="black", ls="--", lw=1,
+                    label="reference band (clean rollouts)")
     for ax in (ax_r, ax_res):
         ax.axvline(T, color="grey", ls=":", lw=1)
     ax_r.set_ylabel("reward (mean)")
@@ -116,20 +128,34 @@ def _run_task(ctx: Context, scale: dict, spec: dict) -> list[dict]:
 
     task, T = spec["task"], int(spec["T"])
     env = make_task_env(task, spec)
-    rows, curves = [], {}
+    rows, curves, first_band = [], {}, None
     for seed in ctx.seeds:
         corpus = ctx.artefacts.corpus(task, rows=spec.get("rows"), episodes=spec.get("episodes"),
                                       seed=seed)
         ctx.artefacts.model(corpus, "default", belief_config(spec, "value", seed))
         ctx.artefacts.index(corpus, "default")
+        n = ctx.n_episodes(scale["episodes"])
+        s = session(corpus, env, task, seed=seed, **ctx.aoc_config)
+        ref = ctx.runner.run("aoc", s, env, n, seed + REFERENCE_SEEDS,
+                             label=f"{task} clean reference seed {seed}")
+        band = None
+        if ref.status == "ok":
+            typical = s.index.meta.get("typical_residual", {})
+            band = reference_band([r.residuals for r in ref.results],
+                                  floor=0.1 * float(typical.get("p50") or 0.0),
+                                  minimum=float(typical.get("p99") or 0.0))
         for noise in (0.0, float(scale["noise"])):
             s = session(corpus, env, task, seed=seed, **ctx.aoc_config)
-            run = ctx.runner.run("aoc", s, env, ctx.n_episodes(scale["episodes"]), seed,
+            run = ctx.runner.run("aoc", s, env, n, seed,
                                  noise_after=T if noise > 0 else None, noise_std=noise,
                                  label=f"{task} noise {noise:g} seed {seed}")
             values = row_values(run)
+            scored = None
+            if run.status == "ok" and band is not None:
+                scored = dict(values, **ood_values(
+                    [flags_against(r.residuals, band) for r in run.results], T))
             if run.status == "ok":
-                values.update(ood_values(run.results, T))
+                values.update(ood_values([r.ood for r in run.results], T))
                 if seed == ctx.seeds[0]:
                     curves[f"noise {noise:g}"] = _curves(run.results)
                     name = f"ood_{task}_noise{noise:g}_episodes.png"
@@ -137,10 +163,17 @@ def _run_task(ctx: Context, scale: dict, spec: dict) -> list[dict]:
                                         title=f"{task}: AOC, noise {noise:g} after step {T}",
                                         noise_after=T)
                     ctx.plots.append(name)
-            rows.append(result_row("ood", task, "aoc", f"noise={noise:g}", seed, **values))
+            rows.append(result_row("ood", task, "aoc", f"noise={noise:g}, band=running", seed,
+                                   **values))
+            if scored is not None:
+                rows.append(result_row("ood", task, "aoc", f"noise={noise:g}, band=reference",
+                                       seed, **scored))
+        if seed == ctx.seeds[0]:
+            first_band = band
     if curves:
         name = f"ood_{task}_mean.png"
         plot_ood(curves, T, ctx.out / name,
-                 f"{task}: residual and reward per step, noise after step {T}")
+                 f"{task}: residual and reward per step, noise after step {T}",
+                 reference=first_band)
         ctx.plots.append(name)
     return rows

@@ -2,12 +2,13 @@
 
 from aoc_cli.control.config import ControllerConfig
 from aoc_cli.control.controller import Controller, Decision
-from aoc_cli.control.monitor import OODMonitor
+from aoc_cli.control.monitor import OODMonitor, flags_against, reference_band
 from aoc_cli.control.records import decision_record, read_audit_step, write_audit
 from aoc_cli.control.rollout import EpisodeResult, HistoryBuffer, run_episode, summarize
 from aoc_cli.control.run import (
     Session,
     explain_query,
+    model_free_session,
     open_session,
     parse_query,
     replay_decision,
@@ -24,9 +25,12 @@ __all__ = [
     "Session",
     "decision_record",
     "explain_query",
+    "flags_against",
+    "model_free_session",
     "open_session",
     "parse_query",
     "read_audit_step",
+    "reference_band",
     "replay_decision",
     "rollout",
     "run_episode",

@@ -87,9 +87,11 @@ def _one_thread() -> None:
 
 def rollout(session: Session, env, episodes: int, seed: int = 0, policy=None,
             audit: str | None = None, noise_after: int | None = None, noise_std: float = 0.0,
-            progress=None) -> tuple[list[EpisodeResult], dict]:
+            progress=None, reference=None) -> tuple[list[EpisodeResult], dict]:
     """Run ``episodes`` episodes (seeds ``seed``, ``seed+1``, ...) with the controller (or
-    another ``policy`` with a ``decide(observation, history)`` method)."""
+    another ``policy`` with a ``decide(observation, history)`` method). ``reference``: a (T,)
+    band from :func:`aoc_cli.control.monitor.reference_band` for the OOD monitor, instead of
+    the running band of each episode's own steps."""
     check_spaces(env, session.corpus)
     policy = policy or session.controller
     if policy is None:
@@ -102,7 +104,7 @@ def rollout(session: Session, env, episodes: int, seed: int = 0, policy=None,
         monitor = None if cfg is None else OODMonitor(
             warmup=cfg.ood_warmup, sigmas=cfg.ood_sigmas,
             floor=0.1 * float(typical.get("p50") or 0.0),
-            minimum=float(typical.get("p99") or 0.0))
+            minimum=float(typical.get("p99") or 0.0), reference=reference)
         res = run_episode(env, policy, session.history_length, session.corpus, e,
                           seed + e, monitor, noise_after, noise_std,
                           keep_decisions=audit is not None)

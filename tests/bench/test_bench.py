@@ -95,9 +95,17 @@ def test_pendulum_ablations_and_ood_tiny(tmp_path, bench_store, name):
         assert aoc[2]["paper"] == [-1.25, 0.4]              # 2 (d_b + 1) is the paper's 20
     else:
         settings = [s["setting"] for s in summary if s["task"] == "pendulum-het"]
-        assert settings == ["noise=0", "noise=0.5"]
+        assert settings == ["noise=0, band=running", "noise=0, band=reference",
+                            "noise=0.5, band=running", "noise=0.5, band=reference"]
         for r in rows:
             assert r["ood_flagged"] in (0.0, 1.0) and r["ood_false_flags"] >= 0
+        # the two bands score the same episodes: same returns and residuals
+        by = {(r["task"], r["setting"]): r for r in rows}
+        for task in ("pendulum-het", "maze"):
+            for noise in ("0", "0.5"):
+                run, ref = (by[(task, f"noise={noise}, band={b}")] for b in ("running", "reference"))
+                assert ref["return_mean"] == run["return_mean"]
+                assert ref["mean_residual"] == run["mean_residual"]
         assert {"ood_pendulum-het_mean.png", "ood_maze_mean.png"} <= set(report["plots"])
         assert {r["task"] for r in rows} == {"pendulum-het", "maze"}
 

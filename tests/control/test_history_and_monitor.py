@@ -50,3 +50,32 @@ def test_monitor_floor_keeps_exact_zeros_from_flagging_tiny_residuals():
         m.update(0.0)
     assert m.update(1e-9) is False
     assert m.update(1.0) is True
+
+
+def test_reference_band_is_the_pooled_mean_plus_three_sigma_per_step():
+    from aoc_cli.control.monitor import flags_against, reference_band
+
+    rng = np.random.default_rng(0)
+    runs = [list(0.01 + 0.001 * rng.standard_normal(30)) for _ in range(4)]
+    for r in runs:
+        r[12] += 0.05                      # every clean run has a spike at step 12 (a hand-over)
+    band = reference_band(runs, window=0)
+    col = np.array([r[5] for r in runs])
+    assert band[5] == pytest.approx(col.mean() + 3 * col.std(ddof=1))
+    assert band[12] > 0.05                 # the spike is part of the reference
+    # a run like the clean ones is not flagged, not even at its own spike; a lasting rise is
+    clean = list(0.01 + 0.0005 * rng.standard_normal(30))
+    clean[12] += 0.05
+    assert not flags_against(clean, reference_band(runs)).any()
+    shifted = clean[:20] + [0.03] * 10
+    assert flags_against(shifted, reference_band(runs))[20:].all()
+    # pooling neighbouring steps, a floor and a minimum
+    wide = reference_band(runs, window=2, floor=0.01, minimum=0.2)
+    assert np.all(wide == 0.2)
+    assert flags_against([None, 0.5], np.array([0.1])).tolist() == [False, True]
+
+
+def test_monitor_with_a_reference_band_flags_from_the_first_step():
+    mon = OODMonitor(warmup=10, reference=np.array([0.1, 0.1, 0.5]))
+    assert [mon.update(x) for x in (0.2, 0.05, 0.4, 0.6)] == [True, False, False, True]
+    assert mon.upper == [0.1, 0.1, 0.5, 0.5]
