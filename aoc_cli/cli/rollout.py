@@ -47,6 +47,7 @@ def register(app: typer.Typer) -> None:
         plot: Optional[Path] = typer.Option(None, "--plot", help="Write a PNG of trajectories or residual/reward curves."),
         noise_after: Optional[int] = typer.Option(None, "--noise-after", help="Disturb actions after this step (OOD test)."),
         noise_std: float = typer.Option(0.5, "--noise-std", help="Disturbance std as a fraction of the action range."),
+        ood_reference: Optional[Path] = typer.Option(None, "--ood-reference", help="Audit log of clean rollouts: flag steps against its per-step 3-sigma band instead of the running one."),
         fmt: Optional[str] = FormatOption,
     ) -> None:
         """Run episodes; print returns, success, OOD flags and residuals."""
@@ -73,6 +74,14 @@ def register(app: typer.Typer) -> None:
         else:
             session = open_session(corpus, model, index_id, config, selection, seed,
                                    action_space)
+        reference = None
+        if ood_reference is not None:
+            if session.index is None:
+                raise AocError(f"--ood-reference needs the AOC controller's residuals; "
+                               f"--policy {policy} has none")
+            from aoc_cli.control.run import reference_from_audit
+
+            reference = reference_from_audit(session, ood_reference)
         baseline = None
         if policy != "aoc":
             from aoc_cli.baselines import make_baseline
@@ -81,7 +90,8 @@ def register(app: typer.Typer) -> None:
         with progress() as p:
             results, summary = rollout(session, environment, episodes, seed=seed, policy=baseline,
                                        audit=str(audit) if audit else None,
-                                       noise_after=noise_after, noise_std=noise_std, progress=p)
+                                       noise_after=noise_after, noise_std=noise_std, progress=p,
+                                       reference=reference)
         if plot is not None:
             _plot(env, results, plot, noise_after)
             message(f"wrote {plot}")

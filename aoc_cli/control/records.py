@@ -144,3 +144,20 @@ def read_audit_step(path, episode: int, step: int) -> dict:
             "candidates": g["candidates"][step] if "candidates" in g else None,
         }
     return out
+
+
+def read_audit_residuals(path) -> tuple[dict, list[np.ndarray]]:
+    """(meta, per-episode residuals (T_e,)) of every episode of an audit log that has them."""
+    try:
+        f = h5py.File(path, "r")
+    except (OSError, FileNotFoundError) as err:
+        raise AocError(f"cannot read audit log {path}: {err}") from None
+    with f:
+        meta = json.loads(f.attrs.get("meta", "{}"))
+        keys = sorted((k for k in f if k.startswith("episode_")),
+                      key=lambda k: int(k.split("_")[1]))
+        runs = [np.asarray(f[k]["residuals"], np.float64) for k in keys if "residuals" in f[k]]
+    if not runs:
+        raise AocError(f"audit log {path} holds no decisions with residuals (record it with "
+                       "`aoc rollout ... --audit FILE` using the AOC controller)")
+    return meta, runs

@@ -156,6 +156,25 @@ def _as_candidates(corpus, actions: list) -> np.ndarray:
     return arr
 
 
+def reference_from_audit(session: Session, path) -> np.ndarray:
+    """(T,) OOD reference band from the residuals of a clean rollout's audit log, recorded
+    with this session's corpus and model (:func:`aoc_cli.control.monitor.reference_band`)."""
+    from aoc_cli.control.monitor import reference_band
+    from aoc_cli.control.records import read_audit_residuals
+
+    meta, runs = read_audit_residuals(path)
+    if meta.get("corpus_hash") != session.corpus.hash or \
+            meta.get("model_hash") != session.model.hash:
+        raise AocError(f"the audit log {path} was recorded with another version of the corpus "
+                       "or model: record the clean reference again with `aoc rollout "
+                       f"{session.corpus.name} ... --audit FILE`")
+    cfg = session.controller.config
+    typical = session.index.meta.get("typical_residual", {})
+    return reference_band(runs, sigmas=cfg.ood_sigmas,
+                          floor=0.1 * float(typical.get("p50") or 0.0),
+                          minimum=float(typical.get("p99") or 0.0))
+
+
 def replay_decision(session: Session, recorded: dict) -> Decision:
     """Re-run a decision from an audit log with its recorded inputs (same candidates)."""
     meta = recorded["meta"]

@@ -237,3 +237,46 @@ def test_zero_and_random_run_on_a_corpus_without_a_model(aoc_inproc, tmp_path):
     returns = [e["return"] for e in json.loads(out)["episodes"]]
     assert returns != pytest.approx(expected)
     one_line_error(*aoc_inproc(*args), r"no trained model: run `aoc train bare`")
+
+
+def test_ood_reference_band_from_a_clean_audit_log(run, tmp_path, maze_root):
+    """--ood-reference: each step is flagged against the per-step band of a clean rollout's
+    residuals (rebuilt here from the two audit logs), not the running band."""
+    import h5py
+
+    from aoc_cli.control.monitor import OODMonitor, flags_against, reference_band
+    from aoc_cli.index.build import load_index
+    from aoc_cli.store import open_corpus
+
+    clean, test = tmp_path / "clean.h5", tmp_path / "test.h5"
+    code, _out, err = run("rollout", "maze", "--env", "maze", "-n", "3", "--seed", "300",
+                          "--audit", str(clean), "-f", "json")
+    assert code == 0, err
+    code, out, err = run("rollout", "maze", "--env", "maze", "-n", "2", "--seed", "7",
+                         "--noise-after", "12", "--noise-std", "0.5",
+                         "--ood-reference", str(clean), "--audit", str(test), "-f", "json")
+    assert code == 0, err
+    reported = [e["ood_steps"] for e in json.loads(out)["episodes"]]
+    typical = load_index(open_corpus("maze", maze_root)).meta["typical_residual"]
+    with h5py.File(clean) as f:
+        runs = [f[k]["residuals"][()] for k in sorted(f) if k.startswith("episode_")]
+    band = reference_band(runs, floor=0.1 * typical["p50"], minimum=typical["p99"])
+    differs = False
+    with h5py.File(test) as f:
+        for e, count in enumerate(reported):
+            g = f[f"episode_{e}"]
+            expected = flags_against(g["residuals"][()], band)
+            np.testing.assert_array_equal(g["ood"][()], expected)
+            assert count == int(expected.sum())
+            running = OODMonitor(floor=0.1 * typical["p50"], minimum=typical["p99"])
+            differs |= [running.update(r) for r in g["residuals"][()]] != expected.tolist()
+    assert differs  # the running band would have flagged other steps
+    # a policy without residuals, and a log of another model, are refused in one line
+    one_line_error(*run("rollout", "maze", "--env", "maze", "-n", "1", "--policy", "zero",
+                        "--ood-reference", str(clean)), r"--ood-reference needs the AOC")
+    with h5py.File(clean, "r+") as f:
+        meta = json.loads(f.attrs["meta"])
+        meta["model_hash"] = "0" * 32
+        f.attrs["meta"] = json.dumps(meta)
+    one_line_error(*run("rollout", "maze", "--env", "maze", "-n", "1",
+                        "--ood-reference", str(clean)), r"another version of the corpus or model")
