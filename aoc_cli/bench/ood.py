@@ -14,7 +14,9 @@ The same seeds run without noise (``noise=0``) as the control: there every flag 
 alarm. Each run is scored against two bands: the monitor's running band of the episode's own
 earlier steps (``band=running``), and a reference band per step learned from clean rollouts
 on other episode seeds (``band=reference``, :func:`aoc_cli.control.monitor.reference_band`),
-which knows that some steps always have a larger residual (the maze's hand-over). The paper used BipedalWalker with a black-box sampler and noise after step 500; here
+which knows that some steps always have a larger residual (the maze's hand-over).
+
+The paper used BipedalWalker with a black-box sampler and noise after step 500; here
 the tasks are pendulum-het (random start; its data holds uniformly random torques, so noisy
 actions are not out of distribution there) and the maze (experts with small noise, noise
 after step 12), with the uniform sampler and each task's controller settings.
@@ -27,7 +29,8 @@ import numpy as np
 from aoc_cli.bench.common import Context, belief_config, make_task_env, session
 from aoc_cli.bench.methods import row_values
 from aoc_cli.bench.results import result_row
-from aoc_cli.control.monitor import flags_against, reference_band
+from aoc_cli.control.monitor import flags_against
+from aoc_cli.control.run import session_reference_band
 
 #: The clean reference rollouts of bench seed s use the episode seeds of bench seed s + this.
 REFERENCE_SEEDS = 500
@@ -140,10 +143,7 @@ def _run_task(ctx: Context, scale: dict, spec: dict) -> list[dict]:
                              label=f"{task} clean reference seed {seed}")
         band = None
         if ref.status == "ok":
-            typical = s.index.meta.get("typical_residual", {})
-            band = reference_band([r.residuals for r in ref.results],
-                                  floor=0.1 * float(typical.get("p50") or 0.0),
-                                  minimum=float(typical.get("p99") or 0.0))
+            band = session_reference_band(s, [r.residuals for r in ref.results])
         for noise in (0.0, float(scale["noise"])):
             s = session(corpus, env, task, seed=seed, **ctx.aoc_config)
             run = ctx.runner.run("aoc", s, env, n, seed,

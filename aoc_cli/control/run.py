@@ -97,14 +97,13 @@ def rollout(session: Session, env, episodes: int, seed: int = 0, policy=None,
     if policy is None:
         raise AocError("a model-free session runs only a given policy (zero or random)")
     cfg = session.controller.config if session.controller is not None else None
-    typical = session.index.meta.get("typical_residual", {}) if session.index is not None else {}
+    floor, minimum = _band_limits(session)
     results = []
     task = progress.add_task("rollout", total=episodes) if progress is not None else None
     for e in range(episodes):
         monitor = None if cfg is None else OODMonitor(
-            warmup=cfg.ood_warmup, sigmas=cfg.ood_sigmas,
-            floor=0.1 * float(typical.get("p50") or 0.0),
-            minimum=float(typical.get("p99") or 0.0), reference=reference)
+            warmup=cfg.ood_warmup, sigmas=cfg.ood_sigmas, floor=floor, minimum=minimum,
+            reference=reference)
         res = run_episode(env, policy, session.history_length, session.corpus, e,
                           seed + e, monitor, noise_after, noise_std,
                           keep_decisions=audit is not None)
@@ -159,7 +158,6 @@ def _as_candidates(corpus, actions: list) -> np.ndarray:
 def reference_from_audit(session: Session, path) -> np.ndarray:
     """(T,) OOD reference band from the residuals of a clean rollout's audit log, recorded
     with this session's corpus and model (:func:`aoc_cli.control.monitor.reference_band`)."""
-    from aoc_cli.control.monitor import reference_band
     from aoc_cli.control.records import read_audit_residuals
 
     meta, runs = read_audit_residuals(path)
@@ -168,11 +166,24 @@ def reference_from_audit(session: Session, path) -> np.ndarray:
         raise AocError(f"the audit log {path} was recorded with another version of the corpus "
                        "or model: record the clean reference again with `aoc rollout "
                        f"{session.corpus.name} ... --audit FILE`")
-    cfg = session.controller.config
-    typical = session.index.meta.get("typical_residual", {})
-    return reference_band(runs, sigmas=cfg.ood_sigmas,
-                          floor=0.1 * float(typical.get("p50") or 0.0),
-                          minimum=float(typical.get("p99") or 0.0))
+    return session_reference_band(session, runs)
+
+
+def session_reference_band(session: Session, runs) -> np.ndarray:
+    """(T,) reference band from clean runs' per-step residuals, with the session's sigmas and
+    the same floor and minimum (the corpus's typical p50 / p99 residual) as its running band."""
+    from aoc_cli.control.monitor import reference_band
+
+    floor, minimum = _band_limits(session)
+    return reference_band(runs, sigmas=session.controller.config.ood_sigmas, floor=floor,
+                          minimum=minimum)
+
+
+def _band_limits(session: Session) -> tuple[float, float]:
+    """(floor of the std, minimum edge) of the OOD bands: 0.1 x the corpus's typical p50
+    residual and its p99 (see :class:`aoc_cli.control.monitor.OODMonitor`)."""
+    typical = session.index.meta.get("typical_residual", {}) if session.index is not None else {}
+    return 0.1 * float(typical.get("p50") or 0.0), float(typical.get("p99") or 0.0)
 
 
 def replay_decision(session: Session, recorded: dict) -> Decision:
