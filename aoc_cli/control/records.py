@@ -115,11 +115,7 @@ def write_audit(path, episodes: list, meta: dict) -> None:
 
 def read_audit_step(path, episode: int, step: int) -> dict:
     """The inputs and recorded outputs of one decision from an audit log."""
-    try:
-        f = h5py.File(path, "r")
-    except (OSError, FileNotFoundError) as err:
-        raise AocError(f"cannot read audit log {path}: {err}") from None
-    with f:
+    with _open_audit(path) as f:
         meta = json.loads(f.attrs.get("meta", "{}"))
         key = f"episode_{episode}"
         if key not in f:
@@ -148,11 +144,7 @@ def read_audit_step(path, episode: int, step: int) -> dict:
 
 def read_audit_residuals(path) -> tuple[dict, list[np.ndarray]]:
     """(meta, per-episode residuals (T_e,)) of every episode of an audit log that has them."""
-    try:
-        f = h5py.File(path, "r")
-    except (OSError, FileNotFoundError) as err:
-        raise AocError(f"cannot read audit log {path}: {err}") from None
-    with f:
+    with _open_audit(path) as f:
         meta = json.loads(f.attrs.get("meta", "{}"))
         keys = sorted((k for k in f if k.startswith("episode_")),
                       key=lambda k: int(k.split("_")[1]))
@@ -161,3 +153,11 @@ def read_audit_residuals(path) -> tuple[dict, list[np.ndarray]]:
         raise AocError(f"audit log {path} holds no decisions with residuals (record it with "
                        "`aoc rollout ... --audit FILE` using the AOC controller)")
     return meta, runs
+
+
+def _open_audit(path) -> h5py.File:
+    """An audit log open for reading, or AocError saying why it cannot be read."""
+    try:
+        return h5py.File(path, "r")
+    except (OSError, FileNotFoundError) as err:
+        raise AocError(f"cannot read audit log {path}: {err}") from None
