@@ -48,6 +48,17 @@ def prepare(store: Store, rows: int, kind: str = "auto") -> str:
     return name
 
 
+def advance(env, buf, obs, action):
+    """Step ``env`` with ``action``, record it in the history ``buf``; the next observation
+    (a new episode's first when this one ended)."""
+    nxt, r, term, trunc, _ = env.step(np.asarray(action, np.float32))
+    buf.push(obs, action, r)
+    if term or trunc:
+        buf.reset()
+        nxt, _ = env.reset()
+    return nxt
+
+
 def time_steps(store: Store, name: str, steps: int) -> dict:
     corpus = store.corpus(name)
     session = open_session(corpus)
@@ -70,12 +81,7 @@ def time_steps(store: Store, name: str, steps: int) -> dict:
         t0 = time.perf_counter()
         index.index.search(b, 2 * (b.shape[1] + 1))  # step 1 of the decomposition alone
         search.append(time.perf_counter() - t0)
-        nxt, r, term, trunc, _ = env.step(np.asarray(d.action, np.float32))
-        buf.push(obs, d.action, r)
-        obs = nxt
-        if term or trunc:
-            obs, _ = env.reset()
-            buf.reset()
+        obs = advance(env, buf, obs, d.action)
     ms = lambda xs: 1000 * float(np.median(xs))  # noqa: E731
     return {"rows": corpus.n_rows, "step_ms": ms(total), "belief_ms": ms(belief),
             "decompose_ms": ms(decomp), "search_ms": ms(search), "kind": index.index.kind}

@@ -30,7 +30,7 @@ from aoc_cli.envs import make_env  # noqa: E402
 from aoc_cli.store import Store  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(__file__))
-from control import parse_size  # noqa: E402
+from control import advance, parse_size  # noqa: E402
 
 
 def _fancy_vectors(self, positions):
@@ -77,12 +77,7 @@ def run(store: Store, name: str, steps: int, old) -> str:
         differ += int(a.chosen != b.chosen
                       or not np.allclose(a.candidate_residuals, b.candidate_residuals, rtol=1e-9, atol=1e-12)
                       or not np.allclose(a.candidate_values, b.candidate_values, rtol=1e-9, atol=1e-12))
-        nxt, r, term, trunc, _ = env.step(np.asarray(b.action, np.float32))
-        buf.push(obs, b.action, r)
-        obs = nxt
-        if term or trunc:
-            obs, _ = env.reset()
-            buf.reset()
+        obs = advance(env, buf, obs, b.action)
     use("new")
     o, n = np.array(times["old"][2:]), np.array(times["new"][2:])  # the first steps build scans
     return (f"{corpus.n_rows:>8} {index.kind:>5} {1e3 * np.median(o):>8.2f} {1e3 * np.median(n):>8.2f} "
