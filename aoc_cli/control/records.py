@@ -157,6 +157,11 @@ def read_audit_residuals(path) -> tuple[dict, list[np.ndarray]]:
 
 def _open_audit(path) -> h5py.File:
     """An audit log open for reading, or AocError saying why it cannot be read."""
+    from pathlib import Path
+
+    if not Path(path).is_file():
+        raise AocError(f"audit log {path} does not exist: record one with "
+                       "`aoc rollout NAME --env ENV --audit FILE`")
     try:
         return h5py.File(path, "r")
     except (OSError, FileNotFoundError) as err:

@@ -141,6 +141,10 @@ def test_rollout_select_uses_only_that_policy(run, tmp_path, maze_root):
     (["index", "maze", "--model", "nope"], "no model 'nope'"),
     (["index", "maze", "--resample", "policy=pi1"], "TAG=VALUE:RATE"),
     (["explain", "maze"], "either --input"),
+    (["rollout", "maze", "--env", "maze", "--ood-reference", "/no/such.h5"],
+     r"audit log /no/such.h5 does not exist: record one with `aoc rollout"),
+    (["explain", "maze", "--audit", "/no/such.h5", "--episode", "0", "--step", "0"],
+     r"does not exist"),
 ])
 def test_bad_input_is_one_line_and_exit_2(run, args, pattern):
     one_line_error(*run(*args), pattern)
