@@ -72,10 +72,14 @@ BUDGETS = {
 AOC_METHODS = ("aoc", "aoc-normal-rows", "aoc-dynamics")
 
 
+#: Experiments that sweep the data size, and so take ``sizes`` (rows per corpus).
+SIZED = ("pendulum-het", "lunar")
+
+
 def check(name: str, scale: str, seeds: int | None, episodes: int | None,
           methods: list[str] | None = None, epsilon: float | None = None,
-          residual_cap: float | None = None) -> None:
-    """Bad experiment, scale, counts, method names or AOC settings -> AocError."""
+          residual_cap: float | None = None, sizes: list[int] | None = None) -> None:
+    """Bad experiment, scale, counts, sizes, method names or AOC settings -> AocError."""
     if name != "all" and name not in EXPERIMENTS:
         raise AocError(f"unknown experiment {name!r}: use one of {', '.join(ORDER)} or all")
     if scale not in SCALES:
@@ -98,21 +102,37 @@ def check(name: str, scale: str, seeds: int | None, episodes: int | None,
                            f"{', '.join([*AOC_METHODS, *BASELINES])}")
     if residual_cap is not None and not residual_cap > 0:
         raise AocError(f"--residual-cap must be > 0, got {residual_cap}")
+    if sizes is not None:
+        if name not in SIZED:
+            raise AocError(f"--sizes applies to {' and '.join(SIZED)} (the data-size sweeps), "
+                           f"not to {name}")
+        if not sizes or any(n < 100 for n in sizes):
+            raise AocError(f"--sizes must be row counts >= 100, got {sizes}")
+
+
+def sized(params: dict, sizes: list[int] | None) -> dict:
+    """A scale's parameters with its data sizes replaced by ``sizes`` (rows per corpus); the
+    paper's column shows a figure where a size is one of the paper's own."""
+    if sizes is None:
+        return params
+    return {**params, "sizes": list(sizes), "paper_rows": list(sizes)}
 
 
 def run_experiment(name: str, scale: str = "full", seeds: int | None = None,
                    out: str | Path | None = None, store: str | Path = "bench/store",
                    episodes: int | None = None, methods: list[str] | None = None,
                    log=None, progress=None, epsilon: float | None = None,
-                   residual_cap: float | None = None) -> dict:
+                   residual_cap: float | None = None, sizes: list[int] | None = None) -> dict:
     """Run experiment ``name`` at ``scale`` (tiny | quick | full); write and return its report:
     ``{"experiment", "out", "rows", "summary", "plots", "built", "seconds"}``.
 
     ``epsilon`` and ``residual_cap`` (ControllerConfig fields) apply to AOC wherever the
-    experiment does not vary them."""
-    check(name, scale, seeds, episodes, methods, epsilon, residual_cap)
+    experiment does not vary them; ``sizes`` replaces the scale's data sizes of the
+    data-size sweeps (``SIZED``), e.g. one of the paper's sizes with the full scale's training
+    and episodes."""
+    check(name, scale, seeds, episodes, methods, epsilon, residual_cap, sizes)
     exp = EXPERIMENTS[name]
-    params = exp.scales[scale]
+    params = sized(exp.scales[scale], sizes)
     out = Path(out) if out is not None else Path("bench") / name
     out.mkdir(parents=True, exist_ok=True)
     n_seeds = seeds if seeds is not None else int(params["seeds"])
@@ -136,8 +156,8 @@ def run_experiment(name: str, scale: str = "full", seeds: int | None = None,
               + ", ".join(f"[{p}]({p})" for p in ctx.plots))
     markdown = summary_markdown(exp.title, summary, exp.metrics, header, exp.paper_label)
     write_outputs(out, name, rows, summary, markdown,
-                  {"scale": scale, "seeds": n_seeds, "seconds": seconds, "plots": ctx.plots,
-                   "aoc_config": ctx.aoc_config,
+                  {"scale": scale, "seeds": n_seeds, "sizes": params.get("sizes"),
+                   "seconds": seconds, "plots": ctx.plots, "aoc_config": ctx.aoc_config,
                    "built": artefacts.built})
     return {"experiment": name, "out": str(out), "rows": rows, "summary": summary,
             "plots": ctx.plots, "built": artefacts.built, "seconds": seconds}
@@ -183,12 +203,13 @@ COST = {
 
 
 def expected_seconds(name: str, scale: str, seeds: int | None = None,
-                     episodes: int | None = None, methods: list[str] | None = None) -> float:
+                     episodes: int | None = None, methods: list[str] | None = None,
+                     sizes: list[int] | None = None) -> float:
     """A rough estimate of a run's time on this machine (artefact reuse not counted)."""
     if name == "all":
         return sum(expected_seconds(n, scale, seeds, episodes, methods) for n in ORDER)
     exp = EXPERIMENTS[name]
-    p = exp.scales[scale]
+    p = sized(exp.scales[scale], sizes if name in SIZED else None)
     budget = BUDGETS[scale]
     n_seeds = seeds if seeds is not None else int(p["seeds"])
     eps = episodes or int(p["episodes"])

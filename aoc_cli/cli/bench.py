@@ -38,6 +38,9 @@ def register(app: typer.Typer) -> None:
             None, "--residual-cap", help="AOC's residual cap c (candidates above c x the "
                                          "corpus's typical p90 residual are dropped; default: "
                                          "no cap)."),
+        sizes: Optional[str] = typer.Option(
+            None, "--sizes", help="pendulum-het, lunar: comma-separated rows per corpus "
+                                  "instead of the scale's (e.g. 100000, the paper's Low-Data)."),
         bench_store: Path = typer.Option(Path("bench/store"), "--bench-store",
                                          help="Store for the bench's corpora and models."),
         fmt: Optional[str] = FormatOption,
@@ -51,9 +54,10 @@ def register(app: typer.Typer) -> None:
             raise AocError("give --quick or --tiny, not both")
         scale = "tiny" if tiny else "quick" if quick else "full"
         chosen = [m.strip() for m in methods.split(",") if m.strip()] if methods else None
-        check(experiment, scale, seeds, episodes, chosen, epsilon, residual_cap)
+        row_counts = _sizes(sizes)
+        check(experiment, scale, seeds, episodes, chosen, epsilon, residual_cap, row_counts)
         names = ORDER if experiment == "all" else [experiment]
-        eta = expected_seconds(experiment, scale, seeds, episodes, chosen)
+        eta = expected_seconds(experiment, scale, seeds, episodes, chosen, row_counts)
         message(f"aoc bench {experiment} ({scale}): expected time about "
                 f"{_duration(eta)} on a 2-core machine (less when the bench store at "
                 f"{bench_store} already holds the corpora and models)")
@@ -69,7 +73,8 @@ def register(app: typer.Typer) -> None:
                 report = run_experiment(name, scale, seeds, target, bench_store, episodes,
                                         chosen, log=message, progress=bar,
                                         epsilon=None if name in ("epsilon", "two-gates")
-                                        else epsilon, residual_cap=residual_cap)
+                                        else epsilon, residual_cap=residual_cap,
+                                        sizes=row_counts)
                 bar.advance(overall)
                 for rec in report["summary"]:
                     if rec["status"] != "ok":
@@ -79,6 +84,16 @@ def register(app: typer.Typer) -> None:
                 records += report["summary"]
         rows = [{c: r.get(c) for c in COLUMNS} for r in records]
         write_records(rows, fmt, columns=COLUMNS, title=f"aoc bench {experiment} ({scale})")
+
+
+def _sizes(text: str | None) -> list[int] | None:
+    """``--sizes 100000,300000`` -> [100000, 300000]; anything else is a one-line error."""
+    if text is None:
+        return None
+    try:
+        return [int(float(part)) for part in text.split(",") if part.strip()]
+    except ValueError:
+        raise AocError(f"--sizes must be comma-separated row counts, got {text!r}") from None
 
 
 def _duration(seconds: float) -> str:

@@ -133,6 +133,17 @@ def test_two_gates_and_lunar_tiny(tmp_path, bench_store):
         assert len({r["method"] for r in rows}) == (1 if name == "two-gates" else 5)
 
 
+def test_sizes_replace_the_data_sizes_of_a_sweep(tmp_path, bench_store):
+    out = tmp_path / "lunar"
+    report = run_experiment("lunar", "tiny", out=out, store=bench_store, sizes=[1_500, 2_500],
+                            methods=["zero"])
+    rows, _summary = _check_outputs(out, report)
+    assert sorted({r["setting"] for r in rows}) == ["rows=1500", "rows=2500"]
+    corpora = {b["name"] for b in report["built"] if b["step"] == "collect"}
+    assert corpora == {"lunar-1500r-s0", "lunar-2500r-s0"}
+    assert json.loads((out / "summary.json").read_text())["sizes"] == [1_500, 2_500]
+
+
 def test_a_second_run_reuses_the_stored_artefacts(tmp_path, bench_store):
     run_experiment("two-gates", "tiny", out=tmp_path / "a", store=bench_store)
     again = run_experiment("two-gates", "tiny", out=tmp_path / "b", store=bench_store)
@@ -232,7 +243,10 @@ def test_bench_cli_prints_the_summary_and_rejects_bad_input(aoc, tmp_path):
                          (["bench", "k", "--tiny", "--seeds", "0"], "--seeds"),
                          (["bench", "lunar", "--tiny", "--methods", "aoc,foo"], "foo"),
                          (["bench", "epsilon", "--tiny", "--epsilon", "0.2"], "does not apply"),
-                         (["bench", "ood", "--tiny", "--epsilon", "1.5"], "(0, 1]")]:
+                         (["bench", "ood", "--tiny", "--epsilon", "1.5"], "(0, 1]"),
+                         (["bench", "maze-adapt", "--tiny", "--sizes", "500"], "--sizes"),
+                         (["bench", "lunar", "--tiny", "--sizes", "1e5x"], "row counts"),
+                         (["bench", "lunar", "--tiny", "--sizes", "10"], ">= 100")]:
         code, _o, err = aoc(*args, "--bench-store", str(store))
         assert code == 2 and needle in err and len(err.strip().splitlines()) == 1
     assert set(EXPERIMENTS) == {"pendulum-het", "epsilon", "k", "maze-adapt", "two-gates",
