@@ -29,7 +29,7 @@ def register(app: typer.Typer) -> None:
                  if k not in ("tags", "built", "sources", "observation_space", "action_space")}
         brief["observation_space"] = space_text(summary["observation_space"])
         brief["action_space"] = space_text(summary["action_space"])
-        brief["sources"] = ", ".join(s.get("path", "?") for s in summary["sources"])
+        brief["sources"] = "; ".join(_source_text(s) for s in summary["sources"])
         write_object(brief, "table", title=f"corpus {name}")
         tag_rows = [{"tag": t, "label": label, "rows": n}
                     for t, counts in summary["tags"].items() for label, n in counts.items()]
@@ -51,3 +51,14 @@ def register(app: typer.Typer) -> None:
             message(f"no corpora in {store.root}: create one with `aoc ingest` or `aoc collect`")
         write_records(records, fmt, columns=["name", "rows", "episodes", "observation", "action",
                                              "has_rewards", "models"], title=str(store.root))
+
+
+def _source_text(source: dict) -> str:
+    """One line for a corpus source: the file an ingest read, or the task a collect ran."""
+    if source.get("kind") == "collect":
+        size = (f"{source['steps']} steps" if source.get("steps") is not None
+                else f"{source.get('episodes')} episodes")
+        return (f"collect {source.get('task', '?')} (seed {source.get('seed', '?')}, {size}; "
+                f"{', '.join(source.get('policies') or [])})")
+    return f"{source.get('format', '?')} {source.get('path', '?')}".strip()
+

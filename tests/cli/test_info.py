@@ -81,3 +81,15 @@ def test_ls_lists_every_corpus(store, aoc, tmp_path):
     code, out, _ = aoc("ls", "-f", "csv")
     assert out.splitlines()[0].startswith("name,rows,episodes")
     assert out.splitlines()[2].startswith("b,300,2")
+
+
+def test_info_table_names_where_each_corpus_came_from(store, aoc, tmp_path):
+    ingest(aoc, tmp_path, "hopper")
+    code, out, err = aoc("collect", "maze", "--episodes", "8", "--seed", "3", "--name", "maze")
+    assert code == 0, err
+    code, out, err = aoc("info", "hopper", "--format", "table")
+    assert code == 0, err
+    assert f"d4rl {tmp_path / 'hopper.hdf5'}" in out    # tables are 200 wide off a terminal
+    code, out, err = aoc("info", "maze", "--format", "table")
+    assert code == 0, err
+    assert "collect maze (seed 3, 8 episodes; pi1, pi2, pi3, pi4)" in out
