@@ -158,9 +158,13 @@ def _decompose(beliefs, Y, k, values, index, reference, selection, config) -> De
     dist = np.where(used, dist, np.nan)
 
     # 4. value estimate: v_hat = sum_c w_c v_c over the subset
+    # as v_0 + sum_c w_c (v_c - v_0), v_0 the heaviest row's value: equal row values give that
+    # value exactly, so candidates whose rows share a value tie exactly (the controller then
+    # breaks the tie by residual, not by the rounding of the weighted sum)
     value = None
     if values is not None:
-        value = (w_out * np.where(used, values[np.maximum(rows, 0)], 0.0)).sum(1)
+        v = np.where(used, values[np.maximum(rows, 0)], 0.0)
+        value = v[:, 0] + (w_out * (v - v[:, :1])).sum(1)
     return Decomposition(
         rows=rows.astype(np.int64),
         weights=w_out,

@@ -200,6 +200,18 @@ def test_value_is_the_weighted_sum_of_row_values():
     assert decompose(beliefs, queries).value is None
 
 
+def test_rows_of_one_value_give_exactly_that_value():
+    # candidates whose supporting rows share a value must tie exactly (the controller breaks
+    # value ties by residual), whatever the rounding of the weights
+    rng = np.random.default_rng(17)
+    beliefs = rng.standard_normal((200, 4))
+    queries = rng.standard_normal((20, 4)) * 0.5
+    for v in (-0.1, 0.3, 9.9):
+        result = decompose(beliefs, queries, values=np.full(200, v))
+        assert (result.weights > 0).sum(1).min() >= 2
+        assert (result.value == v).all()
+
+
 def test_reference_path_agrees_with_the_batched_solver():
     rng = np.random.default_rng(8)
     beliefs = rng.standard_normal((300, 4))
