@@ -64,15 +64,30 @@ def to_jsonable(value: Any) -> Any:
     return value
 
 
-def _cell(value: Any) -> str:
+def _cell(value: Any, table: bool = False) -> str:
+    """A CSV cell (full precision; lists and dicts as compact JSON) or, with ``table``, a table
+    cell: floats to 6 significant digits, also inside lists and dicts (an action vector reads
+    ``[0.742403, 0.736766]``)."""
     value = to_jsonable(value)
     if value is None:
         return ""
     if isinstance(value, float):
         return f"{value:.6g}"
     if isinstance(value, (list, dict)):
+        if table:
+            return _short(value)
         return json.dumps(value, separators=(",", ":"))
     return str(value)
+
+
+def _short(value: Any) -> str:
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    if isinstance(value, list):
+        return "[" + ", ".join(_short(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{k}: {_short(v)}" for k, v in value.items()) + "}"
+    return json.dumps(value)
 
 
 def write_records(
@@ -106,7 +121,7 @@ def write_records(
         for c in columns:
             table.add_column(str(c), overflow="fold")
         for r in records:
-            table.add_row(*[_cell(r.get(c)) for c in columns])
+            table.add_row(*[_cell(r.get(c), table=True) for c in columns])
         _stdout_console().print(table)
     out.flush()
 
@@ -129,7 +144,7 @@ def write_object(obj: dict, fmt: str | None, title: str | None = None, out=None)
         table.add_column("key", style="bold")
         table.add_column("value", overflow="fold")
         for k, v in obj.items():
-            table.add_row(str(k), _cell(v))
+            table.add_row(str(k), _cell(v, table=True))
         _stdout_console().print(table)
     out.flush()
 
