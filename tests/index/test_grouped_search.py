@@ -106,17 +106,39 @@ def test_exact_among_and_grouped_scan_agree_on_the_distances(beliefs, corpus):
     np.testing.assert_allclose(d2, d2_all, rtol=1e-9)
 
 
-def test_k_smallest_under_a_bound_matches_a_full_selection():
-    from aoc_cli.index.grouped import _k_smallest
+def test_ball_kernel_keeps_the_k_nearest_with_ties_and_counts_rows_under_the_bound():
+    from aoc_cli.index.scan_kernels import ball_knn
 
     rng = np.random.default_rng(3)
-    d2 = rng.random((9, 300))
-    d2[2, :5] = d2[2, 5]  # ties at the k-th value
+    rows = rng.integers(0, 4, (300, 3)).astype(np.float64)  # many exact distance ties
+    Y = rng.integers(0, 4, (9, 3)) + 0.25
+    d2 = ((rows[None] - Y[:, None]) ** 2).sum(-1)
     k = 7
     kth = np.sort(d2, axis=1)[:, k - 1]
-    for bound in (kth, kth + 0.05, np.where(np.arange(9) == 4, kth - 0.01, kth + 0.01)):
-        # exact k-th, a loose bound (more than k entries under it), one bound beaten
-        cols = _k_smallest(d2, bound, k)
-        got = np.sort(np.take_along_axis(d2, cols, axis=1), axis=1)
-        np.testing.assert_array_equal(got, np.sort(d2, axis=1)[:, :k])
-        assert all(len(set(c)) == k for c in cols.tolist())
+    G = 2
+    D2 = np.zeros((300, G), np.float32)
+    starts, members = np.array([0, 5, 9]), np.arange(9)
+    inf = np.full(9, np.inf)
+    by_row = np.arange(300)[None].repeat(9, 0)
+
+    def run(u2, hi=inf):
+        out_r, out_d = np.empty((9, k), np.int64), np.empty((9, k))
+        found = ball_knn(D2, np.full(G, np.inf), starts, members, hi, -inf, Y, u2, rows,
+                         Y.astype(np.float32), rows.astype(np.float32), k, out_r, out_d)
+        return found, out_r, out_d
+
+    for u2 in (kth, kth + 0.5, np.where(np.arange(9) == 4, kth - 0.01, kth + 0.01)):
+        found, out_r, out_d = run(u2)
+        assert found == ((d2 <= u2[:, None]).sum(1)).min()
+        full = np.lexsort((by_row, d2), axis=1)[:, :k]
+        ok = np.arange(9) != 4 if found < k else np.ones(9, bool)
+        np.testing.assert_array_equal(out_r[ok], full[ok])  # nearest first, ties by row
+        np.testing.assert_array_equal(out_d[ok], np.take_along_axis(d2, full, 1)[ok])
+    # a row outside query 0's annulus (D2 above its bound) is never returned to it
+    D2[full[0, 0], 0] = 5.0
+    hi = inf.copy()
+    hi[0] = 4.0
+    found, out_r, _ = run(kth + 0.5, hi)
+    rest = np.lexsort((np.arange(300), np.where(np.arange(300) == full[0, 0], np.inf, d2[0])))[:k]
+    np.testing.assert_array_equal(out_r[0], rest)
+    np.testing.assert_array_equal(out_r[1:], np.lexsort((by_row, d2), axis=1)[1:, :k])

@@ -1,0 +1,147 @@
+"""Compiled inner loops of the grouped scan (grouped.py): numba, single-threaded, float64 tests.
+
+Both kernels walk the (M, G) float32 matrix D2 of the rows' squared distances to the G group
+centroids (minus ||c_g||^2, as the GEMM gives them) once, row by row, so the per-row work is a
+few compares instead of several numpy passes over M entries.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+
+@numba.njit(cache=True, nogil=True)
+def rows_under(D2, thresholds):  # pragma: no cover - compiled
+    """(p,) int64 ascending rows m with D2[m, g] <= thresholds[g] for some group g.
+
+    D2: (M, G) float32; thresholds: (G,) float64."""
+    M, G = D2.shape
+    t32 = _up32(thresholds)
+    out = np.empty(M, dtype=np.int64)
+    n = 0
+    for m in range(M):
+        hit = False
+        for g in range(G):  # branch-free: vectorised
+            hit |= D2[m, g] <= t32[g]
+        if hit:
+            out[n] = m
+            n += 1
+    return out[:n]
+
+
+@numba.njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
+def ball_knn(D2, limit, starts, members, hi, lo, Y, u2, rows, Y32, rows32, k, out_rows, out_d2):  # pragma: no cover
+    """Exact k nearest rows of every query among the rows its group's centroid bounds keep.
+
+    D2: (M, G) float32 centroid distances (D2 scale: ||b - c_g||^2 - ||c_g||^2, with rounding);
+    limit: (G,) a row with D2[m, g] > limit[g] is farther than u_i from every query i of group g;
+    starts (G + 1,), members (Q,): the queries of group g are members[starts[g]:starts[g + 1]];
+    hi, lo: (Q,) float64, a row with D2[m, g] > hi[i] or < lo[i] (g the group of query i) is
+    farther than u_i from query i (its annulus about c_g, rounding included);
+    Y: (Q, d) float64 queries and Y32 the same in float32; u2: (Q,) float64 bound on each
+    query's k-th squared distance; rows: (M, d) float64 and rows32 (M, d) float32, the rows.
+
+    Fills out_rows (Q, k) int64 and out_d2 (Q, k) float64 (squared distances from the
+    differences, ascending; ties by row), and returns the fewest rows any query found within its
+    bound (< k: the bound was beaten by rounding, and the answer is incomplete). The float32
+    distance (any summation order) only filters; the kept distances are float64, summed in
+    order.
+    """
+    M, G = D2.shape
+    Q, d = Y.shape
+    heap_d = np.full((Q, k), np.inf)
+    heap_r = np.full((Q, k), -1, dtype=np.int64)
+    found = np.zeros(Q, dtype=np.int64)
+    l32 = _up32(limit)
+    hi32 = _up32(hi)
+    lo32 = -_up32(-lo)
+    # float32 squared distances of float32 data (all terms >= 0) are within (d + 2) 2^-24 of
+    # the exact value, relatively: a row whose float32 distance exceeds u2 (1 + 1e-5) is out
+    u2f = _up32(u2 * (1.0 + 1e-5))
+    for m in range(M):
+        hit = False
+        for g in range(G):  # branch-free: vectorised; most rows are in no ball
+            hit |= D2[m, g] <= l32[g]
+        if not hit:
+            continue
+        for g in range(G):
+            x = D2[m, g]
+            if x > l32[g]:
+                continue
+            for s in range(starts[g], starts[g + 1]):
+                i = members[s]
+                if x > hi32[i] or x < lo32[i]:
+                    continue
+                e32 = np.float32(0.0)
+                for t in range(d):
+                    x32 = rows32[m, t] - Y32[i, t]
+                    e32 += x32 * x32
+                if e32 > u2f[i]:
+                    continue
+                e = 0.0
+                for t in range(d):
+                    diff = rows[m, t] - Y[i, t]
+                    e = e + diff * diff
+                if e > u2[i]:
+                    continue
+                found[i] += 1
+                if e < heap_d[i, 0]:  # a max-heap of the k best (ties: the earlier rows stay)
+                    _replace_top(heap_d[i], heap_r[i], e, m)
+    for i in range(Q):
+        order = np.argsort(heap_d[i], kind="mergesort")
+        dd = heap_d[i][order]
+        rr = heap_r[i][order]
+        # equal distances: by row (the heap keeps the earlier rows, in no order)
+        a = 0
+        while a < k:
+            b = a + 1
+            while b < k and dd[b] == dd[a]:
+                b += 1
+            if b - a > 1:
+                rr[a:b] = np.sort(rr[a:b])
+            a = b
+        out_rows[i] = rr
+        out_d2[i] = dd
+    return found.min() if Q else k
+
+
+@numba.njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
+def _sq32(a, b):  # pragma: no cover - compiled
+    """||a - b||^2 of two float32 vectors (summed in any order: vectorised)."""
+    e = np.float32(0.0)
+    for t in range(a.shape[0]):
+        x = a[t] - b[t]
+        e += x * x
+    return e
+
+
+@numba.njit(cache=True, nogil=True)
+def _up32(x):  # pragma: no cover - compiled
+    """x (float64) as float32 rounded up, so a float32 x <= _up32(t) holds whenever x <= t."""
+    out = x.astype(np.float32)
+    for g in range(x.shape[0]):
+        if np.float64(out[g]) < x[g]:
+            out[g] = np.nextafter(out[g], np.float32(np.inf))
+    return out
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _replace_top(hd, hr, e, m):  # pragma: no cover - compiled
+    """Replace the largest entry of the max-heap (hd, hr), ordered by (distance, row), by
+    (e, m) and restore the heap (the entry evicted among equal distances is the latest row)."""
+    k = hd.shape[0]
+    p = 0
+    while True:
+        c = 2 * p + 1
+        if c >= k:
+            break
+        if c + 1 < k and (hd[c + 1] > hd[c] or (hd[c + 1] == hd[c] and hr[c + 1] > hr[c])):
+            c += 1
+        if hd[c] < e or (hd[c] == e and hr[c] < m):
+            break
+        hd[p] = hd[c]
+        hr[p] = hr[c]
+        p = c
+    hd[p] = e
+    hr[p] = m
