@@ -95,7 +95,7 @@ def min_norm_point(
 def _wolfe_batch(points, valid, tol, max_iter, out_w, out_res, out_ok, out_it):  # pragma: no cover
     n_q, k, d = points.shape
     m = min(k, d + 1)  # an affinely independent corral has at most d + 1 points
-    P = np.empty((k, d))
+    PT = np.empty((d, k))  # transposed: <p_c, x> for all c vectorises over c
     sq = np.empty(k)
     xP = np.empty(k)
     H = np.zeros((m, m))
@@ -126,7 +126,7 @@ def _wolfe_batch(points, valid, tol, max_iter, out_w, out_res, out_ok, out_it): 
         j0 = 0
         for c in range(k):
             for t in range(d):
-                P[c, t] = points[q, c, t] / scale
+                PT[t, c] = points[q, c, t] / scale
             sq[c] = sq[c] / s2
             if sq[c] < sq[j0]:
                 j0 = c
@@ -140,7 +140,7 @@ def _wolfe_batch(points, valid, tol, max_iter, out_w, out_res, out_ok, out_it): 
         slot[0] = j0
         lam[0] = 1.0
         for t in range(d):
-            Ps[0, t] = P[j0, t]
+            Ps[0, t] = PT[t, j0]
         nact = 1
         failed = False
         done = False
@@ -165,17 +165,18 @@ def _wolfe_batch(points, valid, tol, max_iter, out_w, out_res, out_ok, out_it): 
                 if lam[s] != 0.0:
                     for t in range(d):
                         x[t] += lam[s] * Ps[s, t]
+            xP[:] = 0.0
+            for t in range(d):
+                xt = x[t]
+                for c in range(k):
+                    xP[c] += PT[t, c] * xt
             j = 0
             best = np.inf
             for c in range(k):
-                e = 0.0
-                for t in range(d):
-                    e += P[c, t] * x[t]
                 if not valid[q, c]:
-                    e = np.inf
-                xP[c] = e
-                if e < best:
-                    best = e
+                    xP[c] = np.inf
+                if xP[c] < best:
+                    best = xP[c]
                     j = c
             xx = 0.0
             for t in range(d):
@@ -236,7 +237,7 @@ def _wolfe_batch(points, valid, tol, max_iter, out_w, out_res, out_ok, out_it): 
                 if act[s]:
                     e = 1.0
                     for t in range(d):
-                        e += Ps[s, t] * P[j, t]
+                        e += Ps[s, t] * PT[t, j]
                     g[s] = e
                 else:
                     g[s] = 0.0
@@ -265,7 +266,7 @@ def _wolfe_batch(points, valid, tol, max_iter, out_w, out_res, out_ok, out_it): 
             act[s_in] = True
             slot[s_in] = j
             for t in range(d):
-                Ps[s_in, t] = P[j, t]
+                Ps[s_in, t] = PT[t, j]
             nact += 1
         out_it[q] = it
         out_ok[q] = done and not failed
