@@ -19,7 +19,8 @@ def register(app: typer.Typer) -> None:
         name: str = typer.Argument(..., help="Corpus name."),
         input: Optional[str] = typer.Option(None, "--input", "-i", help="JSONL queries (a file, or - for stdin)."),
         audit: Optional[Path] = typer.Option(None, "--audit", help="An audit log written by `aoc rollout --audit`."),
-        episode: int = typer.Option(0, "--episode", help="Episode of the audit log."),
+        data: Optional[str] = typer.Option(None, "--data", help="A corpus whose logged step to explain (--episode, --step): NAME itself, or held-out episodes of the same spaces. Prints the controller's decision there and what supports the logged action."),
+        episode: int = typer.Option(0, "--episode", help="Episode of the audit log or of --data."),
         step: int = typer.Option(0, "--step", help="Step of that episode."),
         compare: Optional[List[str]] = typer.Option(None, "--compare", help="Actions to explain side by side, e.g. --compare 0 --compare 1 or --compare 0.5,-1."),
         model: Optional[str] = typer.Option(None, "--model", help="Model id."),
@@ -31,19 +32,27 @@ def register(app: typer.Typer) -> None:
         seed: int = typer.Option(0, "--seed"),
         fmt: Optional[str] = FormatOption,
     ) -> None:
-        """Explain decisions: from JSONL queries, or a recorded step of an audit log."""
-        from aoc_cli.control import (ControllerConfig, decision_record, open_session,
-                                     parse_query, read_audit_step, replay_decision)
+        """Explain decisions: from JSONL queries, a recorded step of an audit log, or a logged
+        step of a corpus."""
+        from aoc_cli.control import (ControllerConfig, decision_record, explain_logged_step,
+                                     open_session, parse_query, read_audit_step,
+                                     replay_decision)
 
         fmt = resolve_format(fmt)
-        if (input is None) == (audit is None):
-            raise AocError("give either --input FILE|- (JSONL queries) or --audit FILE "
-                           "--episode E --step T")
-        corpus = get_store().corpus(name)
+        if sum(x is not None for x in (input, audit, data)) != 1:
+            raise AocError("give one of --input FILE|- (JSONL queries), --audit FILE --episode E "
+                           "--step T (a recorded decision) or --data CORPUS --episode E --step T "
+                           "(a logged step)")
+        store = get_store()
+        corpus = store.corpus(name)
         config = ControllerConfig(candidates=candidates, epsilon=epsilon, k=k,
                                   residual_cap=residual_cap).check()
         records = []
-        if audit is not None:
+        if data is not None:
+            source = corpus if data == name else store.corpus(data)
+            session = open_session(corpus, model, index_id, config, seed=seed)
+            records = explain_logged_step(session, source, episode, step)
+        elif audit is not None:
             recorded = read_audit_step(audit, episode, step)
             meta = recorded["meta"]
             if meta.get("config"):
@@ -96,8 +105,8 @@ def _read_lines(source: str) -> list[tuple[int, str]]:
 
 def _flat(rec: dict) -> list[dict]:
     """One row per supporting example, with the decision's figures repeated (for CSV)."""
-    base = {k: rec.get(k) for k in ("query", "episode", "step", "action", "value", "residual")
-            if k in rec}
+    base = {k: rec.get(k) for k in ("query", "role", "data", "episode", "step", "action",
+                                     "value", "residual") if k in rec}
     rows = []
     for s in rec["support"]:
         row = dict(base)
@@ -132,8 +141,13 @@ def _print(records: list[dict], fmt: str) -> None:
                 head["best rejected v_hat"] = c["best_rejected_value"]
             if "recorded_action" in rec:
                 head["recorded action"] = rec["recorded_action"]
-            title = "decision" + (f" (query {rec['query']})" if "query" in rec else "") + \
-                (f" (episode {rec['episode']}, step {rec['step']})" if "episode" in rec else "")
+            if "logged_action" in rec:
+                head["logged action"] = rec["logged_action"]
+            where = f"{rec['data']} " if "data" in rec else ""
+            title = rec.get("role", "decision") + \
+                (f" (query {rec['query']})" if "query" in rec else "") + \
+                (f" ({where}episode {rec['episode']}, step {rec['step']})"
+                 if "episode" in rec else "")
             write_object(head, "table", title=title)
             rows = [{"row": s["row"], "episode": s["episode"], "step": s["step"],
                      **s["tags"], "action": s["action"], "value": s["value"],

@@ -7,6 +7,7 @@ from aoc_cli.control.records import decision_record, read_audit_step, write_audi
 from aoc_cli.control.rollout import EpisodeResult, HistoryBuffer, run_episode, summarize
 from aoc_cli.control.run import (
     Session,
+    explain_logged_step,
     explain_query,
     model_free_session,
     open_session,
@@ -24,6 +25,7 @@ __all__ = [
     "OODMonitor",
     "Session",
     "decision_record",
+    "explain_logged_step",
     "explain_query",
     "flags_against",
     "model_free_session",

@@ -140,6 +140,59 @@ def explain_query(session: Session, observation, history, action=None,
                             typical_residual=typical)]
 
 
+def explain_logged_step(session: Session, data, episode: int, step: int,
+                        leave_episode_out: bool = True) -> list[dict]:
+    """What the controller decides at step ``step`` of episode ``episode`` of corpus ``data``
+    (the session's own corpus, or held-out episodes of the same spaces), from that step's
+    logged observation and history, and what supports the action that was logged there.
+    When ``data`` is the session's corpus and ``leave_episode_out``, the episode's own rows
+    are left out of the decompositions (else the logged action is explained by its own row).
+
+    Returns [decision record (``logged_action`` added), the logged action's record] in value
+    mode; the decision record alone in imitation mode (it explains only its own choice)."""
+    corpus = session.corpus
+    same = data.hash == corpus.hash
+    if not same:
+        mine = (corpus.observation_dim, corpus.action_dim, corpus.discrete, corpus.n_actions,
+                corpus.has_rewards)
+        theirs = (data.observation_dim, data.action_dim, data.discrete, data.n_actions,
+                  data.has_rewards)
+        if mine != theirs:
+            raise AocError(
+                f"corpus {data.name!r} does not match {corpus.name!r} (observation dims, action "
+                f"dims or type, rewards: {theirs} against {mine}): explain its steps with a "
+                "model of its own")
+    if not 0 <= episode < data.n_episodes:
+        raise AocError(f"corpus {data.name!r} has episodes 0..{data.n_episodes - 1}, "
+                       f"not {episode}")
+    start, end = (int(x) for x in data.episode_starts[episode:episode + 2])
+    if not 0 <= step < end - start:
+        raise AocError(f"episode {episode} of corpus {data.name!r} has steps "
+                       f"0..{end - start - 1}, not {step}")
+    row = start + step
+    observation = np.asarray(data.read("observations", [row])[0], dtype=np.float64)
+    history = data.history([row], session.history_length)
+    logged = data.read("actions", [row])[0]
+    logged = int(logged) if data.discrete else np.asarray(logged, dtype=np.float64).tolist()
+    ctl = session.controller
+    kept = ctl.selection
+    if same and leave_episode_out:
+        mask = np.ones(corpus.n_rows, bool) if kept is None else kept.copy()
+        mask[start:end] = False
+        ctl.selection = mask
+    try:
+        records = explain_query(session, observation, history)
+        if session.model.mode == "value":
+            records += explain_query(session, observation, history, action=logged)
+    finally:
+        ctl.selection = kept
+    records[0]["logged_action"] = logged
+    for rec, role in zip(records, ("decision", "logged action")):
+        rec.update({"role": role, "data": data.name, "episode": episode, "step": step,
+                    "row": row, "episode_left_out": bool(same and leave_episode_out)})
+    return records
+
+
 def _as_candidates(corpus, actions: list) -> np.ndarray:
     if corpus.discrete:
         arr = np.asarray(actions, dtype=np.float64).reshape(-1)

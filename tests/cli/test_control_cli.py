@@ -111,6 +111,54 @@ def test_explain_jsonl_queries_and_compare(run, tmp_path):
     assert {"support_row", "support_weight", "tag_policy"} <= set(rows[0])
 
 
+def test_explain_a_logged_step_of_the_corpus_and_of_held_out_episodes(run, maze_root):
+    from aoc_cli.envs import collect
+    from aoc_cli.store import Store
+
+    store = Store(maze_root)
+    corpus = store.corpus("maze")
+    episode, step = 300, 4
+    row = int(corpus.episode_starts[episode]) + step
+    code, out, err = run("explain", "maze", "--data", "maze", "--episode", str(episode),
+                         "--step", str(step), "-f", "jsonl")
+    assert code == 0, err
+    decision, logged = [json.loads(x) for x in out.splitlines()]
+    assert (decision["role"], logged["role"]) == ("decision", "logged action")
+    assert decision["row"] == logged["row"] == row and decision["episode_left_out"]
+    np.testing.assert_allclose(decision["logged_action"], corpus.actions[row])
+    np.testing.assert_allclose(logged["action"], corpus.actions[row])
+    for rec in (decision, logged):
+        # the episode's own rows are left out, and v_hat is the weighted value of the rows
+        assert all(s["episode"] != episode for s in rec["support"])
+        assert rec["value"] == pytest.approx(sum(s["weight"] * s["value"]
+                                                 for s in rec["support"]), abs=1e-9)
+    # the table shows both blocks
+    code, table, err = run("explain", "maze", "--data", "maze", "--episode", str(episode),
+                           "--step", str(step), "-f", "table")
+    assert "decision (maze episode 300, step 4)" in table
+    assert "logged action (maze episode 300, step 4)" in table
+    # held-out episodes of the same task: explained against the whole corpus
+    held, _ = collect("maze", episodes=8, seed=77)
+    store.write("maze-held", held, overwrite=True)
+    code, out, err = run("explain", "maze", "--data", "maze-held", "--episode", "5",
+                         "--step", "2", "-f", "json")
+    assert code == 0, err
+    recs = json.loads(out)["decisions"]
+    assert [r["data"] for r in recs] == ["maze-held", "maze-held"]
+    assert not recs[0]["episode_left_out"]
+    np.testing.assert_allclose(recs[1]["action"], held.actions[held.episode_starts[5] + 2])
+
+
+def test_explain_refuses_held_out_data_of_other_spaces(run, maze_root):
+    from aoc_cli.envs import collect
+    from aoc_cli.store import Store
+
+    data, _ = collect("pendulum-het", steps=400, seed=0)
+    Store(maze_root).write("pend-small", data, overwrite=True)
+    one_line_error(*run("explain", "maze", "--data", "pend-small"),
+                   r"corpus 'pend-small' does not match 'maze'")
+
+
 def test_rollout_select_uses_only_that_policy(run, tmp_path, maze_root):
     from aoc_cli.control import read_audit_step
     from aoc_cli.store import Store
@@ -140,7 +188,12 @@ def test_rollout_select_uses_only_that_policy(run, tmp_path, maze_root):
     (["rollout", "maze", "--env", "maze", "--select", "policy=pi9"], "has no value 'pi9'"),
     (["index", "maze", "--model", "nope"], "no model 'nope'"),
     (["index", "maze", "--resample", "policy=pi1"], "TAG=VALUE:RATE"),
-    (["explain", "maze"], "either --input"),
+    (["explain", "maze"], "give one of --input"),
+    (["explain", "maze", "--data", "maze", "--audit", "a.h5"], "give one of --input"),
+    (["explain", "maze", "--data", "maze", "--episode", "480"], "episodes 0..479, not 480"),
+    (["explain", "maze", "--data", "maze", "--episode", "0", "--step", "500"],
+     r"episode 0 of corpus 'maze' has steps 0\.\.\d+, not 500"),
+    (["explain", "maze", "--data", "nope"], "no corpus 'nope'"),
     (["rollout", "maze", "--env", "maze", "--ood-reference", "/no/such.h5"],
      r"audit log /no/such.h5 does not exist: record one with `aoc rollout"),
     (["explain", "maze", "--audit", "/no/such.h5", "--episode", "0", "--step", "0"],
