@@ -88,21 +88,16 @@ def ball_knn(D2, limit, starts, members, hi, lo, Y, u2, rows, Y32, rows32, k, ou
                 found[i] += 1
                 if e < heap_d[i, 0]:  # a max-heap of the k best (ties: the earlier rows stay)
                     _replace_top(heap_d[i], heap_r[i], e, m)
-    for i in range(Q):
-        order = np.argsort(heap_d[i], kind="mergesort")
-        dd = heap_d[i][order]
-        rr = heap_r[i][order]
-        # equal distances: by row (the heap keeps the earlier rows, in no order)
-        a = 0
-        while a < k:
-            b = a + 1
-            while b < k and dd[b] == dd[a]:
-                b += 1
-            if b - a > 1:
-                rr[a:b] = np.sort(rr[a:b])
-            a = b
-        out_rows[i] = rr
-        out_d2[i] = dd
+    for i in range(Q):  # ascending by (distance, row): an insertion sort of the k kept
+        for a in range(k):
+            e, m = heap_d[i, a], heap_r[i, a]
+            b = a
+            while b > 0 and (out_d2[i, b - 1] > e or (out_d2[i, b - 1] == e and out_rows[i, b - 1] > m)):
+                out_d2[i, b] = out_d2[i, b - 1]
+                out_rows[i, b] = out_rows[i, b - 1]
+                b -= 1
+            out_d2[i, b] = e
+            out_rows[i, b] = m
     return found.min() if Q else k
 
 
@@ -126,7 +121,7 @@ def _up32(x):  # pragma: no cover - compiled
     return out
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@numba.njit(cache=True, nogil=True)
 def _replace_top(hd, hr, e, m):  # pragma: no cover - compiled
     """Replace the largest entry of the max-heap (hd, hr), ordered by (distance, row), by
     (e, m) and restore the heap (the entry evicted among equal distances is the latest row)."""
