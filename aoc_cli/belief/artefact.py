@@ -50,8 +50,11 @@ def list_models(corpus) -> list[str]:
 
 def save_model(corpus, model_id: str, *, net: BeliefNet, config: BeliefConfig, dims: dict,
                norm: Normalisation, value: dict | None, values: np.ndarray | None,
-               metrics: dict, history: list[dict], split: dict) -> Path:
-    """Write the model folder atomically (replacing any previous one of that id)."""
+               metrics: dict, history: list[dict], split: dict,
+               dynamics_target: dict | None = None) -> Path:
+    """Write the model folder atomically (replacing any previous one of that id).
+    ``dynamics_target``: the standardisation {"mean", "std"} (d_o,) of the auxiliary head's
+    target o' - o, when the model has the head."""
     path = model_dir(corpus, model_id)
     meta = {
         "format": FORMAT, "format_version": FORMAT_VERSION,
@@ -60,6 +63,9 @@ def save_model(corpus, model_id: str, *, net: BeliefNet, config: BeliefConfig, d
         "mode": config.mode, "value": value, "config": config.to_dict(), "dims": dims,
         "normalisation": norm.to_dict(), "split": split, "metrics": metrics,
     }
+    if dynamics_target is not None:
+        meta["dynamics_target"] = {k: np.asarray(v, dtype=float).tolist()
+                                   for k, v in dynamics_target.items()}
     with atomic_dir(path) as tmp:
         torch.save({k: v.detach().cpu() for k, v in net.state_dict().items()},
                    tmp / "weights.pt")
@@ -138,6 +144,18 @@ class BeliefModel:
             mean = self.encoder.t_mean.cpu().double().numpy()
             w, b = w * std[:, None], b * std + mean
         return LinearHead(w, b)
+
+    def predicted_change(self, beliefs: np.ndarray) -> np.ndarray:
+        """The auxiliary dynamics head's prediction of o' - o, (Q, d_o) float64 in original
+        units, from beliefs (Q, d_b) (a model trained with ``--dynamics-weight`` > 0)."""
+        target = self.meta.get("dynamics_target")
+        if self.net.dynamics is None or target is None:
+            raise AocError(f"model {self.id!r} has no dynamics head: train it with "
+                           "--dynamics-weight > 0 (a model of an earlier version: retrain it)")
+        with torch.no_grad():
+            b = torch.as_tensor(np.asarray(beliefs, dtype=np.float32), device=self.device)
+            z = self.net.dynamics(b).cpu().double().numpy()
+        return z * np.asarray(target["std"]) + np.asarray(target["mean"])
 
     # -- inference -------------------------------------------------------------------------
     def _inputs(self, observations, actions, history: History | None):

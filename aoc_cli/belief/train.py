@@ -204,12 +204,13 @@ def train_model(corpus, config: BeliefConfig, model_id: str = "default", overwri
     inputs = encode_corpus(corpus, encoder, config.history_length, dims["use_action"], device)
     y_all = torch.as_tensor(corpus.actions, device=device) if classify \
         else encoder.targets(targets)
-    dyn = dyn_valid = None
+    dyn = dyn_valid = dyn_standard = None
     if dims.get("dynamics", 0) > 0:
         delta, valid = dynamics_targets(corpus)
         mean, std = (delta[valid].mean(0), delta[valid].std(0)) if valid.any() \
             else (np.zeros(delta.shape[1]), np.ones(delta.shape[1]))
         std = np.where(std > 1e-6, std, 1.0)
+        dyn_standard = {"mean": mean, "std": std}
         dyn = torch.as_tensor((delta - mean) / std, dtype=torch.float32, device=device)
         dyn_valid = torch.as_tensor(valid, dtype=torch.float32, device=device).bool()
     objective = _Objective(config.mode, dims["discrete"], config.dynamics_weight, dyn,
@@ -290,5 +291,6 @@ def train_model(corpus, config: BeliefConfig, model_id: str = "default", overwri
                value=value_spec(config.value, config.gamma) if config.mode == "value" else None,
                values=values, metrics=metrics, history=history,
                split={"episodes": corpus.n_episodes, "val_episodes": len(val_eps),
-                      "train_rows": len(train_rows), "val_rows": len(val_rows)})
+                      "train_rows": len(train_rows), "val_rows": len(val_rows)},
+               dynamics_target=dyn_standard)
     return metrics

@@ -6,7 +6,9 @@ import pytest
 
 from aoc_cli.belief import (BeliefConfig, episode_rows, load_model, logistic_probe,
                             split_episodes, train_model)
+from aoc_cli.belief.train import dynamics_targets
 from aoc_cli.envs import collect
+from aoc_cli.errors import AocError
 from aoc_cli.store import Store
 
 from tests.belief.corpora import hidden_system
@@ -83,6 +85,14 @@ def test_dynamics_head_makes_beliefs_encode_a_system_the_value_ignores(tmp_path)
     # and the model round-trips with the head's weights.
     model = load_model(corpus, "dyn")
     assert model.net.dynamics is not None and model.net.dynamics.out_features == 1
+    # the head's target standardisation is saved: its prediction in original units is o' - o
+    delta, valid = dynamics_targets(corpus)
+    rows = va[valid[va]]
+    pred = model.predicted_change(model.row_beliefs(corpus)[rows])
+    r2 = 1 - ((pred - delta[rows]) ** 2).sum() / ((delta[rows] - delta[rows].mean(0)) ** 2).sum()
+    assert r2 > 0.85
+    with pytest.raises(AocError, match="no dynamics head"):
+        load_model(corpus, "plain").predicted_change(np.zeros((1, model.d_b)))
 
 
 def test_dynamics_weight_must_not_be_negative(store, aoc):
