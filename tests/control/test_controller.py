@@ -119,6 +119,23 @@ def test_imitation_decision_is_the_weight_argmax_of_the_supporting_actions(corri
     assert agree >= 22  # the expert's rule, recovered from the corpus
 
 
+def test_a_logged_step_in_imitation_mode_is_the_decision_alone_without_its_episode(corridor):
+    from aoc_cli.control import explain_logged_step
+
+    session = open_session(corridor)
+    for episode, step in [(3, 5), (20, 0), (41, 11)]:
+        (rec,) = explain_logged_step(session, corridor, episode, step)
+        row = int(corridor.episode_starts[episode]) + step
+        assert rec["role"] == "decision" and rec["row"] == row
+        assert rec["logged_action"] == int(corridor.actions[row])
+        support = rec["support"]
+        assert support and all(s["episode"] != episode for s in support)
+        totals = np.bincount([s["action"] for s in support],
+                             weights=[s["weight"] for s in support], minlength=2)
+        assert rec["action"] == int(np.argmax(totals))
+    assert session.controller.selection is None   # the left-out episode is not left behind
+
+
 def test_residual_cap_keeps_candidates_under_c_times_the_typical_p90(maze):
     session = maze_session(maze, epsilon=0.5, residual_cap=2.0)
     p90 = session.index.meta["typical_residual"]["p90"]
