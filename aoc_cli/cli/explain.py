@@ -25,11 +25,11 @@ def register(app: typer.Typer) -> None:
         compare: Optional[List[str]] = typer.Option(None, "--compare", help="Actions to explain side by side, e.g. --compare 0 --compare 1 or --compare 0.5,-1."),
         model: Optional[str] = typer.Option(None, "--model", help="Model id."),
         index_id: str = typer.Option("default", "--index", help="Index id."),
-        candidates: int = typer.Option(100, "--candidates", "-K"),
-        epsilon: float = typer.Option(0.5, "--epsilon"),
-        k: Optional[int] = typer.Option(None, "--k"),
+        candidates: Optional[int] = typer.Option(None, "--candidates", "-K", help="Candidate actions (default: the task's, else 100)."),
+        epsilon: Optional[float] = typer.Option(None, "--epsilon", help="Residual quantile of candidates kept, in (0, 1] (default: the task's when NAME was collected from a built-in task, as aoc rollout uses it; else 0.5)."),
+        k: Optional[int] = typer.Option(None, "--k", help="Nearest corpus beliefs per query (default 2(d_b+1))."),
         residual_cap: Optional[float] = typer.Option(None, "--residual-cap", help="Residual cap c of the candidate filter (default: none)."),
-        seed: int = typer.Option(0, "--seed"),
+        seed: int = typer.Option(0, "--seed", help="Seed of the candidates."),
         fmt: Optional[str] = FormatOption,
     ) -> None:
         """Explain decisions: from JSONL queries, a recorded step of an audit log, or a logged
@@ -45,8 +45,10 @@ def register(app: typer.Typer) -> None:
                            "(a logged step)")
         store = get_store()
         corpus = store.corpus(name)
-        config = ControllerConfig(candidates=candidates, epsilon=epsilon, k=k,
-                                  residual_cap=residual_cap).check()
+        from aoc_cli.cli.rollout import task_config
+
+        config = task_config(_collected_task(corpus), candidates=candidates, epsilon=epsilon,
+                             k=k, residual_cap=residual_cap)
         records = []
         if data is not None:
             source = corpus if data == name else store.corpus(data)
@@ -82,6 +84,14 @@ def register(app: typer.Typer) -> None:
                     rec["query"] = lineno
                     records.append(rec)
         _print(records, fmt)
+
+
+def _collected_task(corpus) -> str:
+    """The built-in task a corpus was collected from ("" for ingested data): its controller
+    settings are the defaults, as in ``aoc rollout --env TASK``."""
+    tasks = {src.get("task") for src in corpus.manifest.get("sources", [])
+             if src.get("kind") == "collect"}
+    return tasks.pop() if len(tasks) == 1 else ""
 
 
 def _parse_action(text: str):
