@@ -32,7 +32,7 @@ def register(app: typer.Typer) -> None:
         name: str = typer.Argument(..., help="Corpus name."),
         env: str = typer.Option(..., "--env", help="A built-in task (aoc collect --list) or a gymnasium id."),
         episodes: int = typer.Option(5, "--episodes", "-n", help="Episodes to run."),
-        policy: str = typer.Option("aoc", "--policy", help="aoc, or a baseline (see docs)."),
+        policy: str = typer.Option("aoc", "--policy", help="aoc, or a baseline: zero, random, 1nn, knn, 1nn-belief, knn-belief, bc, td3bc, cql, mpc (the last three with the bench extra)."),
         model: Optional[str] = typer.Option(None, "--model", help="Model id (default: the only one)."),
         index_id: str = typer.Option("default", "--index", help="Index id, e.g. a re-sampled index."),
         candidates: int = typer.Option(100, "--candidates", "-K", help="Candidate actions per step."),
