@@ -342,3 +342,12 @@ def test_ood_reference_band_from_a_clean_audit_log(run, tmp_path, maze_root):
         f.attrs["meta"] = json.dumps(meta)
     one_line_error(*run("rollout", "maze", "--env", "maze", "-n", "1",
                         "--ood-reference", str(clean)), r"another version of the corpus or model")
+
+
+def test_rollout_help_names_every_baseline(run):
+    from aoc_cli.baselines import BASELINES
+
+    code, out, err = run("rollout", "--help")
+    assert code == 0, err
+    text = " ".join(out.replace("│", " ").split())
+    assert all(f" {name}," in text or f" {name} " in text for name in BASELINES), text
