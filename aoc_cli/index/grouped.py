@@ -101,13 +101,22 @@ def grouped_search(Y: np.ndarray, scan: ScanData, k: int, mask: np.ndarray | Non
     if near.size < k:
         near = np.argpartition(D2.min(axis=1), k - 1)[:k]
     yy = (Y64 * Y64).sum(axis=1)
-    d2 = (-2.0 * Y64) @ scan.rows64.take(near, axis=0).T
-    d2 += yy[:, None]
-    d2 += scan.norms.take(near)[None, :]
-    # u^2 on the scale of the expanded float64 distances, with room for their rounding
-    # (a few ulps of ||y||^2 + ||b||^2) so each query's k nearest rows are all at most u^2
-    u2 = np.maximum(np.partition(d2, k - 1, axis=1)[:, k - 1], 0.0) + 1e-12 \
-        + 1e-13 * (yy + scan.vmax**2)
+    # their float32 distances, centred on the batch mean so the expansion does not cancel;
+    # u^2 = the k-th of them plus a bound on their rounding (the centring's and the sum's:
+    # 3e-6 (|y - c| + max |b - c|)^2 > (gamma_{d+2} + 2^-22) (...)^2), so each query's k
+    # nearest rows are all at most u^2
+    c32 = Y.mean(axis=0, dtype=np.float32)
+    Yc = np.asarray(Y, dtype=np.float32) - c32
+    Bc = scan.rows.take(near, axis=0) - c32
+    bb = (Bc * Bc).sum(axis=1)
+    yc = (Yc * Yc).sum(axis=1)
+    d2 = Yc @ Bc.T
+    d2 *= -2.0
+    d2 += yc[:, None]
+    d2 += bb[None, :]
+    kth = np.partition(d2, k - 1, axis=1)[:, k - 1].astype(np.float64)
+    reach = np.sqrt(yc.astype(np.float64)) + np.sqrt(float(bb.max()))
+    u2 = np.maximum(kth, 0.0) + 3e-6 * reach**2 + 1e-12 + 1e-13 * (yy + scan.vmax**2)
     u = np.sqrt(u2)
     # stage 2: a row b with ||b - c_g|| > R_g = max_i (||y_i - c_g|| + u_i) is farther than u_i
     # from every query i of group g (triangle inequality), and so is a row outside query i's
