@@ -44,13 +44,12 @@ class ScanData:
     """What the scan needs of the M indexed rows, computed once per index.
 
     rows: (M, d) float32 (a view of the index storage); aug: (M, d + 1) float32, the rows
-    with their squared norms as the last column; norms: (M,) float64 ||v||^2; vmax: max ||v||;
+    with their squared norms as the last column; vmax: max ||v||;
     rows64: (M, d) float64 copy of the rows (the exact distances are taken from it).
     """
 
     rows: np.ndarray
     aug: np.ndarray
-    norms: np.ndarray
     vmax: float
     rows64: np.ndarray
 
@@ -61,7 +60,7 @@ class ScanData:
         aug = np.empty((rows.shape[0], rows.shape[1] + 1), dtype=np.float32)
         aug[:, :-1] = rows
         aug[:, -1] = norms
-        return cls(rows, aug, norms, float(np.sqrt(norms.max(initial=0.0))), rows64)
+        return cls(rows, aug, float(np.sqrt(norms.max(initial=0.0))), rows64)
 
 
 def grouped_search(Y: np.ndarray, scan: ScanData, k: int, mask: np.ndarray | None = None):
