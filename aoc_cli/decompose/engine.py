@@ -20,7 +20,7 @@ import numpy as np
 
 from aoc_cli.decompose.hull import minimal_subset
 from aoc_cli.decompose.minnorm import min_norm_point
-from aoc_cli.decompose.reference import caratheodory, reference_weights
+from aoc_cli.decompose.reference import caratheodory, lifted_nnls_weights, reference_weights
 from aoc_cli.errors import AocError
 from aoc_cli.index import BeliefIndex
 from aoc_cli.index.threads import single_threaded_blas
@@ -130,7 +130,11 @@ def _decompose(beliefs, Y, k, values, index, reference, selection, config) -> De
         weights, failed = solved.weights, np.flatnonzero(~solved.ok)
     for q in failed:
         c = np.flatnonzero(valid[q])
-        w = caratheodory(B[q, c], reference_weights(B[q, c], Y[q]))
+        try:
+            w = reference_weights(B[q, c], Y[q])
+        except RuntimeError:  # piqp stalled at every tolerance: an active-set solver instead
+            w = lifted_nnls_weights(B[q, c], Y[q])
+        w = caratheodory(B[q, c], w)
         # keep whichever of the two answers has the smaller residual: near a zero residual
         # the batched solver's certificate can fail while its point is the better one
         if reference or np.sum((w @ P[q, c]) ** 2) <= np.sum((weights[q, c] @ P[q, c]) ** 2):

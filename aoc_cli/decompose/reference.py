@@ -53,6 +53,27 @@ def reference_weights(neighbours: np.ndarray, query: np.ndarray) -> np.ndarray:
     return w / w.sum()
 
 
+def lifted_nnls_weights(neighbours: np.ndarray, query: np.ndarray,
+                        lift: float = 1e4) -> np.ndarray:
+    """argmin_{w in simplex} ||B^T w - y|| by scipy's NNLS (an active-set method) on the lifted
+    system min_{w >= 0} ||[P^T; lift 1^T] w - [0; lift]||, P = (B - y) / max ||b - y||, then
+    normalised. A second exact-in-the-limit solver for the rare neighbourhoods where piqp
+    stalls at every tolerance (a query inside the hull up to rounding): the sum constraint is
+    met to O(residual^2 / lift^2). neighbours: (k, d); query: (d,). Returns (k,) weights."""
+    from scipy.optimize import nnls
+
+    B = np.asarray(neighbours, dtype=np.float64)
+    P = B - np.asarray(query, dtype=np.float64)
+    P = P / max(float(np.sqrt((P**2).sum(1).max())), 1e-300)
+    k = B.shape[0]
+    A = np.vstack([P.T, np.full((1, k), lift)])
+    b = np.concatenate([np.zeros(P.shape[1]), [lift]])
+    w, _ = nnls(A, b, maxiter=50 * k)
+    if not w.sum() > 0:
+        raise RuntimeError("NNLS found no solution of the corpus-residual QP")
+    return w / w.sum()
+
+
 def reference_residual(neighbours: np.ndarray, query: np.ndarray) -> float:
     """min_{w in simplex} ||B^T w - y|| by piqp."""
     w = reference_weights(neighbours, query)

@@ -254,3 +254,47 @@ def test_bad_input_raises_one_line_aoc_error(kwargs, message):
     with pytest.raises(AocError, match=message) as info:
         decompose(**args)
     assert "\n" not in str(info.value)
+
+
+def test_lifted_nnls_agrees_with_piqp_inside_outside_and_with_duplicates():
+    from aoc_cli.decompose.reference import lifted_nnls_weights, reference_weights
+
+    rng = np.random.default_rng(5)
+    for trial in range(40):
+        d = int(rng.integers(2, 12))
+        B = rng.standard_normal((int(rng.integers(d + 1, 3 * d + 4)), d))
+        if trial % 4 == 1:
+            B = np.vstack([B, B[:3]])                        # duplicates
+        y = [B.mean(0), rng.standard_normal(d) * 3, B[0], 0.5 * (B[0] + B[1])][trial % 4]
+        w = lifted_nnls_weights(B, y)
+        assert (w >= 0).all() and abs(w.sum() - 1) < 1e-12
+        ref = np.linalg.norm(reference_weights(B, y) @ B - y)
+        scale = np.linalg.norm(B - y, axis=1).max()
+        assert np.linalg.norm(w @ B - y) <= ref + 1e-7 * scale
+
+
+def test_a_query_where_both_solvers_fail_their_checks_still_gets_its_exact_residual(monkeypatch):
+    # Seen on a 100k pendulum corpus: a query inside its neighbours' hull up to rounding; the
+    # compiled Wolfe loop could not certify optimality and piqp stalled at every tolerance,
+    # which ended the episode. The engine now falls back to NNLS instead of raising.
+    import aoc_cli.decompose.engine as engine
+
+    def stalled(neighbours, query):
+        raise RuntimeError("piqp found no solution of the corpus-residual QP")
+
+    real = engine.min_norm_point
+
+    def uncertified(P, valid, **kw):
+        out = real(P, valid, **kw)
+        out.ok[:] = False
+        return out
+
+    monkeypatch.setattr(engine, "reference_weights", stalled)
+    monkeypatch.setattr(engine, "min_norm_point", uncertified)
+    rng = np.random.default_rng(11)
+    beliefs = rng.standard_normal((300, 6))
+    queries = np.vstack([beliefs[:40].mean(0), rng.standard_normal(6) * 4, beliefs[7]])
+    result = decompose(beliefs, queries, k=14)
+    monkeypatch.undo()
+    check_subset(result, beliefs, queries)
+    check_residual(result, beliefs, queries)
