@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aoc_cli.index.scan_kernels import ball_knn, rows_under
+from aoc_cli.index.scan_kernels import ball_knn, rows_under, sample_kth
 
 #: Queries per group and the most groups: G = clip(Q // QUERIES_PER_GROUP, 1, MAX_GROUPS).
 QUERIES_PER_GROUP = 6
@@ -93,9 +93,8 @@ def grouped_search(Y: np.ndarray, scan: ScanData, k: int, mask: np.ndarray | Non
     # stage 1: about POOL0 rows nearest each centroid (threshold from a strided sample); each
     # query's k-th distance among their union bounds its k-th neighbour distance from above
     step = max(1, M // SAMPLE)
-    sample = D2[::step]
-    j = min(sample.shape[0] - 1, POOL0 // step)
-    thresholds = np.partition(sample.T, j, axis=1)[:, j].astype(np.float64)
+    j = min(-(-M // step) - 1, POOL0 // step)
+    thresholds = sample_kth(D2, step, j)
     near = rows_under(D2, thresholds) if np.isfinite(thresholds).all() else np.zeros(0, np.int64)
     if near.size < k:
         near = np.argpartition(D2.min(axis=1), k - 1)[:k]

@@ -12,6 +12,24 @@ import numpy as np
 
 
 @numba.njit(cache=True, nogil=True)
+def sample_kth(D2, step, j):  # pragma: no cover - compiled
+    """(G,) float64: for each column g, the (j + 1)-th smallest of D2[::step, g] (D2: (M, G)
+    float32), kept by an insertion into the j + 1 smallest seen."""
+    M, G = D2.shape
+    best = np.full((G, j + 1), np.inf, dtype=np.float32)
+    for m in range(0, M, step):
+        for g in range(G):
+            x = D2[m, g]
+            if x < best[g, j]:
+                b = j
+                while b > 0 and best[g, b - 1] > x:
+                    best[g, b] = best[g, b - 1]
+                    b -= 1
+                best[g, b] = x
+    return best[:, j].astype(np.float64)
+
+
+@numba.njit(cache=True, nogil=True)
 def rows_under(D2, thresholds):  # pragma: no cover - compiled
     """(p,) int64 ascending rows m with D2[m, g] <= thresholds[g] for some group g.
 
