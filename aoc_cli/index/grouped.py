@@ -69,6 +69,7 @@ def grouped_search(Y: np.ndarray, scan: ScanData, k: int, mask: np.ndarray | Non
     Y: (Q, d) float32 queries; mask: (M,) bool rows allowed (None: all), at least k of them.
     Returns (squared distances (Q, k) float64 ascending, positions (Q, k) int64 into the rows).
     """
+    Y = np.ascontiguousarray(Y, dtype=np.float32)  # the bounds below assume float32 queries
     n, d = Y.shape
     M = scan.rows.shape[0]
     Y64 = Y.astype(np.float64)
@@ -129,7 +130,7 @@ def grouped_search(Y: np.ndarray, scan: ScanData, k: int, mask: np.ndarray | Non
     rows = np.empty((n, k), dtype=np.int64)
     exact = np.empty((n, k))
     found = ball_knn(D2, limit, starts, members, hi, lo, Y64, u2, scan.rows64,
-                     np.ascontiguousarray(Y, dtype=np.float32), scan.rows, k, rows, exact)
+                     Y, scan.rows, k, rows, exact)
     if found < k:
         return None
     return exact, rows
