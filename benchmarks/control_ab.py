@@ -3,12 +3,14 @@
 Separate processes drift with the load of a shared machine (+-15 % between runs here); this
 script alternates, step by step and in alternating order, the current code and the current code
 with an older tree's decomposition: its `aoc_cli/decompose/engine.py` (steps 1-4),
-`aoc_cli/decompose/minnorm.py` (the residual QP) and `aoc_cli/index/grouped.py` (the exact
-grouped scan of a flat index), on the same states and the same candidates, and checks that both
-give the same decision: `differ` counts the steps whose chosen candidate differs, `d res` and
+`aoc_cli/decompose/minnorm.py` (the residual QP), `aoc_cli/index/grouped.py` (the exact
+grouped scan of a flat index) and `aoc_cli/index/pooled.py` (the batch search of an IVF / HNSW
+index), on the same states and the same candidates, and checks that both give the same
+decision: `differ` counts the steps whose chosen candidate differs, `rows` the steps whose
+neighbour search returned different rows (or the same rows in another order), `d res` and
 `d value` are the largest change of a candidate's residual and value over all steps, relative
-to the step's largest. Everything else (belief pass,
-minimal subset, the IVF batch search) is the current code in both arms.
+to the step's largest. Everything else (belief pass, minimal subset) is the current code in
+both arms.
 
 Usage: .venv/bin/python benchmarks/control_ab.py --old /tmp/old --sizes 100k,600k
        [--steps 100] [--store DIR]   (the store of benchmarks/control.py, already prepared)
@@ -50,11 +52,14 @@ def arms(old_tree: str) -> dict:
     grouped = load(old_tree, "aoc_cli/index/grouped.py", "old_grouped")
     minnorm = load(old_tree, "aoc_cli/decompose/minnorm.py", "old_minnorm")
     engine = load(old_tree, "aoc_cli/decompose/engine.py", "old_engine")
+    pooled = load(old_tree, "aoc_cli/index/pooled.py", "old_pooled")
     engine.min_norm_point = minnorm.min_norm_point
     return {"new": {"grouped_search": BI.grouped_search, "ScanData": BI.ScanData,
-                    "decompose": build.decompose},
+                    "decompose": build.decompose, "pooled_search": BI.pooled_search,
+                    "exact_among": BI._exact_among},
             "old": {"grouped_search": grouped.grouped_search, "ScanData": grouped.ScanData,
-                    "decompose": engine.decompose}}
+                    "decompose": engine.decompose, "pooled_search": pooled.pooled_search,
+                    "exact_among": pooled.exact_among}}
 
 
 def run(store: Store, name: str, steps: int, code: dict) -> str:
@@ -62,21 +67,36 @@ def run(store: Store, name: str, steps: int, code: dict) -> str:
     session = open_session(corpus)
     ctl, model, index = session.controller, session.model, session.index.index
     scans: dict = {}
+    found: dict = {"old": [], "new": []}  # the rows of every search of the step, per arm
+    search = type(index).search
+
+    def recorded(self, *a, **kw):
+        out = search(self, *a, **kw)
+        found[current].append(out[1].copy())
+        return out
 
     def use(arm: str) -> None:
+        nonlocal current
+        current = arm
         BI.grouped_search, BI.ScanData = code[arm]["grouped_search"], code[arm]["ScanData"]
+        BI.pooled_search, BI._exact_among = code[arm]["pooled_search"], code[arm]["exact_among"]
         build.decompose = code[arm]["decompose"]
         index._scan = scans.get(arm)
+
+    current = "new"
+    index.search = recorded.__get__(index)
 
     env = make_env("pendulum-het")
     buf = HistoryBuffer(model.history_length, corpus.observation_dim, 1, False)
     obs, _ = env.reset(seed=1)
     times: dict = {"old": [], "new": []}
-    differ, dres, dval = 0, 0.0, 0.0
+    differ, rows, dres, dval = 0, 0, 0.0, 0.0
     for s in range(steps):
         h = buf.history()
         cand = ctl.sample_candidates(np.asarray(obs, np.float32).reshape(-1), h)
         dec = {}
+        found["old"].clear()
+        found["new"].clear()
         for arm in (("new", "old") if s % 2 else ("old", "new")):
             use(arm)
             t0 = time.perf_counter()
@@ -85,14 +105,17 @@ def run(store: Store, name: str, steps: int, code: dict) -> str:
             scans[arm] = index._scan
         a, b = dec["old"], dec["new"]
         differ += int(a.chosen != b.chosen)
+        rows += int(len(found["old"]) != len(found["new"]) or not all(
+            np.array_equal(x, y) for x, y in zip(found["old"], found["new"])))
         # largest change of a candidate's residual / value, relative to the step's largest
         dres = max(dres, _rel(a.candidate_residuals, b.candidate_residuals))
         dval = max(dval, _rel(a.candidate_values, b.candidate_values))
         obs = advance(env, buf, obs, b.action)
     use("new")
+    del index.search
     o, n = np.array(times["old"][2:]), np.array(times["new"][2:])  # the first steps build scans
     return (f"{corpus.n_rows:>8} {index.kind:>5} {1e3 * np.median(o):>8.2f} {1e3 * np.median(n):>8.2f} "
-            f"{np.median(o) / np.median(n):>6.2f} {np.median(o / n):>9.2f} {differ:>7d} "
+            f"{np.median(o) / np.median(n):>6.2f} {np.median(o / n):>9.2f} {differ:>7d} {rows:>5d} "
             f"{dres:>8.1e} {dval:>8.1e} {os.getloadavg()[0]:>5.2f}")
 
 
@@ -111,7 +134,7 @@ def main() -> None:
     code = arms(args.old)
     store = Store(args.store)
     print(f"{'rows':>8} {'kind':>5} {'old ms':>8} {'new ms':>8} {'ratio':>6} {'per-step':>9} "
-          f"{'differ':>7} {'d res':>8} {'d value':>8} {'load':>5}")
+          f"{'differ':>7} {'rows':>5} {'d res':>8} {'d value':>8} {'load':>5}")
     for size in args.sizes.split(","):
         print(run(store, f"pend{parse_size(size)}", args.steps, code), flush=True)
 

@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 
+from aoc_cli.index.scan_kernels import pool_knn
 from aoc_cli.index.threads import faiss_threads
 
 
@@ -101,23 +102,17 @@ def _split(ix, Y: np.ndarray, k: int, sel, available: int, depth: int):
 def exact_among(Y: np.ndarray, V: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
     """Squared distances (float64, ascending) and positions (into V) of the k nearest rows of V.
 
-    Candidates are ranked in float32 after centring on the mean of V (so the expansion
-    |y|^2 - 2 y.v + |v|^2 does not cancel), then the k kept distances are recomputed exactly.
+    Y: (Q, d) queries, V: (P, d) rows (both used as float32); results (Q, min(k, P)). Exact:
+    one compiled pass over V per query (``scan_kernels.pool_knn``), a float32 distance as a
+    filter with its rounding bound, the float64 distance of the differences for the rows that
+    pass, and a heap of the k nearest ordered by (distance, position), so ties keep the lower
+    position.
     """
-    centre = V.mean(axis=0, dtype=np.float64).astype(np.float32)
-    Yc = np.asarray(Y, dtype=np.float32) - centre
-    Vc = np.asarray(V, dtype=np.float32) - centre
-    D = (Yc * Yc).sum(1)[:, None] - 2.0 * (Yc @ Vc.T) + (Vc * Vc).sum(1)[None, :]
-    if k < V.shape[0]:
-        # the k smallest per row; np.partition + a mask is much faster than argpartition
-        mask = D <= np.partition(D, k - 1, axis=1)[:, k - 1 : k]
-        if (mask.sum(1) == k).all():
-            part = np.nonzero(mask)[1].reshape(-1, k)
-        else:  # ties at the k-th distance
-            part = np.argpartition(D, k - 1, axis=1)[:, :k]
-    else:
-        part = np.broadcast_to(np.arange(V.shape[0]), D.shape)
-    diff = V[part].astype(np.float64) - np.asarray(Y, dtype=np.float64)[:, None, :]
-    dp = np.einsum("qkd,qkd->qk", diff, diff)
-    order = np.argsort(dp, axis=1, kind="stable")
-    return np.take_along_axis(dp, order, axis=1), np.take_along_axis(part, order, axis=1)
+    Y32 = np.ascontiguousarray(Y, dtype=np.float32)
+    V32 = np.ascontiguousarray(V, dtype=np.float32)
+    k = min(int(k), V32.shape[0])
+    d2 = np.empty((Y32.shape[0], k))
+    pos = np.empty((Y32.shape[0], k), dtype=np.int64)
+    if k > 0:
+        pool_knn(Y32, V32, k, pos, d2)
+    return d2, pos

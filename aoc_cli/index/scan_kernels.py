@@ -106,7 +106,51 @@ def ball_knn(D2, limit, starts, members, hi, lo, Y, u2, rows, Y32, rows32, k, ou
                 found[i] += 1
                 if e < heap_d[i, 0]:  # a max-heap of the k best (ties: the earlier rows stay)
                     _replace_top(heap_d[i], heap_r[i], e, m)
-    for i in range(Q):  # ascending by (distance, row): an insertion sort of the k kept
+    _sort_heaps(heap_d, heap_r, out_d2, out_rows)
+    return found.min() if Q else k
+
+
+@numba.njit(cache=True, nogil=True)
+def pool_knn(Y, V, k, out_rows, out_d2):  # pragma: no cover - compiled
+    """Exact k nearest rows of V for every query of Y (one pass over V per query).
+
+    Y: (Q, d) float32 queries; V: (P, d) float32 rows, P >= k. Fills out_rows (Q, k) int64
+    (positions into V) and out_d2 (Q, k) float64 (squared distances from the differences,
+    summed in order, ascending; ties by position). The float32 distance only filters: all its
+    terms are >= 0, so it is within (d + 2) 2^-24 of the exact value relatively (plus 1e-30
+    for underflow), and a row is dropped only if it exceeds the current k-th distance by more.
+    """
+    Q, d = Y.shape
+    P = V.shape[0]
+    heap_d = np.full((Q, k), np.inf)
+    heap_r = np.full((Q, k), -1, dtype=np.int64)
+    slack = 1.0 + 1e-5
+    for i in range(Q):
+        hd, hr = heap_d[i], heap_r[i]
+        y = Y[i]
+        top = np.float32(np.inf)
+        for m in range(P):
+            if _sq32(V[m], y) > top:
+                continue
+            e = 0.0
+            for t in range(d):
+                diff = np.float64(V[m, t]) - np.float64(y[t])
+                e = e + diff * diff
+            if e < hd[0]:  # rows come in order: a tie with the top keeps the earlier row
+                _replace_top(hd, hr, e, m)
+                if hd[0] < np.inf:
+                    bound = hd[0] * slack + 1e-30
+                    top = np.float32(bound)
+                    if np.float64(top) < bound:
+                        top = np.nextafter(top, np.float32(np.inf))
+    _sort_heaps(heap_d, heap_r, out_d2, out_rows)
+
+
+@numba.njit(cache=True, nogil=True)
+def _sort_heaps(heap_d, heap_r, out_d2, out_rows):  # pragma: no cover - compiled
+    """Each query's k kept (distance, row) pairs ascending by (distance, row): an insertion sort."""
+    Q, k = heap_d.shape
+    for i in range(Q):
         for a in range(k):
             e, m = heap_d[i, a], heap_r[i, a]
             b = a
@@ -116,7 +160,6 @@ def ball_knn(D2, limit, starts, members, hi, lo, Y, u2, rows, Y32, rows32, k, ou
                 b -= 1
             out_d2[i, b] = e
             out_rows[i, b] = m
-    return found.min() if Q else k
 
 
 @numba.njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
