@@ -124,13 +124,15 @@ def pool_knn(Y, V, k, out_rows, out_d2):  # pragma: no cover - compiled
     P = V.shape[0]
     heap_d = np.full((Q, k), np.inf)
     heap_r = np.full((Q, k), -1, dtype=np.int64)
+    e32 = np.empty(P, dtype=np.float32)
     slack = 1.0 + 1e-5
     for i in range(Q):
         hd, hr = heap_d[i], heap_r[i]
         y = Y[i]
+        _sq32_rows(V, y, e32)
         top = np.float32(np.inf)
         for m in range(P):
-            if _sq32(V[m], y) > top:
+            if e32[m] > top:
                 continue
             e = 0.0
             for t in range(d):
@@ -227,3 +229,15 @@ def list_dists(c, lists, offsets, vecs):  # pragma: no cover - compiled
             idx[n] = m
             n += 1
     return dist, idx
+
+
+@numba.njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
+def _sq32_rows(V, y, out):  # pragma: no cover - compiled
+    """out[m] = ||V[m] - y||^2 in float32 for the rows of V (summed in any order: vectorised)."""
+    P, d = V.shape
+    for m in range(P):
+        e = np.float32(0.0)
+        for t in range(d):
+            x = V[m, t] - y[t]
+            e += x * x
+        out[m] = e
