@@ -6,8 +6,8 @@ hold at this size (a strict xfail, so it fails the suite the day it starts passi
 random start AOC does not beat the data's average nor doing nothing — docs/belief.md, "Why AOC
 does not swing up", has the traced decisions and the data variants tried. At the paper's sizes
 (100k and 300k rows, full training; docs/results.md) the same AOC swings up to the data's level
-(-392 and -449 against -376 and -374, doing nothing -1154) but not above it; those runs take an
-hour each here, too long for the suite.
+(-392 and -449 against -376 and -374, doing nothing -1154) but not above it; those runs take 20-70
+minutes each here, too long for the suite.
 """
 
 import numpy as np
