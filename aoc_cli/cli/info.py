@@ -61,4 +61,3 @@ def _source_text(source: dict) -> str:
         return (f"collect {source.get('task', '?')} (seed {source.get('seed', '?')}, {size}; "
                 f"{', '.join(source.get('policies') or [])})")
     return f"{source.get('format', '?')} {source.get('path', '?')}".strip()
-
