@@ -30,6 +30,10 @@ def register(app: typer.Typer) -> None:
         seed: int = typer.Option(0, "--seed", help="Random seed: same seed, same corpus."),
         overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing corpus."),
         list_tasks: bool = typer.Option(False, "--list", help="List the tasks and their defaults."),
+        csv_dir: Optional[str] = typer.Option(
+            None, "--csv", help="ward: write the log as CSV files DIR/NAME.csv and "
+                                "DIR/NAME-static.csv (for `aoc ingest --static`) instead of a "
+                                "corpus."),
         fmt: Optional[str] = FormatOption,
     ) -> None:
         """Run a built-in task's behaviour policies and store the data as a corpus."""
@@ -50,6 +54,18 @@ def register(app: typer.Typer) -> None:
                 raise AocError(f"{flag} must be a positive integer, got {value}")
         if steps is not None and episodes is not None:
             raise AocError("give --steps or --episodes, not both")
+        if csv_dir is not None:
+            write = t.extra.get("write_csv")
+            if write is None:
+                raise AocError(f"--csv: task {task!r} has no CSV form (ward has)")
+            if steps is not None:
+                raise AocError("--csv writes whole stays: give --episodes, not --steps")
+            paths = write(csv_dir, name, episodes or t.default_episodes, seed)
+            message(f"wrote {paths[0]} and {paths[1]}: ingest them with `aoc ingest "
+                    f"{paths[0]} --name {name} --id-column patient --time-column hour "
+                    f"--static {paths[1]} --discrete-actions --tag-column clinician "
+                    "--reward-free`")
+            return
         store = get_store()
         if store.exists(name) and not overwrite:
             raise AocError(f"corpus {name!r} already exists in {store.root}: pass --overwrite "

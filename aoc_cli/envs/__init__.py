@@ -30,16 +30,18 @@ _IDS = {
                                   {"upright": True}),
     "aoc/Maze-v0": ("aoc_cli.envs.maze:MazeEnv", 100, {"world": "maze"}),
     "aoc/TwoGates-v0": ("aoc_cli.envs.maze:MazeEnv", 32, {"world": "two-gates"}),
+    "aoc/Ward-v0": ("aoc_cli.envs.ward:WardEnv", 12, {}),
 }
 for _id, (_entry, _steps, _kwargs) in _IDS.items():
     if _id not in gymnasium.registry:
         gymnasium.register(id=_id, entry_point=_entry, max_episode_steps=_steps,
                            kwargs=_kwargs)
 
-from aoc_cli.envs import lunar, maze, pendulum_het  # noqa: E402  (after registration)
+from aoc_cli.envs import lunar, maze, pendulum_het, ward  # noqa: E402  (after registration)
 
 #: name -> Task, in the order ``aoc collect --list`` shows them.
-TASKS: dict[str, Task] = {t.name: t for mod in (pendulum_het, maze, lunar) for t in mod.TASKS}
+TASKS: dict[str, Task] = {t.name: t for mod in (pendulum_het, maze, lunar, ward)
+                         for t in mod.TASKS}
 
 
 def get_task(name: str) -> Task:

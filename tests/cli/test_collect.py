@@ -34,7 +34,8 @@ def test_list_shows_every_task_with_its_defaults(aoc, store):
     code, out, err = aoc("collect", "--list", "--format", "json")
     assert code == 0, err
     rows = {r["name"]: r for r in json.loads(out)}
-    assert list(rows) == ["pendulum-het", "pendulum-het-upright", "maze", "two-gates", "lunar"]
+    assert list(rows) == ["pendulum-het", "pendulum-het-upright", "maze", "two-gates", "lunar",
+                          "ward"]
     assert rows["maze"]["default_episodes"] == 1000 and rows["maze"]["horizon"] == 100
     assert rows["pendulum-het"]["default_steps"] == 100000
     assert rows["two-gates"]["policies"] == "lower-gate, upper-gate"
