@@ -7,3 +7,11 @@ must say what is wrong and what to do about it.
 
 class AocError(Exception):
     """Bad input or usage; the message is shown to the user as one line."""
+
+
+def warn(text: str) -> None:
+    """A warning the user should see (input accepted, but maybe not as meant): one line on
+    stderr, ``aoc: warning: ...``."""
+    import sys
+
+    print(f"aoc: warning: {text}", file=sys.stderr)

@@ -95,7 +95,7 @@ def time_history(store_root: Path, repeats: int, lookups: int = 100_000, length:
 
 
 def compare_compression(src: Path, root: Path, repeats: int) -> list[dict]:
-    import aoc_cli.store.store as store_mod
+    import aoc_cli.store.writer as store_mod
 
     settings = {
         "none (contiguous)": {},

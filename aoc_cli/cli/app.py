@@ -51,8 +51,15 @@ def main(argv: list[str] | None = None) -> None:
     """Console-script entry point. Click handles usage errors itself (exit 2)."""
     debug = "--debug" in (argv if argv is not None else sys.argv[1:]) or bool(
         os.environ.get("AOC_DEBUG"))
+    previous = _terminate_like_interrupt()
     try:
         app(args=argv, prog_name="aoc")
+    except KeyboardInterrupt:
+        if debug:
+            raise
+        # every write is a temporary renamed into place: the store holds the previous state
+        print("aoc: interrupted; nothing was half-written", file=sys.stderr)
+        sys.exit(130)
     except AocError as err:
         if debug:
             raise
@@ -66,3 +73,23 @@ def main(argv: list[str] | None = None) -> None:
             file=sys.stderr,
         )
         sys.exit(1)
+    finally:
+        if previous is not None:
+            import signal
+
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _terminate_like_interrupt():
+    """SIGTERM raises KeyboardInterrupt, as Ctrl-C does, so the temporaries of a write in
+    progress are removed and the store keeps its previous state. Returns the previous
+    handler (restored when :func:`main` returns)."""
+    import signal
+    import threading
+
+    def handler(signum, frame):
+        raise KeyboardInterrupt
+
+    if threading.current_thread() is threading.main_thread():
+        return signal.signal(signal.SIGTERM, handler)
+    return None

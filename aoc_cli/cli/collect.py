@@ -37,7 +37,7 @@ def register(app: typer.Typer) -> None:
         fmt: Optional[str] = FormatOption,
     ) -> None:
         """Run a built-in task's behaviour policies and store the data as a corpus."""
-        from aoc_cli.envs import TASKS, collect, get_task
+        from aoc_cli.envs import TASKS, get_task
 
         if list_tasks:
             write_records([t.describe() for t in TASKS.values()], fmt, columns=LIST_COLUMNS,
@@ -67,18 +67,28 @@ def register(app: typer.Typer) -> None:
                     "--reward-free`")
             return
         store = get_store()
-        if store.exists(name) and not overwrite:
-            raise AocError(f"corpus {name!r} already exists in {store.root}: pass --overwrite "
-                           "to replace it, or choose another --name")
-        with progress() as bar:
-            job = bar.add_task(f"collect {t.name}", total=None)
+        from aoc_cli.store import check_name, writing_corpus
 
-            def on_progress(done: int, total: int) -> None:
-                bar.update(job, completed=done, total=total)
-
-            data, summary = collect(task, steps=steps, episodes=episodes, seed=seed,
-                                    progress=on_progress)
-        corpus = store.write(name, data, overwrite=overwrite)
+        with writing_corpus(store.root, check_name(name)):
+            if store.exists(name) and not overwrite:
+                raise AocError(f"corpus {name!r} already exists in {store.root}: pass "
+                               "--overwrite to replace it, or choose another --name")
+            corpus, summary = _collect(store, t, task, name, steps, episodes, seed, overwrite)
         message(f"wrote corpus {name!r}: {corpus.n_rows} rows, {corpus.n_episodes} episodes "
                 f"of {task} (seed {seed}, hash {corpus.hash}) to {corpus.path}")
         write_records(summary, fmt, title=f"behaviour policies of {name}")
+
+
+def _collect(store, t, task, name, steps, episodes, seed, overwrite):
+    """Run the task's policies and write the corpus: (corpus, per-policy summary)."""
+    from aoc_cli.envs import collect
+
+    with progress() as bar:
+        job = bar.add_task(f"collect {t.name}", total=None)
+
+        def on_progress(done: int, total: int) -> None:
+            bar.update(job, completed=done, total=total)
+
+        data, summary = collect(task, steps=steps, episodes=episodes, seed=seed,
+                                progress=on_progress)
+    return store.write(name, data, overwrite=overwrite), summary

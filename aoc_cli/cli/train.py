@@ -58,7 +58,23 @@ def train(
                           batch_size=batch_size, lr=lr, patience=patience,
                           val_fraction=val_fraction, seed=seed, threads=threads).validate()
     corpus = get_store().corpus(name)
+    from aoc_cli.store import check_name, writing_model
+
+    with writing_model(corpus.path, check_name(model, "model")):  # one writer per model id
+        metrics = _train(corpus, config, model, overwrite)
+    score = (f"val R^2 {metrics['val_r2']:.3f}" if "val_r2" in metrics
+             else f"val accuracy {metrics['val_accuracy']:.3f} (majority "
+                  f"{metrics['val_majority_accuracy']:.3f})")
+    message(f"trained {name}/{model}: {metrics['mode']}, {metrics['epochs']} epochs (best "
+            f"{metrics['best_epoch']}), {score}, {metrics['seconds']:.0f} s")
+    write_object(metrics, fmt, title=f"aoc train {name} --model {model}")
+
+
+def _train(corpus, config: BeliefConfig, model: str, overwrite: bool) -> dict:
+    """Check the inputs (and the corpus's content hash), then train with a progress bar."""
+    name = corpus.name
     prepared = prepare(corpus, config, model, overwrite)
+    corpus.verify_content()  # the columns prepare read are cached: hashing reads nothing again
     from aoc_cli.belief.train import train_model  # imports torch: only once the input is good
 
     with progress(transient=True) as bar:
@@ -74,14 +90,8 @@ def train(
             bar.update(task, completed=event["epoch"] - (0 if event["epoch_done"] else 1),
                        description=text)
 
-        metrics = train_model(corpus, config, model, overwrite=overwrite, progress=on_progress,
-                              prepared=prepared)
-    score = (f"val R^2 {metrics['val_r2']:.3f}" if "val_r2" in metrics
-             else f"val accuracy {metrics['val_accuracy']:.3f} (majority "
-                  f"{metrics['val_majority_accuracy']:.3f})")
-    message(f"trained {name}/{model}: {metrics['mode']}, {metrics['epochs']} epochs (best "
-            f"{metrics['best_epoch']}), {score}, {metrics['seconds']:.0f} s")
-    write_object(metrics, fmt, title=f"aoc train {name} --model {model}")
+        return train_model(corpus, config, model, overwrite=overwrite, progress=on_progress,
+                           prepared=prepared)
 
 
 def register(app: typer.Typer) -> None:

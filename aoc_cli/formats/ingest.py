@@ -16,7 +16,7 @@ import numpy as np
 from aoc_cli.errors import AocError
 from aoc_cli.formats.common import ReadOptions, observed_bounds
 from aoc_cli.formats.detect import FORMATS, detect_format
-from aoc_cli.store import CorpusData, Store, check_name
+from aoc_cli.store import CorpusData, Store, check_name, writing_corpus
 from aoc_cli.store.corpus import all_finite
 
 
@@ -122,13 +122,13 @@ def ingest(path: str | os.PathLike, name: str, *, store: Store | None = None,
     t0 = time.perf_counter()
     store = store or Store.open()
     check_name(name)
-    if overwrite and append:
-        raise AocError("pass either --overwrite or --append, not both")
-    if store.exists(name) and not (overwrite or append):
-        raise AocError(f"corpus {name!r} already exists: pass --overwrite to replace it or "
-                       "--append to add to it")
-    data = read_dataset(path, fmt, options)
-    corpus = store.write(name, data, overwrite=overwrite, append=append)
+    store.check_writable(name, overwrite=overwrite, append=append, notify=False)
+    if fmt is None:
+        fmt = detect_format(path)  # a missing or unknown input fails before the store is touched
+    with writing_corpus(store.root, name):  # one writer per corpus: a second fails at once
+        store.check_writable(name, overwrite=overwrite, append=append)
+        data = read_dataset(path, fmt, options)
+        corpus = store.write(name, data, overwrite=overwrite, append=append)
     return IngestResult(
         name=name, format=data.source.get("format", fmt or "?"), rows=data.n_rows,
         episodes=data.n_episodes, seconds=time.perf_counter() - t0,

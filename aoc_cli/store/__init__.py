@@ -5,7 +5,17 @@
 >>> h = corpus.history([10, 11], length=4)         # doctest: +SKIP
 """
 
-from aoc_cli.store.atomic import atomic_dir, atomic_path, hash_arrays, hash_file, write_json, write_npy
+from aoc_cli.store.atomic import (
+    atomic_dir,
+    atomic_path,
+    file_record,
+    hash_arrays,
+    hash_file,
+    seal,
+    seal_status,
+    write_json,
+    write_npy,
+)
 from aoc_cli.store.corpus import (
     CorpusData,
     History,
@@ -14,7 +24,10 @@ from aoc_cli.store.corpus import (
     episode_starts_from_lengths,
     gather_history,
 )
-from aoc_cli.store.store import Corpus, Store, check_name, concat
+from aoc_cli.store.lock import writing_corpus, writing_model
+from aoc_cli.store.reader import Corpus
+from aoc_cli.store.store import Store, check_name
+from aoc_cli.store.writer import concat
 from aoc_cli.store.summary import built_from, list_corpora, summarize
 
 
@@ -36,12 +49,17 @@ __all__ = [
     "concat",
     "discrete_space",
     "episode_starts_from_lengths",
+    "file_record",
     "gather_history",
     "hash_arrays",
     "hash_file",
     "list_corpora",
     "open_corpus",
+    "seal",
+    "seal_status",
     "summarize",
     "write_json",
     "write_npy",
+    "writing_corpus",
+    "writing_model",
 ]

@@ -1,5 +1,10 @@
 """Nothing half-written: every file goes to a temporary file in the same folder and is renamed
-into place, so an interrupted command leaves the previous state intact."""
+into place, so an interrupted command leaves the previous state intact.
+
+Temporaries are named ``.<name>.p<pid>.<random>.tmp`` (``.old`` for a replaced folder on its
+way out): a writer killed with kill -9 cannot remove its own, so the next write of the same
+name removes those whose pid is no longer alive (:func:`remove_stale`).
+"""
 
 from __future__ import annotations
 
@@ -8,11 +13,54 @@ import hashlib
 import json
 import os
 import shutil
+import re
 import tempfile
+import time
 from pathlib import Path
 from typing import Iterator
 
 import numpy as np
+
+#: Temporaries of an older aoc carry no pid: removed when older than this many seconds.
+LEGACY_STALE_SECONDS = 3600
+
+
+def _prefix(path: Path) -> str:
+    return f".{path.name}.p{os.getpid()}."
+
+
+def remove_stale(path: str | os.PathLike) -> list[Path]:
+    """Remove the temporaries of ``path`` (``.<name>.*.tmp*``, ``.<name>.*.old``) left by
+    writers that died: those recording a pid that is not alive, and pid-less ones (an older
+    aoc) untouched for an hour. Returns what was removed."""
+    from aoc_cli.store.lock import pid_alive
+
+    path = Path(path)
+    folder = path.parent
+    if not folder.is_dir():
+        return []
+    pattern = re.compile(r"^\." + re.escape(path.name) + r"\.(p(\d+)\.)?[^.]+\.(tmp.*|old)$")
+    removed = []
+    for entry in folder.iterdir():
+        m = pattern.match(entry.name)
+        if m is None:
+            continue
+        if m.group(2) is not None:
+            stale = not pid_alive(int(m.group(2)))
+        else:
+            try:
+                stale = time.time() - entry.lstat().st_mtime > LEGACY_STALE_SECONDS
+            except OSError:
+                continue
+        if not stale:
+            continue
+        if entry.is_dir() and not entry.is_symlink():
+            shutil.rmtree(entry, ignore_errors=True)
+        else:
+            with contextlib.suppress(OSError):
+                entry.unlink()
+        removed.append(entry)
+    return removed
 
 
 @contextlib.contextmanager
@@ -23,7 +71,8 @@ def atomic_path(path: str | os.PathLike, suffix: str = "") -> Iterator[Path]:
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp" + suffix, dir=path.parent)
+    remove_stale(path)
+    fd, tmp = tempfile.mkstemp(prefix=_prefix(path), suffix=".tmp" + suffix, dir=path.parent)
     os.close(fd)
     tmp_path = Path(tmp)
     try:
@@ -51,12 +100,14 @@ def atomic_dir(path: str | os.PathLike) -> Iterator[Path]:
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
+    remove_stale(path)
+    tmp = Path(tempfile.mkdtemp(prefix=_prefix(path), suffix=".tmp", dir=path.parent))
     try:
         yield tmp
+        os.chmod(tmp, 0o777 & ~_umask())  # mkdtemp makes 0700: the mode a plain mkdir gives
         old = None
         if path.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".old", dir=path.parent))
+            old = Path(tempfile.mkdtemp(prefix=_prefix(path), suffix=".old", dir=path.parent))
             os.rmdir(old)
             os.replace(path, old)
         os.replace(tmp, path)
@@ -94,6 +145,35 @@ def hash_arrays(*arrays: np.ndarray | None) -> str:
         h.update(f"{a.dtype.str}{a.shape}".encode())
         h.update(memoryview(a).cast("B"))
     return h.hexdigest()[:32]
+
+
+def sha256_file(path: str | os.PathLike, chunk: int = 1 << 22) -> str:
+    """SHA-256 (hex) of a file's bytes."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        while block := f.read(chunk):
+            h.update(block)
+    return h.hexdigest()
+
+
+def file_record(path: str | os.PathLike) -> dict:
+    """``{"bytes", "sha256"}`` of a file, as recorded beside what is written."""
+    return {"bytes": os.path.getsize(path), "sha256": sha256_file(path)}
+
+
+def seal(meta: dict) -> dict:
+    """``meta`` with ``"sha256"``: the SHA-256 of its other keys (canonical JSON), so a JSON
+    file can be checked on its own (:func:`seal_status`)."""
+    body = {k: v for k, v in meta.items() if k != "sha256"}
+    text = json.dumps(body, sort_keys=True, separators=(",", ":"))
+    return {**body, "sha256": hashlib.sha256(text.encode()).hexdigest()}
+
+
+def seal_status(meta: dict) -> bool | None:
+    """True when a sealed JSON object is intact, False when changed, None when unsealed."""
+    if not isinstance(meta, dict) or "sha256" not in meta:
+        return None
+    return seal(meta)["sha256"] == meta["sha256"]
 
 
 def hash_file(path: str | os.PathLike, chunk: int = 1 << 22) -> str:

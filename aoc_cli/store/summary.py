@@ -12,7 +12,8 @@ import json
 
 import numpy as np
 
-from aoc_cli.store.store import Corpus, Store
+from aoc_cli.store.reader import Corpus
+from aoc_cli.store.store import Store
 
 
 def space_text(space: dict) -> str:

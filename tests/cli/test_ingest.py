@@ -15,7 +15,8 @@ from tests.formats.sources import flat_arrays, write_csv, write_d4rl
 
 
 def snapshot(root):
-    """Every file under the store with its content hash (and every folder, incl. temporaries)."""
+    """Every file under the store with its content hash (and every folder, incl. temporaries);
+    not the writer lock files ``.NAME.lock`` (a pid, no data; never removed)."""
     out = {}
     if not os.path.exists(root):
         return out
@@ -23,6 +24,8 @@ def snapshot(root):
         for d in dirnames:
             out[os.path.relpath(os.path.join(dirpath, d), root)] = "dir"
         for f in filenames:
+            if f.startswith(".") and f.endswith(".lock"):
+                continue
             p = os.path.join(dirpath, f)
             out[os.path.relpath(p, root)] = hashlib.md5(open(p, "rb").read()).hexdigest()
     return out

@@ -3,7 +3,7 @@ when large, and the fast finiteness check."""
 
 import numpy as np
 
-import aoc_cli.store.store as store_mod
+import aoc_cli.store.reader as store_mod
 from aoc_cli.store import Store
 from aoc_cli.store.corpus import all_finite
 from tests.store.test_store import make_data

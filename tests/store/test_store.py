@@ -80,7 +80,8 @@ def test_existing_name_needs_overwrite_and_overwrite_replaces(tmp_path):
         store.write("c", make_data(seed=1))
     new = store.write("c", make_data(seed=1), overwrite=True)
     np.testing.assert_array_equal(new.observations, make_data(seed=1).observations)
-    assert [p.name for p in tmp_path.iterdir()] == ["c"]  # no temporary folders left
+    # no temporary folders left (the writer lock file .c.lock stays: it is never removed)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".c.lock", "c"]
 
 
 def test_append_concatenates_and_requires_same_spaces(tmp_path):
@@ -120,7 +121,7 @@ def test_failed_write_leaves_previous_state(tmp_path, monkeypatch):
     store = Store(tmp_path)
     store.write("c", make_data(seed=0))
     before = json.loads((tmp_path / "c" / "manifest.json").read_text())
-    import aoc_cli.store.store as mod
+    import aoc_cli.store.writer as mod
 
     def boom(*a, **k):
         raise KeyboardInterrupt
@@ -130,7 +131,7 @@ def test_failed_write_leaves_previous_state(tmp_path, monkeypatch):
         store.write("c", make_data(seed=1), overwrite=True)
     after = json.loads((tmp_path / "c" / "manifest.json").read_text())
     assert before == after
-    assert sorted(os.listdir(tmp_path)) == ["c"]
+    assert sorted(os.listdir(tmp_path)) == [".c.lock", "c"]
 
 
 def test_atomic_files_get_the_mode_of_a_plain_open(tmp_path):
