@@ -25,7 +25,8 @@ from aoc_cli.belief.config import BeliefConfig
 from aoc_cli.belief.data import model_dir
 from aoc_cli.belief.model import BeliefNet, Encoder, Normalisation
 from aoc_cli.errors import AocError
-from aoc_cli.store import History, atomic_dir, write_json, write_npy
+from aoc_cli.store import History, atomic_dir, file_record, seal, write_json, write_npy
+from aoc_cli.store.verify import check_files, read_json
 
 FORMAT = "aoc-belief-model"
 FORMAT_VERSION = 1
@@ -41,9 +42,9 @@ def list_models(corpus) -> list[str]:
         if p.name.startswith(".") or not (p / "config.json").is_file():
             continue
         try:
-            trained = json.loads((p / "config.json").read_text()).get("trained_unix", 0.0)
-        except (OSError, json.JSONDecodeError):
-            continue
+            trained = float(json.loads((p / "config.json").read_text()).get("trained_unix", 0.0))
+        except (OSError, ValueError, TypeError, AttributeError):
+            trained = 0.0  # a damaged config: listed, so that loading it says it is damaged
         found.append((trained, p.name))
     return [name for _t, name in sorted(found)]
 
@@ -76,7 +77,8 @@ def save_model(corpus, model_id: str, *, net: BeliefNet, config: BeliefConfig, d
             writer = csv.DictWriter(f, fieldnames=columns, lineterminator="\n")
             writer.writeheader()
             writer.writerows(history)
-        write_json(tmp / "config.json", meta)
+        meta["files"] = {p.name: file_record(p) for p in sorted(tmp.iterdir())}
+        write_json(tmp / "config.json", seal(meta))  # sealed: `aoc verify` checks every byte
     return path
 
 
@@ -272,23 +274,33 @@ def load_model(corpus, model_id: str | None = None, device: str | None = None) -
                            f"`aoc train {corpus.name}`")
         model_id = "default" if "default" in ids else ids[-1]
     path = model_dir(corpus, model_id)
-    if not (path / "config.json").is_file():
+    if not path.is_dir():
         known = ", ".join(ids) or "none"
         raise AocError(f"corpus {corpus.name!r} has no model {model_id!r} (models: {known}): "
                        f"run `aoc train {corpus.name} --model {model_id}`")
-    meta = json.loads((path / "config.json").read_text())
+    what = f"model {model_id!r} of corpus {corpus.name!r} is damaged"
+    todo = f"re-run `aoc train {corpus.name} --model {model_id} --overwrite`"
+    meta = read_json(path / "config.json", what, todo)
     if meta.get("format") != FORMAT or meta.get("format_version") != FORMAT_VERSION:
         raise AocError(f"model {model_id!r} of corpus {corpus.name!r} has an unknown format: "
-                       f"re-run `aoc train {corpus.name} --model {model_id} --overwrite`")
+                       f"{todo}")
+    check_files(path, meta, ("weights.pt", "values.npy"), what, todo)
     from aoc_cli.belief.train import build_net, pick_device
 
-    dev = pick_device(device or meta["config"].get("device", "auto"))
-    net = build_net(meta["dims"], BeliefConfig.from_dict(meta["config"]))
-    state = torch.load(path / "weights.pt", map_location="cpu", weights_only=True)
-    net.load_state_dict(state)
-    values = None
-    if (path / "values.npy").is_file():
-        values = np.load(path / "values.npy", allow_pickle=False)
+    try:
+        dev = pick_device(device or meta["config"].get("device", "auto"))
+        net = build_net(meta["dims"], BeliefConfig.from_dict(meta["config"]))
+        state = torch.load(path / "weights.pt", map_location="cpu", weights_only=True)
+        net.load_state_dict(state)
+        values = None
+        if (path / "values.npy").is_file():
+            values = np.load(path / "values.npy", allow_pickle=False)
+    except AocError:
+        raise
+    except Exception as err:  # a truncated zip, a bad .npy header, keys or shapes that differ
+        first = str(err).strip().splitlines()[0][:160] if str(err).strip() else ""
+        raise AocError(f"{what}: reading {path} failed ({type(err).__name__}: {first}); "
+                       f"{todo}") from None
     model = BeliefModel(path, meta, net.to(dev), values, dev)
     check_corpus(model, corpus)
     return model

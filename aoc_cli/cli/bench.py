@@ -50,6 +50,11 @@ def register(app: typer.Typer) -> None:
         from aoc_cli.bench.runner import check
 
         fmt = resolve_format(fmt)
+        if out is not None:
+            from aoc_cli.cli.common import get_store
+            from aoc_cli.store.paths import check_output
+
+            check_output(out, "--out", get_store().root, folder=True)
         if quick and tiny:
             raise AocError("give --quick or --tiny, not both")
         scale = "tiny" if tiny else "quick" if quick else "full"

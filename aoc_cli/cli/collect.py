@@ -60,6 +60,9 @@ def register(app: typer.Typer) -> None:
                 raise AocError(f"--csv: task {task!r} has no CSV form (ward has)")
             if steps is not None:
                 raise AocError("--csv writes whole stays: give --episodes, not --steps")
+            from aoc_cli.store.paths import check_output
+
+            check_output(csv_dir, "--csv", get_store().root, folder=True)
             paths = write(csv_dir, name, episodes or t.default_episodes, seed)
             message(f"wrote {paths[0]} and {paths[1]}: ingest them with `aoc ingest "
                     f"{paths[0]} --name {name} --id-column patient --time-column hour "

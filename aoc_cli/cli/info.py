@@ -50,7 +50,8 @@ def register(app: typer.Typer) -> None:
         if not records:
             message(f"no corpora in {store.root}: create one with `aoc ingest` or `aoc collect`")
         write_records(records, fmt, columns=["name", "rows", "episodes", "observation", "action",
-                                             "has_rewards", "models"], title=str(store.root))
+                                             "has_rewards", "models", "status"],
+                      title=str(store.root))
 
 
 def _source_text(source: dict) -> str:

@@ -59,7 +59,15 @@ def register(app: typer.Typer) -> None:
         fmt = resolve_format(fmt)
         if episodes < 1:
             raise AocError(f"--episodes must be >= 1, got {episodes}")
-        corpus = get_store().corpus(name)
+        store = get_store()
+        from aoc_cli.store.paths import check_output
+
+        for flag, path in (("--audit", audit), ("--plot", plot)):
+            if path is not None:
+                check_output(path, flag, store.root)
+        if noise_std != noise_std or noise_std < 0 or noise_std == float("inf"):
+            raise AocError(f"--noise-std must be a finite number >= 0, got {noise_std}")
+        corpus = store.corpus(name)
         config = task_config(env, candidates=candidates, epsilon=epsilon, k=k, sampler=sampler,
                              residual_cap=residual_cap)
         environment = make_env(env)

@@ -3,7 +3,8 @@
 A model folder ``models/<id>/`` counts as built from the corpus; its ``config.json`` records
 ``corpus_hash``, the content hash of the corpus it was built from. It is ``ok`` when that
 equals the corpus's hash now, ``stale`` when it does not (the corpus was re-ingested or
-appended to: rebuild it), ``unknown`` when the folder has no readable config.
+appended to: rebuild it), ``damaged`` when its config or a file it records is damaged,
+``unknown`` when the folder has no config.
 """
 
 from __future__ import annotations
@@ -12,6 +13,8 @@ import json
 
 import numpy as np
 
+from aoc_cli.errors import AocError
+from aoc_cli.store.atomic import seal_status
 from aoc_cli.store.reader import Corpus
 from aoc_cli.store.store import Store
 
@@ -24,24 +27,36 @@ def space_text(space: dict) -> str:
 
 
 def built_from(corpus: Corpus) -> list[dict]:
-    """One record per folder under ``models/``: id, status (ok|stale|unknown), what it holds.
+    """One record per folder under ``models/``: id, status, what it holds.
 
-    Records: ``{"id", "status", "corpus_hash", "mode", "files"}``.
+    Status: ``ok``; ``stale`` (built from another version of the corpus: rebuild it);
+    ``damaged`` (its config.json unreadable or changed, or a file it records missing, of
+    another size, or, when small, with another SHA-256: ``aoc verify`` checks everything);
+    ``unknown`` (no config). Records: ``{"id", "status", "corpus_hash", "mode", "files"}``.
     """
+    from aoc_cli.store.verify import file_status
+
     out = []
     if not corpus.models_dir.is_dir():
         return out
     for folder in sorted(p for p in corpus.models_dir.iterdir()
                          if p.is_dir() and not p.name.startswith(".")):
-        config = {}
+        config, readable = {}, True
         try:
             config = json.loads((folder / "config.json").read_text())
             if not isinstance(config, dict):
-                config = {}
-        except (OSError, json.JSONDecodeError):
+                config, readable = {}, False
+        except FileNotFoundError:
             pass
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+            readable = False
         recorded = config.get("corpus_hash")
         status = "unknown" if not recorded else ("ok" if recorded == corpus.hash else "stale")
+        files = config.get("files") or {}
+        if not readable or seal_status(config) is False or any(
+                file_status(folder / name, record, full=False)[0] in ("damaged", "missing")
+                for name, record in files.items()):
+            status = "damaged"
         out.append({
             "id": folder.name,
             "status": status,
@@ -99,18 +114,21 @@ def summarize(corpus: Corpus) -> dict:
 
 
 def list_corpora(store: Store) -> list[dict]:
-    """One record per corpus: name, rows, episodes, observation, action, has_rewards, models."""
+    """One record per corpus: name, status (ok, or damaged: an unreadable or missing manifest,
+    a corpus file of the wrong size; ``aoc verify`` says more), rows, episodes, observation,
+    action, has_rewards, models."""
     out = []
-    for name in store.names():
+    for name in sorted(store.names() + store.damaged_names()):
         try:
             c = store.corpus(name)
-            out.append({"name": name, "rows": c.n_rows, "episodes": c.n_episodes,
+            out.append({"name": name, "status": "ok", "rows": c.n_rows,
+                        "episodes": c.n_episodes,
                         "observation": space_text(c.observation_space),
                         "action": space_text(c.action_space),
                         "has_rewards": c.has_rewards,
                         "models": len(built_from(c))})
-        except (OSError, ValueError, KeyError):
-            out.append({"name": name, "rows": None, "episodes": None,
-                        "observation": "unreadable manifest", "action": None,
-                        "has_rewards": None, "models": None})
+        except (AocError, OSError, ValueError, KeyError):
+            out.append({"name": name, "status": "damaged", "rows": None, "episodes": None,
+                        "observation": None, "action": None, "has_rewards": None,
+                        "models": None})
     return out
