@@ -251,6 +251,18 @@ def replay_decision(session: Session, recorded: dict) -> Decision:
                                      candidates=cand)
 
 
+def _numbers(value, what: str) -> np.ndarray:
+    """A JSON list of finite numbers -> (n,) float64; anything else is an AocError."""
+    try:
+        arr = np.asarray(value, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise AocError(f"{what} must be a list of numbers, got {json.dumps(value)[:60]}") \
+            from None
+    if not np.isfinite(arr).all():
+        raise AocError(f"{what} holds NaN or inf: give finite numbers")
+    return arr
+
+
 def parse_query(line: str, lineno: int, corpus, history_length: int):
     """One JSONL query -> (observation (d_o,), one-row History, action or None)."""
     from aoc_cli.control.rollout import HistoryBuffer
@@ -261,15 +273,19 @@ def parse_query(line: str, lineno: int, corpus, history_length: int):
         raise AocError(f"line {lineno} of the input is not valid JSON: {err.msg}") from None
     if not isinstance(q, dict) or "observation" not in q:
         raise AocError(f"line {lineno}: a query is an object with an \"observation\" list")
-    obs = np.asarray(q["observation"], dtype=np.float64).reshape(-1)
+    obs = _numbers(q["observation"], f"line {lineno}: \"observation\"")
     if obs.shape[0] != corpus.observation_dim:
         raise AocError(f"line {lineno}: observation has {obs.shape[0]} numbers, corpus "
                        f"{corpus.name!r} has {corpus.observation_dim}")
     d_a = corpus.action_dim
     buf = HistoryBuffer(history_length, corpus.observation_dim, d_a, corpus.discrete)
     width = corpus.observation_dim + d_a + 1
-    for j, step in enumerate(q.get("history") or []):
-        step = np.asarray(step, dtype=np.float64).reshape(-1)
+    history = q.get("history") or []
+    if not isinstance(history, list):
+        raise AocError(f"line {lineno}: \"history\" must be a list of steps "
+                       "[observation..., action..., reward]")
+    for j, step in enumerate(history):
+        step = _numbers(step, f"line {lineno}: history step {j}")
         if step.shape[0] != width:
             raise AocError(f"line {lineno}: history step {j} has {step.shape[0]} numbers, "
                            f"expected {width} (observation, action, reward)")

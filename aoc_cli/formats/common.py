@@ -16,7 +16,7 @@ from typing import Callable, Iterable, Iterator
 import h5py
 import numpy as np
 
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, warn
 from aoc_cli.store import CorpusData, box_space, discrete_space, episode_starts_from_lengths
 from aoc_cli.store.corpus import all_finite
 
@@ -146,9 +146,25 @@ def observed_bounds(actions: np.ndarray) -> dict:
             "high": [None if not np.isfinite(x) else float(x) for x in high]}
 
 
+def check_numeric(arrays: dict[str, np.ndarray | None], path) -> None:
+    """Every array holds numbers (or booleans): strings, objects or compound types are an
+    AocError naming the array and the file."""
+    for key, arr in arrays.items():
+        if arr is None:
+            continue
+        kind = np.asarray(arr).dtype.kind
+        if kind not in "fiub":
+            raise AocError(f"{path}: {key} holds {np.asarray(arr).dtype} values, not numbers: "
+                           "store numeric arrays")
+
+
 def flat_observations(obs: np.ndarray) -> np.ndarray:
-    """(N, ...) -> (N, d_o); integers become float32."""
+    """(N, ...) -> (N, d_o); integers become float32. Observations of more than one
+    dimension per row (images, grids) are flattened, with a warning."""
     obs = np.asarray(obs)
+    if obs.ndim > 2:
+        warn(f"observations of shape {tuple(obs.shape)} are flattened to "
+             f"({len(obs)}, {int(np.prod(obs.shape[1:]))}), row-major")
     obs = obs.reshape(len(obs), int(np.prod(obs.shape[1:])))
     if not np.issubdtype(obs.dtype, np.floating):
         obs = obs.astype(np.float32)
@@ -174,9 +190,10 @@ def from_flat(
     ``--tag-column`` may name and that numeric 1-d ones become corpus ``columns``.
     """
     extra = extra or {}
-    n = check_lengths({"observations": observations, "actions": actions, "rewards": rewards,
-                       "terminals": terminals, "timeouts": timeouts,
-                       "episode_terminals": episode_ends})
+    arrays = {"observations": observations, "actions": actions, "rewards": rewards,
+              "terminals": terminals, "timeouts": timeouts, "episode_terminals": episode_ends}
+    check_numeric(arrays, source.get("path", "the input"))
+    n = check_lengths(arrays)
     term = np.zeros(n, bool) if terminals is None else np.asarray(terminals).reshape(n) != 0
     tout = np.zeros(n, bool) if timeouts is None else np.asarray(timeouts).reshape(n) != 0
     ends = term | tout

@@ -31,11 +31,13 @@ import csv
 import fnmatch
 import gzip
 import json
+import zlib
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, warn
 from aoc_cli.formats.common import ReadOptions, action_space_of, encode_labels, no_progress
 from aoc_cli.store import CorpusData, box_space
 
@@ -46,16 +48,30 @@ MAPPING_KEYS = {"id", "time", "observations", "actions", "reward", "terminal", "
 
 def read_table(path: Path, progress=None) -> tuple[list[str], dict[str, np.ndarray]]:
     """A CSV (``.tsv``: tab-separated; ``.gz``: gzip) -> (header, column name -> (N,) str)."""
+    lines = _read_lines(path)
+    delimiter = "\t" if ".tsv" in path.suffixes else ","
+    try:
+        return _parse(path, lines, delimiter, progress)
+    except csv.Error as err:
+        raise AocError(f"cannot read {path} as CSV ({err}): fix the file") from None
+
+
+def _read_lines(path: Path) -> list[str]:
+    """The lines of a text file (gunzipped for ``.gz``); unreadable is one AocError."""
     opener = gzip.open if path.suffix == ".gz" else open
     try:
         with opener(path, "rt", encoding="utf-8-sig", newline="") as fh:
             text = fh.read()
-    except (OSError, UnicodeDecodeError, EOFError) as err:
-        raise AocError(f"cannot read {path} as UTF-8 text ({err})") from None
-    delimiter = "\t" if ".tsv" in path.suffixes else ","
+    except (OSError, UnicodeDecodeError, EOFError, zlib.error) as err:
+        raise AocError(f"cannot read {path} as UTF-8 text ({type(err).__name__}: {err}); "
+                       "a .gz file must be gzip-compressed CSV") from None
     lines = text.splitlines()
     if not lines:
         raise AocError(f"{path} is empty: expected a header line and one row per step")
+    return lines
+
+
+def _parse(path: Path, lines: list[str], delimiter: str, progress):
     header = [h.strip() for h in next(csv.reader([lines[0]], delimiter=delimiter))]
     if len(set(header)) != len(header):
         dup = sorted({h for h in header if header.count(h) > 1})
@@ -147,11 +163,24 @@ def _first_present(header, names):
     return next((n for n in names if n in header), None)
 
 
-def read_csv(path: Path, options: ReadOptions) -> CorpusData:
-    """Read a CSV log (and ``options.static``) into a corpus."""
-    path = Path(path)
+@dataclass
+class Roles:
+    """Which columns play which role (None: absent)."""
+
+    id: str | None
+    time: str | None
+    observations: list[str]
+    actions: list[str]
+    reward: str | None
+    terminal: str | None
+    tags: list[str]
+    discrete: bool
+    static_id: str | None
+
+
+def _roles(path: Path, header: list[str], options: ReadOptions) -> Roles:
+    """Column roles from the flags, else the mapping file, else the defaults."""
     m = _mapping(options)
-    header, cols = read_table(path, options.progress)
     id_col = options.id_column or m.get("id") or _first_present(header, ("episode", "id"))
     time_col = options.time_column or m.get("time") or _first_present(header, ("t", "time"))
     for role, col in (("episode id", id_col), ("time", time_col)):
@@ -161,8 +190,8 @@ def read_csv(path: Path, options: ReadOptions) -> CorpusData:
                       "observation column", path) if (
         options.obs_columns or m.get("observations") or
         any(fnmatch.fnmatchcase(h, "obs_*") for h in header)) else []
-    act_spec = options.act_columns or m.get("actions") or "act_*"
-    act_cols = _match(header, act_spec, "action column", path)
+    act_cols = _match(header, options.act_columns or m.get("actions") or "act_*",
+                      "action column", path)
     reward_col = None
     if not options.reward_free:
         reward_col = options.reward_column or m.get("reward") or (
@@ -173,82 +202,132 @@ def read_csv(path: Path, options: ReadOptions) -> CorpusData:
     term_col = options.terminal_column or m.get("terminal")
     if term_col is not None and term_col not in header:
         raise AocError(f"{path}: no terminal column {term_col!r}")
-    tag_cols = list(options.tag_columns) or list(m.get("tags", []))
     discrete = options.discrete_actions or bool(m.get("discrete_actions", False))
-    n = len(next(iter(cols.values()))) if cols else 0
-    if n == 0:
-        raise AocError(f"{path} has zero rows: nothing to store")
+    if discrete and len(act_cols) != 1:
+        raise AocError(f"--discrete-actions needs exactly one action column, got {act_cols}")
+    return Roles(id_col, time_col, obs_cols, act_cols, reward_col, term_col,
+                 list(options.tag_columns) or list(m.get("tags", [])), discrete,
+                 m.get("static_id") or id_col)
 
-    # Order rows by (id, time); the sort is stable, so ties keep the file's order.
-    ids_text = np.char.strip(cols[id_col]) if id_col else np.full(n, "0")
-    id_key = _sort_key(cols[id_col], id_col, path, dates=False) if id_col else np.zeros(n)
+
+@dataclass
+class Episodes:
+    """Rows ordered by (id, time): ``order`` (N,) file row of each corpus row, ``starts``
+    (E + 1,), the id of each episode as text and as its sort key."""
+
+    order: np.ndarray
+    starts: np.ndarray
+    ids: list[str]
+    keys: np.ndarray
+
+
+def _episodes(path: Path, cols: dict, roles: Roles, n: int) -> Episodes:
+    """Order the rows by episode id and time (stable: ties keep the file's order); warn
+    about empty ids and repeated (id, time) pairs, which are kept."""
+    ids_text = np.char.strip(cols[roles.id]) if roles.id else np.full(n, "0")
+    if roles.id and (ids_text == "").any():
+        rows = np.flatnonzero(ids_text == "")
+        warn(f"{path}: {len(rows)} rows have an empty {roles.id!r} cell (first: data row "
+             f"{int(rows[0]) + 1}); they form one episode with the id ''")
+    id_key = _sort_key(cols[roles.id], roles.id, path, dates=False) if roles.id \
+        else np.zeros(n)
     uniq_keys, id_codes = np.unique(id_key, return_inverse=True)
-    time_key = _sort_key(cols[time_col], time_col, path, dates=True) if time_col \
+    time_key = _sort_key(cols[roles.time], roles.time, path, dates=True) if roles.time \
         else np.arange(n)
     order = np.lexsort((time_key, id_codes))
     id_codes = id_codes[order]
+    if roles.time:
+        same = (np.diff(id_codes) == 0) & (np.diff(np.asarray(time_key)[order]) == 0)
+        if same.any():
+            first = int(order[np.flatnonzero(same)[0] + 1])
+            warn(f"{path}: {int(same.sum())} rows repeat the ({roles.id}, {roles.time}) of an "
+                 f"earlier row (first: data row {first + 1}); kept in file order as "
+                 "successive steps")
     bounds = np.flatnonzero(np.diff(id_codes)) + 1
     starts = np.concatenate([[0], bounds, [n]]).astype(np.int64)
-    first_row = order[starts[:-1]]
-    episode_ids = [str(ids_text[r]) for r in first_row]
+    return Episodes(order, starts, [str(ids_text[r]) for r in order[starts[:-1]]],
+                    uniq_keys[id_codes[starts[:-1]]])
 
-    static_names: list[str] = []
-    static_feats = None
-    static_tags: dict[str, np.ndarray] = {}
-    if options.static is not None:
-        static_id = m.get("static_id") or id_col
-        if id_col is None:
-            raise AocError("--static needs an episode id column to join on: name it with "
-                           "--id-column")
-        static_names, static_feats, static_tags = _read_static(
-            Path(options.static), static_id, uniq_keys[id_codes[starts[:-1]]], episode_ids,
-            bool(np.issubdtype(np.asarray(uniq_keys).dtype, np.number)), tag_cols)
-    obs_names = list(obs_cols) + static_names
-    if not obs_names:
-        raise AocError(f"{path}: no observation columns: name them with --obs-columns, a "
-                       "--columns mapping file or obs_* column names")
-    lengths = np.diff(starts)
-    parts = [numeric(cols[c], c, path)[order][:, None] for c in obs_cols]
-    if static_feats is not None:
-        parts.append(np.repeat(static_feats, lengths, axis=0))
-    observations = np.concatenate(parts, axis=1)
-    act_raw = np.stack([numeric(cols[c], c, path)[order] for c in act_cols], axis=1)
-    if discrete and len(act_cols) != 1:
-        raise AocError(f"--discrete-actions needs exactly one action column, got {act_cols}")
-    actions, act_space = action_space_of(act_raw, discrete, names=act_cols)
+
+def _flags(path: Path, cols: dict, roles: Roles, eps: Episodes, n: int):
+    """(terminals, truncations) (N,): each episode's last row ends it, a terminal unless the
+    terminal column says otherwise (then a truncation)."""
     terminals = np.zeros(n, bool)
     truncations = np.zeros(n, bool)
-    if term_col is None:
-        terminals[starts[1:] - 1] = True
+    last = eps.starts[1:] - 1
+    if roles.terminal is None:
+        terminals[last] = True
     else:
-        terminals = numeric(cols[term_col], term_col, path)[order] != 0
-        truncations[starts[1:] - 1] = ~terminals[starts[1:] - 1]
+        terminals = numeric(cols[roles.terminal], roles.terminal, path)[eps.order] != 0
+        truncations[last] = ~terminals[last]
+    return terminals, truncations
+
+
+def _tags(path: Path, cols: dict, roles: Roles, eps: Episodes, static_tags: dict,
+          has_static: bool) -> dict:
+    lengths = np.diff(eps.starts)
     tags = {}
-    for c in tag_cols:
+    for c in roles.tags:
         if c in cols:
-            tags[c] = encode_labels(np.char.strip(cols[c])[order])
+            tags[c] = encode_labels(np.char.strip(cols[c])[eps.order])
         elif c in static_tags:
             tags[c] = encode_labels(np.repeat(static_tags[c], lengths))
         else:
             raise AocError(f"--tag-column {c!r} is not a column of {path}"
-                           + (" or of the --static file" if options.static else ""))
-    used = set(obs_cols) | set(act_cols) | set(tag_cols) | {id_col, time_col, reward_col,
-                                                            term_col}
-    columns = {c: numeric(cols[c], c, path)[order] for c in header
+                           + (" or of the --static file" if has_static else ""))
+    return tags
+
+
+def read_csv(path: Path, options: ReadOptions) -> CorpusData:
+    """Read a CSV log (and ``options.static``) into a corpus."""
+    path = Path(path)
+    header, cols = read_table(path, options.progress)
+    roles = _roles(path, header, options)
+    n = len(next(iter(cols.values()))) if cols else 0
+    if n == 0:
+        raise AocError(f"{path} has zero rows: nothing to store")
+    eps = _episodes(path, cols, roles, n)
+    static_names: list[str] = []
+    static_feats = None
+    static_tags: dict[str, np.ndarray] = {}
+    if options.static is not None:
+        if roles.id is None:
+            raise AocError("--static needs an episode id column to join on: name it with "
+                           "--id-column")
+        static_names, static_feats, static_tags = _read_static(
+            Path(options.static), roles.static_id, eps.keys, eps.ids,
+            bool(np.issubdtype(np.asarray(eps.keys).dtype, np.number)), roles.tags)
+    obs_names = list(roles.observations) + static_names
+    if not obs_names:
+        raise AocError(f"{path}: no observation columns: name them with --obs-columns, a "
+                       "--columns mapping file or obs_* column names")
+    parts = [numeric(cols[c], c, path)[eps.order][:, None] for c in roles.observations]
+    if static_feats is not None:
+        parts.append(np.repeat(static_feats, np.diff(eps.starts), axis=0))
+    observations = np.concatenate(parts, axis=1)
+    act_raw = np.stack([numeric(cols[c], c, path)[eps.order] for c in roles.actions], axis=1)
+    actions, act_space = action_space_of(act_raw, roles.discrete, names=roles.actions)
+    terminals, truncations = _flags(path, cols, roles, eps, n)
+    tags = _tags(path, cols, roles, eps, static_tags, options.static is not None)
+    used = set(roles.observations) | set(roles.actions) | set(roles.tags) | {
+        roles.id, roles.time, roles.reward, roles.terminal}
+    columns = {c: numeric(cols[c], c, path)[eps.order] for c in header
                if c not in used and _is_numeric(cols[c])}
     obs_space = box_space(observations.shape[1], names=obs_names)
     if static_names:
         obs_space["static"] = static_names
     return CorpusData(
         observations=observations, actions=actions,
-        rewards=numeric(cols[reward_col], reward_col, path)[order] if reward_col else None,
-        terminals=terminals, truncations=truncations, episode_starts=starts,
+        rewards=numeric(cols[roles.reward], roles.reward, path)[eps.order]
+        if roles.reward else None,
+        terminals=terminals, truncations=truncations, episode_starts=eps.starts,
         observation_space=obs_space, action_space=act_space,
-        tags=tags, columns=columns, episode_ids=episode_ids,
+        tags=tags, columns=columns, episode_ids=eps.ids,
         source={"format": "csv", "path": str(path.resolve()),
                 "static": str(Path(options.static).resolve()) if options.static else None,
-                "roles": {"id": id_col, "time": time_col, "observations": obs_cols,
-                          "actions": act_cols, "reward": reward_col, "terminal": term_col}},
+                "roles": {"id": roles.id, "time": roles.time,
+                          "observations": roles.observations, "actions": roles.actions,
+                          "reward": roles.reward, "terminal": roles.terminal}},
     )
 
 
@@ -272,6 +351,11 @@ def _read_static(path: Path, id_col: str, episode_keys: np.ndarray, episode_ids:
         missing = episode_ids[int(np.flatnonzero(~found)[0])]
         raise AocError(f"--static {path} has no row for episode id {missing!r}: add one")
     rows = order[pos]
+    unused = len(keys) - len(np.unique(rows))
+    if unused:
+        extra = sorted(set(range(len(keys))) - set(rows.tolist()))
+        warn(f"--static {path}: {unused} ids have no rows in the series (first: "
+             f"{str(keys[extra[0]])!r}); their static rows are not used")
     names: list[str] = []
     feats: list[np.ndarray] = []
     tags: dict[str, np.ndarray] = {}

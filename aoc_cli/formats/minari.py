@@ -50,80 +50,102 @@ def data_folder(path: str | os.PathLike) -> Path | None:
 
 def read_minari(path: str | os.PathLike, options: ReadOptions) -> CorpusData:
     """Read a Minari dataset folder or id."""
-    import minari
-
     folder = data_folder(path)
     if folder is None:
         raise AocError(f"{path} is not a Minari dataset: expected a folder with main_data.hdf5 "
                        f"and metadata.json, or a dataset id under {datasets_root()} "
                        "(set MINARI_DATASETS_PATH)")
-    try:
-        meta = json.loads((folder / "metadata.json").read_text())
-        dataset = minari.MinariDataset(folder)
-        obs_space, act_space = dataset.observation_space, dataset.action_space
-        n_ep = int(dataset.total_episodes)
-    except (OSError, ValueError, KeyError, json.JSONDecodeError) as err:
-        raise AocError(f"cannot read Minari dataset {folder}: {str(err).splitlines()[0]}; "
-                       "the files are truncated or corrupt, re-download the dataset") from None
-    flatten, obs_names, keys = _flattener(obs_space)
-    to_action, action_space = _action_reader(act_space)
-    obs, act, rew, term, trunc, lengths, ids = [], [], [], [], [], [], []
-    tag_values = {c: [] for c in options.tag_columns}
-    indices = list(dataset.episode_indices)
-    batches = [indices[i:i + BATCH_EPISODES] for i in range(0, len(indices), BATCH_EPISODES)]
-    try:
-        progress = options.progress if len(batches) > 1 else no_progress
-        for batch in progress(batches, "reading Minari episodes", len(batches)):
-            for ep in dataset.storage.get_episodes(batch):
-                t = len(ep["rewards"])
-                o = flatten(ep["observations"])
-                if len(o) not in (t, t + 1):
-                    raise AocError(f"Minari episode {ep['id']} has {len(o)} observations for "
-                                   f"{t} actions: the dataset is inconsistent")
-                obs.append(o[:t])
-                act.append(to_action(ep["actions"]))
-                rew.append(np.asarray(ep["rewards"], np.float64).reshape(-1))
-                term.append(np.asarray(ep["terminations"], bool).reshape(-1))
-                trunc.append(np.asarray(ep["truncations"], bool).reshape(-1))
-                lengths.append(t)
-                ids.append(str(ep["id"]))
-                for col in options.tag_columns:
-                    infos = ep.get("infos") or {}
-                    if col not in infos:
-                        raise AocError(f"--tag-column {col!r} is not an info key of the Minari "
-                                       f"dataset (info keys: {', '.join(sorted(infos)) or 'none'})")
-                    tag_values[col].append(np.asarray(infos[col])[:t])
-    except (OSError, RuntimeError) as err:
-        raise AocError(f"cannot read Minari dataset {folder}: {str(err).splitlines()[0]}; the "
-                       "HDF5 file is truncated or corrupt, re-download the dataset") from None
-    if not lengths or sum(lengths) == 0:
+    meta, dataset = _open(folder)
+    flatten, obs_names, keys = _flattener(dataset.observation_space)
+    to_action, action_space = _action_reader(dataset.action_space)
+    eps = _read_episodes(dataset, folder, options, flatten, to_action)
+    keep = [i for i, t in enumerate(eps["lengths"]) if t > 0]
+    if not keep:
         raise AocError(f"Minari dataset {folder} holds zero steps: nothing to store")
-    keep = [i for i, t in enumerate(lengths) if t > 0]
-    lengths = np.asarray(lengths, np.int64)[keep]
-    observations = np.concatenate([obs[i] for i in keep])
+
+    def joined(key):
+        return np.concatenate([eps[key][i] for i in keep])
+
+    observations = joined("obs")
     obs_space_json = box_space(observations.shape[1], names=obs_names)
-    low, high = _bounds(obs_space)
+    low, high = _bounds(dataset.observation_space)
     if low is not None:
         obs_space_json.update(low=low, high=high)
     if keys:
         obs_space_json["keys"] = keys
     return CorpusData(
-        observations=observations,
-        actions=np.concatenate([act[i] for i in keep]),
-        rewards=np.concatenate([rew[i] for i in keep]),
-        terminals=np.concatenate([term[i] for i in keep]),
-        truncations=np.concatenate([trunc[i] for i in keep]),
-        episode_starts=episode_starts_from_lengths(lengths),
+        observations=observations, actions=joined("act"), rewards=joined("rew"),
+        terminals=joined("term"), truncations=joined("trunc"),
+        episode_starts=episode_starts_from_lengths(np.asarray(eps["lengths"], np.int64)[keep]),
         observation_space=obs_space_json,
         action_space=action_space,
         tags={c: encode_labels(np.concatenate([v[i] for i in keep]))
-              for c, v in tag_values.items()},
-        episode_ids=[ids[i] for i in keep],
+              for c, v in eps["tags"].items()},
+        episode_ids=[eps["ids"][i] for i in keep],
         source={"format": "minari", "path": str(folder.resolve()),
                 "dataset_id": meta.get("dataset_id"),
                 "algorithm_name": meta.get("algorithm_name"),
                 "minari_version": meta.get("minari_version")},
     )
+
+
+def _open(folder: Path):
+    """(metadata dict, minari.MinariDataset); damaged files are one AocError."""
+    import minari
+
+    try:
+        meta = json.loads((folder / "metadata.json").read_text())
+        dataset = minari.MinariDataset(folder)
+        dataset.observation_space, dataset.action_space, int(dataset.total_episodes)
+    except (OSError, ValueError, KeyError, TypeError, AttributeError, AssertionError,
+            json.JSONDecodeError) as err:
+        text = str(err).splitlines()[0] if str(err).strip() else \
+            f"{type(err).__name__}: metadata.json lacks what minari needs"
+        raise AocError(f"cannot read Minari dataset {folder}: {text}; the files are "
+                       "truncated or corrupt, re-download the dataset") from None
+    if not isinstance(meta, dict):
+        raise AocError(f"cannot read Minari dataset {folder}: metadata.json is not a JSON "
+                       "object; re-download the dataset")
+    return meta, dataset
+
+
+def _read_episodes(dataset, folder: Path, options: ReadOptions, flatten, to_action) -> dict:
+    """Every episode's arrays, in batches: lists under obs, act, rew, term, trunc, lengths,
+    ids, and tags {column: list}."""
+    out = {k: [] for k in ("obs", "act", "rew", "term", "trunc", "lengths", "ids")}
+    out["tags"] = {c: [] for c in options.tag_columns}
+    indices = list(dataset.episode_indices)
+    batches = [indices[i:i + BATCH_EPISODES] for i in range(0, len(indices), BATCH_EPISODES)]
+    progress = options.progress if len(batches) > 1 else no_progress
+    try:
+        for batch in progress(batches, "reading Minari episodes", len(batches)):
+            for ep in dataset.storage.get_episodes(batch):
+                _add_episode(out, ep, options, flatten, to_action)
+    except (OSError, RuntimeError, ValueError, TypeError, KeyError) as err:
+        raise AocError(f"cannot read Minari dataset {folder}: {str(err).splitlines()[0]}; the "
+                       "HDF5 file is truncated or corrupt, re-download the dataset") from None
+    return out
+
+
+def _add_episode(out: dict, ep: dict, options: ReadOptions, flatten, to_action) -> None:
+    t = len(ep["rewards"])
+    o = flatten(ep["observations"])
+    if len(o) not in (t, t + 1):
+        raise AocError(f"Minari episode {ep['id']} has {len(o)} observations for "
+                       f"{t} actions: the dataset is inconsistent")
+    out["obs"].append(o[:t])
+    out["act"].append(to_action(ep["actions"]))
+    out["rew"].append(np.asarray(ep["rewards"], np.float64).reshape(-1))
+    out["term"].append(np.asarray(ep["terminations"], bool).reshape(-1))
+    out["trunc"].append(np.asarray(ep["truncations"], bool).reshape(-1))
+    out["lengths"].append(t)
+    out["ids"].append(str(ep["id"]))
+    for col in options.tag_columns:
+        infos = ep.get("infos") or {}
+        if col not in infos:
+            raise AocError(f"--tag-column {col!r} is not an info key of the Minari "
+                           f"dataset (info keys: {', '.join(sorted(infos)) or 'none'})")
+        out["tags"][col].append(np.asarray(infos[col])[:t])
 
 
 def _flattener(space):

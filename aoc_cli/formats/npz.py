@@ -7,6 +7,7 @@ Read with ``allow_pickle=False``: an archive holding Python objects is refused, 
 from __future__ import annotations
 
 import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +21,11 @@ _KNOWN = ("observations", "actions", "rewards", "terminals", "timeouts", "next_o
 
 def read_npz(path: Path, options: ReadOptions) -> CorpusData:
     """Read an NPZ archive with the D4RL keys."""
+    with open(path, "rb") as fh:
+        head = fh.read(6)
+    if head[:4] != b"PK\x03\x04" and head != b"\x93NUMPY":
+        raise AocError(f"cannot read {path}: not an NPZ archive (no ZIP signature); save it "
+                       "with numpy.savez, or pass --from with its real format")
     try:
         z = np.load(path, allow_pickle=False)
         if not isinstance(z, np.lib.npyio.NpzFile):
@@ -31,11 +37,16 @@ def read_npz(path: Path, options: ReadOptions) -> CorpusData:
                 raise AocError(f"{path} has no {', '.join(missing)} (keys: "
                                f"{', '.join(z.files) or 'none'}): save the D4RL keys")
             arrays = {k: z[k] for k in z.files}
-    except (zipfile.BadZipFile, EOFError, OSError) as err:
-        raise AocError(f"cannot read {path}: truncated or corrupt NPZ ({err})") from None
+    except (zipfile.BadZipFile, EOFError, OSError, zlib.error) as err:
+        raise AocError(f"cannot read {path}: truncated or corrupt NPZ ({err}); re-export "
+                       "it") from None
     except ValueError as err:
-        raise AocError(f"cannot read {path}: {str(err).splitlines()[0]} (object arrays are "
-                       "refused: save plain numeric arrays)") from None
+        text = str(err).splitlines()[0] if str(err) else type(err).__name__
+        if "pickle" in text.lower() or "object" in text.lower():
+            raise AocError(f"cannot read {path}: {text} (object arrays are refused, never "
+                           "unpickled: save plain numeric arrays)") from None
+        raise AocError(f"cannot read {path}: a damaged array in the archive ({text}); "
+                       "re-export it") from None
     n = len(arrays["observations"])
     extra = {k: v for k, v in arrays.items()
              if k not in _KNOWN and v.ndim >= 1 and
