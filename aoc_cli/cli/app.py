@@ -55,12 +55,12 @@ def main(argv: list[str] | None = None) -> None:
     previous = _terminate_like_interrupt()
     try:
         app(args=argv, prog_name="aoc")
-    except KeyboardInterrupt:
+    except Terminated:
         if debug:
             raise
         # every write is a temporary renamed into place: the store holds the previous state
-        print("aoc: interrupted; nothing was half-written", file=sys.stderr)
-        sys.exit(130)
+        print("aoc: terminated (the store keeps its previous state)", file=sys.stderr)
+        sys.exit(143)
     except AocError as err:
         if debug:
             raise
@@ -81,15 +81,20 @@ def main(argv: list[str] | None = None) -> None:
             signal.signal(signal.SIGTERM, previous)
 
 
+class Terminated(BaseException):
+    """Raised by SIGTERM: unwinds like KeyboardInterrupt (Ctrl-C), past every ``except
+    Exception``, so the temporaries of a write in progress are removed."""
+
+
 def _terminate_like_interrupt():
-    """SIGTERM raises KeyboardInterrupt, as Ctrl-C does, so the temporaries of a write in
-    progress are removed and the store keeps its previous state. Returns the previous
-    handler (restored when :func:`main` returns)."""
+    """SIGTERM raises :class:`Terminated`, as Ctrl-C raises KeyboardInterrupt, so the store
+    keeps its previous state; exit code 143 (128 + SIGTERM). Returns the previous handler
+    (restored when :func:`main` returns)."""
     import signal
     import threading
 
     def handler(signum, frame):
-        raise KeyboardInterrupt
+        raise Terminated
 
     if threading.current_thread() is threading.main_thread():
         return signal.signal(signal.SIGTERM, handler)
