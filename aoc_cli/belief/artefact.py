@@ -52,10 +52,11 @@ def list_models(corpus) -> list[str]:
 def save_model(corpus, model_id: str, *, net: BeliefNet, config: BeliefConfig, dims: dict,
                norm: Normalisation, value: dict | None, values: np.ndarray | None,
                metrics: dict, history: list[dict], split: dict,
-               dynamics_target: dict | None = None) -> Path:
+               dynamics_target: dict | None = None, extra: dict | None = None) -> Path:
     """Write the model folder atomically (replacing any previous one of that id).
     ``dynamics_target``: the standardisation {"mean", "std"} (d_o,) of the auxiliary head's
-    target o' - o, when the model has the head."""
+    target o' - o, when the model has the head; ``extra``: more JSON entries of config.json
+    (e.g. the critic's Q head, ``--belief critic``)."""
     path = model_dir(corpus, model_id)
     meta = {
         "format": FORMAT, "format_version": FORMAT_VERSION,
@@ -67,6 +68,7 @@ def save_model(corpus, model_id: str, *, net: BeliefNet, config: BeliefConfig, d
     if dynamics_target is not None:
         meta["dynamics_target"] = {k: np.asarray(v, dtype=float).tolist()
                                    for k, v in dynamics_target.items()}
+    meta.update(extra or {})
     with atomic_dir(path) as tmp:
         torch.save({k: v.detach().cpu() for k, v in net.state_dict().items()},
                    tmp / "weights.pt")

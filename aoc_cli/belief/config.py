@@ -14,6 +14,14 @@ from dataclasses import asdict, dataclass, fields
 from aoc_cli.errors import AocError
 
 MODES = ("value", "imitation")
+#: What the value-mode belief b(o, a, h) is trained on (the linear head always maps it to the
+#: chosen value v): ``value`` (the paper's text: regress v), ``critic`` (the last hidden layer of
+#: an offline Q-learning critic, as the paper's reference code), ``reward`` (a model of the
+#: immediate reward, the reference code's "mb" variant), ``dynamics`` (regress v and, through an
+#: auxiliary head, the change of observation o' - o).
+BELIEFS = ("value", "critic", "reward", "dynamics")
+#: The dynamics weight ``--belief dynamics`` implies when none is given.
+DEFAULT_DYNAMICS_WEIGHT = 1.0
 #: Value targets computed from the rewards; any other name is a numeric corpus column.
 REWARD_TARGETS = ("return", "mean-return", "reward")
 
@@ -43,6 +51,8 @@ class BeliefConfig:
     """
 
     mode: str = "value"
+    #: What the value-mode belief is trained on: one of BELIEFS (see there; aoc_cli.belief.kinds).
+    belief: str = "value"
     #: ``return`` (discounted return-to-go), ``mean-return``, ``reward`` or a column name.
     value: str = "return"
     gamma: float = 0.99
@@ -53,6 +63,11 @@ class BeliefConfig:
     #: Value mode: weight of the auxiliary loss that makes b(o, a, h) also predict the change of
     #: observation o' - o through a second linear head (0 = the paper's objective exactly).
     dynamics_weight: float = 0.0
+    #: ``critic``: gradient steps of the offline critic (TD3+BC, aoc_cli.belief.critic).
+    critic_steps: int = 20_000
+    #: ``critic``: weight of the behaviour-cloning term in the actor's loss (TD3+BC's 1 / alpha;
+    #: 0 = plain TD3 as the reference code, which diverges offline: see docs/belief.md).
+    critic_bc_weight: float = 0.4
     #: Activation of the belief layer: ``tanh`` (bounded, no dead units) or ``relu``.
     belief_activation: str = "tanh"
     lr: float = 1e-3
@@ -69,10 +84,27 @@ class BeliefConfig:
     #: ``auto`` (a GPU when torch sees one, else CPU), ``cpu`` or ``cuda``.
     device: str = "auto"
 
+    def __post_init__(self):
+        # ``dynamics`` is the value belief with the auxiliary head: either spelling names it
+        # (a model saved before --belief existed records only the weight).
+        if self.belief == "value" and self.mode == "value" and self.dynamics_weight > 0:
+            self.belief = "dynamics"
+        elif self.belief == "dynamics" and self.dynamics_weight == 0:
+            self.dynamics_weight = DEFAULT_DYNAMICS_WEIGHT
+
     def validate(self) -> "BeliefConfig":
         """Check every field; AocError names the flag to fix."""
         if self.mode not in MODES:
             raise AocError(f"unknown --mode {self.mode!r}: use value or imitation")
+        if self.belief not in BELIEFS:
+            raise AocError(f"unknown --belief {self.belief!r}: use {', '.join(BELIEFS)}")
+        if self.dynamics_weight > 0 and self.belief in ("critic", "reward"):
+            raise AocError(f"--dynamics-weight belongs to --belief dynamics, not "
+                           f"--belief {self.belief}")
+        if self.critic_steps < 1:
+            raise AocError(f"--critic-steps must be >= 1, got {self.critic_steps}")
+        if not self.critic_bc_weight >= 0:
+            raise AocError(f"--critic-bc-weight must be >= 0, got {self.critic_bc_weight}")
         if not self.value:
             raise AocError("--value is empty: use return, mean-return, reward or a column name")
         if self.history_length < 0:
@@ -88,6 +120,9 @@ class BeliefConfig:
         if self.dynamics_weight > 0 and self.mode != "value":
             raise AocError("--dynamics-weight needs --mode value (the imitation belief b(o, h) "
                            "has no action to predict the next observation from)")
+        if self.belief != "value" and self.mode != "value":
+            raise AocError(f"--belief {self.belief} needs --mode value (the imitation belief "
+                           "is trained on the logged action)")
         if self.patience < 1:
             raise AocError(f"--patience must be >= 1, got {self.patience}")
         if not self.lr > 0:

@@ -183,6 +183,10 @@ def train_model(corpus, config: BeliefConfig, model_id: str = "default", overwri
     """
     started = time.perf_counter()
     data = prepared or prepare(corpus, config, model_id, overwrite)
+    if config.belief == "critic":  # its own training (aoc_cli.belief.kinds)
+        from aoc_cli.belief.kinds import train_critic_model
+
+        return train_critic_model(corpus, config, model_id, data, progress)
     values, val_eps = data.values, data.val_episodes
     train_rows, val_rows = data.train_rows, data.val_rows
 
@@ -194,8 +198,8 @@ def train_model(corpus, config: BeliefConfig, model_id: str = "default", overwri
     if config.mode == "value" and config.dynamics_weight > 0:
         dims["dynamics"] = dims["observation"]
     classify = config.mode == "imitation" and dims["discrete"]
-    if config.mode == "value":
-        targets = values
+    if config.mode == "value":  # --belief reward: trained on r, head refitted to v below
+        targets = corpus.rewards if config.belief == "reward" else values
     else:
         targets = None if classify else corpus.actions
     norm = Normalisation.fit(corpus.observations, corpus.actions, corpus.rewards,
@@ -283,9 +287,16 @@ def train_model(corpus, config: BeliefConfig, model_id: str = "default", overwri
         metrics["val_r2"] = final_val["r2"]
         if "dynamics_r2" in final_val:
             metrics["val_dynamics_r2"] = final_val["dynamics_r2"]
+    if config.belief == "reward":
+        from aoc_cli.belief.kinds import refit_value_head
+
+        norm, head = refit_value_head(net, inputs, values, train_rows, val_rows, norm, device)
+        metrics["val_reward_r2"] = metrics.pop("val_r2")
+        metrics.update(head)
     metrics.update({"rows": corpus.n_rows, "train_rows": len(train_rows),
                     "val_rows": len(val_rows), "device": device.type,
-                    "threads": threads if device.type == "cpu" else None})
+                    "threads": threads if device.type == "cpu" else None,
+                    "belief": config.belief})
     metrics["seconds"] = time.perf_counter() - started
     save_model(corpus, model_id, net=net.cpu(), config=config, dims=dims, norm=norm,
                value=value_spec(config.value, config.gamma) if config.mode == "value" else None,

@@ -21,6 +21,17 @@ def train(
     mode: str = typer.Option(_D.mode, "--mode",
                              help="value: b(o, a, h) predicts v (AOC); imitation: b(o, h) "
                                   "predicts the action (ABC, reward-free data)."),
+    belief: str = typer.Option(_D.belief, "--belief",
+                               help="Value mode: what the belief is trained on: value (regress "
+                                    "--value), critic (an offline TD3+BC critic's last hidden "
+                                    "layer), reward (a model of the immediate reward) or "
+                                    "dynamics (value + the o' - o head). The linear head maps "
+                                    "every belief to --value."),
+    critic_steps: int = typer.Option(_D.critic_steps, "--critic-steps",
+                                     help="--belief critic: gradient steps."),
+    critic_bc_weight: float = typer.Option(_D.critic_bc_weight, "--critic-bc-weight",
+                                           help="--belief critic: weight of the actor's "
+                                                "behaviour-cloning term (0: plain TD3)."),
     value: str = typer.Option(_D.value, "--value",
                               help="Value target: return (discounted return-to-go), "
                                    "mean-return, reward, or a numeric corpus column."),
@@ -31,7 +42,8 @@ def train(
     dynamics_weight: float = typer.Option(_D.dynamics_weight, "--dynamics-weight",
                                           help="Value mode: weight of the auxiliary loss that "
                                                "makes the belief also predict o' - o "
-                                               "(0: the paper's objective alone)."),
+                                               "(0: the paper's objective alone; "
+                                               "--belief dynamics: 1 unless given)."),
     belief_dim: int = typer.Option(_D.belief_dim, "--belief-dim", help="Belief dimension d_b."),
     hidden: int = typer.Option(_D.hidden, "--hidden", help="Units of the GRU and hidden layers."),
     epochs: int = typer.Option(_D.max_epochs, "--epochs", help="Maximum epochs (early stopping ends "
@@ -52,7 +64,9 @@ def train(
 ) -> None:
     """Train the belief model b and linear head l of corpus NAME; print the final metrics."""
     fmt = resolve_format(fmt)
-    config = BeliefConfig(mode=mode, value=value, gamma=gamma, history_length=history_length,
+    config = BeliefConfig(mode=mode, belief=belief, critic_steps=critic_steps,
+                          critic_bc_weight=critic_bc_weight, value=value, gamma=gamma,
+                          history_length=history_length,
                           dynamics_weight=dynamics_weight,
                           belief_dim=belief_dim, hidden=hidden, max_epochs=epochs,
                           batch_size=batch_size, lr=lr, patience=patience,
@@ -65,7 +79,9 @@ def train(
     score = (f"val R^2 {metrics['val_r2']:.3f}" if "val_r2" in metrics
              else f"val accuracy {metrics['val_accuracy']:.3f} (majority "
                   f"{metrics['val_majority_accuracy']:.3f})")
-    message(f"trained {name}/{model}: {metrics['mode']}, {metrics['epochs']} epochs (best "
+    unit = "steps" if metrics.get("belief") == "critic" else "epochs"
+    message(f"trained {name}/{model}: {metrics['mode']} ({metrics.get('belief', 'value')} "
+            f"belief), {metrics['epochs']} {unit} (best "
             f"{metrics['best_epoch']}), {score}, {metrics['seconds']:.0f} s")
     write_object(metrics, fmt, title=f"aoc train {name} --model {model}")
 
@@ -78,12 +94,15 @@ def _train(corpus, config: BeliefConfig, model: str, overwrite: bool) -> dict:
     from aoc_cli.belief.train import train_model  # imports torch: only once the input is good
 
     with progress(transient=True) as bar:
-        task = bar.add_task(f"training {name}/{model}", total=config.max_epochs)
+        critic = config.belief == "critic"  # counted in gradient steps, not epochs
+        task = bar.add_task(f"training {name}/{model}",
+                            total=config.critic_steps if critic else config.max_epochs)
 
         def on_progress(event: dict) -> None:
             val = event["val_loss"]
             best = event["best_val_loss"]
-            text = (f"epoch {event['epoch']} batch {event['batch']}/{event['batches']} "
+            text = (f"{'step' if critic else 'epoch'} {event['epoch']} "
+                    f"batch {event['batch']}/{event['batches']} "
                     f"train {event['train_loss']:.4f}"
                     + ("" if val is None else f" val {val:.4f}")
                     + ("" if best is None else f" best {best:.4f}"))

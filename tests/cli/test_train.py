@@ -58,3 +58,25 @@ def test_train_prints_metrics_and_an_existing_model_needs_overwrite(aoc, corpora
     assert code == 0, err
     header, row = out.strip().splitlines()
     assert row.startswith("m1,value,1,")
+
+
+@pytest.mark.parametrize("belief, extra", [("reward", []), ("critic", ["--critic-steps", "20"]),
+                                           ("dynamics", [])])
+def test_belief_kinds_train_from_the_cli_and_are_recorded(aoc, corpora, belief, extra):
+    code, out, err = aoc("train", "syn", "--belief", belief, "--model", belief, *extra, *QUICK)
+    assert code == 0, err
+    metrics = json.loads(out)
+    assert metrics["belief"] == belief and "val_r2" in metrics
+    meta = json.loads((corpora.corpus("syn").models_dir / belief / "config.json").read_text())
+    assert meta["config"]["belief"] == belief
+    assert (meta["config"]["dynamics_weight"] > 0) == (belief == "dynamics")
+
+
+@pytest.mark.parametrize("args, says", [
+    (["--belief", "q"], "unknown --belief 'q'"),
+    (["--belief", "critic", "--dynamics-weight", "1"], "--dynamics-weight belongs"),
+    (["--belief", "reward", "--mode", "imitation"], "needs --mode value"),
+])
+def test_bad_belief_requests_exit_2(aoc, corpora, args, says):
+    code, out, err = aoc("train", "syn", *args, *QUICK)
+    assert code == 2 and out == "" and says in err and len(err.strip().splitlines()) == 1
