@@ -19,8 +19,8 @@ from aoc_cli.cli.common import state
 from aoc_cli.errors import AocError
 
 #: Command modules in the order of the data flow.
-COMMANDS = ["ingest", "collect", "train", "index", "explain", "rollout", "bench", "info",
-            "verify"]
+COMMANDS = ["ingest", "collect", "train", "index", "explain", "evaluate", "rollout", "bench",
+            "info", "verify"]
 
 app = typer.Typer(
     name="aoc",

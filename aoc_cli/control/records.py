@@ -19,6 +19,24 @@ from aoc_cli.errors import AocError
 from aoc_cli.store import History, atomic_path
 
 
+def episode_ids(corpus) -> list[str] | None:
+    """The corpus's own episode ids (e.g. patient ids kept by a CSV ingest), one per episode,
+    or None when it has none. Read once per corpus object."""
+    cached = getattr(corpus, "_aoc_episode_ids", False)
+    if cached is not False:
+        return cached
+    try:
+        raw = corpus.read("episode_ids")
+        ids = [s.decode() if isinstance(s, bytes) else str(s) for s in raw]
+    except (AocError, AttributeError):
+        ids = None
+    try:
+        corpus._aoc_episode_ids = ids
+    except AttributeError:  # pragma: no cover - a read-only stand-in
+        pass
+    return ids
+
+
 def decision_record(decision: Decision, corpus, index, step: int | None = None,
                     observation: np.ndarray | None = None, typical_residual: float | None = None
                     ) -> dict:
@@ -27,6 +45,7 @@ def decision_record(decision: Decision, corpus, index, step: int | None = None,
     episodes = corpus.episode_of(rows) if len(rows) else np.empty(0, np.int64)
     timesteps = corpus.timesteps[rows] if len(rows) else np.empty(0, np.int64)
     tags = corpus.tag_labels_of(rows) if len(rows) else {}
+    ids = episode_ids(corpus)
     actions = corpus.actions[rows] if len(rows) else np.empty(0)
     values = index.values[rows] if index.values is not None and len(rows) else None
     support = []
@@ -34,6 +53,7 @@ def decision_record(decision: Decision, corpus, index, step: int | None = None,
         support.append({
             "row": int(row),
             "episode": int(episodes[j]),
+            "episode_id": None if ids is None else ids[int(episodes[j])],
             "step": int(timesteps[j]),
             "tags": {name: labels[j] for name, labels in tags.items()},
             "action": np.asarray(actions[j]).tolist(),

@@ -1,0 +1,110 @@
+"""`aoc evaluate NAME --data HELD_OUT`: decide every logged step of a corpus and score the
+decisions against what was logged. Parses and prints only; the work is in
+:mod:`aoc_cli.control.evaluate`."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from aoc_cli.cli.common import FormatOption, get_store
+from aoc_cli.errors import AocError
+from aoc_cli.report import resolve_format, write_object, write_records
+
+IMITATION_COLUMNS = ["method", "accuracy", "balanced_accuracy", "auc", "majority_accuracy",
+                     "mae", "r2"]
+VALUE_COLUMNS = ["method", "value_r2", "value_mae", "value_spearman", "agreement",
+                 "action_distance"]
+
+
+def register(app: typer.Typer) -> None:
+    @app.command("evaluate")
+    def evaluate_command(
+        name: str = typer.Argument(..., help="Corpus whose model decides."),
+        data: str = typer.Option(..., "--data", help="Held-out corpus to score (same spaces), or NAME itself: each episode is then decided without its own rows."),
+        baselines: str = typer.Option("knn,bc", "--baselines", help="Baselines on the same steps, comma-separated: knn (nearest rows on standardised inputs), bc (the model's own head); none for neither."),
+        steps_file: Optional[Path] = typer.Option(None, "--steps", help="Write one JSON record per step to this JSONL file."),
+        model: Optional[str] = typer.Option(None, "--model", help="Model id."),
+        index_id: str = typer.Option("default", "--index", help="Index id."),
+        candidates: Optional[int] = typer.Option(None, "--candidates", "-K", help="Value mode, continuous actions: candidate actions per step (default: the task's, else 100)."),
+        epsilon: Optional[float] = typer.Option(None, "--epsilon", help="Value mode: residual quantile of candidates kept, in (0, 1]."),
+        k: Optional[int] = typer.Option(None, "--k", help="Nearest corpus beliefs per query (default 2(d_b+1))."),
+        seed: int = typer.Option(0, "--seed", help="Seed of the candidates (value mode, continuous actions)."),
+        fmt: Optional[str] = FormatOption,
+    ) -> None:
+        """Decide every logged step of a held-out corpus in batches and score the decisions
+        (accuracy, AUC, calibration or value R^2; residuals; baselines on the same steps)."""
+        from aoc_cli.cli.explain import _collected_task
+        from aoc_cli.cli.rollout import task_config
+        from aoc_cli.control import open_session
+        from aoc_cli.control.evaluate import evaluate, step_records
+        from aoc_cli.report.output import progress
+
+        fmt = resolve_format(fmt)
+        names = [b.strip() for b in baselines.split(",")]
+        store = get_store()
+        corpus = store.corpus(name)
+        held_out = corpus if data == name else store.corpus(data)
+        config = task_config(_collected_task(corpus), candidates=candidates, epsilon=epsilon,
+                             k=k, residual_cap=None)
+        session = open_session(corpus, model, index_id, config, seed=seed)
+        with progress(transient=True) as bar:
+            task = bar.add_task(f"evaluate {name} on {data}", total=held_out.n_rows)
+
+            def on_progress(done: int, total: int) -> None:
+                bar.update(task, completed=done, total=total)
+
+            summary, res = evaluate(session, held_out, names, seed=seed, progress=on_progress)
+        if steps_file is not None:
+            from aoc_cli.store import atomic_path
+
+            with atomic_path(steps_file, suffix=".jsonl") as tmp:
+                with open(tmp, "w") as fh:
+                    for rec in step_records(session, held_out, res):
+                        fh.write(json.dumps(rec) + "\n")
+        _print(summary, fmt)
+
+
+def _method_rows(summary: dict) -> list[dict]:
+    own = "abc" if summary["mode"] == "imitation" else "aoc"
+    rows = [{"method": own, **{k: v for k, v in summary.items() if not isinstance(v, (dict, list))}}]
+    for method, rec in summary["baselines"].items():
+        rows.append({"method": method, **rec})
+    return rows
+
+
+def _print(summary: dict, fmt: str) -> None:
+    if fmt in ("json", "jsonl"):
+        write_object(summary, fmt)
+        return
+    columns = IMITATION_COLUMNS if summary["mode"] == "imitation" else VALUE_COLUMNS
+    rows = _method_rows(summary)
+    present = [c for c in columns if any(r.get(c) is not None for r in rows)]
+    if fmt == "csv":
+        extra = ["steps", "extrapolating_share", "heterogeneity_share"]
+        for r in rows[1:]:
+            for c in extra:
+                r[c] = rows[0][c]
+        write_records(rows, "csv", columns=present + extra)
+        return
+    head = {k: summary[k] for k in ("mode", "corpus", "model", "data", "own_episode_left_out",
+                                    "steps", "episodes", "extrapolating_share",
+                                    "heterogeneity_share", "support_max", "seconds",
+                                    "steps_per_second")}
+    res = summary["residual"]
+    head["residual p50 / p90 / p99"] = f"{res['p50']:.4g} / {res['p90']:.4g} / {res['p99']:.4g}"
+    head["typical residual"] = res["typical"]
+    write_object(head, "table", title=f"aoc evaluate {summary['corpus']} on {summary['data']}")
+    write_records(rows, "table", columns=present, title="decisions against the log")
+    if "confusion" in summary:
+        n = len(summary["confusion"])
+        write_records([{"logged": i, **{f"decided {j}": summary["confusion"][i][j]
+                                        for j in range(n)}} for i in range(n)], "table",
+                      title="confusion (steps)")
+        write_records([b for b in summary["calibration"] if b["steps"]], "table",
+                      title="calibration (score of action 1, or the top score)")
+    if summary["steps"] == 0:  # pragma: no cover - refused before
+        raise AocError("no steps were scored")

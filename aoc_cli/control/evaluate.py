@@ -1,0 +1,315 @@
+"""`aoc evaluate NAME --data HELD_OUT`: every logged step of a corpus decided in batches and
+scored against what was logged.
+
+For a chunk of whole episodes of the held-out corpus (S steps):
+
+1. the logged observations (S, d_o) and histories (S, L, ...) of the held-out corpus;
+2. one batched belief pass: imitation b(o, h) (S, d_b); value b(o, a, h) for the logged action
+   (S, d_b) and for the controller's candidates (S * K, d_b), the GRU run once per step;
+3. one batched decomposition against NAME's corpus beliefs. When the held-out corpus *is*
+   NAME, each step's own episode is left out of its neighbours (as ``aoc explain --data`` does
+   with its row mask; here per query: :class:`LeaveEpisodeOut`), so no step is explained by
+   its own row;
+4. the decision: imitation, the weighted action of the minimal corpus subset (its weights per
+   action are the scores); value, the controller's rule (epsilon-quantile filter on the
+   residuals, then the best v_hat) over the candidates;
+5. baselines on the same steps: ``knn`` (the k = d_b + 1 nearest corpus rows on standardised
+   inputs, own episode left out likewise) and ``bc`` (the model's own head: the black box ABC
+   explains).
+
+The work splits into independent chunks of episodes: :func:`score_episodes` scores one chunk
+(a list of held-out episode numbers) and returns a :class:`StepScores`; :func:`merge` joins the
+chunks' results in any grouping; :func:`summarise` computes the metrics. :func:`evaluate` runs
+the three in one process (a parallel runner can farm the chunks out instead).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from aoc_cli.control import scores as sc
+from aoc_cli.control.evaluate_inputs import (EvalContext, candidate_beliefs, check_inputs,
+                                             episode_rows, heterogeneity)
+from aoc_cli.decompose import decompose
+from aoc_cli.errors import AocError
+
+BASELINES = ("knn", "bc")
+#: Held-out steps per chunk (whole episodes; a chunk has at least one episode).
+CHUNK_STEPS = 4096
+
+
+@dataclass
+class StepScores:
+    """Per-step results of a chunk (S steps), all arrays with S rows.
+
+    ``row`` held-out rows; ``episode``, ``step``; ``logged`` (S,) int or (S, d_a);
+    ``decided`` likewise; ``scores`` (S, n) action weights (discrete imitation) or None;
+    ``v_hat`` / ``target`` (S,) value mode; ``residual`` (S,) of the decision; ``warning``
+    (S,) bool heterogeneity; ``support_rows``/``support_weights`` (S, m) (-1 / 0 padded);
+    ``baselines`` name -> {"decided", "scores" or "v_hat"} arrays on the same steps.
+    """
+
+    row: np.ndarray
+    episode: np.ndarray
+    step: np.ndarray
+    logged: np.ndarray
+    decided: np.ndarray
+    residual: np.ndarray
+    warning: np.ndarray
+    support_rows: np.ndarray
+    support_weights: np.ndarray
+    scores: np.ndarray | None = None
+    v_hat: np.ndarray | None = None
+    target: np.ndarray | None = None
+    baselines: dict = field(default_factory=dict)
+
+
+def merge(parts: list[StepScores]) -> StepScores:
+    """Concatenate chunk results (in the given order) into one."""
+    if not parts:
+        raise AocError("no steps were scored")
+    m = max(p.support_rows.shape[1] for p in parts)
+
+    def pad(a, fill):
+        return np.pad(a, ((0, 0), (0, m - a.shape[1])), constant_values=fill)
+
+    def cat(name):
+        vals = [getattr(p, name) for p in parts]
+        return None if vals[0] is None else np.concatenate(vals)
+
+    base = {}
+    for name in parts[0].baselines:
+        base[name] = {k: np.concatenate([p.baselines[name][k] for p in parts])
+                      for k in parts[0].baselines[name]}
+    return StepScores(
+        row=cat("row"), episode=cat("episode"), step=cat("step"), logged=cat("logged"),
+        decided=cat("decided"), residual=cat("residual"), warning=cat("warning"),
+        support_rows=np.concatenate([pad(p.support_rows, -1) for p in parts]),
+        support_weights=np.concatenate([pad(p.support_weights, 0.0) for p in parts]),
+        scores=cat("scores"), v_hat=cat("v_hat"), target=cat("target"), baselines=base)
+
+
+def chunks(ctx: EvalContext, max_steps: int = CHUNK_STEPS) -> list[np.ndarray]:
+    """The held-out episodes in consecutive groups of about ``max_steps`` steps."""
+    lengths = np.diff(ctx.data_starts)
+    out, cur, total = [], [], 0
+    for e, n in enumerate(lengths):
+        if cur and total + n > max_steps:
+            out.append(np.asarray(cur))
+            cur, total = [], 0
+        cur.append(e)
+        total += int(n)
+    if cur:
+        out.append(np.asarray(cur))
+    return out
+
+
+# -- one chunk ---------------------------------------------------------------------------------
+
+def score_episodes(ctx: EvalContext, episodes) -> StepScores:
+    """Decide and score every step of held-out ``episodes`` (episode numbers of the data)."""
+    rows = episode_rows(ctx.data_starts, np.asarray(episodes, dtype=np.int64))
+    ep = np.searchsorted(ctx.data_starts, rows, side="right") - 1
+    obs = ctx.data_obs[rows]
+    hist = ctx.data.history(rows, ctx.history_length)
+    logged = ctx.data_actions[rows]
+    if ctx.mode == "imitation":
+        out = _imitate(ctx, rows, ep, obs, hist, logged)
+    else:
+        out = _value(ctx, rows, ep, obs, hist, logged)
+    if "knn" in ctx.baselines:
+        out.baselines["knn"] = ctx.knn.predict(ctx, obs, logged, ep)
+    return out
+
+
+def _decompose(ctx: EvalContext, beliefs: np.ndarray, query_episodes: np.ndarray):
+    index = ctx.index.index if not ctx.own else LeaveEpisodeOut(
+        ctx.index.index, ctx.corpus_episode, query_episodes, ctx.max_episode_length)
+    return decompose(ctx.index.beliefs, beliefs, k=ctx.k, values=ctx.index.values, index=index)
+
+
+def _imitate(ctx, rows, ep, obs, hist, logged) -> StepScores:
+    model = ctx.model
+    beliefs = model.beliefs(obs, None, hist)
+    dec = _decompose(ctx, beliefs, ep)
+    used = dec.rows >= 0
+    acts = ctx.corpus_actions[np.maximum(dec.rows, 0)]
+    head = beliefs.astype(np.float64) @ ctx.head.weight.T + ctx.head.bias
+    scores = None
+    if ctx.discrete:
+        n = ctx.n_actions
+        scores = np.zeros((len(rows), n))
+        q = np.repeat(np.arange(len(rows)), dec.rows.shape[1])
+        np.add.at(scores, (q, acts.reshape(-1)), np.where(used, dec.weights, 0.0).reshape(-1))
+        decided = scores.argmax(1)
+        probs = np.exp(head - head.max(1, keepdims=True))
+        probs /= probs.sum(1, keepdims=True)
+        bc = {"decided": probs.argmax(1), "scores": probs}
+    else:
+        w = np.where(used, dec.weights, 0.0)
+        decided = np.einsum("qm,qmd->qd", w, acts.reshape(len(rows), -1,
+                                                          ctx.corpus_actions.shape[1]))
+        bc = {"decided": head}
+    out = StepScores(rows, ep, rows - ctx.data_starts[ep], logged, decided, dec.residual,
+                     heterogeneity(ctx, dec.rows, dec.weights), dec.rows, dec.weights,
+                     scores=scores)
+    if "bc" in ctx.baselines:
+        out.baselines["bc"] = bc
+    return out
+
+
+def _value(ctx, rows, ep, obs, hist, logged) -> StepScores:
+    model, cfg = ctx.model, ctx.config
+    s = len(rows)
+    # v_hat of the logged action, against the logged value target
+    b_logged = model.beliefs(obs, logged, hist)
+    dec_l = _decompose(ctx, b_logged, ep)
+    # the controller's own decision over its candidates (the same rule as Controller.evaluate)
+    cands = ctx.candidates(rows)                                    # (S, K) or (S, K, d_a)
+    kk = cands.shape[1]
+    b_c = candidate_beliefs(model, obs, hist, cands)                # (S * K, d_b)
+    dec = _decompose(ctx, b_c, np.repeat(ep, kk))
+    res = dec.residual.reshape(s, kk)
+    val = dec.value.reshape(s, kk)
+    thr = np.quantile(res, cfg.epsilon, axis=1, keepdims=True)
+    passed = res <= thr + 1e-12 * np.maximum(1.0, thr)
+    key = np.where(passed, val, -np.inf)
+    best = key.max(1, keepdims=True)
+    # ties on v_hat: the smaller residual
+    chosen = np.where(key == best, res, np.inf).argmin(1)
+    pick = np.arange(s) * kk + chosen
+    decided = cands[np.arange(s), chosen]
+    out = StepScores(rows, ep, rows - ctx.data_starts[ep], logged, decided,
+                     dec.residual[pick], heterogeneity(ctx, dec.rows[pick], dec.weights[pick]),
+                     dec.rows[pick], dec.weights[pick], v_hat=dec_l.value,
+                     target=ctx.data_values[rows])
+    if "bc" in ctx.baselines:
+        head_l = b_logged.astype(np.float64) @ ctx.head.weight.T + ctx.head.bias
+        head_c = (b_c.astype(np.float64) @ ctx.head.weight.T + ctx.head.bias).reshape(s, kk)
+        out.baselines["bc"] = {"decided": cands[np.arange(s), head_c.argmax(1)],
+                               "v_hat": head_l[:, 0]}
+    return out
+
+
+class LeaveEpisodeOut:
+    """A BeliefIndex seen without each query's own episode: ``search`` asks the index for
+    k + (the longest episode) neighbours and drops those of the query's episode, so the k
+    nearest rows of *other* episodes remain (exact for a flat index). ``query_episodes`` (Q,)
+    aligns with the queries of the one ``decompose`` call it serves."""
+
+    def __init__(self, index, row_episode: np.ndarray, query_episodes: np.ndarray,
+                 longest: int):
+        self.index, self.row_episode = index, row_episode
+        self.query_episodes = np.asarray(query_episodes)
+        self.longest = int(longest)
+        self.n_rows, self.dim = index.n_rows, index.dim
+
+    def search(self, queries, k, selection=None):
+        if selection is not None:
+            raise AocError("internal: leave-episode-out search takes no row selection")
+        wide = min(int(k) + self.longest, self.index.n_rows)
+        dist, rows = self.index.search(queries, wide)
+        own = (rows >= 0) & (self.row_episode[np.maximum(rows, 0)]
+                             == self.query_episodes[:, None])
+        keep = ~own & (rows >= 0)
+        # stable: the kept neighbours in their order, the rest pushed to the end as padding
+        order = np.argsort(~keep, axis=1, kind="stable")[:, :k]
+        d = np.take_along_axis(np.where(keep, dist, np.inf), order, axis=1)
+        r = np.take_along_axis(np.where(keep, rows, -1), order, axis=1)
+        return d, r
+
+
+# -- the whole held-out corpus -----------------------------------------------------------------
+
+def summarise(ctx: EvalContext, res: StepScores) -> dict:
+    """The metrics of merged step results (see :mod:`aoc_cli.control.scores`)."""
+    out: dict = {"mode": ctx.mode, "corpus": ctx.corpus.name, "model": ctx.model.id,
+                 "data": ctx.data.name, "own_episode_left_out": ctx.own,
+                 "steps": int(len(res.row)), "episodes": int(len(np.unique(res.episode)))}
+    base: dict = {}
+    if ctx.mode == "imitation":
+        if ctx.discrete:
+            out.update(sc.classification(res.logged, res.decided, res.scores, ctx.majority))
+            for name, b in res.baselines.items():
+                base[name] = sc.classification(res.logged, b["decided"], b["scores"],
+                                               ctx.majority, full=False)
+        else:
+            out.update(sc.regression(res.logged, res.decided))
+            for name, b in res.baselines.items():
+                base[name] = sc.regression(res.logged, b["decided"])
+    else:
+        out.update(sc.value_fit(res.target, res.v_hat))
+        out.update(sc.agreement(res.logged, res.decided, ctx.discrete))
+        for name, b in res.baselines.items():
+            rec = sc.value_fit(res.target, b["v_hat"])
+            rec.update(sc.agreement(res.logged, b["decided"], ctx.discrete)
+                       if b.get("decided") is not None else {"agreement": None,
+                                                              "action_distance": None})
+            base[name] = rec
+    typical = ctx.index.typical_residual
+    out["residual"] = sc.residual_summary(res.residual, typical)
+    out["extrapolating_share"] = sc.extrapolating_share(res.residual, typical)
+    out["heterogeneity_share"] = float(np.mean(res.warning))
+    out["support_max"] = int((res.support_rows >= 0).sum(1).max())
+    out["baselines"] = base
+    return out
+
+
+def evaluate(session, data, baselines=BASELINES, seed: int = 0, progress=None,
+             chunk_steps: int = CHUNK_STEPS) -> tuple[dict, StepScores]:
+    """Score every step of corpus ``data`` with ``session`` (its corpus, model, index and
+    controller settings); ``progress(done_steps, total_steps)``. Returns (summary, steps)."""
+    started = time.perf_counter()
+    ctx = EvalContext.build(session, data, baselines, seed)
+    parts, done = [], 0
+    for group in chunks(ctx, chunk_steps):
+        part = score_episodes(ctx, group)
+        parts.append(part)
+        done += len(part.row)
+        if progress is not None:
+            progress(done, ctx.data.n_rows)
+    res = merge(parts)
+    summary = summarise(ctx, res)
+    summary["seconds"] = time.perf_counter() - started
+    summary["steps_per_second"] = summary["steps"] / max(summary["seconds"], 1e-9)
+    return summary, res
+
+
+def step_records(ctx_or_session, data, res: StepScores):
+    """One JSON-ready record per scored step (for ``--steps FILE.jsonl``): episode, its id,
+    step, logged action, decision, scores, residual, warning, supporting rows with their
+    episodes and ids."""
+    corpus = ctx_or_session.corpus
+    from aoc_cli.control.records import episode_ids
+
+    data_ids, corpus_ids = episode_ids(data), episode_ids(corpus)
+    sup_ep = corpus.episode_of(np.maximum(res.support_rows, 0))
+    for i in range(len(res.row)):
+        keep = res.support_rows[i] >= 0
+        rec = {"episode": int(res.episode[i]),
+               "episode_id": None if data_ids is None else data_ids[res.episode[i]],
+               "step": int(res.step[i]), "row": int(res.row[i]),
+               "logged": np.asarray(res.logged[i]).tolist(),
+               "decision": np.asarray(res.decided[i]).tolist()}
+        if res.scores is not None:
+            rec["scores"] = res.scores[i].tolist()
+        if res.v_hat is not None:
+            rec["v_hat"] = float(res.v_hat[i])
+            rec["target"] = float(res.target[i])
+        rec["residual"] = float(res.residual[i])
+        rec["warning"] = bool(res.warning[i])
+        rec["support"] = [{"row": int(r), "episode": int(e),
+                           "episode_id": None if corpus_ids is None else corpus_ids[e],
+                           "weight": float(w)}
+                          for r, e, w in zip(res.support_rows[i][keep], sup_ep[i][keep],
+                                             res.support_weights[i][keep])]
+        for name, b in res.baselines.items():
+            rec[f"{name}_decision"] = np.asarray(b["decided"][i]).tolist()
+        yield rec
+
+
+__all__ = ["BASELINES", "LeaveEpisodeOut", "StepScores", "chunks", "evaluate", "merge",
+           "score_episodes", "step_records", "summarise", "check_inputs"]

@@ -1,0 +1,225 @@
+"""What ``aoc evaluate`` prepares once before scoring chunks of episodes: the checked inputs,
+the arrays every chunk reads, the candidates of value mode and the kNN baseline."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from aoc_cli.errors import AocError
+
+
+def check_inputs(corpus, data, mode: str, baselines, value_target: str | None) -> list[str]:
+    """Refuse held-out data the model cannot score; return the baselines as a list."""
+    from aoc_cli.belief.config import REWARD_TARGETS
+
+    if mode == "value" and value_target in REWARD_TARGETS and not data.has_rewards:
+        raise AocError(f"corpus {data.name!r} has no rewards: a value-mode model (target "
+                       f"{value_target!r}) cannot be scored on it; evaluate an imitation-mode "
+                       "model (aoc train --mode imitation) or one trained on a column")
+    mine = (corpus.observation_dim, corpus.action_dim, corpus.discrete, corpus.n_actions,
+            corpus.has_rewards)
+    theirs = (data.observation_dim, data.action_dim, data.discrete, data.n_actions,
+              data.has_rewards)
+    if mine != theirs:
+        raise AocError(
+            f"corpus {data.name!r} does not match {corpus.name!r} (observation dims, action dims "
+            f"or type, rewards: {theirs} against {mine}): evaluate it with a model of its own")
+    if data.n_rows == 0 or data.n_episodes == 0:
+        raise AocError(f"corpus {data.name!r} holds no steps to evaluate")
+    names = [b.strip() for b in (baselines or []) if b.strip()]
+    from aoc_cli.control.evaluate import BASELINES
+
+    unknown = [b for b in names if b not in BASELINES and b != "none"]
+    if unknown:
+        raise AocError(f"unknown baseline {unknown[0]!r}: use {', '.join(BASELINES)} "
+                       "(comma-separated) or none")
+    return [b for b in names if b != "none"]
+
+
+def episode_rows(starts: np.ndarray, episodes: np.ndarray) -> np.ndarray:
+    """(R,) the rows of ``episodes`` in order, from episode offsets (E + 1,)."""
+    lo, hi = starts[episodes], starts[episodes + 1]
+    lengths = hi - lo
+    offsets = np.repeat(lo - np.concatenate([[0], np.cumsum(lengths)[:-1]]), lengths)
+    return np.arange(int(lengths.sum()), dtype=np.int64) + offsets
+
+
+def heterogeneity(ctx: "EvalContext", rows: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """(S,) bool: the supporting rows (S, m) with weight >= min_weight disagree, as
+    :meth:`aoc_cli.control.controller.Controller.heterogeneity` warns (actions differ,
+    continuous actions spread over ``action_spread`` of the range, values over
+    ``value_spread`` corpus value stds)."""
+    cfg = ctx.config
+    keep = (rows >= 0) & (weights >= cfg.min_weight)
+    safe = np.maximum(rows, 0)
+    many = keep.sum(1) >= 2
+    acts = ctx.corpus_actions[safe]
+    if ctx.discrete:
+        big, small = np.iinfo(np.int64).max, np.iinfo(np.int64).min
+        warn = np.where(keep, acts, small).max(1) != np.where(keep, acts, big).min(1)
+    else:
+        hi = np.where(keep[..., None], acts, -np.inf).max(1)
+        lo = np.where(keep[..., None], acts, np.inf).min(1)
+        warn = np.max((hi - lo) / ctx.span, axis=1) > cfg.action_spread
+    values = ctx.index.values
+    if values is not None and ctx.value_std > 0:
+        v = values[safe]
+        spread = np.where(keep, v, -np.inf).max(1) - np.where(keep, v, np.inf).min(1)
+        warn = warn | (spread > cfg.value_spread * ctx.value_std)
+    return warn & many
+
+
+def candidate_beliefs(model, obs: np.ndarray, hist, cands: np.ndarray,
+                      batch: int = 65536) -> np.ndarray:
+    """(S * K, d_b) value-mode beliefs b(o, a, h) of K candidates (S, K) or (S, K, d_a) at S
+    steps; each step's history goes through the GRU once and is shared by its candidates."""
+    import torch
+
+    s, kk = cands.shape[:2]
+    enc, net, L = model.encoder, model.net, model.history_length
+    out = np.empty((s * kk, model.d_b), np.float32)
+    per = max(1, batch // kk)
+    with torch.no_grad():
+        for i in range(0, s, per):
+            sl = slice(i, min(s, i + per))
+            n = sl.stop - sl.start
+            memory = None
+            if L > 0:
+                steps = enc.steps(*[np.asarray(x)[sl, -L:] for x in hist])
+                memory = net.memory(steps).repeat_interleave(kk, dim=0)
+            o = enc.observations(obs[sl]).repeat_interleave(kk, dim=0)
+            c = cands[sl].reshape(n * kk, *cands.shape[2:])
+            a = enc.actions(c)
+            out[sl.start * kk:sl.stop * kk] = net.belief_from_memory(memory, o, a).numpy()
+    return out
+
+
+class KNNBaseline:
+    """The k nearest corpus rows on standardised inputs (imitation: the observation; value:
+    the observation and the encoded action; exact search), k = d_b + 1 (as many rows as ABC's subset may
+    use). Imitation: the neighbours' action shares (discrete) or mean action; value: their
+    mean value for the logged action, and for discrete actions the best of the actions."""
+
+    def __init__(self, ctx: "EvalContext"):
+        from aoc_cli.index import BeliefIndex
+
+        self.k = ctx.model.d_b + 1
+        self.extra = ctx.max_episode_length if ctx.own else 0
+        obs = np.asarray(ctx.corpus.observations, np.float64)
+        self.mean, self.std = obs.mean(0), np.where(obs.std(0) > 1e-9, obs.std(0), 1.0)
+        self.value = ctx.mode == "value"
+        x = self.features(ctx, obs, ctx.corpus_actions)
+        # an exact (flat) index: a batch is one grouped scan (aoc_cli/index/grouped.py)
+        self.nn = BeliefIndex.build(x.astype(np.float32), kind="flat")
+        self.wide = min(self.k + self.extra, len(x))
+
+    def features(self, ctx, obs, actions) -> np.ndarray:
+        z = (np.asarray(obs, np.float64) - self.mean) / self.std
+        if not self.value:
+            return z
+        if ctx.discrete:
+            return np.concatenate([z, np.eye(ctx.n_actions)[np.asarray(actions)]], axis=1)
+        a = (np.asarray(actions, np.float64) - ctx.low) / ctx.span
+        return np.concatenate([z, a.reshape(len(z), -1)], axis=1)
+
+    def neighbours(self, ctx, x: np.ndarray, query_episodes: np.ndarray) -> np.ndarray:
+        """(S, k) corpus rows nearest to features (S, F), own episode left out when own."""
+        _, idx = self.nn.search(x.astype(np.float32), self.wide)
+        if not self.extra:
+            return idx[:, :self.k]
+        keep = ctx.corpus_episode[idx] != query_episodes[:, None]
+        order = np.argsort(~keep, axis=1, kind="stable")[:, :self.k]
+        return np.take_along_axis(idx, order, axis=1)
+
+    def predict(self, ctx, obs, logged, query_episodes) -> dict:
+        idx = self.neighbours(ctx, self.features(ctx, obs, logged), query_episodes)
+        if not self.value:
+            acts = ctx.corpus_actions[idx]
+            if ctx.discrete:
+                shares = np.stack([(acts == a).mean(1) for a in range(ctx.n_actions)], axis=1)
+                return {"decided": shares.argmax(1), "scores": shares}
+            return {"decided": acts.mean(1)}
+        out = {"v_hat": ctx.index.values[idx].mean(1), "decided": None}
+        if ctx.discrete:
+            per = [ctx.index.values[self.neighbours(
+                ctx, self.features(ctx, obs, np.full(len(obs), a)), query_episodes)].mean(1)
+                for a in range(ctx.n_actions)]
+            out["decided"] = np.stack(per, axis=1).argmax(1)
+        return out
+
+
+@dataclass
+class EvalContext:
+    """Everything the chunks of one evaluation share (read-only)."""
+
+    session: object
+    data: object
+    own: bool
+    baselines: list
+    seed: int
+
+    @classmethod
+    def build(cls, session, data, baselines, seed: int = 0) -> "EvalContext":
+        model = session.model
+        value_target = (model.meta.get("value") or {}).get("target")
+        names = check_inputs(session.corpus, data, model.mode, baselines, value_target)
+        ctx = cls(session, data, data.hash == session.corpus.hash, names, int(seed))
+        ctx._prepare()
+        return ctx
+
+    def _prepare(self) -> None:
+        corpus, data, model = self.corpus, self.data, self.model
+        self.mode = model.mode
+        self.config = self.session.controller.config
+        self.index = self.session.index
+        self.history_length = model.history_length
+        self.k = self.config.k if self.config.k is not None else 2 * (model.d_b + 1)
+        self.discrete, self.n_actions = corpus.discrete, corpus.n_actions
+        self.corpus_actions = np.asarray(corpus.actions)
+        self.corpus_episode = corpus.episode_of(np.arange(corpus.n_rows))
+        self.max_episode_length = int(np.diff(corpus.episode_starts).max())
+        self.data_starts = np.asarray(data.episode_starts, np.int64)
+        self.data_obs = np.asarray(data.observations)
+        self.data_actions = np.asarray(data.actions)
+        self.head = model.head_weights
+        if self.discrete:
+            self.majority = int(np.bincount(self.corpus_actions, minlength=self.n_actions).argmax())
+        else:
+            from aoc_cli.control.controller import action_bounds
+
+            self.low, self.high = action_bounds(corpus.action_space, self.corpus_actions)
+            self.span = np.maximum(self.high - self.low, 1e-12)
+        values = self.index.values
+        self.value_std = float(np.std(values)) if values is not None and len(values) else 1.0
+        self.data_values = None
+        if self.mode == "value":
+            if self.own:
+                self.data_values = np.asarray(model.values, np.float64)
+            else:
+                from aoc_cli.belief.targets import value_targets
+
+                spec = model.meta.get("value") or {}
+                self.data_values = value_targets(data, spec.get("target", "return"),
+                                                 float(spec.get("gamma", 0.99)))
+        self.knn = KNNBaseline(self) if "knn" in self.baselines else None
+
+    @property
+    def corpus(self):
+        return self.session.corpus
+
+    @property
+    def model(self):
+        return self.session.model
+
+    def candidates(self, rows: np.ndarray) -> np.ndarray:
+        """The controller's candidates at each of ``rows`` (S,): every action of a discrete
+        space (S, n); K uniform actions in the box (S, K, d_a), seeded by the chunk's first
+        row so a chunk gives the same candidates wherever it runs."""
+        s = len(rows)
+        if self.discrete:
+            return np.broadcast_to(np.arange(self.n_actions), (s, self.n_actions)).copy()
+        rng = np.random.default_rng([self.seed, int(rows[0]) if s else 0])
+        kk = self.config.candidates
+        return rng.uniform(self.low, self.high, size=(s, kk, len(self.low)))
