@@ -31,8 +31,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from aoc_cli.control import scores as sc
-from aoc_cli.control.evaluate_inputs import (EvalContext, candidate_beliefs, check_inputs,
-                                             episode_rows, heterogeneity)
+from aoc_cli.control.evaluate_inputs import (EXACT_MAX_ROWS, EvalContext, candidate_beliefs,
+                                             check_inputs, episode_rows, heterogeneity)
 from aoc_cli.decompose import decompose
 from aoc_cli.errors import AocError
 
@@ -126,8 +126,8 @@ def score_episodes(ctx: EvalContext, episodes) -> StepScores:
 
 
 def _decompose(ctx: EvalContext, beliefs: np.ndarray, query_episodes: np.ndarray):
-    index = ctx.index.index if not ctx.own else LeaveEpisodeOut(
-        ctx.index.index, ctx.corpus_episode, query_episodes, ctx.max_episode_length)
+    index = ctx.search if not ctx.own else LeaveEpisodeOut(
+        ctx.search, ctx.corpus_episode, query_episodes, ctx.max_episode_length)
     return decompose(ctx.index.beliefs, beliefs, k=ctx.k, values=ctx.index.values, index=index)
 
 
@@ -254,16 +254,22 @@ def summarise(ctx: EvalContext, res: StepScores) -> dict:
     out["extrapolating_share"] = sc.extrapolating_share(res.residual, typical)
     out["heterogeneity_share"] = float(np.mean(res.warning))
     out["support_max"] = int((res.support_rows >= 0).sum(1).max())
+    out["search"] = ctx.search.describe() if hasattr(ctx.search, "describe") \
+        else f"the index ({ctx.index.index.kind}, exact)" if ctx.index.index.kind == "flat" \
+        else f"the index ({ctx.index.index.kind})"
     out["baselines"] = base
     return out
 
 
 def evaluate(session, data, baselines=BASELINES, seed: int = 0, progress=None,
-             chunk_steps: int = CHUNK_STEPS) -> tuple[dict, StepScores]:
+             chunk_steps: int = CHUNK_STEPS, exact: bool | None = None
+             ) -> tuple[dict, StepScores]:
     """Score every step of corpus ``data`` with ``session`` (its corpus, model, index and
-    controller settings); ``progress(done_steps, total_steps)``. Returns (summary, steps)."""
+    controller settings); ``progress(done_steps, total_steps)``. ``exact``: search the
+    session's own index (True), an IVF structure built for the run (False), or the index up
+    to :data:`EXACT_MAX_ROWS` corpus rows and IVF beyond (None). Returns (summary, steps)."""
     started = time.perf_counter()
-    ctx = EvalContext.build(session, data, baselines, seed)
+    ctx = EvalContext.build(session, data, baselines, seed, exact)
     parts, done = [], 0
     for group in chunks(ctx, chunk_steps):
         part = score_episodes(ctx, group)
