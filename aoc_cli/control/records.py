@@ -21,20 +21,8 @@ from aoc_cli.store import History, atomic_path
 
 def episode_ids(corpus) -> list[str] | None:
     """The corpus's own episode ids (e.g. patient ids kept by a CSV ingest), one per episode,
-    or None when it has none. Read once per corpus object."""
-    cached = getattr(corpus, "_aoc_episode_ids", False)
-    if cached is not False:
-        return cached
-    try:
-        raw = corpus.read("episode_ids")
-        ids = [s.decode() if isinstance(s, bytes) else str(s) for s in raw]
-    except (AocError, AttributeError):
-        ids = None
-    try:
-        corpus._aoc_episode_ids = ids
-    except AttributeError:  # pragma: no cover - a read-only stand-in
-        pass
-    return ids
+    or None when it has none."""
+    return getattr(corpus, "episode_ids", None)
 
 
 def decision_record(decision: Decision, corpus, index, step: int | None = None,

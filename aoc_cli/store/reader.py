@@ -290,6 +290,15 @@ class Corpus:
         return gather_history(rows, starts, length, self.observations, self.actions,
                               self.rewards)
 
+    @cached_property
+    def episode_ids(self) -> list[str] | None:
+        """The episodes' own ids (E,) (e.g. patient ids kept by a CSV ingest), or None."""
+        with self._h5() as f:
+            if "episode_ids" not in f:
+                return None
+            return [s.decode() if isinstance(s, bytes) else str(s)
+                    for s in f["episode_ids"][()]]
+
     def load(self) -> CorpusData:
         """The whole corpus in memory."""
         with self._h5() as f:
