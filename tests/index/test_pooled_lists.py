@@ -30,6 +30,23 @@ def curve(B: np.ndarray, q: int, spread: float, seed: int) -> np.ndarray:
     return (a + t * (b - a) + 0.02 * rng.standard_normal((q, B.shape[1]))).astype(np.float32)
 
 
+def assert_same_neighbours(d_a, r_a, d_b, r_b, rtol=1e-6, atol=1e-6):
+    """Two k-nearest answers agree: the distances to a few float32 ulp; the rows position by
+    position, except within a run of tied distances (there any order, and at the k-th
+    distance any of the tied rows)."""
+    np.testing.assert_allclose(d_a, d_b, rtol=rtol, atol=atol)
+    tol = atol + rtol * np.abs(np.asarray(d_a, np.float64))
+    for q in range(len(r_a)):
+        d, kth = np.asarray(d_a[q], np.float64), float(d_a[q][-1])
+        clear = np.ones(len(d), bool)  # positions whose distance ties with no other
+        for j in range(len(d)):
+            if (np.abs(d - d[j]) <= 2 * tol[q]).sum() > 1:
+                clear[j] = False
+        np.testing.assert_array_equal(r_a[q][clear], r_b[q][clear])
+        inside = d < kth - 2 * tol[q, -1]  # strictly before the k-th: the same set of rows
+        assert set(r_a[q][inside]) == set(r_b[q][inside]), q
+
+
 @pytest.fixture(scope="module")
 def ivf():
     B = beliefs()
@@ -55,8 +72,9 @@ def test_list_pools_give_faiss_pools_answers(ivf, monkeypatch, seed, spread, q):
         ix._pooled_lists = saved
     if spread >= 0.3:
         assert scanned, "the groups' pools were not used"
-    np.testing.assert_array_equal(r_new, r_old)
-    np.testing.assert_allclose(d_new, d_old, rtol=1e-6, atol=1e-6)
+    # own kernel vs FAISS: float32 distances summed in another order (and FAISS's SIMD
+    # depends on the CPU), so rows may trade places only where their distances tie to a few ulp
+    assert_same_neighbours(d_new, r_new, d_old, r_old)
     # and the answer is exact among the rows the batch search can see: recall against brute force
     D = ((B.astype(np.float64)[None] - Y.astype(np.float64)[:, None]) ** 2).sum(-1)
     truth = np.argsort(D, axis=1, kind="stable")[:, :42]
