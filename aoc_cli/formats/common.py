@@ -192,8 +192,13 @@ def from_flat(
     extra = extra or {}
     arrays = {"observations": observations, "actions": actions, "rewards": rewards,
               "terminals": terminals, "timeouts": timeouts, "episode_terminals": episode_ends}
-    check_numeric(arrays, source.get("path", "the input"))
+    where = source.get("path", "the input")
+    check_numeric(arrays, where)
     n = check_lengths(arrays)
+    for key in ("rewards", "terminals", "timeouts", "episode_terminals"):
+        if arrays[key] is not None and np.asarray(arrays[key]).size != n:
+            raise AocError(f"{where}: {key} must hold one value per row, got shape "
+                           f"{tuple(np.asarray(arrays[key]).shape)} for {n} rows")
     term = np.zeros(n, bool) if terminals is None else np.asarray(terminals).reshape(n) != 0
     tout = np.zeros(n, bool) if timeouts is None else np.asarray(timeouts).reshape(n) != 0
     ends = term | tout

@@ -73,6 +73,8 @@ def _read_lines(path: Path) -> list[str]:
 
 def _parse(path: Path, lines: list[str], delimiter: str, progress):
     header = [h.strip() for h in next(csv.reader([lines[0]], delimiter=delimiter))]
+    if "" in header:
+        raise AocError(f"{path}: header column {header.index('') + 1} has no name: name it")
     if len(set(header)) != len(header):
         dup = sorted({h for h in header if header.count(h) > 1})
         raise AocError(f"{path} repeats column names {dup}: rename them")
@@ -240,9 +242,9 @@ def _episodes(path: Path, cols: dict, roles: Roles, n: int) -> Episodes:
         same = (np.diff(id_codes) == 0) & (np.diff(np.asarray(time_key)[order]) == 0)
         if same.any():
             first = int(order[np.flatnonzero(same)[0] + 1])
-            warn(f"{path}: {int(same.sum())} rows repeat the ({roles.id}, {roles.time}) of an "
-                 f"earlier row (first: data row {first + 1}); kept in file order as "
-                 "successive steps")
+            key = f"({roles.id}, {roles.time})" if roles.id else repr(roles.time)
+            warn(f"{path}: {int(same.sum())} rows repeat the {key} of an earlier row (first: "
+                 f"data row {first + 1}); kept in file order as successive steps")
     bounds = np.flatnonzero(np.diff(id_codes)) + 1
     starts = np.concatenate([[0], bounds, [n]]).astype(np.int64)
     return Episodes(order, starts, [str(ids_text[r]) for r in order[starts[:-1]]],
@@ -355,7 +357,8 @@ def _read_static(path: Path, id_col: str, episode_keys: np.ndarray, episode_ids:
     if unused:
         extra = sorted(set(range(len(keys))) - set(rows.tolist()))
         warn(f"--static {path}: {unused} ids have no rows in the series (first: "
-             f"{str(keys[extra[0]])!r}); their static rows are not used")
+             f"{str(np.char.strip(cols[id_col])[extra[0]])!r}); their static rows are not "
+             "used")
     names: list[str] = []
     feats: list[np.ndarray] = []
     tags: dict[str, np.ndarray] = {}

@@ -154,6 +154,12 @@ class CorpusData:
                     f"{name} of row {bad} is not finite (NaN or inf): fix the data or pass "
                     "--drop-nonfinite to drop the episodes that hold such rows"
                 )
+        for kind, names in (("tag", self.tags), ("column", self.columns)):
+            for key in names:
+                if not isinstance(key, str) or not key.strip() or "/" in key or \
+                        key in (".", ".."):
+                    raise AocError(f"{kind} name {key!r} cannot be stored: give it a name "
+                                   "without '/' (rename the source column)")
         self.tags = {k: (np.asarray(c, dtype=np.int32), [str(x) for x in lab])
                      for k, (c, lab) in self.tags.items()}
         self.columns = {k: np.asarray(v, dtype=np.float64) for k, v in self.columns.items()}
