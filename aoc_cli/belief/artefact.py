@@ -23,6 +23,7 @@ import torch
 
 from aoc_cli.belief.config import BeliefConfig
 from aoc_cli.belief.data import model_dir
+from aoc_cli.belief.inputs import build_net, encode_corpus, pick_device
 from aoc_cli.belief.model import BeliefNet, Encoder, Normalisation
 from aoc_cli.errors import AocError
 from aoc_cli.store import History, atomic_dir, file_record, seal, write_json, write_npy
@@ -240,8 +241,6 @@ class BeliefModel:
 
         ``progress(done_rows, total_rows)`` is called after each batch when given.
         """
-        from aoc_cli.belief.train import encode_corpus
-
         check_corpus(self, corpus)
         inputs = encode_corpus(corpus, self.encoder, self.history_length,
                                self.mode == "value", self.device)
@@ -287,8 +286,6 @@ def load_model(corpus, model_id: str | None = None, device: str | None = None) -
         raise AocError(f"model {model_id!r} of corpus {corpus.name!r} has an unknown format: "
                        f"{todo}")
     check_files(path, meta, ("weights.pt", "values.npy"), what, todo)
-    from aoc_cli.belief.train import build_net, pick_device
-
     try:
         dev = pick_device(device or meta["config"].get("device", "auto"))
         net = build_net(meta["dims"], BeliefConfig.from_dict(meta["config"]))

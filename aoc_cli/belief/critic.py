@@ -145,7 +145,7 @@ def fit_critic(corpus, inputs, encoder: Encoder, config: BeliefConfig,
                progress=None) -> CriticFit:
     """Train the twin critic and the actor on ``train_rows`` for ``config.critic_steps`` steps.
 
-    ``inputs`` is :func:`aoc_cli.belief.train.encode_corpus` of the corpus with the actions;
+    ``inputs`` is :func:`aoc_cli.belief.inputs.encode_corpus` of the corpus with the actions;
     ``progress(record)`` is called every RECORD_EVERY steps.
     """
     if corpus.discrete:

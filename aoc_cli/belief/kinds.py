@@ -86,14 +86,14 @@ def train_critic_model(corpus, config: BeliefConfig, model_id: str, data,
     from aoc_cli.belief.critic import fit_critic
     from aoc_cli.belief.model import Encoder
     from aoc_cli.belief.targets import value_spec
-    from aoc_cli.belief.train import _dims, encode_corpus, pick_device
+    from aoc_cli.belief.inputs import encode_corpus, network_dims, pick_device
 
     started = time.perf_counter()
     device = pick_device(config.device)
     threads = config.resolved_threads()
     if device.type == "cpu":
         torch.set_num_threads(threads)
-    dims = _dims(corpus, "value")
+    dims = network_dims(corpus, "value")
     norm = Normalisation.fit(corpus.observations, corpus.actions, corpus.rewards,
                              dims["discrete"], data.values)
     encoder = Encoder(norm, dims["discrete"], dims["n_actions"], device)
