@@ -30,8 +30,9 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 import aoc_cli.index.belief_index as BI  # noqa: E402
-import aoc_cli.index.build as build  # noqa: E402
-from aoc_cli.control import HistoryBuffer, open_session  # noqa: E402
+import aoc_cli.session as build  # noqa: E402
+from aoc_cli.control import HistoryBuffer  # noqa: E402
+from aoc_cli.session import open_session  # noqa: E402
 from aoc_cli.envs import make_env  # noqa: E402
 from aoc_cli.store import Store  # noqa: E402
 

@@ -46,7 +46,8 @@ def session(corpus, env, task: str | None = None, model_id: str = "default",
             index_id: str = "default", seed: int = 0, selection=None, **config):
     """An AOC session on ``corpus``: ControllerConfig fields ``config`` over the task's own
     controller settings (as `aoc rollout --env TASK` uses them) over the paper's defaults."""
-    from aoc_cli.control import ControllerConfig, open_session
+    from aoc_cli.control import ControllerConfig
+    from aoc_cli.session import open_session
     from aoc_cli.envs import TASKS
 
     settings = dict(getattr(TASKS.get(task), "controller", None) or {}) if task else {}

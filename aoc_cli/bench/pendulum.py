@@ -56,7 +56,7 @@ def _variant(ctx: Context, method: str, corpus, env, task: str, seed: int):
     """The session of aoc's diagnostic rows: ORACLE (the normal system's rows only) or DYNAMICS
     (the dynamics-head model and its index)."""
     if method == ORACLE:
-        from aoc_cli.index.build import row_selection
+        from aoc_cli.rows import row_selection
 
         normal = row_selection(corpus, {"system": ["normal"]})
         return session(corpus, env, task, seed=seed, selection=normal, **ctx.aoc_config)

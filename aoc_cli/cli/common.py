@@ -45,3 +45,18 @@ def parse_key_values(items: list[str] | None, flag: str) -> dict[str, str]:
             raise AocError(f"{flag} expects KEY=VALUE, got {item!r}")
         out[key.strip()] = value.strip()
     return out
+
+
+def parse_rates(items: list[str] | None, flag: str) -> dict[str, float]:
+    """``["policy=pi1:4"]`` -> ``{"policy=pi1": 4.0}``."""
+    out = {}
+    for item in items or []:
+        key, sep, rate = item.rpartition(":")
+        try:
+            value = float(rate)
+        except ValueError:
+            value = None
+        if not sep or "=" not in key or value is None:
+            raise AocError(f"{flag} expects TAG=VALUE:RATE (e.g. policy=pi1:4), got {item!r}")
+        out[key] = value
+    return out

@@ -35,8 +35,8 @@ def register(app: typer.Typer) -> None:
         """Explain decisions: from JSONL queries, a recorded step of an audit log, or a logged
         step of a corpus."""
         from aoc_cli.control import (ControllerConfig, decision_record, explain_logged_step,
-                                     open_session, parse_query, read_audit_step,
-                                     replay_decision)
+                                     parse_query, read_audit_step, replay_decision)
+        from aoc_cli.session import open_session
 
         fmt = resolve_format(fmt)
         if sum(x is not None for x in (input, audit, data)) != 1:

@@ -6,7 +6,7 @@ from typing import List, Optional
 
 import typer
 
-from aoc_cli.cli.common import FormatOption, get_store
+from aoc_cli.cli.common import FormatOption, get_store, parse_rates
 from aoc_cli.report import progress, write_object
 
 
@@ -23,7 +23,7 @@ def register(app: typer.Typer) -> None:
         fmt: Optional[str] = FormatOption,
     ) -> None:
         """Compute every row's belief and build the index the controller searches."""
-        from aoc_cli.index.build import build_index, parse_rates
+        from aoc_cli.session import build_index
 
         corpus = get_store().corpus(name)
         rates_r = parse_rates(resample, "--resample")

@@ -51,10 +51,10 @@ def register(app: typer.Typer) -> None:
         fmt: Optional[str] = FormatOption,
     ) -> None:
         """Run episodes; print returns, success, OOD flags and residuals."""
-        from aoc_cli.control import open_session, rollout
-        from aoc_cli.control.run import model_free_session
+        from aoc_cli.control import rollout
         from aoc_cli.envs import make_env
-        from aoc_cli.index.build import row_selection
+        from aoc_cli.rows import row_selection
+        from aoc_cli.session import model_free_session, open_session
 
         fmt = resolve_format(fmt)
         if episodes < 1:
@@ -84,7 +84,7 @@ def register(app: typer.Typer) -> None:
                                    action_space)
         reference = None
         if ood_reference is not None:
-            if session.index is None:
+            if policy in MODEL_FREE:
                 raise AocError(f"--ood-reference needs the AOC controller's residuals; "
                                f"--policy {policy} has none")
             from aoc_cli.control.run import reference_from_audit

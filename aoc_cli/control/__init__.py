@@ -6,11 +6,8 @@ from aoc_cli.control.monitor import OODMonitor, flags_against, reference_band
 from aoc_cli.control.records import decision_record, read_audit_step, write_audit
 from aoc_cli.control.rollout import EpisodeResult, HistoryBuffer, run_episode, summarize
 from aoc_cli.control.run import (
-    Session,
     explain_logged_step,
     explain_query,
-    model_free_session,
-    open_session,
     parse_query,
     replay_decision,
     rollout,
@@ -23,13 +20,10 @@ __all__ = [
     "EpisodeResult",
     "HistoryBuffer",
     "OODMonitor",
-    "Session",
     "decision_record",
     "explain_logged_step",
     "explain_query",
     "flags_against",
-    "model_free_session",
-    "open_session",
     "parse_query",
     "read_audit_step",
     "reference_band",

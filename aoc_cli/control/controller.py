@@ -66,7 +66,7 @@ def action_bounds(action_space: dict, actions: np.ndarray | None = None):
 class Controller:
     """AOC (value mode) or ABC (imitation mode) over one corpus, model and index.
 
-    ``index`` is a :class:`aoc_cli.index.build.CorpusIndex` (beliefs of every corpus row,
+    ``index`` is a :class:`aoc_cli.session.CorpusIndex` (beliefs of every corpus row,
     values, the nearest-neighbour index); ``selection`` an optional (N,) bool row mask applied
     at query time, with no rebuild.
     """

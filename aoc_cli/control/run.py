@@ -1,91 +1,25 @@
-"""The library entry points behind `aoc rollout` and `aoc explain`."""
+"""The library entry points behind `aoc rollout` and `aoc explain`, given a session
+(:mod:`aoc_cli.session`)."""
 
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from aoc_cli.control.config import ControllerConfig
-from aoc_cli.control.controller import Controller, Decision
+from aoc_cli.control.controller import Decision
 from aoc_cli.control.monitor import OODMonitor
 from aoc_cli.control.records import decision_record, write_audit
 from aoc_cli.control.rollout import EpisodeResult, check_spaces, run_episode, summarize
 from aoc_cli.errors import AocError
 
-
-@dataclass
-class Session:
-    """A controller ready to act: corpus, model, index, selection and settings."""
-
-    corpus: object
-    index: object
-    controller: Controller | None
-    action_space: dict | None = None
-
-    @property
-    def model(self):
-        return self.index.model
-
-    @property
-    def history_length(self) -> int:
-        """L of the model (0 for a model-free session: the zero and random baselines)."""
-        return 0 if self.index is None else int(self.model.history_length)
-
-    def meta(self) -> dict:
-        if self.index is None:
-            return {"corpus": self.corpus.name, "corpus_hash": self.corpus.hash, "model": None}
-        return {
-            "corpus": self.corpus.name, "corpus_hash": self.corpus.hash,
-            "model": self.model.id, "model_hash": self.model.hash,
-            "index": self.index.index_id, "mode": self.model.mode,
-            "config": self.controller.config.to_dict(),
-            "selection": None if self.controller.selection is None
-            else np.flatnonzero(self.controller.selection).tolist()
-            if self.controller.selection.sum() < 10000 else "mask",
-        }
+if TYPE_CHECKING:
+    from aoc_cli.session import ModelFreeSession, Session
 
 
-def open_session(corpus, model_id: str | None = None, index_id: str = "default",
-                 config: ControllerConfig | None = None, selection=None, seed: int = 0,
-                 action_space: dict | None = None) -> Session:
-    """Load the model and index of ``corpus`` and build a controller."""
-    from aoc_cli.belief import load_model
-    from aoc_cli.index.build import load_index
-
-    config = (config or ControllerConfig()).check()
-    _one_thread()
-    index = load_index(corpus, model_id, index_id)
-    bc_model = None
-    if config.sampler == "bc" and index.model.mode == "value" and not corpus.discrete:
-        bc_model = load_model(corpus, config.bc_model)
-        if bc_model.mode != "imitation":
-            raise AocError(f"model {config.bc_model!r} is not an imitation-mode model: the bc "
-                           f"sampler needs `aoc train {corpus.name} --model {config.bc_model} "
-                           "--mode imitation`")
-    controller = Controller(corpus, index, config, selection=selection, bc_model=bc_model,
-                            seed=seed, action_space=action_space)
-    return Session(corpus, index, controller, action_space)
-
-
-def model_free_session(corpus, action_space: dict | None = None) -> Session:
-    """A session without model or index, for the policies that need neither (zero, random):
-    they run on a corpus before anything is trained."""
-    return Session(corpus, None, None, action_space)
-
-
-def _one_thread() -> None:
-    """A control step is ~100 small queries: one thread each for torch and FAISS is fastest,
-    and two thread pools (torch's and FAISS's OpenMP) must not fight over the cores."""
-    import faiss
-    import torch
-
-    torch.set_num_threads(1)
-    faiss.omp_set_num_threads(1)
-
-
-def rollout(session: Session, env, episodes: int, seed: int = 0, policy=None,
+def rollout(session: Session | ModelFreeSession, env, episodes: int, seed: int = 0, policy=None,
             audit: str | None = None, noise_after: int | None = None, noise_std: float = 0.0,
             progress=None, reference=None) -> tuple[list[EpisodeResult], dict]:
     """Run ``episodes`` episodes (seeds ``seed``, ``seed+1``, ...) with the controller (or
@@ -93,10 +27,11 @@ def rollout(session: Session, env, episodes: int, seed: int = 0, policy=None,
     band from :func:`aoc_cli.control.monitor.reference_band` for the OOD monitor, instead of
     the running band of each episode's own steps."""
     check_spaces(env, session.corpus)
-    policy = policy or session.controller
+    controller = getattr(session, "controller", None)
+    policy = policy or controller
     if policy is None:
         raise AocError("a model-free session runs only a given policy (zero or random)")
-    cfg = session.controller.config if session.controller is not None else None
+    cfg = controller.config if controller is not None else None
     floor, minimum = _band_limits(session)
     results = []
     task = progress.add_task("rollout", total=episodes) if progress is not None else None
@@ -232,10 +167,11 @@ def session_reference_band(session: Session, runs) -> np.ndarray:
                           minimum=minimum)
 
 
-def _band_limits(session: Session) -> tuple[float, float]:
+def _band_limits(session: Session | ModelFreeSession) -> tuple[float, float]:
     """(floor of the std, minimum edge) of the OOD bands: 0.1 x the corpus's typical p50
     residual and its p99 (see :class:`aoc_cli.control.monitor.OODMonitor`)."""
-    typical = session.index.meta.get("typical_residual", {}) if session.index is not None else {}
+    index = getattr(session, "index", None)
+    typical = index.meta.get("typical_residual", {}) if index is not None else {}
     return 0.1 * float(typical.get("p50") or 0.0), float(typical.get("p99") or 0.0)
 
 

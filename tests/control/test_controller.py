@@ -3,10 +3,11 @@
 import numpy as np
 import pytest
 
-from aoc_cli.control import ControllerConfig, HistoryBuffer, open_session, rollout
+from aoc_cli.control import ControllerConfig, HistoryBuffer, rollout
 from aoc_cli.envs import make_env
 from aoc_cli.errors import AocError
-from aoc_cli.index.build import row_selection
+from aoc_cli.rows import row_selection
+from aoc_cli.session import open_session
 
 from tests.control.corpora import corridor_store, maze_store
 

@@ -1,15 +1,22 @@
-"""`aoc index`: the belief of every corpus row and the nearest-neighbour index over them.
+"""The session: a corpus with its belief model, index and controller (the top of the flow).
+
+The flow reads one way: store -> belief -> index -> decompose -> control -> session.
+:mod:`aoc_cli.index` knows only beliefs (numpy + FAISS); this module joins a corpus, its
+belief model and the index into a :class:`CorpusIndex`, and that with a controller into a
+:class:`Session` (or a :class:`ModelFreeSession` for the policies that need no model).
 
 Layout under ``<corpus>/models/<model>/``::
 
     beliefs.npy                 (N, d_b) float32, memory-mappable, the belief of every row
+    beliefs.json                the model and corpus hashes the beliefs were computed from
     index/<index_id>/index.faiss    the FAISS index (+ .json, its config)
     index/<index_id>/index.faiss.rows.npy  (M,) int64: entry -> corpus row (derived indexes)
     index/<index_id>/index.json     what it was built from (corpus, model hashes), kind, size
 
 The ``default`` index holds every row once. Derived indexes re-sample or sub-sample rows by
-tag (the paper's adaptivity experiment) with no retraining: ``--resample policy=pi1:4``
-repeats pi1's rows four times, ``--subsample policy=pi1:0.5`` keeps a random half of them.
+tag (the paper's adaptivity experiment) with no retraining: a rate of 4 for ``policy=pi1``
+repeats pi1's rows four times, 0.5 keeps a random half of its episodes
+(:func:`aoc_cli.rows.row_multiplicity`).
 """
 
 from __future__ import annotations
@@ -18,13 +25,20 @@ import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from aoc_cli.control.config import ControllerConfig
+from aoc_cli.control.controller import Controller
 from aoc_cli.decompose import decompose
 from aoc_cli.errors import AocError
 from aoc_cli.index import BeliefIndex
-from aoc_cli.store import check_name, write_json, write_npy
+from aoc_cli.rows import row_multiplicity
+from aoc_cli.store import Corpus, check_name, write_json, write_npy
+
+if TYPE_CHECKING:
+    from aoc_cli.belief.artefact import BeliefModel
 
 #: Rows sampled to measure the corpus's typical residual (leave-those-rows-out).
 TYPICAL_SAMPLE = 500
@@ -36,7 +50,7 @@ class CorpusIndex:
     index (possibly derived: re-sampled or sub-sampled rows) and what it was built from."""
 
     index_id: str
-    model: object
+    model: BeliefModel
     beliefs: np.ndarray
     values: np.ndarray | None
     index: BeliefIndex
@@ -65,25 +79,23 @@ class CorpusIndex:
                          selection=selection)
 
 
-def _load_model(corpus, model_id: str | None):
-    """The model to index or control with: the given id, else "default", else the latest."""
-    from aoc_cli.belief import list_models, load_model
+def load_model(corpus: Corpus, model_id: str | None) -> BeliefModel:
+    """The model to index or control with (torch is imported only here, when one is loaded)."""
+    from aoc_cli.belief import load_model as load
 
-    if model_id is None and "default" in list_models(corpus):
-        model_id = "default"
-    return load_model(corpus, model_id)
+    return load(corpus, model_id)
 
 
 def _index_dir(corpus, model_id: str, index_id: str) -> Path:
     return corpus.models_dir / model_id / "index" / check_name(index_id, "index")
 
 
-def build_index(corpus, model_id: str | None = None, kind: str = "auto",
+def build_index(corpus: Corpus, model_id: str | None = None, kind: str = "auto",
                 index_id: str = "default", resample: dict | None = None,
                 subsample: dict | None = None, seed: int = 0, progress=None,
                 **params) -> CorpusIndex:
     """Compute (or reuse) the beliefs of every row and build an index over them."""
-    model = _load_model(corpus, model_id)
+    model = load_model(corpus, model_id)
     model_dir = corpus.models_dir / model.id
     beliefs_path = model_dir / "beliefs.npy"
     meta_path = model_dir / "beliefs.json"
@@ -140,56 +152,9 @@ def typical_residual(ci: CorpusIndex, seed: int = 0) -> dict:
             "p99": float(np.quantile(r, 0.99)), "sample": int(len(sample))}
 
 
-def row_multiplicity(corpus, resample: dict | None, subsample: dict | None,
-                     seed: int) -> np.ndarray:
-    """(N,) int copies of each corpus row in a derived index, from ``{"policy=pi1": 4.0}``.
-
-    Rates are per tag value: an integer part repeats the rows, a fractional part keeps that
-    fraction of whole episodes (chosen with ``seed``), so trajectories stay whole.
-    """
-    n = corpus.n_rows
-    counts = np.ones(n, dtype=np.int64)
-    rng = np.random.default_rng(seed)
-    rates = {**(resample or {}), **(subsample or {})}
-    for key, rate in rates.items():
-        tag, _, label = key.partition("=")
-        codes, labels = corpus.tag(tag)
-        if label not in labels:
-            raise AocError(f"tag {tag!r} has no value {label!r} (values: {', '.join(labels)})")
-        if rate < 0:
-            raise AocError(f"a sampling rate must be >= 0, got {rate} for {key}")
-        mask = codes == labels.index(label)
-        whole, frac = int(np.floor(rate)), rate - np.floor(rate)
-        episodes = np.unique(corpus.episode_of(np.flatnonzero(mask)))
-        extra = np.zeros(corpus.n_episodes, bool)
-        if frac > 0:
-            pick = rng.choice(len(episodes), size=int(round(frac * len(episodes))), replace=False)
-            extra[episodes[pick]] = True
-        per_row = whole + extra[corpus.episode_of(np.arange(n))].astype(np.int64)
-        counts[mask] = per_row[mask]
-    if counts.sum() == 0:
-        raise AocError("the sampling rates leave no rows in the index")
-    return counts
-
-
-def parse_rates(items: list[str] | None, flag: str) -> dict[str, float]:
-    """``["policy=pi1:4"]`` -> ``{"policy=pi1": 4.0}``."""
-    out = {}
-    for item in items or []:
-        key, sep, rate = item.rpartition(":")
-        try:
-            value = float(rate)
-        except ValueError:
-            value = None
-        if not sep or "=" not in key or value is None:
-            raise AocError(f"{flag} expects TAG=VALUE:RATE (e.g. policy=pi1:4), got {item!r}")
-        out[key] = value
-    return out
-
-
-def load_index(corpus, model_id: str | None = None, index_id: str = "default") -> CorpusIndex:
+def load_index(corpus: Corpus, model_id: str | None = None, index_id: str = "default") -> CorpusIndex:
     """Load a built index, refusing one built from another corpus or model."""
-    model = _load_model(corpus, model_id)
+    model = load_model(corpus, model_id)
     out = _index_dir(corpus, model.id, index_id)
     if not (out / "index.json").is_file():
         hint = f"aoc index {corpus.name} --model {model.id}"
@@ -208,31 +173,83 @@ def load_index(corpus, model_id: str | None = None, index_id: str = "default") -
     return CorpusIndex(index_id, model, beliefs, model.values, index, meta)
 
 
-def row_selection(corpus, select: dict[str, list[str]] | None = None,
-                  exclude: dict[str, list[str]] | None = None,
-                  episodes: list[int] | None = None,
-                  row_range: tuple[int, int] | None = None) -> np.ndarray | None:
-    """(N,) bool mask from tag selections/exclusions, episodes and a row range; None = all."""
-    if not (select or exclude or episodes or row_range):
-        return None
-    n = corpus.n_rows
-    mask = np.ones(n, bool)
-    for tag, labels in (select or {}).items():
-        codes, known = corpus.tag(tag)
-        for label in labels:
-            if label not in known:
-                raise AocError(f"tag {tag!r} has no value {label!r} (values: {', '.join(known)})")
-        mask &= np.isin(codes, [known.index(x) for x in labels])
-    for tag, labels in (exclude or {}).items():
-        codes, known = corpus.tag(tag)
-        mask &= ~np.isin(codes, [known.index(x) for x in labels if x in known])
-    if episodes:
-        mask &= np.isin(corpus.episode_of(np.arange(n)), episodes)
-    if row_range:
-        lo, hi = row_range
-        rng_mask = np.zeros(n, bool)
-        rng_mask[max(lo, 0):min(hi, n)] = True
-        mask &= rng_mask
-    if not mask.any():
-        raise AocError("the row selection leaves no rows of the corpus")
-    return mask
+@dataclass
+class Session:
+    """A controller ready to act: corpus, belief model, index (with its row values) and the
+    controller over them (its settings and row selection). ``action_space``: the
+    environment's, when it is narrower than the corpus's."""
+
+    corpus: Corpus
+    model: BeliefModel
+    index: CorpusIndex
+    controller: Controller
+    action_space: dict | None = None
+
+    @property
+    def history_length(self) -> int:
+        """L of the model: the previous transitions a belief reads."""
+        return int(self.model.history_length)
+
+    def meta(self) -> dict:
+        """What an audit log records of the session."""
+        selection = self.controller.selection
+        return {
+            "corpus": self.corpus.name, "corpus_hash": self.corpus.hash,
+            "model": self.model.id, "model_hash": self.model.hash,
+            "index": self.index.index_id, "mode": self.model.mode,
+            "config": self.controller.config.to_dict(),
+            "selection": None if selection is None
+            else np.flatnonzero(selection).tolist() if selection.sum() < 10000 else "mask",
+        }
+
+
+@dataclass
+class ModelFreeSession:
+    """A corpus without model or index, for the policies that need neither (zero, random):
+    they run on a corpus before anything is trained."""
+
+    corpus: Corpus
+    action_space: dict | None = None
+
+    @property
+    def history_length(self) -> int:
+        """0: a model-free policy reads no history."""
+        return 0
+
+    def meta(self) -> dict:
+        return {"corpus": self.corpus.name, "corpus_hash": self.corpus.hash, "model": None}
+
+
+def open_session(corpus: Corpus, model_id: str | None = None, index_id: str = "default",
+                 config: ControllerConfig | None = None, selection: np.ndarray | None = None,
+                 seed: int = 0, action_space: dict | None = None) -> Session:
+    """Load the model and index of ``corpus`` and build a controller; ``selection`` an (N,)
+    bool row mask (:func:`aoc_cli.rows.row_selection`)."""
+    config = (config or ControllerConfig()).check()
+    _one_thread()
+    index = load_index(corpus, model_id, index_id)
+    bc_model = None
+    if config.sampler == "bc" and index.model.mode == "value" and not corpus.discrete:
+        bc_model = load_model(corpus, config.bc_model)
+        if bc_model.mode != "imitation":
+            raise AocError(f"model {config.bc_model!r} is not an imitation-mode model: the bc "
+                           f"sampler needs `aoc train {corpus.name} --model {config.bc_model} "
+                           "--mode imitation`")
+    controller = Controller(corpus, index, config, selection=selection, bc_model=bc_model,
+                            seed=seed, action_space=action_space)
+    return Session(corpus, index.model, index, controller, action_space)
+
+
+def model_free_session(corpus: Corpus, action_space: dict | None = None) -> ModelFreeSession:
+    """A session for the zero and random policies: no model or index is opened."""
+    return ModelFreeSession(corpus, action_space)
+
+
+def _one_thread() -> None:
+    """A control step is ~100 small queries: one thread each for torch and FAISS is fastest,
+    and two thread pools (torch's and FAISS's OpenMP) must not fight over the cores."""
+    import faiss
+    import torch
+
+    torch.set_num_threads(1)
+    faiss.omp_set_num_threads(1)

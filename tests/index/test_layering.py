@@ -1,0 +1,27 @@
+"""The flow reads one way (store -> belief -> index -> decompose -> control -> session): the
+index package knows only beliefs, so importing it must not import torch or anything above it."""
+
+import subprocess
+import sys
+
+
+def _modules_after(statement: str) -> set[str]:
+    code = f"import sys; {statement}; print(' '.join(sorted(sys.modules)))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True)
+    return set(out.stdout.split())
+
+
+def test_index_depends_on_numpy_and_faiss_only():
+    mods = _modules_after("import aoc_cli.index")
+    assert "faiss" in mods and "numpy" in mods
+    assert "torch" not in mods
+    above = {m for m in mods if m.startswith(("aoc_cli.decompose", "aoc_cli.control",
+                                              "aoc_cli.belief", "aoc_cli.session"))}
+    assert not above, above
+
+
+def test_belief_artefact_and_train_import_in_either_order():
+    # no import cycle between the two: each loads on its own, first
+    for first in ("aoc_cli.belief.artefact", "aoc_cli.belief.train"):
+        assert first in _modules_after(f"import {first}")
