@@ -48,12 +48,9 @@ def session(corpus, env, task: str | None = None, model_id: str = "default",
     controller settings (as `aoc rollout --env TASK` uses them) over the paper's defaults."""
     from aoc_cli.control import ControllerConfig
     from aoc_cli.session import open_session
-    from aoc_cli.envs import TASKS
 
-    settings = dict(getattr(TASKS.get(task), "controller", None) or {}) if task else {}
-    settings.update(config)
-    return open_session(corpus, model_id, index_id, ControllerConfig(**settings), selection,
-                        seed, action_space_of(env))
+    return open_session(corpus, model_id, index_id, ControllerConfig.for_task(task, **config),
+                        selection, seed, action_space_of(env))
 
 
 def belief_config(scale: dict, mode: str = "value", seed: int = 0, **overrides):

@@ -1,7 +1,9 @@
 """The typer app. Each command lives in its own module ``aoc_cli.cli.<command>`` exposing
 ``register(app)``; this module only wires them up and turns errors into exit codes:
-0 success, 1 a failed run, 2 bad input or usage (one line on stderr, no traceback unless
-``--debug``).
+0 success, 1 a failed run, 2 bad input or usage (one line ``aoc: error: ...`` on stderr, no
+traceback unless ``--debug``): a library error (:class:`aoc_cli.errors.AocError`) and a usage
+error (an unknown command or option, a missing argument, a value that is not one of the
+choices) alike.
 """
 
 from __future__ import annotations
@@ -15,6 +17,12 @@ from typing import Optional
 
 import typer
 
+try:  # typer >= 0.2x carries its own copy of click
+    from typer._click import exceptions as usage
+except ImportError:  # pragma: no cover - older typer on click
+    from click import exceptions as usage
+
+from aoc_cli import __version__
 from aoc_cli.cli.common import state
 from aoc_cli.errors import AocError
 
@@ -26,10 +34,16 @@ app = typer.Typer(
     name="aoc",
     help="Accountable offline control: decisions backed by named rows of a logged dataset.",
     no_args_is_help=True,
-    add_completion=False,
+    add_completion=True,
     pretty_exceptions_enable=False,
     context_settings={"help_option_names": ["-h", "--help"]},
 )
+
+
+def _version(value: bool) -> None:
+    if value:
+        print(f"aoc {__version__}")
+        raise typer.Exit()
 
 
 @app.callback()
@@ -38,9 +52,10 @@ def _global(
         None, "--store", envvar="AOC_STORE", help="Corpus store folder (default ./corpora)."
     ),
     debug: bool = typer.Option(False, "--debug", help="Show tracebacks of errors."),
+    version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
+                                 help="Print the version and exit."),
 ) -> None:
     state.store = store
-    state.debug = debug
 
 
 for _name in COMMANDS:
@@ -48,19 +63,43 @@ for _name in COMMANDS:
         importlib.import_module(f"aoc_cli.cli.{_name}").register(app)
 
 
+def usage_message(err: usage.UsageError) -> str:
+    """One line for a usage error, naming the flag: ``unknown --mode: 'x' is not one of ...``."""
+    command = err.ctx.command_path if err.ctx is not None else "aoc"
+    if isinstance(err, usage.BadParameter) and not isinstance(err, usage.MissingParameter) \
+            and err.param is not None:
+        hint = err.param_hint or err.param.get_error_hint()
+        hint = hint if isinstance(hint, str) else " / ".join(hint)
+        text = str(err.message).removeprefix("Value error, ")
+        kind = "unknown" if " is not one of " in text else "invalid value for"
+        return f"{kind} {hint.replace(chr(39), '')}: {text}"
+    message = " ".join(err.format_message().split())
+    return f"{message} (see `{command} --help`)"
+
+
 def main(argv: list[str] | None = None) -> None:
-    """Console-script entry point. Click handles usage errors itself (exit 2)."""
-    debug = "--debug" in (argv if argv is not None else sys.argv[1:]) or bool(
-        os.environ.get("AOC_DEBUG"))
+    """Console-script entry point."""
+    args = list(argv if argv is not None else sys.argv[1:])
+    debug = "--debug" in args or bool(os.environ.get("AOC_DEBUG"))
     previous = _terminate_like_interrupt()
+    code = 0
     try:
-        app(args=argv, prog_name="aoc")
+        code = app(args=args, prog_name="aoc", standalone_mode=False)
     except Terminated:
         if debug:
             raise
         # every write is a temporary renamed into place: the store holds the previous state
         print("aoc: terminated (the store keeps its previous state)", file=sys.stderr)
         sys.exit(143)
+    except usage.NoArgsIsHelpError as err:
+        print(err.format_message())
+        sys.exit(2)
+    except usage.UsageError as err:
+        print(f"aoc: error: {usage_message(err)}", file=sys.stderr)
+        sys.exit(2)
+    except typer.Abort:
+        print("aoc: aborted", file=sys.stderr)
+        sys.exit(130)
     except AocError as err:
         if debug:
             raise
@@ -79,6 +118,8 @@ def main(argv: list[str] | None = None) -> None:
             import signal
 
             signal.signal(signal.SIGTERM, previous)
+    if isinstance(code, int) and code != 0:
+        sys.exit(code)
 
 
 class Terminated(BaseException):

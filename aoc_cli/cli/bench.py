@@ -7,7 +7,7 @@ from typing import Optional
 
 import typer
 
-from aoc_cli.cli.common import FormatOption
+from aoc_cli.cli.common import EpisodesOption, EpsilonOption, FormatOption, ResidualCapOption
 from aoc_cli.errors import AocError
 from aoc_cli.report import message, progress, resolve_format, write_records
 
@@ -25,25 +25,19 @@ def register(app: typer.Typer) -> None:
         tiny: bool = typer.Option(False, "--tiny", help="A smoke-test run (seconds; no effect "
                                                         "to read from it)."),
         seeds: Optional[int] = typer.Option(None, "--seeds", help="Seeds (default: the scale's)."),
-        episodes: Optional[int] = typer.Option(None, "--episodes",
-                                               help="Episodes per method and setting."),
+        episodes: EpisodesOption = None,
         methods: Optional[str] = typer.Option(None, "--methods",
                                               help="Comma-separated methods (default: all)."),
         out: Optional[Path] = typer.Option(None, "--out", help="Output folder (default "
                                            "bench/EXPERIMENT; with all: OUT/EXPERIMENT)."),
-        epsilon: Optional[float] = typer.Option(
-            None, "--epsilon", help="AOC's epsilon where the experiment does not vary it "
-                                    "(default: the task's setting, else 0.5)."),
-        residual_cap: Optional[float] = typer.Option(
-            None, "--residual-cap", help="AOC's residual cap c (candidates above c x the "
-                                         "corpus's typical p90 residual are dropped; default: "
-                                         "no cap)."),
+        epsilon: EpsilonOption = None,
+        residual_cap: ResidualCapOption = None,
         sizes: Optional[str] = typer.Option(
             None, "--sizes", help="pendulum-het, lunar: comma-separated rows per corpus "
                                   "instead of the scale's (e.g. 100000, the paper's Low-Data)."),
         bench_store: Path = typer.Option(Path("bench/store"), "--bench-store",
                                          help="Store for the bench's corpora and models."),
-        fmt: Optional[str] = FormatOption,
+        fmt: FormatOption = None,
     ) -> None:
         """Run an experiment end to end; write results.csv, summary.md/json and PNGs."""
         from aoc_cli.bench import ORDER, expected_seconds, run_experiment

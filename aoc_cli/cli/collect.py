@@ -4,11 +4,11 @@ corpus; ``aoc collect --list`` shows the tasks. Parses and prints only; the work
 
 from __future__ import annotations
 
-from typing import Optional
+from typing import Annotated, Optional
 
 import typer
 
-from aoc_cli.cli.common import FormatOption, get_store
+from aoc_cli.cli.common import EpisodesOption, FormatOption, get_store
 from aoc_cli.errors import AocError
 from aoc_cli.report.output import message, progress, write_records
 
@@ -22,10 +22,9 @@ def register(app: typer.Typer) -> None:
         task: Optional[str] = typer.Argument(
             None, help="Built-in task: pendulum-het, pendulum-het-upright, maze, two-gates, "
                        "lunar (see --list)."),
-        steps: Optional[int] = typer.Option(
-            None, "--steps", "-n", help="Rows to collect (default: the task's, see --list)."),
-        episodes: Optional[int] = typer.Option(
-            None, "--episodes", help="Episodes to collect instead of --steps."),
+        steps: Annotated[Optional[int], typer.Option(
+            "--steps", help="Rows to collect (default: the task's, see --list).")] = None,
+        episodes: EpisodesOption = None,
         name: Optional[str] = typer.Option(None, "--name", help="Name of the corpus to write."),
         seed: int = typer.Option(0, "--seed", help="Random seed: same seed, same corpus."),
         overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing corpus."),
@@ -34,7 +33,7 @@ def register(app: typer.Typer) -> None:
             None, "--csv", help="ward: write the log as CSV files DIR/NAME.csv and "
                                 "DIR/NAME-static.csv (for `aoc ingest --static`) instead of a "
                                 "corpus."),
-        fmt: Optional[str] = FormatOption,
+        fmt: FormatOption = None,
     ) -> None:
         """Run a built-in task's behaviour policies and store the data as a corpus."""
         from aoc_cli.envs import TASKS, get_task

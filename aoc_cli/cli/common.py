@@ -1,10 +1,17 @@
-"""What every command module shares: global state, the --format option, tag parsing."""
+"""What every command module shares: global state, the typed options declared once, the
+choices as enums (``--help`` lists them, shell completion offers them), flag parsing.
+
+A command declares a shared option by its alias and its default, e.g.
+``epsilon: EpsilonOption = None``, ``fmt: FormatOption = None``, ``seed: SeedOption = 0``;
+the flag's name and help text are the same in every command.
+"""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from enum import Enum
 from pathlib import Path
-from typing import Optional
+from typing import Annotated, List, Optional
 
 import typer
 
@@ -16,17 +23,116 @@ class State:
     """Global options, set by the app callback before any command runs."""
 
     store: Optional[Path] = None
-    debug: bool = False
 
 
 state = State()
 
-FormatOption = typer.Option(
-    None,
-    "--format",
-    "-f",
-    help="Output format: table|json|jsonl|csv (default: table on a terminal, json in a pipe).",
-)
+
+# -- choices (str enums: a member compares equal to its value) -----------------------------
+class OutputFormat(str, Enum):
+    """``--format``: how data is printed on stdout."""
+
+    table = "table"
+    json = "json"
+    jsonl = "jsonl"
+    csv = "csv"
+
+
+class PolicyName(str, Enum):
+    """``--policy``: the AOC controller or a baseline (:mod:`aoc_cli.baselines`)."""
+
+    aoc = "aoc"
+    zero = "zero"
+    random = "random"
+    nn1 = "1nn"
+    knn = "knn"
+    nn1_belief = "1nn-belief"
+    knn_belief = "knn-belief"
+    bc = "bc"
+    td3bc = "td3bc"
+    cql = "cql"
+    mpc = "mpc"
+
+
+class SamplerName(str, Enum):
+    """``--sampler``: how the controller draws its K candidate actions."""
+
+    uniform = "uniform"
+    bc = "bc"
+
+
+class IndexKind(str, Enum):
+    """``--kind``: the nearest-neighbour index (auto: flat for small corpora)."""
+
+    auto = "auto"
+    flat = "flat"
+    hnsw = "hnsw"
+    ivf = "ivf"
+
+
+class BeliefMode(str, Enum):
+    """``--mode``: value (AOC, b(o, a, h) predicts v) or imitation (ABC, b(o, h) predicts a)."""
+
+    value = "value"
+    imitation = "imitation"
+
+
+def choice(value: Enum | str | None) -> str | None:
+    """The plain string of an enum choice (None stays None)."""
+    return value.value if isinstance(value, Enum) else value
+
+
+# -- arguments and options shared by several commands --------------------------------------
+CorpusArgument = Annotated[str, typer.Argument(help="Corpus name.", show_default=False)]
+
+FormatOption = Annotated[Optional[OutputFormat], typer.Option(
+    "--format", "-f", case_sensitive=False,
+    help="Output format (default: table on a terminal, json in a pipe).")]
+
+ModelOption = Annotated[Optional[str], typer.Option(
+    "--model", help="Model id (models/<ID>/ of the corpus; default: 'default', else the "
+                    "latest trained).")]
+
+IndexOption = Annotated[str, typer.Option(
+    "--index", "--index-id", help="Index id: 'default' (every row once) or a derived index "
+                                  "(re-sampled or sub-sampled rows).")]
+
+EpsilonOption = Annotated[Optional[float], typer.Option(
+    "--epsilon", help="Residual quantile of the candidates kept, in (0, 1] (default: the "
+                      "task's setting, else 0.5).")]
+
+KOption = Annotated[Optional[int], typer.Option(
+    "--k", help="Nearest corpus beliefs per query (default 2(d_b+1)).")]
+
+ResidualCapOption = Annotated[Optional[float], typer.Option(
+    "--residual-cap", help="Also drop candidates whose residual exceeds this many times the "
+                           "corpus's typical p90 residual (default: no cap).")]
+
+CandidatesOption = Annotated[Optional[int], typer.Option(
+    "--candidates", "-K", help="Candidate actions per step (default: the task's, else 100).")]
+
+SamplerOption = Annotated[SamplerName, typer.Option(
+    "--sampler", case_sensitive=False,
+    help="Candidates: uniform in the action box, or bc (a behaviour-cloning model + noise).")]
+
+PolicyOption = Annotated[PolicyName, typer.Option(
+    "--policy", case_sensitive=False,
+    help="aoc, or a baseline: " + ", ".join(p.value for p in PolicyName if p.value != "aoc")
+         + " (the last three with the bench extra).")]
+
+EpisodesOption = Annotated[Optional[int], typer.Option(
+    "--episodes", "-n", help="Episodes to run (or to collect).")]
+
+SeedOption = Annotated[int, typer.Option(
+    "--seed", help="Random seed: the same seed gives the same result.")]
+
+SelectOption = Annotated[Optional[List[str]], typer.Option(
+    "--select", help="Only rows with TAG=VALUE[,VALUE] (repeatable).")]
+
+ExcludeOption = Annotated[Optional[List[str]], typer.Option(
+    "--exclude", help="No rows with TAG=VALUE[,VALUE] (repeatable).")]
+
+OverwriteOption = Annotated[bool, typer.Option("--overwrite", help="Replace an existing one.")]
 
 
 def get_store():
@@ -36,14 +142,25 @@ def get_store():
     return Store.open(state.store)
 
 
+# -- flag values ---------------------------------------------------------------------------
+def _split(item: str, sep: str, flag: str, form: str) -> tuple[str, str]:
+    key, found, value = item.rpartition(sep) if sep == ":" else item.partition(sep)
+    if not found or not key.strip() or not value.strip():
+        raise AocError(f"{flag} expects {form}, got {item!r}")
+    return key.strip(), value.strip()
+
+
 def parse_key_values(items: list[str] | None, flag: str) -> dict[str, str]:
     """``["a=b", "c=d"]`` -> ``{"a": "b", "c": "d"}``; a malformed item is an AocError."""
-    out: dict[str, str] = {}
+    return dict(_split(item, "=", flag, "KEY=VALUE") for item in items or [])
+
+
+def parse_selection(items: list[str] | None, flag: str) -> dict[str, list[str]]:
+    """``["policy=pi1,pi3", "system=normal"]`` -> ``{"policy": ["pi1", "pi3"], ...}``."""
+    out: dict[str, list[str]] = {}
     for item in items or []:
-        key, sep, value = item.partition("=")
-        if not sep or not key or not value:
-            raise AocError(f"{flag} expects KEY=VALUE, got {item!r}")
-        out[key.strip()] = value.strip()
+        tag, values = _split(item, "=", flag, "TAG=VALUE[,VALUE...]")
+        out.setdefault(tag, []).extend(v.strip() for v in values.split(",") if v.strip())
     return out
 
 
@@ -51,12 +168,12 @@ def parse_rates(items: list[str] | None, flag: str) -> dict[str, float]:
     """``["policy=pi1:4"]`` -> ``{"policy=pi1": 4.0}``."""
     out = {}
     for item in items or []:
-        key, sep, rate = item.rpartition(":")
+        form = "TAG=VALUE:RATE (e.g. policy=pi1:4)"
+        key, rate = _split(item, ":", flag, form)
         try:
-            value = float(rate)
+            out[key] = float(rate)
         except ValueError:
-            value = None
-        if not sep or "=" not in key or value is None:
-            raise AocError(f"{flag} expects TAG=VALUE:RATE (e.g. policy=pi1:4), got {item!r}")
-        out[key] = value
+            raise AocError(f"{flag} expects {form}, got {item!r}") from None
+        if "=" not in key:
+            raise AocError(f"{flag} expects {form}, got {item!r}")
     return out

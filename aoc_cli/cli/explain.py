@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import List, Optional
+from typing import Annotated, List, Optional
 
 import typer
 
-from aoc_cli.cli.common import FormatOption, get_store
+from aoc_cli.cli.common import (CandidatesOption, CorpusArgument, EpsilonOption, FormatOption,
+                                IndexOption, KOption, ModelOption, ResidualCapOption,
+                                get_store)
 from aoc_cli.errors import AocError
 from aoc_cli.report import resolve_format, write_object, write_records
 
@@ -16,21 +18,30 @@ from aoc_cli.report import resolve_format, write_object, write_records
 def register(app: typer.Typer) -> None:
     @app.command("explain")
     def explain_command(
-        name: str = typer.Argument(..., help="Corpus name."),
-        input: Optional[str] = typer.Option(None, "--input", "-i", help="JSONL queries (a file, or - for stdin)."),
-        audit: Optional[Path] = typer.Option(None, "--audit", help="An audit log written by `aoc rollout --audit`."),
-        data: Optional[str] = typer.Option(None, "--data", help="A corpus whose logged step to explain (--episode, --step): NAME itself, or held-out episodes of the same spaces. Prints the controller's decision there and what supports the logged action."),
-        episode: int = typer.Option(0, "--episode", help="Episode of the audit log or of --data."),
-        step: int = typer.Option(0, "--step", help="Step of that episode."),
-        compare: Optional[List[str]] = typer.Option(None, "--compare", help="Actions to explain side by side, e.g. --compare 0 --compare 1 or --compare 0.5,-1."),
-        model: Optional[str] = typer.Option(None, "--model", help="Model id."),
-        index_id: str = typer.Option("default", "--index", help="Index id."),
-        candidates: Optional[int] = typer.Option(None, "--candidates", "-K", help="Candidate actions (default: the task's, else 100)."),
-        epsilon: Optional[float] = typer.Option(None, "--epsilon", help="Residual quantile of candidates kept, in (0, 1] (default: the task's when NAME was collected from a built-in task, as aoc rollout uses it; else 0.5)."),
-        k: Optional[int] = typer.Option(None, "--k", help="Nearest corpus beliefs per query (default 2(d_b+1))."),
-        residual_cap: Optional[float] = typer.Option(None, "--residual-cap", help="Residual cap c of the candidate filter (default: none)."),
-        seed: int = typer.Option(0, "--seed", help="Seed of the candidates."),
-        fmt: Optional[str] = FormatOption,
+        name: CorpusArgument,
+        input: Annotated[Optional[str], typer.Option(
+            "--input", "-i", help="JSONL queries (a file, or - for stdin).")] = None,
+        audit: Annotated[Optional[Path], typer.Option(
+            "--audit", help="An audit log written by `aoc rollout --audit`.")] = None,
+        data: Annotated[Optional[str], typer.Option(
+            "--data", help="A corpus whose logged step to explain (--episode, --step): NAME "
+                           "itself, or held-out episodes of the same spaces. Prints the "
+                           "controller's decision there and what supports the logged "
+                           "action.")] = None,
+        episode: Annotated[int, typer.Option(
+            "--episode", help="Episode of the audit log or of --data.")] = 0,
+        step: Annotated[int, typer.Option("--step", help="Step of that episode.")] = 0,
+        compare: Annotated[Optional[List[str]], typer.Option(
+            "--compare", help="Actions to explain side by side, e.g. --compare 0 --compare 1 "
+                              "or --compare 0.5,-1.")] = None,
+        model: ModelOption = None,
+        index_id: IndexOption = "default",
+        candidates: CandidatesOption = None,
+        epsilon: EpsilonOption = None,
+        k: KOption = None,
+        residual_cap: ResidualCapOption = None,
+        seed: Annotated[int, typer.Option("--seed", help="Seed of the candidates.")] = 0,
+        fmt: FormatOption = None,
     ) -> None:
         """Explain decisions: from JSONL queries, a recorded step of an audit log, or a logged
         step of a corpus."""
@@ -45,10 +56,8 @@ def register(app: typer.Typer) -> None:
                            "(a logged step)")
         store = get_store()
         corpus = store.corpus(name)
-        from aoc_cli.cli.rollout import task_config
-
-        config = task_config(_collected_task(corpus), candidates=candidates, epsilon=epsilon,
-                             k=k, residual_cap=residual_cap)
+        config = ControllerConfig.for_task(_collected_task(corpus), candidates=candidates,
+                                           epsilon=epsilon, k=k, residual_cap=residual_cap)
         records = []
         if data is not None:
             source = corpus if data == name else store.corpus(data)

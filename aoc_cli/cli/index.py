@@ -2,25 +2,34 @@
 
 from __future__ import annotations
 
-from typing import List, Optional
+from typing import Annotated, List, Optional
 
 import typer
 
-from aoc_cli.cli.common import FormatOption, get_store, parse_rates
+from aoc_cli.cli.common import (CorpusArgument, FormatOption, IndexKind, ModelOption, choice,
+                                get_store, parse_rates)
 from aoc_cli.report import progress, write_object
 
 
 def register(app: typer.Typer) -> None:
     @app.command("index")
     def index_command(
-        name: str = typer.Argument(..., help="Corpus name."),
-        model: Optional[str] = typer.Option(None, "--model", help="Model id (default: the only one)."),
-        kind: str = typer.Option("auto", "--kind", help="auto|flat|hnsw|ivf (auto: flat for small corpora)."),
-        index_id: str = typer.Option("default", "--index-id", help="Name of the index (derived indexes need their own)."),
-        resample: Optional[List[str]] = typer.Option(None, "--resample", help="TAG=VALUE:RATE, e.g. policy=pi1:4 (repeat those rows)."),
-        subsample: Optional[List[str]] = typer.Option(None, "--subsample", help="TAG=VALUE:RATE, e.g. policy=pi1:0.5 (keep a share of those episodes)."),
-        seed: int = typer.Option(0, "--seed", help="Seed of sub-sampling and of the typical-residual sample."),
-        fmt: Optional[str] = FormatOption,
+        name: CorpusArgument,
+        model: ModelOption = None,
+        kind: Annotated[IndexKind, typer.Option(
+            "--kind", case_sensitive=False,
+            help="The nearest-neighbour index (auto: flat for small corpora).")] = IndexKind.auto,
+        index_id: Annotated[str, typer.Option(
+            "--index", "--index-id",
+            help="Name of the index (derived indexes need their own).")] = "default",
+        resample: Annotated[Optional[List[str]], typer.Option(
+            "--resample", help="TAG=VALUE:RATE, e.g. policy=pi1:4 (repeat those rows).")] = None,
+        subsample: Annotated[Optional[List[str]], typer.Option(
+            "--subsample", help="TAG=VALUE:RATE, e.g. policy=pi1:0.5 (keep a share of those "
+                                "episodes).")] = None,
+        seed: Annotated[int, typer.Option(
+            "--seed", help="Seed of sub-sampling and of the typical-residual sample.")] = 0,
+        fmt: FormatOption = None,
     ) -> None:
         """Compute every row's belief and build the index the controller searches."""
         from aoc_cli.session import build_index
@@ -34,7 +43,7 @@ def register(app: typer.Typer) -> None:
 
                 raise AocError(f"--subsample rates are <= 1 (got {rate} for {key}); use --resample")
         with progress() as p:
-            ci = build_index(corpus, model, kind=kind, index_id=index_id, resample=rates_r,
+            ci = build_index(corpus, model, kind=choice(kind), index_id=index_id, resample=rates_r,
                              subsample=rates_s, seed=seed, progress=p)
         meta = ci.meta
         write_object({

@@ -2,18 +2,16 @@
 
 from __future__ import annotations
 
-from typing import Optional
-
 import typer
 
-from aoc_cli.cli.common import FormatOption, get_store
+from aoc_cli.cli.common import CorpusArgument, FormatOption, get_store
 
 
 def register(app: typer.Typer) -> None:
     @app.command("info")
     def info(
-        name: str = typer.Argument(..., help="Corpus name."),
-        fmt: Optional[str] = FormatOption,
+        name: CorpusArgument,
+        fmt: FormatOption = None,
     ) -> None:
         """Rows, episodes, spaces, returns, tags and what has been built from corpus NAME."""
         from aoc_cli.report.output import resolve_format, write_object, write_records
@@ -40,7 +38,7 @@ def register(app: typer.Typer) -> None:
                           "table", title="built from this corpus")
 
     @app.command("ls")
-    def ls(fmt: Optional[str] = FormatOption) -> None:
+    def ls(fmt: FormatOption = None) -> None:
         """List the corpora of the store."""
         from aoc_cli.report.output import message, write_records
         from aoc_cli.store import list_corpora

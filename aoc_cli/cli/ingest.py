@@ -18,7 +18,7 @@ def register(app: typer.Typer) -> None:
     @app.command("ingest")
     def ingest(
         path: str = typer.Argument(..., help="Dataset file or folder, or a Minari dataset id."),
-        name: str = typer.Option(..., "--name", "-n", help="Name of the corpus to create."),
+        name: str = typer.Option(..., "--name", help="Name of the corpus to create."),
         source_format: Optional[str] = typer.Option(
             None, "--from", help="Input format: minari|d4rl|d3rlpy|npz|csv (default: detect)."),
         tag: Optional[List[str]] = typer.Option(
@@ -48,7 +48,7 @@ def register(app: typer.Typer) -> None:
         terminal_column: Optional[str] = typer.Option(None, "--terminal-column", help="CSV."),
         static: Optional[Path] = typer.Option(
             None, "--static", help="CSV of static per-episode features, one row per id."),
-        fmt: Optional[str] = FormatOption,
+        fmt: FormatOption = None,
     ) -> None:
         """Read a dataset (Minari, D4RL HDF5, d3rlpy, NPZ, CSV) into corpus NAME."""
         from aoc_cli.formats import ReadOptions

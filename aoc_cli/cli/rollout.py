@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import List, Optional
+from typing import Annotated, Optional
 
 import typer
 
-from aoc_cli.cli.common import FormatOption, get_store
+from aoc_cli.cli.common import (CandidatesOption, CorpusArgument, EpisodesOption,
+                                EpsilonOption, ExcludeOption, FormatOption, IndexOption,
+                                KOption, ModelOption, PolicyName, PolicyOption,
+                                ResidualCapOption, SamplerName, SamplerOption, SelectOption,
+                                choice, get_store, parse_selection)
 from aoc_cli.errors import AocError
 from aoc_cli.report import message, progress, resolve_format, write_object, write_records
 
@@ -15,48 +19,46 @@ from aoc_cli.report import message, progress, resolve_format, write_object, writ
 MODEL_FREE = ("zero", "random")
 
 
-def parse_selection(items: list[str] | None, flag: str) -> dict[str, list[str]]:
-    """``["policy=pi1,pi3", "system=normal"]`` -> ``{"policy": ["pi1", "pi3"], ...}``."""
-    out: dict[str, list[str]] = {}
-    for item in items or []:
-        tag, sep, values = item.partition("=")
-        if not sep or not tag or not values:
-            raise AocError(f"{flag} expects TAG=VALUE[,VALUE...], got {item!r}")
-        out.setdefault(tag.strip(), []).extend(v.strip() for v in values.split(",") if v.strip())
-    return out
-
-
 def register(app: typer.Typer) -> None:
     @app.command("rollout")
     def rollout_command(
-        name: str = typer.Argument(..., help="Corpus name."),
-        env: str = typer.Option(..., "--env", help="A built-in task (aoc collect --list) or a gymnasium id."),
-        episodes: int = typer.Option(5, "--episodes", "-n", help="Episodes to run."),
-        policy: str = typer.Option("aoc", "--policy", help="aoc, or a baseline: zero, random, 1nn, knn, 1nn-belief, knn-belief, bc, td3bc, cql, mpc (the last three with the bench extra)."),
-        model: Optional[str] = typer.Option(None, "--model", help="Model id (default: the only one)."),
-        index_id: str = typer.Option("default", "--index", help="Index id, e.g. a re-sampled index."),
-        candidates: int = typer.Option(100, "--candidates", "-K", help="Candidate actions per step."),
-        epsilon: Optional[float] = typer.Option(None, "--epsilon", help="Residual quantile of candidates kept, in (0, 1] (default: the task's, else 0.5)."),
-        k: Optional[int] = typer.Option(None, "--k", help="Nearest corpus beliefs per query (default 2(d_b+1))."),
-        residual_cap: Optional[float] = typer.Option(None, "--residual-cap", help="Also drop candidates whose residual exceeds this many times the corpus's typical p90 residual (default: no cap)."),
-        sampler: str = typer.Option("uniform", "--sampler", help="uniform|bc"),
-        select: Optional[List[str]] = typer.Option(None, "--select", help="Only rows with TAG=VALUE[,VALUE]."),
-        exclude: Optional[List[str]] = typer.Option(None, "--exclude", help="No rows with TAG=VALUE[,VALUE]."),
-        seed: int = typer.Option(0, "--seed", help="Seed of the first episode and of the candidates."),
-        audit: Optional[Path] = typer.Option(None, "--audit", help="Write every decision to this HDF5 file."),
-        plot: Optional[Path] = typer.Option(None, "--plot", help="Write a PNG of trajectories or residual/reward curves."),
-        noise_after: Optional[int] = typer.Option(None, "--noise-after", help="Disturb actions after this step (OOD test)."),
-        noise_std: float = typer.Option(0.5, "--noise-std", help="Disturbance std as a fraction of the action range."),
-        ood_reference: Optional[Path] = typer.Option(None, "--ood-reference", help="Audit log of clean rollouts: flag steps against its per-step 3-sigma band instead of the running one."),
-        fmt: Optional[str] = FormatOption,
+        name: CorpusArgument,
+        env: Annotated[str, typer.Option(
+            "--env", help="A built-in task (aoc collect --list) or a gymnasium id.")],
+        episodes: EpisodesOption = 5,
+        policy: PolicyOption = PolicyName.aoc,
+        model: ModelOption = None,
+        index_id: IndexOption = "default",
+        candidates: CandidatesOption = None,
+        epsilon: EpsilonOption = None,
+        k: KOption = None,
+        residual_cap: ResidualCapOption = None,
+        sampler: SamplerOption = SamplerName.uniform,
+        select: SelectOption = None,
+        exclude: ExcludeOption = None,
+        seed: Annotated[int, typer.Option(
+            "--seed", help="Seed of the first episode and of the candidates.")] = 0,
+        audit: Annotated[Optional[Path], typer.Option(
+            "--audit", help="Write every decision to this HDF5 file.")] = None,
+        plot: Annotated[Optional[Path], typer.Option(
+            "--plot", help="Write a PNG of trajectories or residual/reward curves.")] = None,
+        noise_after: Annotated[Optional[int], typer.Option(
+            "--noise-after", help="Disturb actions after this step (OOD test).")] = None,
+        noise_std: Annotated[float, typer.Option(
+            "--noise-std", help="Disturbance std as a fraction of the action range.")] = 0.5,
+        ood_reference: Annotated[Optional[Path], typer.Option(
+            "--ood-reference", help="Audit log of clean rollouts: flag steps against its "
+                                    "per-step 3-sigma band instead of the running one.")] = None,
+        fmt: FormatOption = None,
     ) -> None:
         """Run episodes; print returns, success, OOD flags and residuals."""
-        from aoc_cli.control import rollout
+        from aoc_cli.control import ControllerConfig, rollout
         from aoc_cli.envs import make_env
         from aoc_cli.rows import row_selection
         from aoc_cli.session import model_free_session, open_session
 
         fmt = resolve_format(fmt)
+        policy, sampler = choice(policy), choice(sampler)
         if episodes < 1:
             raise AocError(f"--episodes must be >= 1, got {episodes}")
         store = get_store()
@@ -68,8 +70,8 @@ def register(app: typer.Typer) -> None:
         if noise_std != noise_std or noise_std < 0 or noise_std == float("inf"):
             raise AocError(f"--noise-std must be a finite number >= 0, got {noise_std}")
         corpus = store.corpus(name)
-        config = task_config(env, candidates=candidates, epsilon=epsilon, k=k, sampler=sampler,
-                             residual_cap=residual_cap)
+        config = ControllerConfig.for_task(env, candidates=candidates, epsilon=epsilon, k=k,
+                                           sampler=sampler, residual_cap=residual_cap)
         environment = make_env(env)
         selection = row_selection(corpus, parse_selection(select, "--select"),
                                   parse_selection(exclude, "--exclude"))
@@ -114,17 +116,6 @@ def register(app: typer.Typer) -> None:
         else:
             write_records(rows, fmt)
             message("summary: " + ", ".join(f"{k}={v}" for k, v in summary.items()))
-
-
-def task_config(env: str, **given):
-    """ControllerConfig from the flags given, else the task's own settings, else the paper's."""
-    from aoc_cli.control import ControllerConfig
-    from aoc_cli.envs import TASKS
-
-    task = TASKS.get(env)
-    settings = dict(task.controller) if task is not None else {}
-    settings.update({k: v for k, v in given.items() if v is not None})
-    return ControllerConfig(**settings).check()
 
 
 def _plot(env_name: str, results, path: Path, noise_after) -> None:

@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-from typing import Optional
+from typing import Annotated, Optional
 
 import typer
 
 from aoc_cli.belief.config import BeliefConfig
 from aoc_cli.belief.data import prepare
-from aoc_cli.cli.common import FormatOption, get_store
+from aoc_cli.cli.common import BeliefMode, CorpusArgument, FormatOption, choice, get_store
 from aoc_cli.report.output import message, progress, resolve_format, write_object
 
 #: Flag defaults are the config's (the paper's) defaults.
@@ -16,11 +16,13 @@ _D = BeliefConfig()
 
 
 def train(
-    name: str = typer.Argument(..., help="Corpus to train on."),
-    model: str = typer.Option("default", "--model", help="Model id (models/<ID>/ of the corpus)."),
-    mode: str = typer.Option(_D.mode, "--mode",
-                             help="value: b(o, a, h) predicts v (AOC); imitation: b(o, h) "
-                                  "predicts the action (ABC, reward-free data)."),
+    name: CorpusArgument,
+    model: Annotated[str, typer.Option(
+        "--model", help="Model id to write (models/<ID>/ of the corpus).")] = "default",
+    mode: Annotated[BeliefMode, typer.Option(
+        "--mode", case_sensitive=False,
+        help="value: b(o, a, h) predicts v (AOC); imitation: b(o, h) predicts the action "
+             "(ABC, reward-free data).")] = BeliefMode(_D.mode),
     belief: str = typer.Option(_D.belief, "--belief",
                                help="Value mode: what the belief is trained on: value (regress "
                                     "--value), critic (an offline TD3+BC critic's last hidden "
@@ -55,16 +57,17 @@ def train(
                                       "validation loss."),
     val_fraction: float = typer.Option(_D.val_fraction, "--val-fraction",
                                        help="Share of episodes held out for validation."),
-    seed: int = typer.Option(_D.seed, "--seed", help="Seed of the split, initialisation and "
-                                               "batches (reproducible on CPU)."),
+    seed: Annotated[int, typer.Option(
+        "--seed", help="Seed of the split, initialisation and batches (reproducible on "
+                       "CPU).")] = _D.seed,
     threads: Optional[int] = typer.Option(None, "--threads",
                                           help="CPU threads (default: all cores)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing model id."),
-    fmt: Optional[str] = FormatOption,
+    fmt: FormatOption = None,
 ) -> None:
     """Train the belief model b and linear head l of corpus NAME; print the final metrics."""
     fmt = resolve_format(fmt)
-    config = BeliefConfig(mode=mode, belief=belief, critic_steps=critic_steps,
+    config = BeliefConfig(mode=choice(mode), belief=belief, critic_steps=critic_steps,
                           critic_bc_weight=critic_bc_weight, value=value, gamma=gamma,
                           history_length=history_length,
                           dynamics_weight=dynamics_weight,

@@ -53,6 +53,17 @@ class ControllerConfig:
     ood_sigmas: float = 3.0
     """A step is flagged when its residual exceeds the running mean by this many stds."""
 
+    @classmethod
+    def for_task(cls, task: str | None, **flags) -> "ControllerConfig":
+        """The settings for ``task``: the ``flags`` given (None: not given) over the built-in
+        task's own settings (``Task.controller``; none for another name, an ingested corpus's
+        ``""`` or None) over the paper's defaults; checked."""
+        from aoc_cli.envs import TASKS
+
+        settings = dict(getattr(TASKS.get(task), "controller", None) or {}) if task else {}
+        settings.update({k: v for k, v in flags.items() if v is not None})
+        return cls(**settings).check()
+
     def check(self) -> "ControllerConfig":
         from aoc_cli.errors import AocError
 

@@ -23,9 +23,7 @@ def corridor(tmp_path_factory):
 
 
 def maze_session(corpus, **kw):
-    from aoc_cli.envs import TASKS
-
-    config = ControllerConfig(**{**TASKS["maze"].controller, **kw})
+    config = ControllerConfig.for_task("maze", **kw)
     return open_session(corpus, config=config, seed=0)
 
 
@@ -165,3 +163,18 @@ def test_residual_cap_falls_back_to_the_smallest_residual_when_none_pass(maze):
 def test_residual_cap_must_be_positive():
     with pytest.raises(AocError, match="residual-cap"):
         ControllerConfig(residual_cap=0.0).check()
+
+
+def test_task_defaults_come_from_one_place():
+    from aoc_cli.envs import TASKS
+
+    maze = ControllerConfig.for_task("maze")
+    assert maze.epsilon == TASKS["maze"].controller["epsilon"] != ControllerConfig().epsilon
+    # a flag given wins; a flag not given (None) leaves the task's setting
+    assert ControllerConfig.for_task("maze", epsilon=0.3, k=None).epsilon == 0.3
+    assert ControllerConfig.for_task("maze", k=None).k is None
+    # an ingested corpus ("") or an unknown gymnasium id: the paper's defaults
+    assert ControllerConfig.for_task("") == ControllerConfig.for_task("Pendulum-v1") == \
+        ControllerConfig()
+    with pytest.raises(AocError, match="epsilon"):
+        ControllerConfig.for_task("maze", epsilon=2.0)
