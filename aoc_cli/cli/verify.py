@@ -17,7 +17,7 @@ def register(app: typer.Typer) -> None:
     def verify(
         names: Optional[List[str]] = typer.Argument(
             None, help="Corpora to check (default: every corpus of the store)."),
-        fmt: Optional[str] = FormatOption,
+        fmt: FormatOption = None,
     ) -> None:
         """Check every file of the store against the checksums recorded when it was written."""
         from aoc_cli.report.output import message, progress, write_records
