@@ -6,11 +6,12 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Optional
+from typing import Annotated, Optional
 
 import typer
 
-from aoc_cli.cli.common import FormatOption, get_store
+from aoc_cli.cli.common import (CandidatesOption, EpsilonOption, FormatOption, IndexOption,
+                                KOption, ModelOption, get_store)
 from aoc_cli.errors import AocError
 from aoc_cli.report import resolve_format, write_object, write_records
 
@@ -27,30 +28,31 @@ def register(app: typer.Typer) -> None:
         data: str = typer.Option(..., "--data", help="Held-out corpus to score (same spaces), or NAME itself: each episode is then decided without its own rows."),
         baselines: str = typer.Option("knn,bc", "--baselines", help="Baselines on the same steps, comma-separated: knn (nearest rows on standardised inputs), bc (the model's own head); none for neither."),
         steps_file: Optional[Path] = typer.Option(None, "--steps", help="Write one JSON record per step to this JSONL file."),
-        model: Optional[str] = typer.Option(None, "--model", help="Model id."),
-        index_id: str = typer.Option("default", "--index", help="Index id."),
-        candidates: Optional[int] = typer.Option(None, "--candidates", "-K", help="Value mode, continuous actions: candidate actions per step (default: the task's, else 100)."),
-        epsilon: Optional[float] = typer.Option(None, "--epsilon", help="Value mode: residual quantile of candidates kept, in (0, 1]."),
-        k: Optional[int] = typer.Option(None, "--k", help="Nearest corpus beliefs per query (default 2(d_b+1))."),
+        model: ModelOption = None,
+        index_id: IndexOption = "default",
+        candidates: CandidatesOption = None,
+        epsilon: EpsilonOption = None,
+        k: KOption = None,
         exact: Optional[bool] = typer.Option(None, "--exact/--ivf", help="Search the index exactly for every step, or an IVF structure built for the run (default: exact up to 20,000 corpus rows, IVF beyond: ~10x faster, recall of the nearest rows ~0.9999)."),
-        seed: int = typer.Option(0, "--seed", help="Seed of the candidates (value mode, continuous actions)."),
-        fmt: Optional[str] = FormatOption,
+        seed: Annotated[int, typer.Option(
+            "--seed", help="Seed of the candidates (value mode, continuous actions).")] = 0,
+        fmt: FormatOption = None,
     ) -> None:
         """Decide every logged step of a held-out corpus in batches and score the decisions
         (accuracy, AUC, calibration or value R^2; residuals; baselines on the same steps)."""
         from aoc_cli.cli.explain import _collected_task
-        from aoc_cli.cli.rollout import task_config
-        from aoc_cli.control import open_session
+        from aoc_cli.control import ControllerConfig
         from aoc_cli.control.evaluate import evaluate, step_records
         from aoc_cli.report.output import progress
+        from aoc_cli.session import open_session
 
         fmt = resolve_format(fmt)
         names = [b.strip() for b in baselines.split(",")]
         store = get_store()
         corpus = store.corpus(name)
         held_out = corpus if data == name else store.corpus(data)
-        config = task_config(_collected_task(corpus), candidates=candidates, epsilon=epsilon,
-                             k=k, residual_cap=None)
+        config = ControllerConfig.for_task(_collected_task(corpus), candidates=candidates,
+                                           epsilon=epsilon, k=k, residual_cap=None)
         session = open_session(corpus, model, index_id, config, seed=seed)
         with progress(transient=True) as bar:
             task = bar.add_task(f"evaluate {name} on {data}", total=held_out.n_rows)

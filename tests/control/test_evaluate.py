@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from aoc_cli.belief import BeliefConfig, train_model
-from aoc_cli.control import ControllerConfig, explain_logged_step, open_session
+from aoc_cli.control import ControllerConfig, explain_logged_step
 from aoc_cli.control.evaluate import LeaveEpisodeOut, evaluate, step_records
 from aoc_cli.envs import collect
-from aoc_cli.index.build import build_index
+from aoc_cli.session import build_index, open_session
 from aoc_cli.store import Store
 
 from tests.conftest import run_aoc
