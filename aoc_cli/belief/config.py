@@ -71,6 +71,9 @@ class BeliefConfig:
     #: Activation of the belief layer: ``tanh`` (bounded, no dead units) or ``relu``.
     belief_activation: str = "tanh"
     lr: float = 1e-3
+    #: L2 penalty of Adam (0: the paper's objective; ``aoc train`` may choose one on small
+    #: corpora, aoc_cli.belief.select).
+    weight_decay: float = 0.0
     batch_size: int = 500
     max_epochs: int = 200
     #: Stop after this many epochs without a validation-loss improvement of ``min_delta``.
@@ -125,6 +128,8 @@ class BeliefConfig:
                            "is trained on the logged action)")
         if self.patience < 1:
             raise AocError(f"--patience must be >= 1, got {self.patience}")
+        if not self.weight_decay >= 0:
+            raise AocError(f"--weight-decay must be >= 0, got {self.weight_decay}")
         if not self.lr > 0:
             raise AocError(f"--lr must be > 0, got {self.lr}")
         if not 0.0 < self.val_fraction < 1.0:

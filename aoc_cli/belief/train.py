@@ -96,13 +96,15 @@ def _evaluate(net, inputs: CorpusInputs, rows: torch.Tensor, y: torch.Tensor, ob
 
 
 def train_model(corpus, config: BeliefConfig, model_id: str = "default", overwrite: bool = False,
-                progress=None, prepared: TrainingData | None = None) -> dict:
+                progress=None, prepared: TrainingData | None = None, save: bool = True,
+                extra: dict | None = None) -> dict:
     """Learn b and l on ``corpus`` and write ``corpus.models_dir/<model_id>/``; final metrics.
 
     ``progress``, when given, is called with a dict (``epoch``, ``max_epochs``, ``batch``,
     ``batches``, ``train_loss`` running mean, ``val_loss`` and ``best_val_loss`` or None,
     ``epoch_done``) every few batches, and at the end of every epoch with the epoch's metrics
-    (also ``val_r2`` or ``val_accuracy``, ``seconds``). ``prepared`` is the
+    (also ``val_r2`` or ``val_accuracy``, ``seconds``). ``save=False`` trains and returns the
+    metrics without writing the model; ``extra`` is merged into the saved metrics. ``prepared`` is the
     result of :func:`aoc_cli.belief.data.prepare` for the same arguments, when already known.
     """
     started = time.perf_counter()
@@ -147,7 +149,8 @@ def train_model(corpus, config: BeliefConfig, model_id: str = "default", overwri
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(config.seed)
         net = build_net(dims, config).to(device)
-    optimiser = torch.optim.Adam(net.parameters(), lr=config.lr)
+    optimiser = torch.optim.Adam(net.parameters(), lr=config.lr,
+                                 weight_decay=config.weight_decay)
     generator = torch.Generator().manual_seed(config.seed)
     tr = torch.as_tensor(train_rows, device=device)
     va = torch.as_tensor(val_rows, device=device)
@@ -222,6 +225,9 @@ def train_model(corpus, config: BeliefConfig, model_id: str = "default", overwri
                     "threads": threads if device.type == "cpu" else None,
                     "belief": config.belief})
     metrics["seconds"] = time.perf_counter() - started
+    metrics.update(extra or {})  # e.g. how the settings were chosen (aoc_cli.belief.select)
+    if not save:  # a candidate of the model selection: its metrics only
+        return metrics
     save_model(corpus, model_id, net=net.cpu(), config=config, dims=dims, norm=norm,
                value=value_spec(config.value, config.gamma) if config.mode == "value" else None,
                values=values, metrics=metrics, history=history,

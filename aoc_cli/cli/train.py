@@ -6,6 +6,7 @@ from typing import Annotated, Optional
 
 import typer
 
+from aoc_cli.belief import select
 from aoc_cli.belief.config import BeliefConfig
 from aoc_cli.belief.data import prepare
 from aoc_cli.cli.common import BeliefMode, CorpusArgument, FormatOption, choice, get_store
@@ -38,16 +39,25 @@ def train(
                               help="Value target: return (discounted return-to-go), "
                                    "mean-return, reward, or a numeric corpus column."),
     gamma: float = typer.Option(_D.gamma, "--gamma", help="Discount of --value return."),
-    history_length: int = typer.Option(_D.history_length, "--history-length",
-                                       help="Previous transitions of the episode the GRU reads "
-                                            "(0: no history)."),
+    history_length: Optional[int] = typer.Option(
+        None, "--history-length", help="Previous transitions of the episode the GRU reads "
+                                       "(0: no history; default: chosen by validation among "
+                                       "0, 1, 4 on corpora of up to 20,000 rows, else 4)."),
     dynamics_weight: float = typer.Option(_D.dynamics_weight, "--dynamics-weight",
                                           help="Value mode: weight of the auxiliary loss that "
                                                "makes the belief also predict o' - o "
                                                "(0: the paper's objective alone; "
                                                "--belief dynamics: 1 unless given)."),
     belief_dim: int = typer.Option(_D.belief_dim, "--belief-dim", help="Belief dimension d_b."),
-    hidden: int = typer.Option(_D.hidden, "--hidden", help="Units of the GRU and hidden layers."),
+    hidden: Optional[int] = typer.Option(
+        None, "--hidden", help="Units of the GRU and hidden layers (default: chosen among 128, "
+                               "64, 256 on small corpora, else 128)."),
+    weight_decay: Optional[float] = typer.Option(
+        None, "--weight-decay", help="Adam's L2 penalty (default: chosen among 0, 1e-4, 1e-3 "
+                                     "on small corpora, else 0)."),
+    paper: bool = typer.Option(False, "--paper", help="The paper's settings for everything "
+                                                      "not given (L 4, 128 units, no weight "
+                                                      "decay): no selection."),
     epochs: int = typer.Option(_D.max_epochs, "--epochs", help="Maximum epochs (early stopping ends "
                                                      "sooner)."),
     batch_size: int = typer.Option(_D.batch_size, "--batch-size", help="Mini-batch rows."),
@@ -69,16 +79,19 @@ def train(
     fmt = resolve_format(fmt)
     config = BeliefConfig(mode=choice(mode), belief=belief, critic_steps=critic_steps,
                           critic_bc_weight=critic_bc_weight, value=value, gamma=gamma,
-                          history_length=history_length,
                           dynamics_weight=dynamics_weight,
-                          belief_dim=belief_dim, hidden=hidden, max_epochs=epochs,
+                          belief_dim=belief_dim, max_epochs=epochs,
                           batch_size=batch_size, lr=lr, patience=patience,
-                          val_fraction=val_fraction, seed=seed, threads=threads).validate()
+                          val_fraction=val_fraction, seed=seed, threads=threads)
+    given = {"history_length": history_length, "hidden": hidden, "weight_decay": weight_decay}
+    config = select.with_defaults(config, given).validate()
     corpus = get_store().corpus(name)
     from aoc_cli.store import check_name, writing_model
 
     with writing_model(corpus.path, check_name(model, "model")):  # one writer per model id
-        metrics = _train(corpus, config, model, overwrite)
+        metrics = _train(corpus, config, model, overwrite,
+                         select.open_settings(corpus, config, given, paper),
+                         select.why_no_search(corpus, config, given, paper))
     score = (f"val R^2 {metrics['val_r2']:.3f}" if "val_r2" in metrics
              else f"val accuracy {metrics['val_accuracy']:.3f} (majority "
                   f"{metrics['val_majority_accuracy']:.3f})")
@@ -86,11 +99,29 @@ def train(
     message(f"trained {name}/{model}: {metrics['mode']} ({metrics.get('belief', 'value')} "
             f"belief), {metrics['epochs']} {unit} (best "
             f"{metrics['best_epoch']}), {score}, {metrics['seconds']:.0f} s")
-    write_object(metrics, fmt, title=f"aoc train {name} --model {model}")
+    chosen = metrics.get("selection") if (metrics.get("selection") or {}).get("searched") \
+        else None
+    if chosen:
+        message("chose " + ", ".join(f"{k} {v}" for k, v in chosen["chosen"].items()
+                                     if k in chosen["searched"]) + " by " + chosen["why"])
+    warning = select.baseline_check(metrics)
+    if warning:
+        message(f"[yellow]warning:[/] {warning}")
+    shown = metrics
+    if fmt == "table" and chosen:  # the candidates are in the JSON output and config.json
+        shown = {**metrics, "selection": ", ".join(f"{k} {v}" for k, v in
+                                                   chosen.get("chosen", {}).items())}
+    elif "selection" in metrics:
+        message(f"settings: {metrics['selection']['why']}")
+    if fmt == "table" and not chosen and "selection" in metrics:
+        shown = {**metrics, "selection": metrics["selection"]["why"]}
+    write_object(shown, fmt, title=f"aoc train {name} --model {model}")
 
 
-def _train(corpus, config: BeliefConfig, model: str, overwrite: bool) -> dict:
-    """Check the inputs (and the corpus's content hash), then train with a progress bar."""
+def _train(corpus, config: BeliefConfig, model: str, overwrite: bool, open_names: list[str],
+           defaults_note: str | None) -> dict:
+    """Check the inputs (and the corpus's content hash), then train with a progress bar;
+    with ``open_names``, choose those settings by validation first (aoc_cli.belief.select)."""
     name = corpus.name
     prepared = prepare(corpus, config, model, overwrite)
     corpus.verify_content()  # the columns prepare read are cached: hashing reads nothing again
@@ -112,8 +143,17 @@ def _train(corpus, config: BeliefConfig, model: str, overwrite: bool) -> dict:
             bar.update(task, completed=event["epoch"] - (0 if event["epoch_done"] else 1),
                        description=text)
 
+        if open_names:
+            def on_candidate(rec: dict) -> None:
+                bar.update(task, description="choosing settings: " + ", ".join(
+                    f"{k} {rec[k]}" for k in ("history_length", "hidden", "weight_decay"))
+                    + f" val loss {rec['val_loss']:.4f}")
+
+            return select.select_and_train(corpus, config, open_names, model, overwrite,
+                                           prepared, on_progress, on_candidate)
+        extra = {"selection": {"searched": [], "why": defaults_note}} if defaults_note else None
         return train_model(corpus, config, model, overwrite=overwrite, progress=on_progress,
-                           prepared=prepared)
+                           prepared=prepared, extra=extra)
 
 
 def register(app: typer.Typer) -> None:

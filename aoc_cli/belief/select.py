@@ -1,0 +1,150 @@
+"""Settings that hold up on small logs: ``aoc train`` chooses what the user did not fix.
+
+On a small corpus (at most :data:`SELECT_MAX_ROWS` rows) the paper's settings (a 4-step GRU
+history, 128 units, no weight decay) can overfit or underfit what the data supports, and
+nothing tells the user. So, for the settings the user leaves open, ``aoc train`` trains
+candidates on the same split of whole episodes and keeps the one with the lowest validation
+loss (cross-entropy of the logged action, or squared error of the standardised target):
+
+1. history length L in (0, 1, 4);
+2. then the width (GRU and hidden units) in (128, 64, 256) at the chosen L;
+3. then Adam's weight decay in (0, 1e-4, 1e-3).
+
+A candidate replaces the current choice only when its validation loss is lower by more than
+:data:`MARGIN` (relative): ties keep the simpler, earlier setting. Candidates stop early with
+patience :data:`SEARCH_PATIENCE` (at most the user's); the chosen settings are then trained
+with the user's patience and saved. What was tried, what was chosen and why go to the output
+and to the model's config (``metrics.selection``). Corpora larger than the limit, the critic /
+reward / dynamics beliefs, and ``--paper`` use the paper's settings for whatever is open.
+
+After training, :func:`baseline_check` says when the model is no better than predicting the
+majority action (discrete) or the mean (continuous, value) on the held-out episodes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+from aoc_cli.belief.config import BeliefConfig
+
+SELECT_MAX_ROWS = 20_000
+#: The settings searched, in order, with their candidate values (the first is tried first).
+SEARCH: tuple[tuple[str, tuple], ...] = (
+    ("history_length", (0, 1, 4)),
+    ("hidden", (128, 64, 256)),
+    ("weight_decay", (0.0, 1e-4, 1e-3)),
+)
+#: The paper's value of each searched setting (used when a setting is open and no search runs).
+PAPER = {"history_length": 4, "hidden": 128, "weight_decay": 0.0}
+MARGIN = 0.01
+SEARCH_PATIENCE = 5
+#: How much better than the majority / mean the model must be not to be flagged.
+BASELINE_MARGIN = 0.005
+
+
+def open_settings(corpus, config: BeliefConfig, given: dict, paper: bool = False) -> list[str]:
+    """The settings to search: those of :data:`SEARCH` the user did not give (``given``:
+    name -> value or None), when the corpus is small and the belief is the plain one."""
+    if paper or config.belief != "value" or corpus.n_rows > SELECT_MAX_ROWS:
+        return []
+    return [name for name, _values in SEARCH if given.get(name) is None]
+
+
+def with_defaults(config: BeliefConfig, given: dict) -> BeliefConfig:
+    """``config`` with the paper's value for every searched setting left open."""
+    return replace(config, **{k: (v if given.get(k) is None else given[k])
+                              for k, v in PAPER.items()})
+
+
+def why_no_search(corpus, config: BeliefConfig, given: dict, paper: bool) -> str | None:
+    """Why open settings took the paper's values (None when nothing was open)."""
+    left = [k for k in PAPER if given.get(k) is None]
+    if not left:
+        return None
+    if paper:
+        return "--paper: the paper's settings"
+    if config.belief != "value":
+        return f"--belief {config.belief}: the paper's settings"
+    return (f"the corpus has {corpus.n_rows} rows, over the {SELECT_MAX_ROWS} up to which "
+            "settings are chosen by validation: the paper's settings")
+
+
+def _score(metrics: dict) -> float:
+    return float(metrics["val_loss"])
+
+
+def select_and_train(corpus, config: BeliefConfig, open_names: list[str], model_id: str,
+                     overwrite: bool, prepared, progress=None, on_candidate=None) -> dict:
+    """Search ``open_names`` (see the module docstring), then train and save the chosen
+    configuration as ``model_id``; the final metrics, with ``selection`` (what was tried and
+    why the winner was chosen). ``on_candidate(record)`` is called after each candidate."""
+    import time
+
+    from aoc_cli.belief.train import train_model
+
+    started = time.perf_counter()
+    best = config
+    search_cfg = replace(config, patience=min(config.patience, SEARCH_PATIENCE))
+    tried: list[dict] = []
+    cache: dict[tuple, dict] = {}
+
+    def run(cfg: BeliefConfig) -> dict:
+        key = tuple(getattr(cfg, n) for n, _ in SEARCH)
+        if key not in cache:
+            m = train_model(corpus, replace(search_cfg, **dict(zip([n for n, _ in SEARCH],
+                                                                   key))),
+                            model_id, overwrite=True, prepared=prepared, save=False)
+            rec = {n: v for n, v in zip([n for n, _ in SEARCH], key)}
+            rec.update({k: m[k] for k in ("val_loss", "val_accuracy", "val_r2", "epochs")
+                        if k in m})
+            tried.append(rec)
+            cache[key] = rec
+            if on_candidate is not None:
+                on_candidate(rec)
+        return cache[key]
+
+    reasons = []
+    for name, values in SEARCH:
+        if name not in open_names:
+            continue
+        current = replace(best, **{name: values[0]})
+        best_rec = run(current)
+        for v in values[1:]:
+            cand = replace(best, **{name: v})
+            rec = run(cand)
+            if _score(rec) < _score(best_rec) * (1 - MARGIN):
+                current, best_rec = cand, rec
+        best = current
+        reasons.append(f"{name} {getattr(best, name)}: validation loss "
+                       f"{_score(best_rec):.4g} (" + ", ".join(
+                           f"{r[name]}: {_score(r):.4g}" for r in tried
+                           if all(r[n] == getattr(best, n) for n, _ in SEARCH if n != name))
+                       + ")")
+    selection = {
+        "searched": list(open_names),
+        "chosen": {n: getattr(best, n) for n, _ in SEARCH},
+        "why": "lowest validation loss on held-out episodes (a candidate must beat the "
+               f"simpler one by more than {MARGIN:.0%}): " + "; ".join(reasons),
+        "candidates": tried,
+        "search_seconds": time.perf_counter() - started,
+        "rule": f"settings left open are chosen by validation on corpora of at most "
+                f"{SELECT_MAX_ROWS} rows",
+    }
+    metrics = train_model(corpus, best, model_id, overwrite=overwrite, progress=progress,
+                          prepared=prepared, extra={"selection": selection})
+    return metrics
+
+
+def baseline_check(metrics: dict, margin: float = BASELINE_MARGIN) -> str | None:
+    """A warning when the model does no better than the trivial predictor on the held-out
+    episodes: the majority action (discrete imitation) or the mean (R^2 near 0)."""
+    if "val_accuracy" in metrics and "val_majority_accuracy" in metrics:
+        acc, maj = metrics["val_accuracy"], metrics["val_majority_accuracy"]
+        if acc <= maj + margin:
+            return (f"the model is no better than always predicting the majority action: "
+                    f"validation accuracy {acc:.3f} against {maj:.3f}")
+        return None
+    r2 = metrics.get("val_r2")
+    if r2 is not None and r2 <= margin:
+        return (f"the model is no better than predicting the mean: validation R^2 {r2:.3f}")
+    return None
