@@ -20,7 +20,8 @@ def register(app: typer.Typer) -> None:
     @app.command("bench")
     def bench_command(
         experiment: str = typer.Argument(
-            ..., help="pendulum-het, epsilon, k, maze-adapt, two-gates, lunar, ood, or all."),
+            ..., help="pendulum-het, epsilon, k, maze-adapt, two-gates, lunar, ood, all, or "
+                      "ward (ABC against BC, kNN and the majority on held-out patients)."),
         quick: bool = typer.Option(False, "--quick", help="A reduced run (<= 15 min each)."),
         tiny: bool = typer.Option(False, "--tiny", help="A smoke-test run (seconds; no effect "
                                                         "to read from it)."),
@@ -52,6 +53,9 @@ def register(app: typer.Typer) -> None:
         if quick and tiny:
             raise AocError("give --quick or --tiny, not both")
         scale = "tiny" if tiny else "quick" if quick else "full"
+        if experiment == "ward":  # imitation on a log: splits, not rollouts (bench/ward.py)
+            _ward(out, bench_store, scale, seeds, fmt)
+            return
         chosen = [m.strip() for m in methods.split(",") if m.strip()] if methods else None
         row_counts = _sizes(sizes)
         check(experiment, scale, seeds, episodes, chosen, epsilon, residual_cap, row_counts)
@@ -83,6 +87,19 @@ def register(app: typer.Typer) -> None:
                 records += report["summary"]
         rows = [{c: r.get(c) for c in COLUMNS} for r in records]
         write_records(rows, fmt, columns=COLUMNS, title=f"aoc bench {experiment} ({scale})")
+
+
+def _ward(out, bench_store, scale, splits, fmt) -> None:
+    from aoc_cli.bench.ward import run_ward
+
+    if splits is not None and splits < 1:
+        raise AocError(f"--seeds (random patient splits) must be >= 1, got {splits}")
+    with progress() as bar:
+        report = run_ward(out or Path("bench/ward"), bench_store, scale, splits, log=message,
+                          progress=bar)
+    message(f"ward: wrote {report['out']}/results.csv, summary.md, summary.json and ward.png "
+            f"in {_duration(report['seconds'])}")
+    write_records(report["summary"], fmt, title=f"aoc bench ward ({scale})")
 
 
 def _sizes(text: str | None) -> list[int] | None:

@@ -1,0 +1,183 @@
+"""`aoc bench ward`: the paper's strictly batch imitation case on the simulated ward.
+
+Over random 10:1 splits by patient of one ward log, on the held-out patients' steps:
+
+* **abc** -- ABC as a user gets it: ``aoc train --mode imitation`` with its default settings
+  (chosen by validation, aoc_cli.belief.select), ``aoc index``, ``aoc evaluate`` (the decision
+  is the weight-argmax of the minimal corpus subset; the AUC score is the treated rows' weight);
+* **abc-head** -- the same model's own head (the black box ABC explains);
+* **bc-lr**, **bc-mlp** -- scikit-learn's logistic regression and MLP (128, 128; early stopping)
+  on the same information ABC reads: the standardised observation and the previous L steps'
+  observations and actions (L = the history length ABC's selection chose, zero-padded with a
+  mask at the stay's start);
+* **knn** -- the k = d_b + 1 nearest training rows on the standardised observation;
+* **majority** -- the training log's most common action (AUC 0.5).
+
+Writes ``results.csv`` (one row per method x split), ``summary.json``, ``summary.md`` (mean and
+std over splits) and ``ward.png`` (accuracy and AUC with their spread) to ``out``.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+SCALES = {"full": {"patients": 550, "splits": 10}, "quick": {"patients": 550, "splits": 3},
+          "tiny": {"patients": 110, "splits": 2}}
+METHODS = ("abc", "abc-head", "bc-lr", "bc-mlp", "knn", "majority")
+
+
+def history_features(obs: np.ndarray, actions: np.ndarray, starts: np.ndarray,
+                     length: int) -> np.ndarray:
+    """(N, d_o + L (d_o + 2)) the observation, then the previous L steps' observation, action
+    and a present-mask, oldest first, zero where before the episode's start."""
+    n = len(obs)
+    ep = np.searchsorted(starts, np.arange(n), side="right") - 1
+    parts = [obs]
+    for lag in range(length, 0, -1):
+        prev = np.arange(n) - lag
+        ok = prev >= starts[ep]
+        safe = np.maximum(prev, 0)
+        parts += [obs[safe] * ok[:, None], (actions[safe] * ok)[:, None], ok[:, None]]
+    return np.concatenate(parts, axis=1).astype(np.float64)
+
+
+def _sk_scores(model, x_tr, y_tr, x_te):
+    from sklearn.pipeline import make_pipeline
+    from sklearn.preprocessing import StandardScaler
+
+    pipe = make_pipeline(StandardScaler(), model).fit(x_tr, y_tr)
+    return pipe.predict_proba(x_te)[:, 1]
+
+
+def run_split(store, data, split: int, patients: int, seed: int = 0) -> list[dict]:
+    """One random 10:1 split by patient: every method's accuracy and AUC on the held-out
+    steps."""
+    from sklearn.linear_model import LogisticRegression
+    from sklearn.metrics import roc_auc_score
+    from sklearn.neural_network import MLPClassifier
+
+    from aoc_cli.belief import select
+    from aoc_cli.belief.config import BeliefConfig
+    from aoc_cli.belief.data import prepare
+    from aoc_cli.control import ControllerConfig, open_session
+    from aoc_cli.control.evaluate import evaluate
+    from aoc_cli.index.build import build_index
+
+    rng = np.random.default_rng([seed, split])
+    test = np.zeros(patients, bool)
+    test[rng.choice(patients, size=patients // 11, replace=False)] = True
+    tr_name, te_name = f"ward-split{split}", f"ward-split{split}-test"
+    store.write(tr_name, data.select_episodes(~test), overwrite=True)
+    store.write(te_name, data.select_episodes(test), overwrite=True)
+    tr, te = store.corpus(tr_name), store.corpus(te_name)
+    given = {"history_length": None, "hidden": None, "weight_decay": None}
+    config = select.with_defaults(BeliefConfig(mode="imitation", threads=1, seed=split),
+                                  given).validate()
+    prepared = prepare(tr, config, "default", True)
+    started = time.perf_counter()
+    metrics = select.select_and_train(tr, config, select.open_settings(tr, config, given),
+                                      "default", True, prepared)
+    build_index(tr, "default")
+    session = open_session(tr, "default", config=ControllerConfig())
+    summary, _res = evaluate(session, te, ["knn", "bc"])
+    abc_seconds = time.perf_counter() - started
+    chosen = metrics["selection"]["chosen"]
+    rows = [{"method": "abc", "accuracy": summary["accuracy"], "auc": summary["auc"],
+             "support_max": summary["support_max"], "seconds": abc_seconds, **chosen}]
+    for name, key in (("abc-head", "bc"), ("knn", "knn")):
+        b = summary["baselines"][key]
+        rows.append({"method": name, "accuracy": b["accuracy"], "auc": b["auc"]})
+    y_tr, y_te = np.asarray(tr.actions), np.asarray(te.actions)
+    L = int(chosen["history_length"])
+    x_tr = history_features(np.asarray(tr.observations, float), y_tr, tr.episode_starts, L)
+    x_te = history_features(np.asarray(te.observations, float), y_te, te.episode_starts, L)
+    for name, model in (("bc-lr", LogisticRegression(max_iter=5000)),
+                        ("bc-mlp", MLPClassifier((128, 128), early_stopping=True,
+                                                 max_iter=500, random_state=split))):
+        p = _sk_scores(model, x_tr, y_tr, x_te)
+        rows.append({"method": name, "accuracy": float(np.mean((p >= 0.5) == y_te)),
+                     "auc": float(roc_auc_score(y_te, p))})
+    majority = int(np.bincount(y_tr).argmax())
+    rows.append({"method": "majority", "accuracy": float(np.mean(y_te == majority)),
+                 "auc": 0.5})
+    for r in rows:
+        r.update(split=split, train_rows=tr.n_rows, test_rows=te.n_rows)
+    return rows
+
+
+def summarise(rows: list[dict]) -> list[dict]:
+    out = []
+    for m in METHODS:
+        acc = np.array([r["accuracy"] for r in rows if r["method"] == m])
+        auc = np.array([r["auc"] for r in rows if r["method"] == m])
+        if len(acc):
+            out.append({"method": m, "splits": int(len(acc)), "accuracy_mean": float(acc.mean()),
+                        "accuracy_std": float(acc.std()), "auc_mean": float(auc.mean()),
+                        "auc_std": float(auc.std())})
+    return out
+
+
+def plot(summary: list[dict], out_png: Path) -> None:
+    from aoc_cli.envs import render
+
+    fig, ax = render.new_axes("ward: held-out patients (mean ± std over splits)", "method",
+                              "score", size=(7.0, 4.0))
+    x = np.arange(len(summary))
+    for off, key, label in ((-0.18, "accuracy", "accuracy"), (0.18, "auc", "AUC")):
+        ax.errorbar(x + off, [s[f"{key}_mean"] for s in summary],
+                    yerr=[s[f"{key}_std"] for s in summary], fmt="o", capsize=3, label=label)
+    ax.set_xticks(x)
+    ax.set_xticklabels([s["method"] for s in summary])
+    ax.set_ylim(0.45, 1.0)
+    ax.legend(loc="lower left")
+    render.save(fig, out_png)
+
+
+def run_ward(out: Path, bench_store: Path, scale: str = "full", splits: int | None = None,
+             log=None, progress=None) -> dict:
+    """Collect the ward log, run every split, write the outputs; the report."""
+    from aoc_cli.envs import collect
+    from aoc_cli.store import Store, atomic_path
+
+    cfg = SCALES[scale]
+    n_splits = splits or cfg["splits"]
+    started = time.perf_counter()
+    store = Store(Path(bench_store))
+    data, _ = collect("ward", episodes=cfg["patients"], seed=0)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    rows: list[dict] = []
+    task = progress.add_task("bench ward", total=n_splits) if progress is not None else None
+    for s in range(n_splits):
+        rows += run_split(store, data, s, cfg["patients"])
+        if progress is not None:
+            progress.advance(task)
+        if log is not None:
+            abc = next(r for r in rows if r["method"] == "abc" and r["split"] == s)
+            log(f"ward split {s}: abc accuracy {abc['accuracy']:.3f} auc {abc['auc']:.3f}")
+    summary = summarise(rows)
+    columns = list(dict.fromkeys(k for r in rows for k in r))
+    with atomic_path(out / "results.csv", suffix=".csv") as tmp:
+        import csv
+
+        with open(tmp, "w", newline="") as fh:
+            w = csv.DictWriter(fh, fieldnames=columns, lineterminator="\n")
+            w.writeheader()
+            w.writerows(rows)
+    with atomic_path(out / "summary.json", suffix=".json") as tmp:
+        Path(tmp).write_text(json.dumps({"scale": scale, "patients": cfg["patients"],
+                                         "splits": n_splits, "summary": summary,
+                                         "rows": rows}, indent=2))
+    md = ["| method | splits | accuracy | AUC |", "| --- | --- | --- | --- |"]
+    md += [f"| {s['method']} | {s['splits']} | {s['accuracy_mean']:.4f} ± "
+           f"{s['accuracy_std']:.4f} | {s['auc_mean']:.4f} ± {s['auc_std']:.4f} |"
+           for s in summary]
+    with atomic_path(out / "summary.md", suffix=".md") as tmp:
+        Path(tmp).write_text("\n".join(md) + "\n")
+    plot(summary, out / "ward.png")
+    return {"summary": summary, "rows": rows, "out": str(out),
+            "seconds": time.perf_counter() - started}

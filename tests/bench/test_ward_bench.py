@@ -1,0 +1,25 @@
+"""bench ward: the features the scikit-learn baselines read, and the summary over splits."""
+
+import numpy as np
+
+from aoc_cli.bench.ward import history_features, summarise
+
+
+def test_history_features_are_the_previous_steps_of_the_same_stay():
+    obs = np.arange(10, dtype=float).reshape(5, 2)          # rows 0-1 one stay, 2-4 another
+    act = np.array([1, 0, 1, 1, 0])
+    x = history_features(obs, act, np.array([0, 2, 5]), 1)
+    assert x.shape == (5, 2 + 4)
+    np.testing.assert_array_equal(x[:, :2], obs)
+    np.testing.assert_array_equal(x[:, 5], [0, 1, 0, 1, 1])        # a previous step present
+    np.testing.assert_array_equal(x[1, 2:5], [0, 1, 1])            # row 0's obs and action
+    np.testing.assert_array_equal(x[2, 2:5], [0, 0, 0])            # a new stay: padding
+    np.testing.assert_array_equal(x[4, 2:5], [6, 7, 1])
+    assert history_features(obs, act, np.array([0, 2, 5]), 0).shape == (5, 2)
+
+
+def test_summary_is_mean_and_std_over_splits():
+    rows = [{"method": "abc", "accuracy": a, "auc": u} for a, u in ((0.9, 0.8), (0.95, 0.9))]
+    (s,) = summarise(rows)
+    assert s["splits"] == 2 and abs(s["accuracy_mean"] - 0.925) < 1e-12
+    assert abs(s["auc_std"] - 0.05) < 1e-12
