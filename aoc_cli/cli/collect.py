@@ -65,8 +65,7 @@ def register(app: typer.Typer) -> None:
             paths = write(csv_dir, name, episodes or t.default_episodes, seed)
             message(f"wrote {paths[0]} and {paths[1]}: ingest them with `aoc ingest "
                     f"{paths[0]} --name {name} --id-column patient --time-column hour "
-                    f"--static {paths[1]} --discrete-actions --tag-column clinician "
-                    "--reward-free`")
+                    f"--static {paths[1]} --discrete-actions --tag-column clinician`")
             return
         store = get_store()
         from aoc_cli.store import check_name, writing_corpus

@@ -165,11 +165,15 @@ def _print(records: list[dict], fmt: str) -> None:
             where = f"{rec['data']} " if "data" in rec else ""
             title = rec.get("role", "decision") + \
                 (f" (query {rec['query']})" if "query" in rec else "") + \
-                (f" ({where}episode {rec['episode']}, step {rec['step']})"
+                (f" ({where}episode {rec['episode']}"
+                 + (f" '{rec['episode_id']}'" if rec.get("episode_id") is not None else "")
+                 + f", step {rec['step']})"
                  if "episode" in rec else "")
             write_object(head, "table", title=title)
-            rows = [{"row": s["row"], "episode": s["episode"], "step": s["step"],
-                     **s["tags"], "action": s["action"], "value": s["value"],
+            rows = [{"row": s["row"], "episode": s["episode"],
+                     **({"episode_id": s["episode_id"]} if s.get("episode_id") is not None
+                        else {}),
+                     "step": s["step"], **s["tags"], "action": s["action"], "value": s["value"],
                      "weight": s["weight"], "distance": s["distance"]} for s in rec["support"]]
             write_records(rows, "table", title="minimal corpus subset")
             for w in rec["warnings"]:

@@ -111,7 +111,7 @@ def train(
     if fmt == "table" and chosen:  # the candidates are in the JSON output and config.json
         shown = {**metrics, "selection": ", ".join(f"{k} {v}" for k, v in
                                                    chosen.get("chosen", {}).items())}
-    elif "selection" in metrics:
+    if not chosen and "selection" in metrics:
         message(f"settings: {metrics['selection']['why']}")
     if fmt == "table" and not chosen and "selection" in metrics:
         shown = {**metrics, "selection": metrics["selection"]["why"]}

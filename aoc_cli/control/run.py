@@ -122,8 +122,12 @@ def explain_logged_step(session: Session, data, episode: int, step: int,
     finally:
         ctl.selection = kept
     records[0]["logged_action"] = logged
+    from aoc_cli.control.records import episode_ids
+
+    ids = episode_ids(data)
     for rec, role in zip(records, ("decision", "logged action")):
-        rec.update({"role": role, "data": data.name, "episode": episode, "step": step,
+        rec.update({"role": role, "data": data.name, "episode": episode,
+                    "episode_id": None if ids is None else ids[episode], "step": step,
                     "row": row, "episode_left_out": bool(same and leave_episode_out)})
     return records
 

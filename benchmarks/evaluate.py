@@ -1,0 +1,92 @@
+"""Evaluate benchmark (issue 14): held-out steps scored per second by `aoc evaluate`, the whole
+process (interpreter start, imports, loading, beliefs, decompositions, baselines, metrics).
+
+    .venv/bin/python benchmarks/evaluate.py [--patients 10000] [--repeats 3] [--store DIR]
+
+Goal: at least 2,000 steps a second on a 100k-row corpus. Builds (once, in ``--store``) a ward
+corpus of ``--patients`` stays (about 10 rows each), an imitation model (``--paper``, 4 epochs:
+the speed does not depend on how well it is trained) with its index, and a value model on the
+``outcome`` column; a held-out ward log of a tenth as many patients. Then times, ``--repeats``
+times each (median reported, and every run), in one process per run:
+
+* ``imitation, held out``: ``aoc evaluate ward100k --data held`` (knn and bc baselines);
+* ``imitation, own``: ``aoc evaluate ward100k --data ward100k`` (every corpus step, its own
+  episode left out), baselines on;
+* ``imitation, own, exact``: the same with ``--exact`` (the index's exact search);
+* ``value, held out``: ``aoc evaluate ward100k --model value --data held`` (the logged action's
+  v_hat and the controller's choice over the 2 actions: 3 decompositions a step).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+AOC = [sys.executable, "-c", "from aoc_cli.cli.app import main; main()"]
+
+
+def aoc(store: Path, *args: str) -> tuple[float, str]:
+    env = {**os.environ, "AOC_STORE": str(store), "OMP_NUM_THREADS": "1",
+           "PYTHONPATH": str(ROOT)}
+    t0 = time.perf_counter()
+    proc = subprocess.run([*AOC, *args], capture_output=True, text=True, env=env)
+    seconds = time.perf_counter() - t0
+    if proc.returncode != 0:
+        raise SystemExit(f"aoc {' '.join(args)} failed: {proc.stderr.strip()}")
+    return seconds, proc.stdout
+
+
+def build(store: Path, patients: int) -> None:
+    if (store / "ward100k" / "models" / "value" / "index").is_dir():
+        return
+    aoc(store, "collect", "ward", "--name", "ward100k", "--episodes", str(patients),
+        "--overwrite", "-f", "json")
+    aoc(store, "collect", "ward", "--name", "held", "--episodes", str(patients // 10),
+        "--seed", "1", "--overwrite", "-f", "json")
+    for model, extra in (("default", ["--mode", "imitation"]),
+                         ("value", ["--value", "outcome"])):
+        aoc(store, "train", "ward100k", "--model", model, *extra, "--paper", "--epochs", "4",
+            "--threads", "1", "--overwrite", "-f", "json")
+        aoc(store, "index", "ward100k", "--model", model, "-f", "json")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--patients", type=int, default=10_000)
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--store", type=Path, default=ROOT / "bench" / "evaluate-store")
+    args = ap.parse_args()
+    args.store.mkdir(parents=True, exist_ok=True)
+    build(args.store, args.patients)
+    cases = {
+        "imitation, held out": ["evaluate", "ward100k", "--data", "held"],
+        "imitation, own": ["evaluate", "ward100k", "--data", "ward100k"],
+        "imitation, own, exact": ["evaluate", "ward100k", "--data", "ward100k", "--exact"],
+        "value, held out": ["evaluate", "ward100k", "--model", "value", "--data", "held"],
+    }
+    with open("/proc/loadavg") as fh:
+        print(f"load before: {fh.read().split()[:3]}")
+    for name, argv in cases.items():
+        runs = []
+        for _ in range(args.repeats):
+            seconds, out = aoc(args.store, *argv, "-f", "json")
+            summary = json.loads(out)
+            runs.append((seconds, summary["steps"], summary["seconds"]))
+        whole = statistics.median(r[1] / r[0] for r in runs)
+        inner = statistics.median(r[1] / r[2] for r in runs)
+        print(f"{name}: {runs[0][1]} steps; whole process {whole:.0f} steps/s (runs "
+              + ", ".join(f"{r[0]:.1f} s" for r in runs) + f"); inside evaluate() {inner:.0f} "
+              "steps/s")
+    with open("/proc/loadavg") as fh:
+        print(f"load after: {fh.read().split()[:3]}")
+
+
+if __name__ == "__main__":
+    main()
