@@ -21,7 +21,6 @@ repeats pi1's rows four times, 0.5 keeps a random half of its episodes
 
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -35,7 +34,7 @@ from aoc_cli.decompose import decompose
 from aoc_cli.errors import AocError
 from aoc_cli.index import BeliefIndex
 from aoc_cli.rows import row_multiplicity
-from aoc_cli.store import Corpus, check_name, write_json, write_npy
+from aoc_cli.store import Corpus, atomic_dir, check_name, derived, writing_model
 
 if TYPE_CHECKING:
     from aoc_cli.belief.artefact import BeliefModel
@@ -94,46 +93,57 @@ def build_index(corpus: Corpus, model_id: str | None = None, kind: str = "auto",
                 index_id: str = "default", resample: dict | None = None,
                 subsample: dict | None = None, seed: int = 0, progress=None,
                 **params) -> CorpusIndex:
-    """Compute (or reuse) the beliefs of every row and build an index over them."""
-    model = load_model(corpus, model_id)
-    model_dir = corpus.models_dir / model.id
-    beliefs_path = model_dir / "beliefs.npy"
-    meta_path = model_dir / "beliefs.json"
-    fresh = meta_path.is_file() and json.loads(meta_path.read_text()).get("model_hash") == \
-        model.hash and beliefs_path.is_file()
-    if not fresh:
-        callback = None
-        if progress is not None:
-            task = progress.add_task("beliefs of every row", total=corpus.n_rows)
+    """Compute (or reuse) the beliefs of every row and build an index over them.
 
-            def callback(done, total):
-                progress.update(task, completed=done, total=total)
-        beliefs = model.row_beliefs(corpus, progress=callback).astype(np.float32)
-        write_npy(beliefs_path, beliefs)
-        write_json(meta_path, {"model_hash": model.hash, "corpus_hash": corpus.hash,
-                               "shape": list(beliefs.shape)})
-    beliefs = np.load(beliefs_path, mmap_mode="r", allow_pickle=False)
+    Built in a temporary folder beside the index folder (new beliefs staged in it) and
+    swapped in only when everything succeeded (:mod:`aoc_cli.store.derived`)."""
+    model = load_model(corpus, model_id)
     if (resample or subsample) and index_id == "default":
         raise AocError("a re-sampled or sub-sampled index needs its own --index-id "
                        "(the default index holds every row once)")
-    start = time.perf_counter()
-    index = BeliefIndex.build(beliefs, kind=kind, seed=seed, **params)
-    if resample or subsample:
-        index = index.resample(row_multiplicity(corpus, resample, subsample, seed))
-    seconds = time.perf_counter() - start
+    model_dir = corpus.models_dir / model.id
     out = _index_dir(corpus, model.id, index_id)
-    out.mkdir(parents=True, exist_ok=True)
-    index.save(out / "index.faiss")
-    meta = {
-        "index_id": index_id, "model": model.id, "model_hash": model.hash,
-        "corpus": corpus.name, "corpus_hash": corpus.hash, "kind": index.kind,
-        "rows": int(index.size), "belief_dim": int(beliefs.shape[1]),
-        "resample": resample or {}, "subsample": subsample or {}, "seed": seed,
-        "build_seconds": seconds, "built": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-    }
-    ci = CorpusIndex(index_id, model, beliefs, model.values, index, meta)
-    meta["typical_residual"] = typical_residual(ci, seed)
-    write_json(out / "index.json", meta)
+    todo = f"retrain it: `aoc train {corpus.name} --model {model.id} --overwrite`"
+    fresh = derived.beliefs_fresh(model_dir, model.hash)
+    with writing_model(corpus.path, model.id), atomic_dir(out) as tmp:
+        # the columns the beliefs read, hashed on the way (with reused beliefs a pass of its
+        # own, small beside building the index: an index of damaged data is never built)
+        corpus.verify_content()
+        staged = None
+        if fresh:
+            beliefs = derived.open_beliefs(model_dir, f"beliefs of model {model.id!r}", todo)
+        else:
+            callback = None
+            if progress is not None:
+                task = progress.add_task("beliefs of every row", total=corpus.n_rows)
+
+                def callback(done, total):
+                    progress.update(task, completed=done, total=total)
+            beliefs = model.row_beliefs(corpus, progress=callback).astype(np.float32)
+            derived.check_finite(beliefs, f"model {model.id!r} of corpus {corpus.name!r}",
+                                 todo)
+            staged = derived.stage_beliefs(tmp, beliefs)
+            beliefs = np.load(staged, mmap_mode="r", allow_pickle=False)
+        start = time.perf_counter()
+        index = BeliefIndex.build(beliefs, kind=kind, seed=seed, **params)
+        if resample or subsample:
+            index = index.resample(row_multiplicity(corpus, resample, subsample, seed))
+        seconds = time.perf_counter() - start
+        index.save(tmp / "index.faiss")
+        meta = {
+            "index_id": index_id, "model": model.id, "model_hash": model.hash,
+            "corpus": corpus.name, "corpus_hash": corpus.hash, "kind": index.kind,
+            "rows": int(index.size), "belief_dim": int(beliefs.shape[1]),
+            "resample": resample or {}, "subsample": subsample or {}, "seed": seed,
+            "build_seconds": seconds, "built": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        }
+        ci = CorpusIndex(index_id, model, beliefs, model.values, index, meta)
+        meta["typical_residual"] = typical_residual(ci, seed)
+        derived.write_index_meta(tmp, meta)
+        if staged is not None:  # everything built: the beliefs go in first, then the index
+            derived.commit_beliefs(staged, model_dir, {
+                "model_hash": model.hash, "corpus_hash": corpus.hash,
+                "shape": list(beliefs.shape)})
     return ci
 
 
@@ -153,23 +163,23 @@ def typical_residual(ci: CorpusIndex, seed: int = 0) -> dict:
 
 
 def load_index(corpus: Corpus, model_id: str | None = None, index_id: str = "default") -> CorpusIndex:
-    """Load a built index, refusing one built from another corpus or model."""
+    """Load a built index, refusing one built from another corpus or model, or damaged."""
     model = load_model(corpus, model_id)
     out = _index_dir(corpus, model.id, index_id)
+    hint = f"aoc index {corpus.name} --model {model.id}"
+    if index_id != "default":
+        hint += f" --index-id {index_id} (with its --resample/--subsample)"
     if not (out / "index.json").is_file():
-        hint = f"aoc index {corpus.name} --model {model.id}"
-        if index_id != "default":
-            hint += f" --index-id {index_id} (with its --resample/--subsample)"
         raise AocError(f"no index {index_id!r} for model {model.id!r} of corpus "
                        f"{corpus.name!r}: run `{hint}`")
-    meta = json.loads((out / "index.json").read_text())
+    what = f"index {index_id!r} of model {model.id!r} of corpus {corpus.name!r} is damaged"
+    todo = f"rebuild it with `{hint}`"
+    meta = derived.open_index_meta(out, what, todo)
     if meta.get("corpus_hash") != corpus.hash or meta.get("model_hash") != model.hash:
         raise AocError(f"index {index_id!r} was built from another version of corpus "
-                       f"{corpus.name!r} or model {model.id!r}: rebuild it with "
-                       f"`aoc index {corpus.name} --model {model.id}`")
-    beliefs = np.load(corpus.models_dir / model.id / "beliefs.npy", mmap_mode="r",
-                      allow_pickle=False)
-    index = BeliefIndex.load(out / "index.faiss", beliefs)
+                       f"{corpus.name!r} or model {model.id!r}: rebuild it with `{hint}`")
+    beliefs = derived.open_beliefs(corpus.models_dir / model.id, what, todo)
+    index = derived.load_faiss(out / "index.faiss", beliefs, what, todo)
     return CorpusIndex(index_id, model, beliefs, model.values, index, meta)
 
 
