@@ -10,8 +10,8 @@ from typing import Annotated, Optional
 
 import typer
 
-from aoc_cli.cli.common import (CandidatesOption, EpsilonOption, FormatOption, IndexOption,
-                                KOption, ModelOption, get_store)
+from aoc_cli.cli.common import (CandidatesOption, CorpusArgument, EpsilonOption,
+                                FormatOption, IndexOption, KOption, ModelOption, get_store)
 from aoc_cli.errors import AocError
 from aoc_cli.report import resolve_format, write_object, write_records
 
@@ -24,16 +24,26 @@ VALUE_COLUMNS = ["method", "value_r2", "value_mae", "value_spearman", "agreement
 def register(app: typer.Typer) -> None:
     @app.command("evaluate")
     def evaluate_command(
-        name: str = typer.Argument(..., help="Corpus whose model decides."),
-        data: str = typer.Option(..., "--data", help="Held-out corpus to score (same spaces), or NAME itself: each episode is then decided without its own rows."),
-        baselines: str = typer.Option("knn,bc", "--baselines", help="Baselines on the same steps, comma-separated: knn (nearest rows on standardised inputs), bc (the model's own head); none for neither."),
-        steps_file: Optional[Path] = typer.Option(None, "--steps", help="Write one JSON record per step to this JSONL file."),
+        name: CorpusArgument,
+        data: Annotated[str, typer.Option(
+            "--data", help="Held-out corpus to score (same spaces), or NAME itself: each "
+                           "episode is then decided without its own rows.")],
+        baselines: Annotated[str, typer.Option(
+            "--baselines", help="Baselines on the same steps, comma-separated: knn (nearest "
+                                "rows on standardised inputs), bc (the model's own head); none "
+                                "for neither.")] = "knn,bc",
+        steps_file: Annotated[Optional[Path], typer.Option(
+            "--steps", help="Write one JSON record per step to this JSONL file.")] = None,
         model: ModelOption = None,
         index_id: IndexOption = "default",
         candidates: CandidatesOption = None,
         epsilon: EpsilonOption = None,
         k: KOption = None,
-        exact: Optional[bool] = typer.Option(None, "--exact/--ivf", help="Search the index exactly for every step, or an IVF structure built for the run (default: exact up to 20,000 corpus rows, IVF beyond: ~10x faster, recall of the nearest rows ~0.9999)."),
+        exact: Annotated[Optional[bool], typer.Option(
+            "--exact/--ivf", help="Search the index exactly for every step, or an IVF structure "
+                                  "built for the run (default: exact up to 20,000 corpus rows, "
+                                  "IVF beyond: ~10x faster, recall of the nearest rows "
+                                  "~0.9999).")] = None,
         seed: Annotated[int, typer.Option(
             "--seed", help="Seed of the candidates (value mode, continuous actions).")] = 0,
         fmt: FormatOption = None,
