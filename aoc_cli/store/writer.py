@@ -16,7 +16,6 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from aoc_cli.errors import AocError
 from aoc_cli.store.atomic import atomic_dir, file_record, hash_arrays, seal, write_json
 from aoc_cli.store.corpus import CorpusData, episode_starts_from_lengths
 from aoc_cli.store.lock import writing_corpus

@@ -91,17 +91,17 @@ def test_racing_appends_lose_no_rows(tmp_path):
     """Two `aoc ingest --append` started together: each either adds its rows or fails with
     one line; the corpus ends with exactly the rows of the appends that succeeded."""
     store = tmp_path / "store"
-    source = d4rl_file(tmp_path / "part.hdf5", n=20_000)
+    source = d4rl_file(tmp_path / "part.hdf5", n=5_000)
     assert spawn("ingest", str(source), "--name", "c", store=store).wait() == 0
-    expected = 20_000
+    expected = 5_000
     for _trial in range(2):
         procs = [spawn("ingest", str(source), "--name", "c", "--append", store=store)
                  for _ in range(2)]
         results = [(p, *p.communicate(timeout=300)) for p in procs]
         for p, out, err in results:
             if p.returncode == 0:
-                expected += 20_000
+                expected += 5_000
             else:
                 one_line_error(p.returncode, out, err, r"corpus 'c' is being written by pid")
         assert rows_of(store, "c") == expected
-    assert expected >= 60_000  # at least one append of each trial went through
+    assert expected >= 15_000  # at least one append of each trial went through

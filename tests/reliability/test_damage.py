@@ -159,6 +159,11 @@ def test_a_damaged_model_is_named_and_never_shown_as_ok(store, aoc, damage):
         line = one_line_error(*aoc(*command), r"model 'default' of corpus 'm' is damaged")
         assert "aoc train m --model default --overwrite" in line
     assert verify_rows(aoc, "m")[0] == 2
+    if damage == "config not json":  # the command the message names works
+        code, _out, err = aoc("train", "m", "--model", "default", "--overwrite", "--epochs",
+                              "1", "--hidden", "8", "--belief-dim", "4")
+        assert code == 0, err
+        assert verify_rows(aoc, "m")[0] == 0
 
 
 @pytest.mark.parametrize("damage", ["faiss random", "faiss truncated", "beliefs deleted",

@@ -5,14 +5,13 @@ the input was taken in a way the user may not have meant)."""
 from __future__ import annotations
 
 import gzip
-import json
 
 import h5py
 import numpy as np
 import pytest
 
 from tests.conftest import run_in_process
-from tests.formats.sources import flat_arrays, write_csv, write_d4rl
+from tests.formats.sources import flat_arrays, write_csv
 from tests.reliability.common import one_line_error, snapshot
 
 
