@@ -7,7 +7,8 @@
   the paper did); at the quick and tiny scales it is evaluated with the random-start corpus and
   models (the corpus covers the upright region; one training instead of two). A diagnostic
   row, ``aoc-normal-rows``, is AOC restricted to the evaluation system's rows (see ORACLE);
-  ``aoc-dynamics`` is AOC with aoc's auxiliary dynamics head (see DYNAMICS).
+  ``aoc-dynamics`` is AOC with aoc's auxiliary dynamics head (see DYNAMICS); ``aoc-critic``
+  and ``aoc-reward`` are AOC with the reference code's beliefs (aoc_cli/bench/beliefs.py).
 * ``epsilon`` (paper Table "epsilon controls the conservation"): AOC with epsilon in
   {0.3, 0.5, 0.9, 1.0} at the middle data size, on the scale's ablation tasks (the quick
   scale: random and upright start), with the paper's model and with the dynamics head.
@@ -20,24 +21,29 @@ The paper's pendulum figures are for the upright start; they are shown beside bo
 from __future__ import annotations
 
 from aoc_cli.bench import paper
+from aoc_cli.bench.beliefs import BELIEF_ROWS, belief_session, prepare_beliefs
 from aoc_cli.bench.common import Context, belief_config, make_task_env, session
 from aoc_cli.bench.methods import DATA, data_values, row_values
 from aoc_cli.bench.results import result_row
 
 TASKS = ("pendulum-het", "pendulum-het-upright")
-METHODS = ["aoc", "aoc-dynamics", "aoc-normal-rows", "knn", "1nn", "knn-belief", "1nn-belief",
+METHODS = ["aoc", "aoc-dynamics", "aoc-critic", "aoc-reward", "aoc-normal-rows", "knn", "1nn",
+           "knn-belief", "1nn-belief",
            "bc", "td3bc", "cql", "mpc", "zero", "random"]
 
 SCALES = {
     "tiny": {"sizes": [2_000], "paper_rows": [100_000], "episodes": 1, "seeds": 1,
              "epochs": 2, "patience": 2, "upright_data": "shared", "mid": 2_000, "max_steps": 40,
+             "critic_steps": 20,
              "ablation_tasks": ["pendulum-het"]},
     "quick": {"sizes": [30_000], "paper_rows": [100_000], "episodes": 4, "seeds": 1,
               "epochs": 40, "patience": 6, "upright_data": "shared", "mid": 30_000,
+              "critic_steps": 3_000,
               "ablation_tasks": ["pendulum-het", "pendulum-het-upright"],
               "methods": [m for m in METHODS if m != "cql"]},  # CQL: too slow on this CPU
     "full": {"sizes": [100_000, 300_000, 600_000], "paper_rows": [100_000, 300_000, 600_000],
              "episodes": 10, "seeds": 8, "epochs": 200, "patience": 10, "upright_data": "own",
+             "critic_steps": 10_000,
              "mid": 300_000, "ablation_tasks": ["pendulum-het", "pendulum-het-upright"]},
 }
 EPSILONS = (0.3, 0.5, 0.9, 1.0)
@@ -53,14 +59,14 @@ DYNAMICS_WEIGHT = 1.0
 
 
 def _variant(ctx: Context, method: str, corpus, env, task: str, seed: int):
-    """The session of aoc's diagnostic rows: ORACLE (the normal system's rows only) or DYNAMICS
-    (the dynamics-head model and its index)."""
+    """The session of aoc's other rows: ORACLE (the normal system's rows only) or a belief row
+    (aoc-dynamics, aoc-critic, aoc-reward: its own model and index, bench/beliefs.py)."""
     if method == ORACLE:
         from aoc_cli.rows import row_selection
 
         normal = row_selection(corpus, {"system": ["normal"]})
         return session(corpus, env, task, seed=seed, selection=normal, **ctx.aoc_config)
-    return session(corpus, env, task, model_id="dynamics", seed=seed, **ctx.aoc_config)
+    return belief_session(ctx, method, corpus, env, task, seed)
 
 
 def _k_values(d_b: int) -> list[int]:
@@ -68,9 +74,10 @@ def _k_values(d_b: int) -> list[int]:
 
 
 def _prepare(ctx: Context, scale: dict, task: str, rows: int, seed: int, bc: bool,
-             dynamics: bool = False):
-    """Corpus, value model (+ bc model, + the dynamics-head model and its index) and default
-    index for ``task`` at ``rows`` rows."""
+             dynamics: bool = False, beliefs=()):
+    """Corpus, value model (+ bc model, + the dynamics-head model and its index, + the models
+    and indexes of the belief rows in ``beliefs``) and default index for ``task`` at ``rows``
+    rows."""
     data_task = task if (task == "pendulum-het" or scale["upright_data"] == "own") \
         else "pendulum-het"
     corpus = ctx.artefacts.corpus(data_task, rows=rows, seed=seed)
@@ -79,6 +86,7 @@ def _prepare(ctx: Context, scale: dict, task: str, rows: int, seed: int, bc: boo
         ctx.artefacts.model(corpus, "dynamics", belief_config(scale, "value", seed,
                                                               dynamics_weight=DYNAMICS_WEIGHT))
         ctx.artefacts.index(corpus, "dynamics")
+    prepare_beliefs(ctx, scale, corpus, [m for m in beliefs if m != DYNAMICS], seed)
     if bc:
         ctx.artefacts.model(corpus, "bc", belief_config(scale, "imitation", seed))
     ctx.artefacts.index(corpus, "default")
@@ -94,14 +102,14 @@ def run_pendulum_het(ctx: Context, scale: dict) -> tuple[list[dict], callable]:
         for seed in ctx.seeds:
             for task in TASKS:
                 corpus = _prepare(ctx, scale, task, size, seed, "bc" in methods,
-                                  DYNAMICS in methods)
+                                  DYNAMICS in methods, methods)
                 env = make_task_env(task, scale)
                 s = session(corpus, env, task, seed=seed, **ctx.aoc_config)
                 rows_out.append(result_row("pendulum-het", task, DATA, setting, seed,
                                            **data_values(corpus),
                                            note=f"corpus {corpus.name}"))
                 for method in methods:
-                    if method in (ORACLE, DYNAMICS):
+                    if method == ORACLE or method in BELIEF_ROWS:
                         run = ctx.runner.run("aoc", _variant(ctx, method, corpus, env, task, seed),
                                              env, ctx.n_episodes(scale["episodes"]), seed,
                                              label=f"{method} {task} {setting} seed {seed}")

@@ -30,27 +30,32 @@ _RUNTIME = ("threads", "device")
 
 
 def corpus_name(task: str, rows: int | None = None, episodes: int | None = None,
-                seed: int = 0) -> str:
+                seed: int = 0, behaviour: str = "mix") -> str:
     budget = f"{rows}r" if rows is not None else f"{episodes}e"
-    return f"{task}-{budget}-s{seed}"
+    return f"{task}-{budget}-s{seed}" + ("" if behaviour == "mix" else f"-{behaviour}")
 
 
-def _same_policies(corpus, task: str) -> bool:
+def _same_policies(corpus, task: str, behaviour: str = "mix") -> bool:
     """Whether the corpus was collected with the task's current behaviour policies (a corpus
     of an earlier behaviour mix, e.g. other noise levels, is collected again)."""
-    from aoc_cli.envs import TASKS
+    from aoc_cli.envs import TASKS, replay
 
     known = TASKS.get(task)
     if known is None or "policy" not in corpus.manifest.get("tags", {}):
         return True
-    return list(corpus.tag("policy")[1]) == list(known.policies)
+    wanted = replay.POLICIES if behaviour == "replay" else known.policies
+    return list(corpus.tag("policy")[1]) == list(wanted)
 
 
 class Artefacts:
     """Builds or reuses corpora, models and indexes in the bench store; logs what it did."""
 
-    def __init__(self, store_root: str | Path, log=None, progress=None):
+    def __init__(self, store_root: str | Path, log=None, progress=None,
+                 behaviour: str = "mix"):
         self.store = Store.open(store_root)
+        #: How the tasks that have one (pendulum-het, lunar) collect their data: ``mix`` or
+        #: ``replay`` (``aoc bench --behaviour``; aoc_cli/envs/replay.py).
+        self.behaviour = behaviour
         self.log = log or (lambda text: None)
         self.progress = progress
         self.built: list[dict] = []
@@ -67,15 +72,17 @@ class Artefacts:
     # -- corpus ----------------------------------------------------------------------------
     def corpus(self, task: str, rows: int | None = None, episodes: int | None = None,
                seed: int = 0):
-        from aoc_cli.envs import collect
+        from aoc_cli.envs import TASKS, collect
 
-        name = corpus_name(task, rows, episodes, seed)
+        behaviour = self.behaviour if self.behaviour in TASKS[task].behaviours else "mix"
+        name = corpus_name(task, rows, episodes, seed, behaviour)
         if self.store.exists(name):
             c = self.store.corpus(name)
             src = (c.manifest.get("sources") or [{}])[-1]
             if src.get("task") == task and src.get("seed") == seed and \
                     src.get("steps") == rows and src.get("episodes") == episodes and \
-                    _same_policies(c, task):
+                    src.get("behaviour", "mix") == behaviour and \
+                    _same_policies(c, task, behaviour):
                 return c
         started = time.perf_counter()
         bar = self._task(f"collect {name}", rows or episodes)
@@ -84,7 +91,8 @@ class Artefacts:
             if bar is not None:
                 self.progress.update(bar, completed=done, total=total)
 
-        data, _summary = collect(task, steps=rows, episodes=episodes, seed=seed, progress=tick)
+        data, _summary = collect(task, steps=rows, episodes=episodes, seed=seed, progress=tick,
+                                 behaviour=behaviour)
         self._done(bar)
         c = self.store.write(name, data, overwrite=True)
         self._record("collect", name, started)

@@ -69,7 +69,7 @@ BUDGETS = {
 
 
 #: AOC's rows in the bench: the paper's AOC and aoc's two diagnostics (see bench/pendulum.py).
-AOC_METHODS = ("aoc", "aoc-normal-rows", "aoc-dynamics")
+AOC_METHODS = ("aoc", "aoc-normal-rows", "aoc-dynamics", "aoc-critic", "aoc-reward")
 
 
 #: Experiments that sweep the data size, and so take ``sizes`` (rows per corpus).
@@ -78,8 +78,13 @@ SIZED = ("pendulum-het", "lunar")
 
 def check(name: str, scale: str, seeds: int | None, episodes: int | None,
           methods: list[str] | None = None, epsilon: float | None = None,
-          residual_cap: float | None = None, sizes: list[int] | None = None) -> None:
+          residual_cap: float | None = None, sizes: list[int] | None = None,
+          behaviour: str = "mix") -> None:
     """Bad experiment, scale, counts, sizes, method names or AOC settings -> AocError."""
+    if behaviour not in ("mix", "replay"):
+        raise AocError(f"unknown --behaviour {behaviour!r}: use mix or replay")
+    if behaviour != "mix" and name not in SIZED:
+        raise AocError(f"--behaviour {behaviour} applies to {' and '.join(SIZED)}, not {name}")
     if name != "all" and name not in EXPERIMENTS:
         raise AocError(f"unknown experiment {name!r}: use one of {', '.join(ORDER)} or all")
     if scale not in SCALES:
@@ -122,21 +127,23 @@ def run_experiment(name: str, scale: str = "full", seeds: int | None = None,
                    out: str | Path | None = None, store: str | Path = "bench/store",
                    episodes: int | None = None, methods: list[str] | None = None,
                    log=None, progress=None, epsilon: float | None = None,
-                   residual_cap: float | None = None, sizes: list[int] | None = None) -> dict:
+                   residual_cap: float | None = None, sizes: list[int] | None = None,
+                   behaviour: str = "mix") -> dict:
     """Run experiment ``name`` at ``scale`` (tiny | quick | full); write and return its report:
     ``{"experiment", "out", "rows", "summary", "plots", "built", "seconds"}``.
 
     ``epsilon`` and ``residual_cap`` (ControllerConfig fields) apply to AOC wherever the
     experiment does not vary them; ``sizes`` replaces the scale's data sizes of the
     data-size sweeps (``SIZED``), e.g. one of the paper's sizes with the full scale's training
-    and episodes."""
-    check(name, scale, seeds, episodes, methods, epsilon, residual_cap, sizes)
+    and episodes; ``behaviour="replay"`` collects their corpora as replay buffers (an agent
+    that starts random and improves, aoc_cli/envs/replay.py)."""
+    check(name, scale, seeds, episodes, methods, epsilon, residual_cap, sizes, behaviour)
     exp = EXPERIMENTS[name]
     params = sized(exp.scales[scale], sizes)
     out = Path(out) if out is not None else Path("bench") / name
     out.mkdir(parents=True, exist_ok=True)
     n_seeds = seeds if seeds is not None else int(params["seeds"])
-    artefacts = Artefacts(store, log=log, progress=progress)
+    artefacts = Artefacts(store, log=log, progress=progress, behaviour=behaviour)
     runner = Runner(BUDGETS[scale], progress=progress, log=log)
     aoc_config = {} if epsilon is None else {"epsilon": epsilon}
     if residual_cap is not None:
@@ -151,12 +158,14 @@ def run_experiment(name: str, scale: str = "full", seeds: int | None = None,
     header = (f"Scale `{scale}`, seeds {n_seeds}, {seconds / 60:.1f} min"
               + (f", AOC with epsilon = {epsilon:g}" if epsilon is not None else "")
               + (f", residual cap {residual_cap:g} x typical p90" if residual_cap else "")
+              + (f", {behaviour} data" if behaviour != "mix" else "")
               + ". Mean ± std across "
               "seeds (one seed: across its episodes). Plots: "
               + ", ".join(f"[{p}]({p})" for p in ctx.plots))
     markdown = summary_markdown(exp.title, summary, exp.metrics, header, exp.paper_label)
     write_outputs(out, name, rows, summary, markdown,
                   {"scale": scale, "seeds": n_seeds, "sizes": params.get("sizes"),
+                   "behaviour": behaviour,
                    "seconds": seconds, "plots": ctx.plots, "aoc_config": ctx.aoc_config,
                    "built": artefacts.built})
     return {"experiment": name, "out": str(out), "rows": rows, "summary": summary,
@@ -192,10 +201,12 @@ def _plot(exp: Experiment, summary: list[dict], ctx: Context) -> None:
 COST = {
     "train_row_epoch": 1.0e-4,      # belief model, one thread
     "epochs": 35,                   # early stopping ends near here (at most max_epochs)
-    "step": {"aoc": 0.07, "aoc-normal-rows": 0.07, "aoc-dynamics": 0.07, "knn-belief": 0.06, "1nn-belief": 0.05, "knn": 0.05,
+    "step": {"aoc": 0.07, "aoc-normal-rows": 0.07, "aoc-dynamics": 0.07,
+             "aoc-critic": 0.07, "aoc-reward": 0.07, "knn-belief": 0.06, "1nn-belief": 0.05, "knn": 0.05,
              "1nn": 0.04, "bc": 0.002, "td3bc": 0.001, "cql": 0.001, "mpc": 0.01,
              "zero": 0.0002, "random": 0.0002},
     "offline_rl_step": {"td3bc": 0.033, "cql": 0.25},
+    "critic_step": 0.1,             # --belief critic, batch 500, one thread
     "mpc_row_epoch": 2e-5,
     "rows_per_episode": {"maze": 20, "two-gates": 28},
     "collect_row": {"lunar": 3e-4},
@@ -229,13 +240,18 @@ def expected_seconds(name: str, scale: str, seeds: int | None = None,
                 t += rows * budget.mpc_epochs * COST["mpc_row_epoch"]
         return t
 
+    def critic(ms):
+        return ("aoc-critic" in ms) * int(p.get("critic_steps", 10_000)) * COST["critic_step"]
+
     if name == "pendulum-het":
         ms = methods or p.get("methods", pendulum.METHODS)
         tasks = len(pendulum.TASKS)
         for rows in p["sizes"]:
             corpora = 2 if p["upright_data"] == "own" else 1
-            models = 1 + ("bc" in ms) + 1.4 * ("aoc-dynamics" in ms)  # the head: ~40% more epochs
-            total += n_seeds * corpora * (train(rows, models) + blackbox(ms, rows))
+            models = 1 + ("bc" in ms) + 1.4 * ("aoc-dynamics" in ms) \
+                + ("aoc-reward" in ms)  # the head: ~40% more epochs
+            total += n_seeds * corpora * (train(rows, models) + blackbox(ms, rows)
+                                          + critic(ms))
             total += n_seeds * tasks * eps * 200 * sum(step.get(m, 0.01) for m in ms)
     elif name in ("epsilon", "k"):
         tasks = len(p["ablation_tasks"])
@@ -252,8 +268,9 @@ def expected_seconds(name: str, scale: str, seeds: int | None = None,
     elif name == "lunar":
         ms = methods or p["methods"]
         for rows in p["sizes"]:
+            models = 1 + ("bc" in ms) + 1.4 * ("aoc-dynamics" in ms) + ("aoc-reward" in ms)
             total += n_seeds * (rows * COST["collect_row"]["lunar"]
-                                + train(rows, 2 if "bc" in ms else 1) + blackbox(ms, rows))
+                                + train(rows, models) + blackbox(ms, rows) + critic(ms))
             total += n_seeds * eps * 400 * sum(step.get(m, 0.01) for m in ms)
     elif name == "ood":
         for spec in p["tasks"]:

@@ -36,13 +36,17 @@ def register(app: typer.Typer) -> None:
         sizes: Optional[str] = typer.Option(
             None, "--sizes", help="pendulum-het, lunar: comma-separated rows per corpus "
                                   "instead of the scale's (e.g. 100000, the paper's Low-Data)."),
+        behaviour: str = typer.Option(
+            "mix", "--behaviour", help="pendulum-het, lunar: mix (the task's behaviour "
+                                       "policies) or replay (an agent that starts random and "
+                                       "improves, as the paper's replay buffers)."),
         bench_store: Path = typer.Option(Path("bench/store"), "--bench-store",
                                          help="Store for the bench's corpora and models."),
         fmt: FormatOption = None,
     ) -> None:
         """Run an experiment end to end; write results.csv, summary.md/json and PNGs."""
         from aoc_cli.bench import ORDER, expected_seconds, run_experiment
-        from aoc_cli.bench.runner import check
+        from aoc_cli.bench.runner import SIZED, check
 
         fmt = resolve_format(fmt)
         if out is not None:
@@ -58,7 +62,8 @@ def register(app: typer.Typer) -> None:
             return
         chosen = [m.strip() for m in methods.split(",") if m.strip()] if methods else None
         row_counts = _sizes(sizes)
-        check(experiment, scale, seeds, episodes, chosen, epsilon, residual_cap, row_counts)
+        check(experiment, scale, seeds, episodes, chosen, epsilon, residual_cap, row_counts,
+              behaviour if experiment != "all" else "mix")
         names = ORDER if experiment == "all" else [experiment]
         eta = expected_seconds(experiment, scale, seeds, episodes, chosen, row_counts)
         message(f"aoc bench {experiment} ({scale}): expected time about "
@@ -77,7 +82,8 @@ def register(app: typer.Typer) -> None:
                                         chosen, log=message, progress=bar,
                                         epsilon=None if name in ("epsilon", "two-gates")
                                         else epsilon, residual_cap=residual_cap,
-                                        sizes=row_counts)
+                                        sizes=row_counts,
+                                        behaviour=behaviour if name in SIZED else "mix")
                 bar.advance(overall)
                 for rec in report["summary"]:
                     if rec["status"] != "ok":

@@ -27,6 +27,10 @@ def register(app: typer.Typer) -> None:
         episodes: EpisodesOption = None,
         name: Optional[str] = typer.Option(None, "--name", help="Name of the corpus to write."),
         seed: int = typer.Option(0, "--seed", help="Random seed: same seed, same corpus."),
+        behaviour: str = typer.Option(
+            "mix", "--behaviour", help="mix: the task's behaviour policies; replay "
+                                       "(pendulum-het, pendulum-het-upright, lunar): an agent "
+                                       "that starts random and improves, as a replay buffer."),
         overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing corpus."),
         list_tasks: bool = typer.Option(False, "--list", help="List the tasks and their defaults."),
         csv_dir: Optional[str] = typer.Option(
@@ -46,6 +50,9 @@ def register(app: typer.Typer) -> None:
             raise AocError("give a task to collect (one of " + ", ".join(TASKS)
                            + "), or --list to see them")
         t = get_task(task)
+        if behaviour not in t.behaviours:
+            raise AocError(f"--behaviour {behaviour!r}: task {task!r} has "
+                           f"{', '.join(t.behaviours)}")
         if name is None:
             raise AocError(f"give the corpus name: aoc collect {task} --name NAME")
         for flag, value in (("--steps", steps), ("--episodes", episodes)):
@@ -74,13 +81,14 @@ def register(app: typer.Typer) -> None:
             if store.exists(name) and not overwrite:
                 raise AocError(f"corpus {name!r} already exists in {store.root}: pass "
                                "--overwrite to replace it, or choose another --name")
-            corpus, summary = _collect(store, t, task, name, steps, episodes, seed, overwrite)
+            corpus, summary = _collect(store, t, task, name, steps, episodes, seed, overwrite,
+                                       behaviour)
         message(f"wrote corpus {name!r}: {corpus.n_rows} rows, {corpus.n_episodes} episodes "
                 f"of {task} (seed {seed}, hash {corpus.hash}) to {corpus.path}")
         write_records(summary, fmt, title=f"behaviour policies of {name}")
 
 
-def _collect(store, t, task, name, steps, episodes, seed, overwrite):
+def _collect(store, t, task, name, steps, episodes, seed, overwrite, behaviour="mix"):
     """Run the task's policies and write the corpus: (corpus, per-policy summary)."""
     from aoc_cli.envs import collect
 
@@ -91,5 +99,5 @@ def _collect(store, t, task, name, steps, episodes, seed, overwrite):
             bar.update(job, completed=done, total=total)
 
         data, summary = collect(task, steps=steps, episodes=episodes, seed=seed,
-                                progress=on_progress)
+                                progress=on_progress, behaviour=behaviour)
     return store.write(name, data, overwrite=overwrite), summary

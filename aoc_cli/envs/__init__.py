@@ -68,16 +68,23 @@ def make_env(name_or_gym_id: str, **kw) -> gymnasium.Env:
 
 
 def collect(task: str, steps: int | None = None, episodes: int | None = None, seed: int = 0,
-            progress: Progress | None = None) -> tuple[CorpusData, list[dict]]:
+            progress: Progress | None = None,
+            behaviour: str = "mix") -> tuple[CorpusData, list[dict]]:
     """Run ``task``'s behaviour mix for exactly ``steps`` rows (or ``episodes`` episodes; neither:
     the task's default) and return the corpus data and a per-policy summary (episodes, rows,
     mean/std return, success rate where defined). Same seed, same arrays, bit for bit.
+    ``behaviour="replay"`` (pendulum-het, pendulum-het-upright, lunar): the data of an agent
+    that starts random and improves (aoc_cli/envs/replay.py).
 
     ``progress(done, total)`` is called as rows (or episodes) are collected.
     """
     t = get_task(task)
+    if behaviour not in t.behaviours:
+        raise AocError(f"task {task!r} has no behaviour {behaviour!r}: use "
+                       f"{', '.join(t.behaviours)}")
+    extra = {} if behaviour == "mix" else {"behaviour": behaviour}
     data, summary = t.collect_fn(steps=steps, episodes=episodes, seed=int(seed),
-                                 progress=progress)
+                                 progress=progress, **extra)
     return data.validate(), summary
 
 

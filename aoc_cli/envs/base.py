@@ -45,6 +45,9 @@ class Task:
     goal: tuple[float, ...] | None = None
     success_test: str | None = None
     extra: dict = field(default_factory=dict)
+    #: The behaviours ``collect`` can run (``mix``: the task's policies; ``replay``: an agent
+    #: that starts random and improves, aoc_cli/envs/replay.py).
+    behaviours: tuple[str, ...] = ("mix",)
     #: Controller settings this task is run with unless the user overrides them (e.g. the
     #: maze's 2-d uniform candidates are mostly off the experts' paths: epsilon 0.1).
     controller: dict = field(default_factory=dict)

@@ -20,7 +20,7 @@ import gymnasium
 import numpy as np
 from gymnasium.envs.box2d.lunar_lander import heuristic
 
-from aoc_cli.envs import render
+from aoc_cli.envs import render, replay
 from aoc_cli.envs.base import Episode, Progress, Task, budget, summarise, to_corpus
 from aoc_cli.store import box_space
 
@@ -71,13 +71,15 @@ def run_episode(env: gymnasium.Env, policy: str, rng: np.random.Generator) -> Ep
     The deviation from the heuristic is AR(1): d_0 ~ N(0, s^2), d_{t+1} = rho d_t +
     sqrt(1 - rho^2) s e_t (e_t standard normal), so every d_t has std s (the level).
     """
-    std = float(policy.rsplit("ou", 1)[1])
+    randomly = policy == "random"  # uniform actions (--behaviour replay's first episodes)
+    std = 0.0 if randomly else float(policy.rsplit("ou", 1)[1])
     rho = NOISE_CORRELATION
     obs, _info = env.reset(seed=int(rng.integers(2**31 - 1)))
     deviation = std * rng.standard_normal(2)
     observations, actions, rewards = [], [], []
     while True:
-        a = expert_action(env, obs, deviation)
+        a = rng.uniform(-1.0, 1.0, 2).astype(np.float32) if randomly \
+            else expert_action(env, obs, deviation)
         deviation = rho * deviation + np.sqrt(1.0 - rho**2) * std * rng.standard_normal(2)
         observations.append(obs)
         actions.append(a)
@@ -90,16 +92,29 @@ def run_episode(env: gymnasium.Env, policy: str, rng: np.random.Generator) -> Ep
                    success=bool(info["success"]))
 
 
-def _collect(steps: int | None, episodes: int | None, seed: int, progress: Progress | None):
+def _collect(steps: int | None, episodes: int | None, seed: int, progress: Progress | None,
+             behaviour: str = "mix"):
+    """``behaviour`` ``mix``: the four noise levels in turn; ``replay``: an agent that starts
+    random and improves, scheduled by the share of rows (or episodes) collected so far
+    (aoc_cli/envs/replay.py)."""
     steps, episodes = budget(steps, episodes, 100_000, None)
     rng = np.random.default_rng(seed)
     env = make()
     eps: list[Episode] = []
+    stds: list[float | None] = []
     rows = 0
     try:
         while (steps is not None and rows < steps) or (episodes is not None
                                                        and len(eps) < episodes):
-            eps.append(run_episode(env, POLICIES[len(eps) % len(POLICIES)], rng))
+            policy = POLICIES[len(eps) % len(POLICIES)]
+            if behaviour == "replay":
+                std = replay.noise_at(rows / steps if steps is not None
+                                      else len(eps) / episodes)
+                policy = "random" if std is None else f"heuristic-ou{std!r}"
+                stds.append(std)
+            eps.append(run_episode(env, policy, rng))
+            if behaviour == "replay":
+                eps[-1].tags["policy"] = replay.label(std)
             rows += len(eps[-1])
             if progress is not None and steps is not None:
                 progress(min(rows, steps), steps)
@@ -108,15 +123,21 @@ def _collect(steps: int | None, episodes: int | None, seed: int, progress: Progr
     finally:
         env.close()
     space = env.observation_space
+    policies = replay.POLICIES if behaviour == "replay" else POLICIES
     source = {"kind": "collect", "task": "lunar", "gym_id": GYM_ID, "seed": int(seed),
-              "steps": steps, "episodes": episodes, "policies": list(POLICIES)}
-    data = to_corpus(eps, {"policy": POLICIES},
+              "steps": steps, "episodes": episodes, "policies": list(policies),
+              "behaviour": behaviour}
+    data = to_corpus(eps, {"policy": policies},
                      box_space(8, space.low, space.high,
                                ["x", "y", "vx", "vy", "angle", "angular_velocity",
                                 "left_leg", "right_leg"]),
                      box_space(2, -1.0, 1.0, ["main_engine", "side_engine"]), source,
                      steps=steps)
-    return data, summarise(eps, {"policy": POLICIES}, kept_rows=steps)
+    if behaviour == "replay":
+        kept = np.diff(data.episode_starts)
+        data.columns = {**(data.columns or {}),
+                        "noise_std": replay.noise_column(stds[:len(kept)], kept)}
+    return data, summarise(eps, {"policy": policies}, kept_rows=steps)
 
 
 def trajectory(observations: np.ndarray) -> np.ndarray:
@@ -140,8 +161,9 @@ TASKS = [Task(
     name="lunar", gym_id=GYM_ID, horizon=HORIZON, policies=POLICIES,
     description="gymnasium LunarLanderContinuous-v3, heuristic lander with action noise",
     make_fn=make,
-    collect_fn=lambda steps=None, episodes=None, seed=0, progress=None: _collect(
-        steps, episodes, seed, progress),
+    collect_fn=lambda steps=None, episodes=None, seed=0, progress=None, behaviour="mix":
+        _collect(steps, episodes, seed, progress, behaviour),
+    behaviours=replay.BEHAVIOURS,
     plot_fn=plot_trajectories, trajectory_fn=trajectory, default_steps=100_000,
     goal=(0.0, 0.0), success_test=f"episode return >= {SUCCESS_RETURN:g}",
 )]

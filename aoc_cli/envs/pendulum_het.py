@@ -27,7 +27,7 @@ import gymnasium
 import numpy as np
 from gymnasium.envs.classic_control.pendulum import PendulumEnv, angle_normalize
 
-from aoc_cli.envs import render
+from aoc_cli.envs import render, replay
 from aoc_cli.envs.base import Episode, Progress, Task, budget, summarise, to_corpus
 from aoc_cli.errors import AocError
 from aoc_cli.store import box_space
@@ -178,7 +178,9 @@ def rollout_batch(policies: list[str], systems: list[str], lengths: np.ndarray, 
 
 
 def _collect(steps: int | None, episodes: int | None, seed: int, progress: Progress | None,
-             upright: bool, task_name: str):
+             upright: bool, task_name: str, behaviour: str = "mix"):
+    """The task's data: ``behaviour`` ``mix`` (the five policies in turn) or ``replay`` (per
+    system, an agent that starts random and improves: aoc_cli/envs/replay.py)."""
     steps, episodes = budget(steps, episodes, 100_000, None)
     plans = []  # per system: episode lengths
     for k, system in enumerate(SYSTEMS):
@@ -191,24 +193,38 @@ def _collect(steps: int | None, episodes: int | None, seed: int, progress: Progr
             lengths = [HORIZON] * n
         plans.append(lengths)
     # Interleave the systems (normal, converse, normal, ...); policies cycle within a system.
-    order = []
+    # With --behaviour replay, episode j of a system runs at noise_at(j / its episodes).
+    order, stds = [], []
     for j in range(max(len(p) for p in plans)):
         for k, system in enumerate(SYSTEMS):
             if j < len(plans[k]):
-                order.append((system, POLICIES[j % len(POLICIES)], plans[k][j]))
+                policy = POLICIES[j % len(POLICIES)]
+                if behaviour == "replay":
+                    std = replay.noise_at(j / len(plans[k]))
+                    policy = "random" if std is None else f"swingup-noise{std!r}"
+                    stds.append(std)
+                order.append((system, policy, plans[k][j]))
     lengths = np.array([n for _s, _p, n in order], dtype=np.int64)
     rng = np.random.default_rng(seed)
     eps = rollout_batch([p for _s, p, _n in order], [s for s, _p, _n in order], lengths,
                         upright, rng, progress, 0, int(lengths.sum()))
+    policies = POLICIES
+    if behaviour == "replay":
+        policies = replay.POLICIES
+        for ep, std in zip(eps, stds):
+            ep.tags["policy"] = replay.label(std)
     data = to_corpus(
-        eps, {"system": SYSTEMS, "policy": POLICIES},
+        eps, {"system": SYSTEMS, "policy": policies},
         observation_space=box_space(3, [-1, -1, -MAX_SPEED], [1, 1, MAX_SPEED],
                                     ["cos_theta", "sin_theta", "theta_dot"]),
         action_space=box_space(1, -MAX_TORQUE, MAX_TORQUE, ["torque"]),
         source={"kind": "collect", "task": task_name, "seed": int(seed), "steps": steps,
-                "episodes": episodes, "policies": list(POLICIES), "systems": list(SYSTEMS)},
+                "episodes": episodes, "policies": list(policies), "systems": list(SYSTEMS),
+                "behaviour": behaviour},
     )
-    summary = summarise(eps, {"system": SYSTEMS, "policy": POLICIES})
+    if behaviour == "replay":
+        data.columns = {**(data.columns or {}), "noise_std": replay.noise_column(stds, lengths)}
+    summary = summarise(eps, {"system": SYSTEMS, "policy": policies})
     return data, summary
 
 
@@ -246,8 +262,9 @@ def _task(name: str, gym_id: str, upright: bool) -> Task:
         name=name, gym_id=gym_id, horizon=HORIZON, policies=POLICIES,
         description=f"Pendulum, normal or converse (negated) torque; start {start}",
         make_fn=lambda **kw: make(upright=upright, **kw),
-        collect_fn=lambda steps=None, episodes=None, seed=0, progress=None: _collect(
-            steps, episodes, seed, progress, upright, name),
+        collect_fn=lambda steps=None, episodes=None, seed=0, progress=None, behaviour="mix":
+            _collect(steps, episodes, seed, progress, upright, name, behaviour),
+        behaviours=replay.BEHAVIOURS,
         plot_fn=plot_trajectories, trajectory_fn=trajectory,
         default_steps=100_000, start=(0.0, 0.0) if upright else None, goal=(0.0, 0.0),
         extra={"systems": SYSTEMS, "evaluation_system": "normal"},

@@ -56,7 +56,8 @@ def test_pendulum_het_tiny_covers_every_method_task_and_the_data(tmp_path, bench
     report = run_experiment("pendulum-het", "tiny", out=out, store=bench_store)
     rows, summary = _check_outputs(out, report)
     methods = {r["method"] for r in rows}
-    assert methods >= {"aoc", "aoc-dynamics", "aoc-normal-rows", "knn", "1nn", "knn-belief",
+    assert methods >= {"aoc", "aoc-dynamics", "aoc-critic", "aoc-reward", "aoc-normal-rows",
+                       "knn", "1nn", "knn-belief",
                        "1nn-belief", "bc", "td3bc", "cql", "mpc", "zero", "random", "data"}
     # aoc-dynamics runs its own model, trained with the auxiliary head; aoc the paper's
     from aoc_cli.belief import load_model
@@ -65,6 +66,9 @@ def test_pendulum_het_tiny_covers_every_method_task_and_the_data(tmp_path, bench
                                                          if r["method"] == "data")).split()[-1])
     assert load_model(corpus, "dynamics").config.dynamics_weight == 1.0
     assert load_model(corpus, "default").config.dynamics_weight == 0.0
+    # the reference code's beliefs: each row its own model, trained on what its name says
+    assert load_model(corpus, "critic").config.belief == "critic"
+    assert load_model(corpus, "reward").config.belief == "reward"
     assert {r["task"] for r in rows} == {"pendulum-het", "pendulum-het-upright"}
     zero_upright = next(r for r in rows if r["method"] == "zero"
                         and r["task"] == "pendulum-het-upright")
@@ -130,7 +134,10 @@ def test_two_gates_and_lunar_tiny(tmp_path, bench_store):
         out = tmp_path / name
         report = run_experiment(name, "tiny", out=out, store=bench_store)
         rows, _summary = _check_outputs(out, report)
-        assert len({r["method"] for r in rows}) == (1 if name == "two-gates" else 5)
+        methods = {r["method"] for r in rows}
+        assert len(methods) == (1 if name == "two-gates" else 7)
+        if name == "lunar":  # the reference code's beliefs beside the paper's AOC
+            assert {"aoc", "aoc-critic", "aoc-reward", "data"} <= methods
 
 
 def test_sizes_replace_the_data_sizes_of_a_sweep(tmp_path, bench_store):
@@ -270,3 +277,20 @@ def test_a_stored_corpus_of_an_earlier_behaviour_mix_is_collected_again(tmp_path
     again = art.corpus("pendulum-het", rows=400, seed=0)
     assert list(again.tag("policy")[1]) == list(TASKS["pendulum-het"].policies)
     assert again.hash == first.hash
+
+
+def test_bench_replay_data_is_its_own_corpus(tmp_path):
+    from aoc_cli.bench.prepare import Artefacts
+    from aoc_cli.bench.runner import check
+    from aoc_cli.errors import AocError
+
+    art = Artefacts(tmp_path / "store", behaviour="replay")
+    corpus = art.corpus("pendulum-het", rows=2_000, seed=0)
+    assert corpus.name == "pendulum-het-2000r-s0-replay"
+    assert corpus.manifest["sources"][-1]["behaviour"] == "replay"
+    assert corpus.tag("policy")[1][0] == "random"
+    assert art.corpus("pendulum-het", rows=2_000, seed=0).hash == corpus.hash   # reused
+    mix = Artefacts(tmp_path / "store").corpus("pendulum-het", rows=2_000, seed=0)
+    assert mix.name == "pendulum-het-2000r-s0" and mix.hash != corpus.hash
+    with pytest.raises(AocError, match="applies to pendulum-het and lunar"):
+        check("maze-adapt", "tiny", None, None, behaviour="replay")
