@@ -85,8 +85,12 @@ def file_lock(path: str | os.PathLike, what: str, shared: bool = False) -> Itera
         finally:
             held[2] -= 1
         return
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+    except OSError as err:
+        raise AocError(f"cannot write to the store: creating the lock file {path} failed "
+                       f"({err.strerror}); is the store folder writable?") from None
     try:
         fcntl.flock(fd, (fcntl.LOCK_SH if shared else fcntl.LOCK_EX) | fcntl.LOCK_NB)
     except BlockingIOError:

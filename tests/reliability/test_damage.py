@@ -263,3 +263,18 @@ def test_a_failed_index_leaves_the_previous_beliefs_and_index(store, aoc, fail_i
     assert code == 0, err
     assert (model / "beliefs.npy").read_bytes() != before[model / "beliefs.npy"]
     assert verify_rows(aoc, "m")[0] == 0
+
+
+@pytest.mark.parametrize("query,pattern", [
+    ('{"observation": "abc"}', r'line 1: "observation" must be a list of numbers'),
+    ('{"observation": [1, 2], "history": [[1, 2, "x", 4, 5]]}',
+     r"line 1: history step 0 must be a list of numbers"),
+    ('{"observation": [1, NaN]}', r"NaN or inf"),
+])
+def test_jsonl_queries_that_are_not_numbers_are_one_line(store, aoc, monkeypatch, query,
+                                                         pattern):
+    import io
+    import sys
+
+    monkeypatch.setattr(sys, "stdin", io.StringIO(query + "\n"))
+    one_line_error(*aoc("explain", "m", "--input", "-"), pattern)
