@@ -69,15 +69,20 @@ def main() -> None:
     ap.add_argument("--patients", type=int, default=10_000)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--store", type=Path, default=ROOT / "bench" / "evaluate-store")
+    ap.add_argument("--cases", default="held,own,value,exact",
+                    help="comma-separated: held, own, exact, value (in this order of output)")
     args = ap.parse_args()
     args.store.mkdir(parents=True, exist_ok=True)
     build(args.store, args.patients)
-    cases = {
-        "imitation, held out": ["evaluate", "ward100k", "--data", "held"],
-        "imitation, own": ["evaluate", "ward100k", "--data", "ward100k"],
-        "imitation, own, exact": ["evaluate", "ward100k", "--data", "ward100k", "--exact"],
-        "value, held out": ["evaluate", "ward100k", "--model", "value", "--data", "held"],
+    known = {
+        "held": ("imitation, held out", ["evaluate", "ward100k", "--data", "held"]),
+        "own": ("imitation, own", ["evaluate", "ward100k", "--data", "ward100k"]),
+        "value": ("value, held out", ["evaluate", "ward100k", "--model", "value", "--data",
+                                      "held"]),
+        "exact": ("imitation, own, exact", ["evaluate", "ward100k", "--data", "ward100k",
+                                            "--exact"]),
     }
+    cases = dict(known[c.strip()] for c in args.cases.split(","))
     with open("/proc/loadavg") as fh:
         print(f"load before: {fh.read().split()[:3]}")
     for name, argv in cases.items():
