@@ -4,7 +4,7 @@ missing. The work is in :mod:`aoc_cli.store.verify`."""
 
 from __future__ import annotations
 
-from typing import List, Optional
+from typing import Annotated, List, Optional
 
 import typer
 
@@ -15,8 +15,9 @@ from aoc_cli.errors import AocError
 def register(app: typer.Typer) -> None:
     @app.command("verify")
     def verify(
-        names: Optional[List[str]] = typer.Argument(
-            None, help="Corpora to check (default: every corpus of the store)."),
+        names: Annotated[Optional[List[str]], typer.Argument(
+            help="Corpora to check (default: every corpus of the store).",
+            show_default=False)] = None,
         fmt: FormatOption = None,
     ) -> None:
         """Check every file of the store against the checksums recorded when it was written."""

@@ -125,7 +125,7 @@ def verify_corpus(store, name: str) -> list[dict]:
     else:
         status, detail = file_status(h5, None)
         rows.append({"corpus": name, "file": "corpus.h5",
-                     "status": "missing" if status == "missing" else "damaged",
+                     "status": "missing" if status == "missing" else "unrecorded",
                      "detail": "cannot be checked: no readable manifest"})
     if manifest is not None and h5.is_file() and row["status"] != "damaged":
         rows.append(_content_row(store, name))

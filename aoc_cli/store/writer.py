@@ -27,8 +27,9 @@ def write_corpus(root: Path, name: str, data: CorpusData, *, overwrite: bool = F
     """Validate and store ``data`` as corpus ``root/name`` (atomically, under its lock).
 
     ``append`` adds the episodes to an existing corpus with the same spaces (a missing one is
-    created, with a warning); derived models are kept but become stale (their corpus hash no
-    longer matches). A damaged corpus folder (no manifest) is replaced only with ``overwrite``.
+    created; ``aoc ingest`` warns); derived models are kept but become stale (their corpus
+    hash no longer matches). A damaged corpus folder (no manifest) is replaced only with
+    ``overwrite``.
     """
     from aoc_cli.store.store import Store
 
