@@ -25,7 +25,7 @@ from aoc_cli.store.atomic import seal_status, sha256_file
 
 #: Opening an artefact hashes its recorded files up to this size; larger ones are checked
 #: by size only (``aoc verify`` hashes everything).
-FAST_HASH_BYTES = 64 << 20
+FAST_HASH_BYTES = 16 << 20
 
 
 def file_status(path: Path, record: dict | None, full: bool = True) -> tuple[str, str]:
