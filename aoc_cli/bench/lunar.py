@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from aoc_cli.bench import paper
 from aoc_cli.bench.beliefs import BELIEF_ROWS, belief_session, prepare_beliefs
+from aoc_cli.bench.cells import Cell, Plan
 from aoc_cli.bench.common import Context, belief_config, make_task_env, session
 from aoc_cli.bench.methods import DATA, data_values, row_values
 from aoc_cli.bench.results import result_row
@@ -32,36 +33,45 @@ SCALES = {
 }
 
 
-def run_lunar(ctx: Context, scale: dict):
-
+def _cells(ctx: Context, scale: dict) -> list[Cell]:
     methods = ctx.pick_methods(scale["methods"])
+    kinds = tuple(m for m in methods if m in BELIEF_ROWS)
+    return [Cell("lunar", method, f"rows={size}", seed,
+                 ("lunar", size, seed, "bc" in methods, kinds))
+            for size in scale["sizes"] for seed in ctx.seeds for method in [DATA, *methods]]
+
+
+def _prepare(ctx: Context, scale: dict, prep: tuple):
+    _task, size, seed, bc, kinds = prep
+    corpus = ctx.artefacts.corpus("lunar", rows=size, seed=seed)
+    ctx.artefacts.model(corpus, "default", belief_config(scale, "value", seed))
+    if bc:
+        ctx.artefacts.model(corpus, "bc", belief_config(scale, "imitation", seed))
+    ctx.artefacts.index(corpus, "default")
+    prepare_beliefs(ctx, scale, corpus, list(kinds), seed)
+    return corpus
+
+
+def _run(ctx: Context, scale: dict, cell: Cell, corpus) -> dict:
+    _task, method, setting, seed = cell.key
+    if method == DATA:
+        return {"rows": [result_row("lunar", "lunar", DATA, setting, seed,
+                                    **data_values(corpus), note=f"corpus {corpus.name}")]}
     env = make_task_env("lunar", scale)
-    rows = []
-    for size in scale["sizes"]:
-        setting = f"rows={size}"
-        for seed in ctx.seeds:
-            corpus = ctx.artefacts.corpus("lunar", rows=size, seed=seed)
-            ctx.artefacts.model(corpus, "default", belief_config(scale, "value", seed))
-            if "bc" in methods:
-                ctx.artefacts.model(corpus, "bc", belief_config(scale, "imitation", seed))
-            ctx.artefacts.index(corpus, "default")
-            prepare_beliefs(ctx, scale, corpus, methods, seed)
-            s = session(corpus, env, "lunar", seed=seed, **ctx.aoc_config)
-            rows.append(result_row("lunar", "lunar", DATA, setting, seed,
-                                   **data_values(corpus), note=f"corpus {corpus.name}"))
-            for method in methods:
-                run = ctx.runner.run("aoc" if method in BELIEF_ROWS else method,
-                                     belief_session(ctx, method, corpus, env, "lunar", seed)
-                                     if method in BELIEF_ROWS else s, env,
-                                     ctx.n_episodes(scale["episodes"]), seed,
-                                     label=f"{method} lunar {setting} seed {seed}")
-                run.method = method
-                rows.append(result_row("lunar", "lunar", method, setting, seed,
-                                       **row_values(run)))
+    if method in BELIEF_ROWS:
+        s = belief_session(ctx, method, corpus, env, "lunar", seed)
+    else:
+        s = session(corpus, env, "lunar", seed=seed, **ctx.aoc_config)
+    run = ctx.runner.run("aoc" if method in BELIEF_ROWS else method, s, env,
+                         ctx.n_episodes(scale["episodes"]), seed,
+                         label=f"{method} lunar {setting} seed {seed}")
+    run.method = method
+    return {"rows": [result_row("lunar", "lunar", method, setting, seed, **row_values(run))]}
 
+
+def _figure(ctx: Context, scale: dict):
     sizes = dict(zip((f"rows={s}" for s in scale["sizes"]), scale["paper_rows"]))
+    return lambda row: paper.lunar(row["method"], sizes.get(row["setting"], -1))
 
-    def figure(row):
-        return paper.lunar(row["method"], sizes.get(row["setting"], -1))
 
-    return rows, figure
+LUNAR = Plan(_cells, _prepare, _run, _figure)

@@ -20,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from aoc_cli.bench import paper
+from aoc_cli.bench.cells import Cell, Plan
 from aoc_cli.bench.common import Context, belief_config, make_task_env, session
 from aoc_cli.bench.methods import row_values
 from aoc_cli.bench.results import result_row
@@ -119,59 +120,77 @@ def _plot(ctx: Context, task: str, results, name: str, title: str) -> None:
     ctx.plots.append(name)
 
 
-def run_maze_adapt(ctx: Context, scale: dict):
+def _maze_cells(ctx: Context, scale: dict) -> list[Cell]:
+    return [Cell("maze", method, f"rate={rate:g}", seed, ("maze", seed), (rate,))
+            for seed in ctx.seeds for rate in scale["rates"]
+            for method in ["aoc"] + (ctx.pick_methods(scale["compare"]) if rate == 1.0 else [])]
 
+
+def _maze_prepare(ctx: Context, scale: dict, prep: tuple):
+    seed = prep[1]
+    corpus = ctx.artefacts.corpus("maze", episodes=scale["episodes_data"], seed=seed)
+    ctx.artefacts.model(corpus, "default", belief_config(scale, "value", seed))
+    for rate in scale["rates"]:
+        resample = None if rate == 1.0 else {"policy=pi1": rate}
+        ctx.artefacts.index(corpus, "default", _index_id(rate), resample=resample, seed=seed)
+    return corpus
+
+
+def _maze_run(ctx: Context, scale: dict, cell: Cell, corpus) -> dict:
+    seed, method, (rate,) = cell.seed, cell.method, cell.args
     env = make_task_env("maze", scale)
-    rows = []
-    for seed in ctx.seeds:
-        corpus = ctx.artefacts.corpus("maze", episodes=scale["episodes_data"], seed=seed)
-        ctx.artefacts.model(corpus, "default", belief_config(scale, "value", seed))
-        for rate in scale["rates"]:
-            index_id = _index_id(rate)
-            resample = None if rate == 1.0 else {"policy=pi1": rate}
-            ctx.artefacts.index(corpus, "default", index_id, resample=resample, seed=seed)
-            s = session(corpus, env, "maze", index_id=index_id, seed=seed, **ctx.aoc_config)
-            methods = ["aoc"] + (ctx.pick_methods(scale["compare"]) if rate == 1.0 else [])
-            for method in methods:
-                run = ctx.runner.run(method, s, env, ctx.n_episodes(scale["episodes"]), seed,
-                                     label=f"maze x{rate:g} seed {seed}")
-                values = row_values(run)
-                if run.status == "ok":
-                    values["upper_gate"], values["lower_gate"] = gate_counts(run.results)
-                    if seed == ctx.seeds[0]:
-                        _plot(ctx, "maze", run.results, f"maze_{method}_x{rate:g}.png",
-                              f"{method}, pi1 x{rate:g}: success "
-                              f"{values['success_rate']:.0%}")
-                rows.append(result_row("maze-adapt", "maze", method, f"rate={rate:g}", seed,
-                                       **values))
+    s = session(corpus, env, "maze", index_id=_index_id(rate), seed=seed, **ctx.aoc_config)
+    run = ctx.runner.run(method, s, env, ctx.n_episodes(scale["episodes"]), seed,
+                         label=f"maze x{rate:g} seed {seed}")
+    values = row_values(run)
+    if run.status == "ok":
+        values["upper_gate"], values["lower_gate"] = gate_counts(run.results)
+        if seed == ctx.seeds[0]:
+            _plot(ctx, "maze", run.results, f"maze_{method}_x{rate:g}.png",
+                  f"{method}, pi1 x{rate:g}: success {values['success_rate']:.0%}")
+    return {"rows": [result_row("maze-adapt", "maze", method, cell.setting, seed, **values)]}
 
+
+def _maze_figure(ctx: Context, scale: dict):
     def figure(row):
         fig = paper.maze(float(row["setting"].split("=")[1]))
         return None if fig is None or row["method"] != "aoc" else fig
 
-    return rows, figure
+    return figure
 
 
-def run_two_gates(ctx: Context, scale: dict):
+MAZE_ADAPT = Plan(_maze_cells, _maze_prepare, _maze_run, _maze_figure)
 
+
+def _two_gates_cells(ctx: Context, scale: dict) -> list[Cell]:
+    return [Cell("two-gates", "aoc", f"epsilon={eps:g}", seed, ("two-gates", seed), (eps,))
+            for seed in ctx.seeds for eps in scale["epsilons"]]
+
+
+def _two_gates_prepare(ctx: Context, scale: dict, prep: tuple):
+    seed = prep[1]
+    corpus = ctx.artefacts.corpus("two-gates", episodes=scale["episodes_data"], seed=seed)
+    ctx.artefacts.model(corpus, "default", belief_config(scale, "value", seed))
+    ctx.artefacts.index(corpus, "default")
+    return corpus
+
+
+def _two_gates_run(ctx: Context, scale: dict, cell: Cell, corpus) -> dict:
+    seed, (eps,) = cell.seed, cell.args
     env = make_task_env("two-gates", scale)
-    rows = []
-    for seed in ctx.seeds:
-        corpus = ctx.artefacts.corpus("two-gates", episodes=scale["episodes_data"], seed=seed)
-        ctx.artefacts.model(corpus, "default", belief_config(scale, "value", seed))
-        ctx.artefacts.index(corpus, "default")
-        for eps in scale["epsilons"]:
-            s = session(corpus, env, "two-gates", seed=seed, **{**ctx.aoc_config, "epsilon": eps})
-            run = ctx.runner.run("aoc", s, env, ctx.n_episodes(scale["episodes"]), seed,
-                                 label=f"two-gates epsilon {eps:g} seed {seed}")
-            values = row_values(run)
-            if run.status == "ok" and seed == ctx.seeds[0]:
-                _plot(ctx, "two-gates", run.results, f"two_gates_epsilon{eps:g}.png",
-                      f"AOC, epsilon {eps:g}: return {values['return_mean']:.2f}")
-            rows.append(result_row("two-gates", "two-gates", "aoc", f"epsilon={eps:g}", seed,
-                                   **values))
+    s = session(corpus, env, "two-gates", seed=seed, **{**ctx.aoc_config, "epsilon": eps})
+    run = ctx.runner.run("aoc", s, env, ctx.n_episodes(scale["episodes"]), seed,
+                         label=f"two-gates epsilon {eps:g} seed {seed}")
+    values = row_values(run)
+    if run.status == "ok" and seed == ctx.seeds[0]:
+        _plot(ctx, "two-gates", run.results, f"two_gates_epsilon{eps:g}.png",
+              f"AOC, epsilon {eps:g}: return {values['return_mean']:.2f}")
+    return {"rows": [result_row("two-gates", "two-gates", "aoc", cell.setting, seed,
+                                **values)]}
 
-    def figure(row):
-        return paper.two_gates(float(row["setting"].split("=")[1]))
 
-    return rows, figure
+def _two_gates_figure(ctx: Context, scale: dict):
+    return lambda row: paper.two_gates(float(row["setting"].split("=")[1]))
+
+
+TWO_GATES = Plan(_two_gates_cells, _two_gates_prepare, _two_gates_run, _two_gates_figure)

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from aoc_cli.bench.cells import Cell, Plan
 from aoc_cli.bench.common import Context, belief_config, make_task_env, session
 from aoc_cli.bench.methods import row_values
 from aoc_cli.bench.results import result_row
@@ -119,61 +120,79 @@ def plot_ood(curves: dict, T: int, path, title: str, reference=None) -> None:
     save(fig, path)
 
 
-def run_ood(ctx: Context, scale: dict):
-    rows = []
-    for spec in scale["tasks"]:
-        rows += _run_task(ctx, scale, spec)
-    return rows, lambda row: None
+def _cells(ctx: Context, scale: dict) -> list[Cell]:
+    """One cell per task and seed: the clean reference rollouts, then AOC without and with
+    noise (both scored against that reference)."""
+    return [Cell(spec["task"], "aoc", "noise", seed, (i, seed), (i,))
+            for i, spec in enumerate(scale["tasks"]) for seed in ctx.seeds]
 
 
-def _run_task(ctx: Context, scale: dict, spec: dict) -> list[dict]:
+def _prepare(ctx: Context, scale: dict, prep: tuple):
+    i, seed = prep
+    spec = scale["tasks"][i]
+    corpus = ctx.artefacts.corpus(spec["task"], rows=spec.get("rows"),
+                                  episodes=spec.get("episodes"), seed=seed)
+    ctx.artefacts.model(corpus, "default", belief_config(spec, "value", seed))
+    ctx.artefacts.index(corpus, "default")
+    return corpus
+
+
+def _run(ctx: Context, scale: dict, cell: Cell, corpus) -> dict:
     from aoc_cli.report.plots import plot_rollout_curves
 
+    spec, seed = scale["tasks"][cell.args[0]], cell.seed
     task, T = spec["task"], int(spec["T"])
     env = make_task_env(task, spec)
-    rows, curves, first_band = [], {}, None
-    for seed in ctx.seeds:
-        corpus = ctx.artefacts.corpus(task, rows=spec.get("rows"), episodes=spec.get("episodes"),
-                                      seed=seed)
-        ctx.artefacts.model(corpus, "default", belief_config(spec, "value", seed))
-        ctx.artefacts.index(corpus, "default")
-        n = ctx.n_episodes(scale["episodes"])
+    rows, curves = [], {}
+    n = ctx.n_episodes(scale["episodes"])
+    s = session(corpus, env, task, seed=seed, **ctx.aoc_config)
+    ref = ctx.runner.run("aoc", s, env, n, seed + REFERENCE_SEEDS,
+                         label=f"{task} clean reference seed {seed}")
+    band = None
+    if ref.status == "ok":
+        band = session_reference_band(s, [r.residuals for r in ref.results])
+    for noise in (0.0, float(scale["noise"])):
         s = session(corpus, env, task, seed=seed, **ctx.aoc_config)
-        ref = ctx.runner.run("aoc", s, env, n, seed + REFERENCE_SEEDS,
-                             label=f"{task} clean reference seed {seed}")
-        band = None
-        if ref.status == "ok":
-            band = session_reference_band(s, [r.residuals for r in ref.results])
-        for noise in (0.0, float(scale["noise"])):
-            s = session(corpus, env, task, seed=seed, **ctx.aoc_config)
-            run = ctx.runner.run("aoc", s, env, n, seed,
-                                 noise_after=T if noise > 0 else None, noise_std=noise,
-                                 label=f"{task} noise {noise:g} seed {seed}")
-            values = row_values(run)
-            scored = None
-            if run.status == "ok" and band is not None:
-                scored = dict(values, **ood_values(
-                    [flags_against(r.residuals, band) for r in run.results], T))
-            if run.status == "ok":
-                values.update(ood_values([r.ood for r in run.results], T))
-                if seed == ctx.seeds[0]:
-                    curves[f"noise {noise:g}"] = _curves(run.results)
-                    name = f"ood_{task}_noise{noise:g}_episodes.png"
-                    plot_rollout_curves(run.results, ctx.out / name,
-                                        title=f"{task}: AOC, noise {noise:g} after step {T}",
-                                        noise_after=T)
-                    ctx.plots.append(name)
-            rows.append(result_row("ood", task, "aoc", f"noise={noise:g}, band=running", seed,
-                                   **values))
-            if scored is not None:
-                rows.append(result_row("ood", task, "aoc", f"noise={noise:g}, band=reference",
-                                       seed, **scored))
-        if seed == ctx.seeds[0]:
-            first_band = band
-    if curves:
-        name = f"ood_{task}_mean.png"
-        plot_ood(curves, T, ctx.out / name,
-                 f"{task}: residual and reward per step, noise after step {T}",
-                 reference=first_band)
+        run = ctx.runner.run("aoc", s, env, n, seed,
+                             noise_after=T if noise > 0 else None, noise_std=noise,
+                             label=f"{task} noise {noise:g} seed {seed}")
+        values = row_values(run)
+        scored = None
+        if run.status == "ok" and band is not None:
+            scored = dict(values, **ood_values(
+                [flags_against(r.residuals, band) for r in run.results], T))
+        if run.status == "ok":
+            values.update(ood_values([r.ood for r in run.results], T))
+            if seed == ctx.seeds[0]:
+                curves[f"noise {noise:g}"] = _curves(run.results)
+                name = f"ood_{task}_noise{noise:g}_episodes.png"
+                plot_rollout_curves(run.results, ctx.out / name,
+                                    title=f"{task}: AOC, noise {noise:g} after step {T}",
+                                    noise_after=T)
+                ctx.plots.append(name)
+        rows.append(result_row("ood", task, "aoc", f"noise={noise:g}, band=running", seed,
+                               **values))
+        if scored is not None:
+            rows.append(result_row("ood", task, "aoc", f"noise={noise:g}, band=reference",
+                                   seed, **scored))
+    extra = {"curves": curves, "band": band} if seed == ctx.seeds[0] else {}
+    return {"rows": rows, "extra": extra}
+
+
+def _finish(ctx: Context, scale: dict, results) -> None:
+    """Per task: the mean residual and reward per step of the first seed, with its band."""
+    for cell, result in results:
+        spec = scale["tasks"][cell.args[0]]
+        curves = result.extra.get("curves")
+        if cell.seed != ctx.seeds[0] or not curves:
+            continue
+        band = result.extra.get("band")
+        name = f"ood_{cell.task}_mean.png"
+        plot_ood({k: {m: np.asarray(v, dtype=float) for m, v in c.items()}
+                  for k, c in curves.items()}, int(spec["T"]), ctx.out / name,
+                 f"{cell.task}: residual and reward per step, noise after step {spec['T']}",
+                 reference=None if band is None else np.asarray(band, dtype=float))
         ctx.plots.append(name)
-    return rows
+
+
+OOD = Plan(_cells, _prepare, _run, lambda ctx, scale: (lambda row: None), _finish)

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from aoc_cli.bench import paper
 from aoc_cli.bench.beliefs import BELIEF_ROWS, belief_session, prepare_beliefs
+from aoc_cli.bench.cells import Cell, Plan
 from aoc_cli.bench.common import Context, belief_config, make_task_env, session
 from aoc_cli.bench.methods import DATA, data_values, row_values
 from aoc_cli.bench.results import result_row
@@ -73,13 +74,15 @@ def _k_values(d_b: int) -> list[int]:
     return [1, 10, 2 * (d_b + 1), 100]
 
 
-def _prepare(ctx: Context, scale: dict, task: str, rows: int, seed: int, bc: bool,
-             dynamics: bool = False, beliefs=()):
+def _data_task(scale: dict, task: str) -> str:
+    return task if (task == "pendulum-het" or scale["upright_data"] == "own") else "pendulum-het"
+
+
+def _prepare(ctx: Context, scale: dict, prep: tuple):
     """Corpus, value model (+ bc model, + the dynamics-head model and its index, + the models
-    and indexes of the belief rows in ``beliefs``) and default index for ``task`` at ``rows``
-    rows."""
-    data_task = task if (task == "pendulum-het" or scale["upright_data"] == "own") \
-        else "pendulum-het"
+    and indexes of the belief rows) and default index of ``prep`` = (data task, rows, seed,
+    bc, dynamics, belief rows)."""
+    data_task, rows, seed, bc, dynamics, beliefs = prep
     corpus = ctx.artefacts.corpus(data_task, rows=rows, seed=seed)
     ctx.artefacts.model(corpus, "default", belief_config(scale, "value", seed))
     if dynamics:
@@ -93,79 +96,85 @@ def _prepare(ctx: Context, scale: dict, task: str, rows: int, seed: int, bc: boo
     return corpus
 
 
-def run_pendulum_het(ctx: Context, scale: dict) -> tuple[list[dict], callable]:
-
+def _het_cells(ctx: Context, scale: dict) -> list[Cell]:
     methods = ctx.pick_methods(scale.get("methods", METHODS))
-    rows_out = []
-    for size, paper_rows in zip(scale["sizes"], scale["paper_rows"]):
-        setting = f"rows={size}"
+    beliefs = tuple(m for m in methods if m in BELIEF_ROWS)
+    cells = []
+    for size in scale["sizes"]:
         for seed in ctx.seeds:
             for task in TASKS:
-                corpus = _prepare(ctx, scale, task, size, seed, "bc" in methods,
-                                  DYNAMICS in methods, methods)
-                env = make_task_env(task, scale)
-                s = session(corpus, env, task, seed=seed, **ctx.aoc_config)
-                rows_out.append(result_row("pendulum-het", task, DATA, setting, seed,
-                                           **data_values(corpus),
-                                           note=f"corpus {corpus.name}"))
-                for method in methods:
-                    if method == ORACLE or method in BELIEF_ROWS:
-                        run = ctx.runner.run("aoc", _variant(ctx, method, corpus, env, task, seed),
-                                             env, ctx.n_episodes(scale["episodes"]), seed,
-                                             label=f"{method} {task} {setting} seed {seed}")
-                        run.method = method
-                    else:
-                        run = ctx.runner.run(method, s, env, ctx.n_episodes(scale["episodes"]),
-                                             seed, label=f"{task} {setting} seed {seed}")
-                    rows_out.append(result_row("pendulum-het", task, method, setting, seed,
-                                               **row_values(run)))
+                prep = (_data_task(scale, task), size, seed, "bc" in methods,
+                        DYNAMICS in methods, beliefs)
+                cells += [Cell(task, method, f"rows={size}", seed, prep)
+                          for method in [DATA, *methods]]
+    return cells
 
+
+def _het_run(ctx: Context, scale: dict, cell: Cell, corpus) -> dict:
+    task, method, setting, seed = cell.key
+    if method == DATA:
+        return {"rows": [result_row("pendulum-het", task, DATA, setting, seed,
+                                    **data_values(corpus), note=f"corpus {corpus.name}")]}
+    env = make_task_env(task, scale)
+    if method == ORACLE or method in BELIEF_ROWS:
+        run = ctx.runner.run("aoc", _variant(ctx, method, corpus, env, task, seed),
+                             env, ctx.n_episodes(scale["episodes"]), seed,
+                             label=f"{method} {task} {setting} seed {seed}")
+        run.method = method
+    else:
+        s = session(corpus, env, task, seed=seed, **ctx.aoc_config)
+        run = ctx.runner.run(method, s, env, ctx.n_episodes(scale["episodes"]),
+                             seed, label=f"{task} {setting} seed {seed}")
+    return {"rows": [result_row("pendulum-het", task, method, setting, seed,
+                                **row_values(run))]}
+
+
+def _het_figure(ctx: Context, scale: dict):
     sizes = dict(zip((f"rows={s}" for s in scale["sizes"]), scale["paper_rows"]))
-
-    def figure(row):
-        return paper.pendulum(row["method"], sizes.get(row["setting"], -1))
-
-    return rows_out, figure
+    return lambda row: paper.pendulum(row["method"], sizes.get(row["setting"], -1))
 
 
-def _ablation(ctx: Context, scale: dict, name: str, settings) -> list[dict]:
+PENDULUM_HET = Plan(_het_cells, _prepare, _het_run, _het_figure)
 
-    out = []
+
+def _ablation_cells(ctx: Context, scale: dict, settings) -> list[Cell]:
+    cells = []
     for seed in ctx.seeds:
         for task in scale["ablation_tasks"]:
-            corpus = _prepare(ctx, scale, task, scale["mid"], seed, bc=False, dynamics=True)
-            env = make_task_env(task, scale)
-            for setting, config in settings(corpus):
-                for method, model_id in (("aoc", "default"), (DYNAMICS, "dynamics")):
-                    s = session(corpus, env, task, model_id=model_id, seed=seed,
-                                **{**ctx.aoc_config, **config})
-                    run = ctx.runner.run("aoc", s, env, ctx.n_episodes(scale["episodes"]), seed,
-                                         label=f"{method} {task} {setting} seed {seed}")
-                    out.append(result_row(name, task, method, setting, seed,
-                                          **row_values(run)))
-    return out
+            prep = (_data_task(scale, task), scale["mid"], seed, False, True, ())
+            for setting, config in settings(belief_config(scale, "value", seed)):
+                for method in ("aoc", DYNAMICS):
+                    cells.append(Cell(task, method, setting, seed, prep,
+                                      tuple(sorted(config.items()))))
+    return cells
 
 
-def run_epsilon(ctx: Context, scale: dict):
-    rows = _ablation(ctx, scale, "epsilon",
-                     lambda corpus: [(f"epsilon={e:g}", {"epsilon": e}) for e in EPSILONS])
+def _ablation_run(name: str):
+    def run(ctx: Context, scale: dict, cell: Cell, corpus) -> dict:
+        task, method, setting, seed = cell.key
+        env = make_task_env(task, scale)
+        model_id = "default" if method == "aoc" else "dynamics"
+        s = session(corpus, env, task, model_id=model_id, seed=seed,
+                    **{**ctx.aoc_config, **dict(cell.args)})
+        run = ctx.runner.run("aoc", s, env, ctx.n_episodes(scale["episodes"]), seed,
+                             label=f"{method} {task} {setting} seed {seed}")
+        return {"rows": [result_row(name, task, method, setting, seed, **row_values(run))]}
 
-    def figure(row):
-        return paper.epsilon(float(row["setting"].split("=")[1]))
-
-    return rows, figure
+    return run
 
 
-def run_k(ctx: Context, scale: dict):
-    from aoc_cli.belief import load_model
+def _epsilon_settings(config):
+    return [(f"epsilon={e:g}", {"epsilon": e}) for e in EPSILONS]
 
-    def settings(corpus):
-        d_b = load_model(corpus, "default").d_b
-        return [(f"k={k}", {"k": k}) for k in _k_values(d_b)]
 
-    rows = _ablation(ctx, scale, "k", settings)
+def _k_settings(config):
+    """The k values of the paper's table; 2 (d_b + 1) from the model's belief dimension."""
+    return [(f"k={k}", {"k": k}) for k in _k_values(config.belief_dim)]
 
-    def figure(row):
-        return paper.k(int(row["setting"].split("=")[1]))
 
-    return rows, figure
+EPSILON = Plan(lambda ctx, scale: _ablation_cells(ctx, scale, _epsilon_settings), _prepare,
+               _ablation_run("epsilon"),
+               lambda ctx, scale: lambda row: paper.epsilon(float(row["setting"].split("=")[1])))
+K = Plan(lambda ctx, scale: _ablation_cells(ctx, scale, _k_settings), _prepare,
+         _ablation_run("k"),
+         lambda ctx, scale: lambda row: paper.k(int(row["setting"].split("=")[1])))

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from aoc_cli.bench import lunar, maze, ood, paper, pendulum, plots
+from aoc_cli.bench.cells import execute
 from aoc_cli.bench.common import SCALES, Context
 from aoc_cli.bench.methods import Budget, Runner
 from aoc_cli.bench.prepare import Artefacts
@@ -28,32 +29,32 @@ RETURN = [("return_mean", "return"), ("success_rate", "success")]
 class Experiment:
     name: str
     title: str
-    run: object
+    plan: object       # a cells.Plan
     scales: dict
     metrics: list
     paper_label: str = "paper"
 
 
 EXPERIMENTS = {e.name: e for e in [
-    Experiment("pendulum-het", "Pendulum-Het: methods x data sizes", pendulum.run_pendulum_het,
+    Experiment("pendulum-het", "Pendulum-Het: methods x data sizes", pendulum.PENDULUM_HET,
                pendulum.SCALES, [("return_mean", "return"), ("seconds_per_step", "s/step")],
                "paper (upright start)"),
-    Experiment("epsilon", "Pendulum-Het: the residual quantile epsilon", pendulum.run_epsilon,
+    Experiment("epsilon", "Pendulum-Het: the residual quantile epsilon", pendulum.EPSILON,
                pendulum.SCALES, [("return_mean", "return"), ("mean_residual", "residual")],
                "paper (upright, 300k)"),
-    Experiment("k", "Pendulum-Het: neighbours k", pendulum.run_k, pendulum.SCALES,
+    Experiment("k", "Pendulum-Het: neighbours k", pendulum.K, pendulum.SCALES,
                [("return_mean", "return"), ("mean_residual", "residual")],
                "paper (upright, 300k)"),
-    Experiment("maze-adapt", "Maze: re-sampling pi1 (no retraining)", maze.run_maze_adapt,
+    Experiment("maze-adapt", "Maze: re-sampling pi1 (no retraining)", maze.MAZE_ADAPT,
                maze.SCALES, [("success_rate", "success"), ("upper_gate", "upper gate /100"),
                              ("lower_gate", "lower gate /100"), ("return_mean", "return")],
                "paper (success / upper / lower)"),
-    Experiment("two-gates", "Two gates: epsilon and conservatism", maze.run_two_gates,
+    Experiment("two-gates", "Two gates: epsilon and conservatism", maze.TWO_GATES,
                maze.TWO_GATES_SCALES, RETURN),
-    Experiment("lunar", "LunarLanderContinuous: methods x data sizes", lunar.run_lunar,
+    Experiment("lunar", "LunarLanderContinuous: methods x data sizes", lunar.LUNAR,
                lunar.SCALES, [("return_mean", "return"), ("success_rate", "success"),
                               ("seconds_per_step", "s/step")]),
-    Experiment("ood", "OOD detection: action noise after step T", ood.run_ood, ood.SCALES,
+    Experiment("ood", "OOD detection: action noise after step T", ood.OOD, ood.SCALES,
                [("ood_delay", "delay (steps)"), ("ood_flagged", "flagged after T"),
                 ("ood_false_flags", "flags before T"), ("mean_residual", "residual"),
                 ("return_mean", "return")], "paper"),
@@ -79,8 +80,8 @@ SIZED = ("pendulum-het", "lunar")
 def check(name: str, scale: str, seeds: int | None, episodes: int | None,
           methods: list[str] | None = None, epsilon: float | None = None,
           residual_cap: float | None = None, sizes: list[int] | None = None,
-          behaviour: str = "mix") -> None:
-    """Bad experiment, scale, counts, sizes, method names or AOC settings -> AocError."""
+          behaviour: str = "mix", workers: int | None = None) -> None:
+    """Bad experiment, scale, counts, sizes, method names, AOC settings or workers -> AocError."""
     if behaviour not in ("mix", "replay"):
         raise AocError(f"unknown --behaviour {behaviour!r}: use mix or replay")
     if behaviour != "mix" and name not in SIZED:
@@ -105,6 +106,8 @@ def check(name: str, scale: str, seeds: int | None, episodes: int | None,
         if unknown:
             raise AocError(f"unknown method(s) {', '.join(unknown)}: use "
                            f"{', '.join([*AOC_METHODS, *BASELINES])}")
+    if workers is not None and workers < 1:
+        raise AocError(f"--workers must be >= 1, got {workers}")
     if residual_cap is not None and not residual_cap > 0:
         raise AocError(f"--residual-cap must be > 0, got {residual_cap}")
     if sizes is not None:
@@ -128,16 +131,23 @@ def run_experiment(name: str, scale: str = "full", seeds: int | None = None,
                    episodes: int | None = None, methods: list[str] | None = None,
                    log=None, progress=None, epsilon: float | None = None,
                    residual_cap: float | None = None, sizes: list[int] | None = None,
-                   behaviour: str = "mix") -> dict:
+                   behaviour: str = "mix", workers: int | None = None,
+                   address: str | None = None) -> dict:
     """Run experiment ``name`` at ``scale`` (tiny | quick | full); write and return its report:
     ``{"experiment", "out", "rows", "summary", "plots", "built", "seconds"}``.
+
+    Its cells (:mod:`aoc_cli.bench.cells`) run here one after the other, or as Ray tasks with
+    ``workers`` (a local Ray with that many CPUs) or ``address`` (an existing cluster; also
+    ``$RAY_ADDRESS`` when ``workers`` is given); the rows are the same. Finished cells are
+    kept in ``out/cells/`` and taken by a re-run with the same settings and code.
 
     ``epsilon`` and ``residual_cap`` (ControllerConfig fields) apply to AOC wherever the
     experiment does not vary them; ``sizes`` replaces the scale's data sizes of the
     data-size sweeps (``SIZED``), e.g. one of the paper's sizes with the full scale's training
     and episodes; ``behaviour="replay"`` collects their corpora as replay buffers (an agent
     that starts random and improves, aoc_cli/envs/replay.py)."""
-    check(name, scale, seeds, episodes, methods, epsilon, residual_cap, sizes, behaviour)
+    check(name, scale, seeds, episodes, methods, epsilon, residual_cap, sizes, behaviour,
+          workers)
     exp = EXPERIMENTS[name]
     params = sized(exp.scales[scale], sizes)
     out = Path(out) if out is not None else Path("bench") / name
@@ -151,7 +161,8 @@ def run_experiment(name: str, scale: str = "full", seeds: int | None = None,
     ctx = Context(name, scale, out, artefacts, runner, list(range(n_seeds)), episodes,
                   methods, log, aoc_config=aoc_config)
     started = time.perf_counter()
-    rows, figure = exp.run(ctx, params)
+    rows = execute(exp.plan, ctx, params, workers=workers, address=address, progress=progress)
+    figure = exp.plan.figure(ctx, params)
     summary = summarize_rows(rows, figure)
     _plot(exp, summary, ctx)
     seconds = time.perf_counter() - started

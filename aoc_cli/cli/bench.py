@@ -7,7 +7,8 @@ from typing import Optional
 
 import typer
 
-from aoc_cli.cli.common import EpisodesOption, EpsilonOption, FormatOption, ResidualCapOption
+from aoc_cli.cli.common import (EpisodesOption, EpsilonOption, FormatOption, RayAddressOption,
+                               ResidualCapOption, WorkersOption)
 from aoc_cli.errors import AocError
 from aoc_cli.report import message, progress, resolve_format, write_records
 
@@ -42,6 +43,8 @@ def register(app: typer.Typer) -> None:
                                        "improves, as the paper's replay buffers)."),
         bench_store: Path = typer.Option(Path("bench/store"), "--bench-store",
                                          help="Store for the bench's corpora and models."),
+        workers: WorkersOption = None,
+        ray_address: RayAddressOption = None,
         fmt: FormatOption = None,
     ) -> None:
         """Run an experiment end to end; write results.csv, summary.md/json and PNGs."""
@@ -63,7 +66,7 @@ def register(app: typer.Typer) -> None:
         chosen = [m.strip() for m in methods.split(",") if m.strip()] if methods else None
         row_counts = _sizes(sizes)
         check(experiment, scale, seeds, episodes, chosen, epsilon, residual_cap, row_counts,
-              behaviour if experiment != "all" else "mix")
+              behaviour if experiment != "all" else "mix", workers)
         names = ORDER if experiment == "all" else [experiment]
         eta = expected_seconds(experiment, scale, seeds, episodes, chosen, row_counts)
         message(f"aoc bench {experiment} ({scale}): expected time about "
@@ -83,7 +86,8 @@ def register(app: typer.Typer) -> None:
                                         epsilon=None if name in ("epsilon", "two-gates")
                                         else epsilon, residual_cap=residual_cap,
                                         sizes=row_counts,
-                                        behaviour=behaviour if name in SIZED else "mix")
+                                        behaviour=behaviour if name in SIZED else "mix",
+                                        workers=workers, address=ray_address)
                 bar.advance(overall)
                 for rec in report["summary"]:
                     if rec["status"] != "ok":

@@ -134,6 +134,14 @@ ExcludeOption = Annotated[Optional[List[str]], typer.Option(
 
 OverwriteOption = Annotated[bool, typer.Option("--overwrite", help="Replace an existing one.")]
 
+WorkersOption = Annotated[Optional[int], typer.Option(
+    "--workers", help="Split the work into Ray tasks on N workers: a local Ray with N CPUs, "
+                      "or at most N at once on --ray-address (needs the ray extra).")]
+
+RayAddressOption = Annotated[Optional[str], typer.Option(
+    "--ray-address", help="Join this Ray cluster (also $RAY_ADDRESS with --workers) instead "
+                          "of starting a local one.")]
+
 
 def get_store():
     """The corpus store selected by --store, AOC_STORE or ./corpora."""
