@@ -221,6 +221,7 @@ def test_aoc_is_more_conservative_with_a_small_epsilon_on_two_gates(tmp_path):
     """A real effect (the paper's two-gates table): epsilon 0.1 keeps AOC on the data and
     reaches the goal; epsilon 0.7 lets it extrapolate into the wall."""
     from aoc_cli.bench import maze
+    from aoc_cli.bench.cells import execute
     from aoc_cli.bench.common import Context
     from aoc_cli.bench.methods import Runner
     from aoc_cli.bench.prepare import Artefacts
@@ -229,7 +230,7 @@ def test_aoc_is_more_conservative_with_a_small_epsilon_on_two_gates(tmp_path):
              "epsilons": (0.1, 0.7)}
     ctx = Context("two-gates", "small", tmp_path, Artefacts(tmp_path / "store"), Runner(),
                   [0])
-    rows, _fig = maze.run_two_gates(ctx, scale)
+    rows = execute(maze.TWO_GATES, ctx, scale)
     by = {r["setting"]: r for r in rows}
     assert by["epsilon=0.1"]["success_rate"] >= 0.8
     assert by["epsilon=0.1"]["return_mean"] > by["epsilon=0.7"]["return_mean"] + 3.0

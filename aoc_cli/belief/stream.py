@@ -1,0 +1,313 @@
+"""Corpora beyond memory: training and beliefs a block of rows at a time.
+
+The in-memory path (:mod:`aoc_cli.belief.train`) encodes every row once as tensors, which
+needs several times the corpus's float arrays. Above :data:`STREAM_ROWS` rows training
+streams instead, and the beliefs of every row are always written chunk by chunk:
+
+* **Blocks.** The corpus rows are cut into blocks of about ``block_rows`` rows at episode
+  boundaries. A block's columns are read from ``corpus.h5`` as contiguous slices, with the
+  ``L`` rows before it, and encoded exactly as the in-memory path encodes them; each row's
+  history window is built inside the block (:func:`block_inputs`). Peak memory grows with the
+  block, not the corpus.
+* **Training** (:func:`train_streaming`): each epoch visits the blocks in a random order and
+  the training rows of a block (its training episodes) in a random order, in mini-batches of
+  ``batch_size``. Validation uses the first validation episodes, up to
+  :data:`VAL_ROWS_MAX` rows, kept in memory; the reported train loss is the epoch's running
+  mean. Early stopping, the saved artefact and its metrics are as in the in-memory path. The
+  value targets (N,) float64 are computed for every row, as they are saved with the model.
+  The auxiliary dynamics head is not streamed (a model with it trains in memory).
+* **Beliefs** (:func:`write_row_beliefs`): computed in batches of 65536 rows, the same batches
+  as :meth:`BeliefModel.row_beliefs`, and written into a memory-mapped ``.npy`` file
+  (a temporary file renamed into place), so the (N, d_b) array is never held in memory.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import os
+import time
+from pathlib import Path
+from types import SimpleNamespace
+
+import h5py
+import numpy as np
+import torch
+
+from aoc_cli.belief.config import BeliefConfig
+from aoc_cli.belief.data import model_dir, split_episodes
+from aoc_cli.belief.model import _STD_FLOOR, Encoder, Normalisation, _stats
+from aoc_cli.belief.targets import value_spec, value_targets
+from aoc_cli.errors import AocError
+
+#: Corpora with more rows than this train by streaming (when the model has no dynamics head).
+STREAM_ROWS = 2_000_000
+#: Rows per block read and encoded at once.
+BLOCK_ROWS = 262_144
+#: Validation rows kept in memory when streaming (the first validation episodes).
+VAL_ROWS_MAX = 200_000
+#: Rows per belief batch (as ``BeliefModel.row_beliefs`` and ``train.EVAL_BATCH``).
+BELIEF_BATCH = 65_536
+
+
+def streams(corpus, config: BeliefConfig) -> bool:
+    """Whether ``train_model`` streams this corpus (module docstring)."""
+    return corpus.n_rows > STREAM_ROWS and not config.dynamics_weight > 0
+
+
+class Columns:
+    """Contiguous row ranges of a corpus's float columns, read from ``corpus.h5``."""
+
+    def __init__(self, corpus):
+        self.path = Path(corpus.path) / "corpus.h5"
+        self.starts = np.asarray(corpus.episode_starts, dtype=np.int64)
+        self.has_rewards = corpus.has_rewards
+        self.n_rows = corpus.n_rows
+
+    def read(self, a: int, b: int):
+        """observations (b-a, d_o), actions (b-a, ...) and rewards (b-a,) or None."""
+        with h5py.File(self.path, "r") as f:
+            rew = f["rewards"][a:b] if self.has_rewards else None
+            return f["observations"][a:b], f["actions"][a:b], rew
+
+    def local_starts(self, lo: int, hi: int) -> np.ndarray:
+        """Episode starts within rows [lo, hi), relative to lo, with 0 and hi - lo."""
+        inside = self.starts[(self.starts > lo) & (self.starts < hi)] - lo
+        return np.concatenate([[0], inside, [hi - lo]]).astype(np.int64)
+
+
+def block_inputs(cols: Columns, encoder: Encoder, a: int, b: int, history_length: int,
+                 use_action: bool, device: torch.device):
+    """(inputs, offset): rows [a, b) encoded with their history windows; row r is local row
+    r - offset of ``inputs`` (a :class:`aoc_cli.belief.train.CorpusInputs`)."""
+    from aoc_cli.belief.train import encode_corpus
+
+    lo = max(0, a - history_length)
+    obs, act, rew = cols.read(lo, b)
+    view = SimpleNamespace(observations=obs, actions=act, rewards=rew,
+                           episode_starts=cols.local_starts(lo, b))
+    return encode_corpus(view, encoder, history_length, use_action, device), lo
+
+
+def blocks(starts: np.ndarray, block_rows: int = BLOCK_ROWS) -> list[tuple[int, int]]:
+    """Row ranges [a, b) of about ``block_rows`` rows, cut at episode starts."""
+    out, a, n = [], 0, int(starts[-1])
+    while a < n:
+        j = np.searchsorted(starts, a + block_rows, side="left")
+        b = int(starts[min(j, len(starts) - 1)])
+        b = b if b > a else int(starts[np.searchsorted(starts, a, side="right")])
+        out.append((a, b))
+        a = b
+    return out
+
+
+def write_row_beliefs(model, corpus, path: str | Path, progress=None) -> Path:
+    """Beliefs (N, d_b) float32 of every row written to the ``.npy`` file ``path`` in
+    batches (module docstring); ``progress(done, total)`` after each batch."""
+    from aoc_cli.belief.artefact import check_corpus
+
+    check_corpus(model, corpus)
+    path = Path(path)
+    n, cols = corpus.n_rows, Columns(corpus)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.npy")
+    out = np.lib.format.open_memmap(tmp, mode="w+", dtype=np.float32, shape=(n, model.d_b))
+    try:
+        with torch.no_grad():
+            for a in range(0, n, BELIEF_BATCH):
+                b = min(n, a + BELIEF_BATCH)
+                inputs, lo = block_inputs(cols, model.encoder, a, b, model.history_length,
+                                          model.mode == "value", model.device)
+                rows = torch.arange(a - lo, b - lo, device=model.device)
+                out[a:b] = model.net.belief(*inputs.batch(rows)).cpu().numpy()
+                if progress is not None:
+                    progress(b, n)
+        out.flush()
+        del out
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+    return path
+
+
+# -- training -------------------------------------------------------------------------------
+
+def _moments(cols: Columns, ranges, what: str, discrete: bool):
+    """Exact mean and std (float64, chunked) of a column over the given row ranges."""
+    total = sq = None
+    count = 0
+    with h5py.File(cols.path, "r") as f:
+        ds = f[what]
+        for a, b in ranges:
+            x = np.asarray(ds[a:b], dtype=np.float64).reshape(b - a, -1)
+            s = x.sum(0)
+            total = s if total is None else total + s
+            count += b - a
+        mean = total / count
+        for a, b in ranges:
+            x = np.asarray(ds[a:b], dtype=np.float64).reshape(b - a, -1)
+            d = ((x - mean) ** 2).sum(0)
+            sq = d if sq is None else sq + d
+    std = np.sqrt(sq / count)
+    std = np.where(std > _STD_FLOOR, std, 1.0)
+    return mean.tolist(), std.tolist()
+
+
+def _normalisation(corpus, cols: Columns, ranges, discrete: bool, targets) -> Normalisation:
+    o_mean, o_std = _moments(cols, ranges, "observations", False)
+    a_mean = a_std = None
+    if not discrete:
+        a_mean, a_std = _moments(cols, ranges, "actions", False)
+    r_mean, r_std = ([0.0], [1.0]) if not corpus.has_rewards else \
+        _moments(cols, ranges, "rewards", False)
+    t_mean = t_std = None
+    if isinstance(targets, np.ndarray):  # the value targets, in memory (saved with the model)
+        t_mean, t_std = _stats(targets.reshape(len(targets), -1))
+    elif targets == "actions":
+        t_mean, t_std = a_mean, a_std
+    return Normalisation(o_mean, o_std, a_mean, a_std, r_mean[0], r_std[0], t_mean, t_std)
+
+
+def _episode_mask(starts: np.ndarray, episodes: np.ndarray, a: int, b: int) -> np.ndarray:
+    """(b - a,) bool: rows of [a, b) that belong to ``episodes`` (sorted)."""
+    first = np.searchsorted(starts, a, side="right") - 1
+    last = np.searchsorted(starts, b - 1, side="right") - 1
+    eps = np.arange(first, last + 1)
+    keep = np.isin(eps, episodes)
+    lengths = np.minimum(starts[eps + 1], b) - np.maximum(starts[eps], a)
+    return np.repeat(keep, lengths)
+
+
+def train_streaming(corpus, config: BeliefConfig, model_id: str = "default",
+                    overwrite: bool = False, progress=None, block_rows: int = BLOCK_ROWS) -> dict:
+    """Train like :func:`aoc_cli.belief.train.train_model`, streaming blocks of rows
+    (module docstring); writes the model and returns its metrics."""
+    from aoc_cli.belief.artefact import save_model
+    from aoc_cli.belief.train import _dims, _Objective, build_net, pick_device
+
+    started = time.perf_counter()
+    config.validate()
+    if config.dynamics_weight > 0:
+        raise AocError("the dynamics head is trained in memory, not streamed")
+    if model_dir(corpus, model_id).exists() and not overwrite:
+        raise AocError(f"model {model_id!r} of corpus {corpus.name!r} already exists: pass "
+                       "--overwrite to replace it, or choose another --model")
+    values = value_targets(corpus, config.value, config.gamma) if config.mode == "value" else None
+    train_eps, val_eps = split_episodes(corpus.n_episodes, config.val_fraction, config.seed)
+    device = pick_device(config.device)
+    threads = config.resolved_threads()
+    if device.type == "cpu":
+        torch.set_num_threads(threads)
+    dims = _dims(corpus, config.mode)
+    classify = config.mode == "imitation" and dims["discrete"]
+    cols = Columns(corpus)
+    starts = cols.starts
+    ranges = blocks(starts, block_rows)
+    targets = values if config.mode == "value" else (None if classify else "actions")
+    norm = _normalisation(corpus, cols, ranges, dims["discrete"], targets)
+    encoder = Encoder(norm, dims["discrete"], dims["n_actions"], device)
+    L, use_action = config.history_length, dims["use_action"]
+
+    def block(a, b, mask=None):
+        """(inputs, local rows, targets) of the rows of [a, b) in ``mask``."""
+        inputs, lo = block_inputs(cols, encoder, a, b, L, use_action, device)
+        rows = np.arange(a, b) if mask is None else np.arange(a, b)[mask]
+        if classify:
+            with h5py.File(cols.path, "r") as f:
+                y = torch.as_tensor(f["actions"][a:b][rows - a], device=device)
+        elif config.mode == "value":
+            y = encoder.targets(values[rows])
+        else:
+            with h5py.File(cols.path, "r") as f:
+                y = encoder.targets(f["actions"][a:b][rows - a])
+        return inputs, torch.as_tensor(rows - lo, device=device), y
+
+    # validation: the first validation episodes, up to VAL_ROWS_MAX rows, in memory
+    lengths = np.diff(starts)[val_eps]
+    kept = val_eps[:max(1, int(np.searchsorted(np.cumsum(lengths), VAL_ROWS_MAX, "right")))]
+    val_parts = [block(int(starts[e]), int(starts[e + 1])) for e in kept]
+    objective = _Objective(config.mode, dims["discrete"])
+
+    def validate(net) -> dict:
+        with torch.no_grad():
+            outs = [net(*inp.batch(rows))[1] for inp, rows, _y in val_parts]
+            ys = torch.cat([y for _i, _r, y in val_parts])
+            return objective.metrics(net, None, torch.cat(outs), ys, None)
+
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(config.seed)
+        net = build_net(dims, config).to(device)
+    optimiser = torch.optim.Adam(net.parameters(), lr=config.lr)
+    rng = np.random.default_rng(config.seed)
+    generator = torch.Generator().manual_seed(config.seed)
+    train_sorted = np.sort(train_eps)
+    n_train = int(np.diff(starts)[train_eps].sum())
+    n_batches = max(1, sum(math.ceil(int(_episode_mask(starts, train_sorted, a, b).sum())
+                                     / config.batch_size) for a, b in ranges))
+    history: list[dict] = []
+    best = {"val_loss": math.inf, "epoch": 0, "state": copy.deepcopy(net.state_dict())}
+    stale = 0
+    for epoch in range(1, config.max_epochs + 1):
+        net.train()
+        total, count, done = 0.0, 0, 0
+        for j in rng.permutation(len(ranges)):
+            a, b = ranges[j]
+            mask = _episode_mask(starts, train_sorted, a, b)
+            if not mask.any():
+                continue
+            inputs, local, y = block(a, b, mask)
+            perm = torch.randperm(len(local), generator=generator)
+            for i in range(0, len(local), config.batch_size):
+                pick = perm[i:i + config.batch_size]
+                _beliefs, out = net(*inputs.batch(local[pick]))
+                loss = objective.main_loss(out, y[pick])
+                optimiser.zero_grad(set_to_none=True)
+                loss.backward()
+                optimiser.step()
+                total += float(loss.detach()) * len(pick)
+                count += len(pick)
+                done += 1
+            if progress is not None:
+                progress({"epoch": epoch, "max_epochs": config.max_epochs, "batch": done,
+                          "batches": n_batches, "train_loss": total / count,
+                          "val_loss": history[-1]["val_loss"] if history else None,
+                          "best_val_loss": None if best["epoch"] == 0 else best["val_loss"],
+                          "epoch_done": False})
+        net.eval()
+        val = validate(net)
+        record = {"epoch": epoch, "train_loss": total / max(count, 1), "val_loss": val["loss"]}
+        record.update({f"val_{k}": v for k, v in val.items() if k != "loss"})
+        record["seconds"] = time.perf_counter() - started
+        history.append(record)
+        if val["loss"] < best["val_loss"] - config.min_delta:
+            best = {"val_loss": val["loss"], "epoch": epoch,
+                    "state": copy.deepcopy(net.state_dict())}
+            stale = 0
+        else:
+            stale += 1
+        if progress is not None:
+            progress({**record, "max_epochs": config.max_epochs, "batch": n_batches,
+                      "batches": n_batches, "best_val_loss": best["val_loss"],
+                      "epoch_done": True})
+        if stale >= config.patience or not math.isfinite(val["loss"]):
+            break
+    net.load_state_dict(best["state"])
+    net.eval()
+    final = validate(net)
+    n_val = int(np.diff(starts)[val_eps].sum())
+    metrics = {"model": model_id, "mode": config.mode, "epochs": len(history),
+               "best_epoch": best["epoch"],
+               "train_loss": history[best["epoch"] - 1]["train_loss"] if best["epoch"] else None,
+               "val_loss": final["loss"], "streamed": True,
+               "val_rows_scored": int(sum(len(r) for _i, r, _y in val_parts))}
+    metrics.update({k if k.startswith("val_") else f"val_{k}": v
+                    for k, v in final.items() if k != "loss"})
+    metrics.update({"rows": corpus.n_rows, "train_rows": n_train, "val_rows": n_val,
+                    "device": device.type, "threads": threads if device.type == "cpu" else None,
+                    "seconds": time.perf_counter() - started})
+    save_model(corpus, model_id, net=net.cpu(), config=config, dims=dims, norm=norm,
+               value=value_spec(config.value, config.gamma) if config.mode == "value" else None,
+               values=values, metrics=metrics, history=history,
+               split={"episodes": corpus.n_episodes, "val_episodes": len(val_eps),
+                      "train_rows": n_train, "val_rows": n_val})
+    return metrics
