@@ -97,6 +97,8 @@ def build_index(corpus: Corpus, model_id: str | None = None, kind: str = "auto",
 
     Built in a temporary folder beside the index folder (new beliefs staged in it) and
     swapped in only when everything succeeded (:mod:`aoc_cli.store.derived`)."""
+    from aoc_cli.belief.stream import write_row_beliefs
+
     model = load_model(corpus, model_id)
     if (resample or subsample) and index_id == "default":
         raise AocError("a re-sampled or sub-sampled index needs its own --index-id "
@@ -119,11 +121,12 @@ def build_index(corpus: Corpus, model_id: str | None = None, kind: str = "auto",
 
                 def callback(done, total):
                     progress.update(task, completed=done, total=total)
-            beliefs = model.row_beliefs(corpus, progress=callback).astype(np.float32)
+            # chunk by chunk into a memory-mapped file: (N, d_b) is never held in memory
+            staged = write_row_beliefs(model, corpus, Path(tmp) / derived.BELIEFS,
+                                       progress=callback)
+            beliefs = np.load(staged, mmap_mode="r", allow_pickle=False)
             derived.check_finite(beliefs, f"model {model.id!r} of corpus {corpus.name!r}",
                                  todo)
-            staged = derived.stage_beliefs(tmp, beliefs)
-            beliefs = np.load(staged, mmap_mode="r", allow_pickle=False)
         start = time.perf_counter()
         index = BeliefIndex.build(beliefs, kind=kind, seed=seed, **params)
         if resample or subsample:

@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import copy
 import math
-import os
 import time
 from pathlib import Path
 from types import SimpleNamespace
@@ -39,6 +38,7 @@ from aoc_cli.belief.data import model_dir, split_episodes
 from aoc_cli.belief.model import _STD_FLOOR, Encoder, Normalisation, _stats
 from aoc_cli.belief.targets import value_spec, value_targets
 from aoc_cli.errors import AocError
+from aoc_cli.store import atomic_path
 
 #: Corpora with more rows than this train by streaming (when the model has no dynamics head).
 STREAM_ROWS = 2_000_000
@@ -109,9 +109,8 @@ def write_row_beliefs(model, corpus, path: str | Path, progress=None) -> Path:
     check_corpus(model, corpus)
     path = Path(path)
     n, cols = corpus.n_rows, Columns(corpus)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.npy")
-    out = np.lib.format.open_memmap(tmp, mode="w+", dtype=np.float32, shape=(n, model.d_b))
-    try:
+    with atomic_path(path, suffix=".npy") as tmp:
+        out = np.lib.format.open_memmap(tmp, mode="w+", dtype=np.float32, shape=(n, model.d_b))
         with torch.no_grad():
             for a in range(0, n, BELIEF_BATCH):
                 b = min(n, a + BELIEF_BATCH)
@@ -123,10 +122,6 @@ def write_row_beliefs(model, corpus, path: str | Path, progress=None) -> Path:
                     progress(b, n)
         out.flush()
         del out
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
     return path
 
 

@@ -107,6 +107,10 @@ def train_model(corpus, config: BeliefConfig, model_id: str = "default", overwri
     metrics without writing the model; ``extra`` is merged into the saved metrics. ``prepared`` is the
     result of :func:`aoc_cli.belief.data.prepare` for the same arguments, when already known.
     """
+    from aoc_cli.belief.stream import streams, train_streaming
+
+    if streams(corpus, config):  # a large corpus: trained a block of rows at a time
+        return train_streaming(corpus, config, model_id, overwrite, progress)
     started = time.perf_counter()
     data = prepared or prepare(corpus, config, model_id, overwrite)
     if config.belief == "critic":  # its own training (aoc_cli.belief.kinds)

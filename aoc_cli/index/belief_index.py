@@ -80,7 +80,11 @@ class BeliefIndex:
         kind = config.resolved_kind(n_rows)
         _set_threads(config)
         index = _new_faiss(kind, beliefs, config)
-        index.add(beliefs)
+        # IVF chunk by chunk: FAISS's temporaries (assignments, distances) stay the chunk's
+        # size, a memory-mapped belief array is read once in order, and the lists are the same
+        step = ADD_CHUNK if kind == "ivf" else max(n_rows, 1)
+        for a in range(0, n_rows, step):
+            index.add(np.ascontiguousarray(beliefs[a:a + step]))
         return cls(index, config, kind, n_rows, None, beliefs)
 
     @property
@@ -297,6 +301,10 @@ class BeliefIndex:
 
 
 # -------------------------------------------------------------------- helpers
+#: Rows added to a FAISS index at once.
+ADD_CHUNK = 1 << 20
+
+
 def _new_faiss(kind: str, train: np.ndarray, config: IndexConfig) -> faiss.Index:
     d = train.shape[1]
     if kind == "flat":
