@@ -1,0 +1,237 @@
+"""Benchmark: a corpus beyond memory end to end — ingest, train (one epoch), index, control.
+
+For each size (pendulum-het rows, collected with seed 0), four stages, each in its own Python
+process so that its peak resident memory (VmHWM of /proc/self/status) is its own:
+
+* ingest: collect the rows and write the corpus (``Store.write``);
+* train: one epoch of the default value model (streamed above 2M rows, see
+  aoc_cli/belief/stream.py), one torch thread;
+* index: the beliefs of every row (written chunk by chunk into beliefs.npy) and the default
+  index (IVF above 200k rows: trained on a sample, filled chunk by chunk);
+* control: ``--steps`` control steps of AOC (K = 100 candidates) on a pendulum-het rollout,
+  one thread; median step time; recall@k of the neighbours the decomposition used against
+  exact search (faiss.knn over the memory-mapped beliefs, in chunks) on the candidate beliefs
+  of the first ``--recall-steps`` steps.
+
+Each stage records seconds, peak memory (VmHWM), memory after the imports (the baseline),
+and the 1-minute load average, in STORE/scale.json; a stage already recorded is skipped, so a
+run that was interrupted resumes (``--redo STAGE`` runs a stage again). Memory is set against
+the corpus's float arrays (observations, actions, rewards) and the belief array (N, d_b).
+
+Usage: .venv/bin/python benchmarks/scale.py --sizes 1m,3m,10m --store DIR [--steps 200]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+STAGES = ("ingest", "train", "index", "control")
+
+
+def parse_size(text: str) -> int:
+    text = text.strip().lower()
+    mult = {"k": 1_000, "m": 1_000_000}.get(text[-1], 1)
+    return int(float(text.rstrip("km")) * mult)
+
+
+def memory() -> dict:
+    """VmHWM and VmRSS of this process, MB."""
+    out = {}
+    for line in Path("/proc/self/status").read_text().splitlines():
+        key, _, value = line.partition(":")
+        if key in ("VmHWM", "VmRSS"):
+            out[key] = int(value.split()[0]) / 1024
+    return out
+
+
+def name_of(rows: int) -> str:
+    return f"pend{rows}"
+
+
+def stage_ingest(store, rows: int) -> dict:
+    from aoc_cli.envs import collect
+
+    data, _ = collect("pendulum-het", steps=rows, seed=0)
+    corpus = store.write(name_of(rows), data, overwrite=True)
+    return {"rows": corpus.n_rows, "episodes": corpus.n_episodes}
+
+
+def stage_train(store, rows: int) -> dict:
+    from aoc_cli.belief import BeliefConfig, train_model
+    from aoc_cli.belief.stream import streams
+
+    corpus = store.corpus(name_of(rows))
+    cfg = BeliefConfig(seed=0, max_epochs=1, patience=1, threads=1)
+    m = train_model(corpus, cfg, "default", overwrite=True)
+    return {"streamed": streams(corpus, cfg), "val_r2": m.get("val_r2"),
+            "train_rows": m.get("train_rows")}
+
+
+def stage_index(store, rows: int) -> dict:
+    from aoc_cli.index.build import build_index
+
+    corpus = store.corpus(name_of(rows))
+    ci = build_index(corpus, "default")
+    return {"kind": ci.index.kind, "build_seconds": ci.meta["build_seconds"]}
+
+
+def _exact_knn(beliefs, queries, k: int, chunk: int = 1 << 20):
+    """(Q, k) exact nearest rows of ``queries`` among ``beliefs`` (memory-mapped), by chunks."""
+    import faiss
+    import numpy as np
+
+    best_d = np.full((len(queries), k), np.inf, np.float32)
+    best_i = np.full((len(queries), k), -1, np.int64)
+    for a in range(0, len(beliefs), chunk):
+        block = np.ascontiguousarray(beliefs[a:a + chunk], dtype=np.float32)
+        d, i = faiss.knn(queries, block, k)
+        d_all = np.concatenate([best_d, d], axis=1)
+        i_all = np.concatenate([best_i, i + a], axis=1)
+        order = np.argsort(d_all, axis=1, kind="stable")[:, :k]
+        best_d = np.take_along_axis(d_all, order, 1)
+        best_i = np.take_along_axis(i_all, order, 1)
+    return best_i
+
+
+def stage_control(store, rows: int, steps: int, recall_steps: int) -> dict:
+    import faiss
+    import numpy as np
+    import torch
+
+    from aoc_cli.control import HistoryBuffer, open_session
+    from aoc_cli.envs import make_env
+
+    torch.set_num_threads(1)
+    faiss.omp_set_num_threads(1)
+    corpus = store.corpus(name_of(rows))
+    t0 = time.perf_counter()
+    session = open_session(corpus)
+    open_s = time.perf_counter() - t0
+    ctl, model, index = session.controller, session.model, session.index
+    env = make_env("pendulum-het")
+    buf = HistoryBuffer(model.history_length, corpus.observation_dim, 1, False)
+    obs, _ = env.reset(seed=1)
+    times, queries, found = [], [], []
+    k = ctl.config.k
+    for step in range(steps):
+        h = buf.history()
+        t0 = time.perf_counter()
+        d = ctl.decide(obs, h)
+        times.append(time.perf_counter() - t0)
+        if step < recall_steps:  # outside the timing: the same beliefs and neighbours
+            b = model.beliefs(np.asarray(obs, np.float32)[None], d.candidates, h)
+            dec = index.decompose(b, k=k)
+            queries.append(b)
+            found.append(dec.neighbours)
+        nxt, r, term, trunc, _ = env.step(np.asarray(d.action, np.float32))
+        buf.push(obs, d.action, r)
+        obs = nxt
+        if term or trunc:
+            buf.reset()
+            obs, _ = env.reset()
+    q = np.concatenate(queries).astype(np.float32)
+    got = np.concatenate(found)
+    t0 = time.perf_counter()
+    exact = _exact_knn(index.beliefs, q, got.shape[1])
+    exact_s = time.perf_counter() - t0
+    hits = [len(set(g[g >= 0]) & set(e)) / len(e) for g, e in zip(got, exact)]
+    ms = np.asarray(times) * 1000
+    return {"steps": steps, "step_ms": float(np.median(ms)), "p90_ms": float(np.percentile(ms, 90)),
+            "open_seconds": open_s, "kind": index.index.kind, "k": int(got.shape[1]),
+            "recall": float(np.mean(hits)), "recall_min": float(np.min(hits)),
+            "recall_queries": int(len(q)), "exact_seconds": exact_s}
+
+
+def run_stage(stage: str, store_dir: str, rows: int, steps: int, recall_steps: int) -> None:
+    """In the child: import, note the baseline memory, run the stage, print one JSON line."""
+    import numpy as np  # noqa: F401 - part of the baseline
+    import torch  # noqa: F401
+
+    from aoc_cli.store import Store
+
+    store = Store.open(store_dir)
+    base = memory()
+    t0 = time.perf_counter()
+    if stage == "control":
+        out = stage_control(store, rows, steps, recall_steps)
+    else:
+        out = {"ingest": stage_ingest, "train": stage_train, "index": stage_index}[stage](
+            store, rows)
+    out.update(seconds=time.perf_counter() - t0, peak_mb=memory()["VmHWM"],
+               base_mb=base["VmRSS"], load=os.getloadavg()[0])
+    print("RESULT " + json.dumps(out), flush=True)
+
+
+def sizes_of(store_dir: str, rows: int) -> dict:
+    """Bytes of the corpus's float arrays and of the belief array."""
+    import h5py
+
+    path = Path(store_dir) / name_of(rows)
+    out = {}
+    with h5py.File(path / "corpus.h5", "r") as f:
+        out["corpus_float_mb"] = sum(f[k].size * f[k].dtype.itemsize for k in
+                                     ("observations", "actions", "rewards") if k in f) / 2**20
+    beliefs = path / "models" / "default" / "beliefs.npy"
+    if beliefs.is_file():
+        import numpy as np
+
+        b = np.load(beliefs, mmap_mode="r")
+        out["belief_mb"] = b.size * b.dtype.itemsize / 2**20
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sizes", default="1m,3m,10m")
+    ap.add_argument("--store", required=True, help="store folder; results in STORE/scale.json")
+    ap.add_argument("--steps", type=int, default=200)
+    ap.add_argument("--recall-steps", type=int, default=20)
+    ap.add_argument("--redo", default="", help="comma-separated stages to run again")
+    ap.add_argument("--stage", help=argparse.SUPPRESS)
+    ap.add_argument("--rows", type=int, help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.stage:
+        run_stage(args.stage, args.store, args.rows, args.steps, args.recall_steps)
+        return
+    Path(args.store).mkdir(parents=True, exist_ok=True)
+    record = Path(args.store) / "scale.json"
+    results = json.loads(record.read_text()) if record.is_file() else {}
+    redo = {s for s in args.redo.split(",") if s}
+    for size in args.sizes.split(","):
+        rows = parse_size(size)
+        done = results.setdefault(str(rows), {})
+        for stage in STAGES:
+            if stage in done and stage not in redo:
+                continue
+            proc = subprocess.run([sys.executable, __file__, "--stage", stage, "--rows",
+                                   str(rows), "--store", args.store, "--steps",
+                                   str(args.steps), "--recall-steps", str(args.recall_steps)],
+                                  capture_output=True, text=True)
+            line = next((x for x in proc.stdout.splitlines() if x.startswith("RESULT ")), None)
+            if proc.returncode != 0 or line is None:
+                sys.exit(f"{stage} at {rows} rows failed:\n{proc.stderr[-3000:]}")
+            done[stage] = json.loads(line[len("RESULT "):])
+            done.update(sizes_of(args.store, rows))
+            tmp = record.with_suffix(".json.tmp")
+            tmp.write_text(json.dumps(results, indent=1) + "\n")
+            os.replace(tmp, record)
+            r = done[stage]
+            print(f"{rows:>9} {stage:>8} {r['seconds']:>9.1f} s  peak {r['peak_mb']:>7.0f} MB "
+                  f"(base {r['base_mb']:.0f})  load {r['load']:.1f}  "
+                  + " ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
+                             for k, v in r.items()
+                             if k not in ("seconds", "peak_mb", "base_mb", "load")),
+                  flush=True)
+
+
+if __name__ == "__main__":
+    main()
