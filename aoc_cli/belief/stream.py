@@ -15,7 +15,8 @@ streams instead, and the beliefs of every row are always written chunk by chunk:
   :data:`VAL_ROWS_MAX` rows, kept in memory; the reported train loss is the epoch's running
   mean. Early stopping, the saved artefact and its metrics are as in the in-memory path. The
   value targets (N,) float64 are computed for every row, as they are saved with the model.
-  The auxiliary dynamics head is not streamed (a model with it trains in memory).
+  The auxiliary dynamics head and the other belief kinds (critic, reward) are not streamed:
+  they train in memory.
 * **Beliefs** (:func:`write_row_beliefs`): computed in batches of 65536 rows, the same batches
   as :meth:`BeliefModel.row_beliefs`, and written into a memory-mapped ``.npy`` file
   (a temporary file renamed into place), so the (N, d_b) array is never held in memory.
@@ -52,7 +53,8 @@ BELIEF_BATCH = 65_536
 
 def streams(corpus, config: BeliefConfig) -> bool:
     """Whether ``train_model`` streams this corpus (module docstring)."""
-    return corpus.n_rows > STREAM_ROWS and not config.dynamics_weight > 0
+    plain = config.mode == "imitation" or getattr(config, "belief", "value") == "value"
+    return corpus.n_rows > STREAM_ROWS and plain and not config.dynamics_weight > 0
 
 
 class Columns:
