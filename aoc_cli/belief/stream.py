@@ -81,8 +81,8 @@ class Columns:
 def block_inputs(cols: Columns, encoder: Encoder, a: int, b: int, history_length: int,
                  use_action: bool, device: torch.device):
     """(inputs, offset): rows [a, b) encoded with their history windows; row r is local row
-    r - offset of ``inputs`` (a :class:`aoc_cli.belief.train.CorpusInputs`)."""
-    from aoc_cli.belief.train import encode_corpus
+    r - offset of ``inputs`` (a :class:`aoc_cli.belief.inputs.CorpusInputs`)."""
+    from aoc_cli.belief.inputs import encode_corpus
 
     lo = max(0, a - history_length)
     obs, act, rew = cols.read(lo, b)
@@ -180,7 +180,8 @@ def train_streaming(corpus, config: BeliefConfig, model_id: str = "default",
     """Train like :func:`aoc_cli.belief.train.train_model`, streaming blocks of rows
     (module docstring); writes the model and returns its metrics."""
     from aoc_cli.belief.artefact import save_model
-    from aoc_cli.belief.train import _dims, _Objective, build_net, pick_device
+    from aoc_cli.belief.inputs import build_net, network_dims, pick_device
+    from aoc_cli.belief.train import _Objective
 
     started = time.perf_counter()
     config.validate()
@@ -195,7 +196,7 @@ def train_streaming(corpus, config: BeliefConfig, model_id: str = "default",
     threads = config.resolved_threads()
     if device.type == "cpu":
         torch.set_num_threads(threads)
-    dims = _dims(corpus, config.mode)
+    dims = network_dims(corpus, config.mode)
     classify = config.mode == "imitation" and dims["discrete"]
     cols = Columns(corpus)
     starts = cols.starts

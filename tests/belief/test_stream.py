@@ -11,7 +11,7 @@ import torch
 from aoc_cli.belief import BeliefConfig, load_model, train_model
 from aoc_cli.belief.stream import Columns, block_inputs, blocks, train_streaming, \
     write_row_beliefs
-from aoc_cli.belief.train import encode_corpus
+from aoc_cli.belief.inputs import encode_corpus
 from aoc_cli.store import Store
 from tests.belief.corpora import history_dependent
 
