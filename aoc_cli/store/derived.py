@@ -37,8 +37,8 @@ def beliefs_fresh(model_dir: Path, model_hash: str) -> bool:
 def check_finite(beliefs: np.ndarray, what: str, todo: str) -> None:
     """Refuse beliefs holding NaN or inf (a damaged or diverged model)."""
     with np.errstate(invalid="ignore", over="ignore"):  # by chunks: beliefs may be a memmap
-        ok = all(np.isfinite(np.asarray(beliefs[a:a + (1 << 20)], np.float64).sum())
-                 for a in range(0, len(beliefs), 1 << 20))
+        ok = all(np.isfinite(np.asarray(beliefs[a:a + (1 << 18)], np.float64).sum())
+                 for a in range(0, len(beliefs), 1 << 18))
     if not ok and not np.isfinite(beliefs).all():
         bad = int(np.flatnonzero(~np.isfinite(beliefs).all(axis=1))[0])
         raise AocError(f"{what}: the belief of row {bad} is not finite (NaN or inf); {todo}")
