@@ -237,11 +237,18 @@ def test_a_failed_index_leaves_the_previous_beliefs_and_index(store, aoc, fail_i
 
     monkeypatch = pytest.MonkeyPatch()
     if fail_in == "beliefs":  # NaN beliefs, as of a damaged model
-        from aoc_cli.belief.artefact import BeliefModel
+        import aoc_cli.belief.stream as stream
 
-        real = BeliefModel.row_beliefs
-        monkeypatch.setattr(BeliefModel, "row_beliefs",
-                            lambda self, *a, **k: real(self, *a, **k) * np.nan)
+        real = stream.write_row_beliefs
+
+        def nan_beliefs(*a, **k):  # the beliefs are written chunk by chunk into a .npy
+            path = real(*a, **k)
+            written = np.load(path, mmap_mode="r+")
+            written[:] = np.nan
+            written.flush()
+            return path
+
+        monkeypatch.setattr(stream, "write_row_beliefs", nan_beliefs)
         pattern = r"the belief of row 0 is not finite.*aoc train m --model default --overwrite"
     elif fail_in == "index":
         monkeypatch.setattr(session.BeliefIndex, "build", boom)
