@@ -8,7 +8,8 @@ from typing import Annotated, Optional
 
 import typer
 
-from aoc_cli.cli.common import EpisodesOption, FormatOption, get_store
+from aoc_cli.cli.common import (EpisodesOption, FormatOption, RayAddressOption, WorkersOption,
+                                get_store)
 from aoc_cli.errors import AocError
 from aoc_cli.report.output import message, progress, write_records
 
@@ -37,6 +38,12 @@ def register(app: typer.Typer) -> None:
             None, "--csv", help="ward: write the log as CSV files DIR/NAME.csv and "
                                 "DIR/NAME-static.csv (for `aoc ingest --static`) instead of a "
                                 "corpus."),
+        workers: WorkersOption = None,
+        ray_address: RayAddressOption = None,
+        chunk: Annotated[Optional[int], typer.Option(
+            "--chunk", help="With --workers: rows (or, with --episodes, episodes) per "
+                            "independently seeded chunk (default 100000 rows, 1000 episodes; "
+                            "README, 'Collect on several workers').")] = None,
         fmt: FormatOption = None,
     ) -> None:
         """Run a built-in task's behaviour policies and store the data as a corpus."""
@@ -55,7 +62,8 @@ def register(app: typer.Typer) -> None:
                            f"{', '.join(t.behaviours)}")
         if name is None:
             raise AocError(f"give the corpus name: aoc collect {task} --name NAME")
-        for flag, value in (("--steps", steps), ("--episodes", episodes)):
+        for flag, value in (("--steps", steps), ("--episodes", episodes),
+                            ("--workers", workers), ("--chunk", chunk)):
             if value is not None and value <= 0:
                 raise AocError(f"{flag} must be a positive integer, got {value}")
         if steps is not None and episodes is not None:
@@ -81,8 +89,13 @@ def register(app: typer.Typer) -> None:
             if store.exists(name) and not overwrite:
                 raise AocError(f"corpus {name!r} already exists in {store.root}: pass "
                                "--overwrite to replace it, or choose another --name")
-            corpus, summary = _collect(store, t, task, name, steps, episodes, seed, overwrite,
-                                       behaviour)
+            if workers is None and ray_address is None:
+                corpus, summary = _collect(store, t, task, name, steps, episodes, seed,
+                                           overwrite, behaviour)
+            else:
+                corpus, summary = _collect_chunks(store, task, name, steps, episodes, seed,
+                                                  overwrite, behaviour, workers, ray_address,
+                                                  chunk)
         message(f"wrote corpus {name!r}: {corpus.n_rows} rows, {corpus.n_episodes} episodes "
                 f"of {task} (seed {seed}, hash {corpus.hash}) to {corpus.path}")
         write_records(summary, fmt, title=f"behaviour policies of {name}")
@@ -100,4 +113,22 @@ def _collect(store, t, task, name, steps, episodes, seed, overwrite, behaviour="
 
         data, summary = collect(task, steps=steps, episodes=episodes, seed=seed,
                                 progress=on_progress, behaviour=behaviour)
+    return store.write(name, data, overwrite=overwrite), summary
+
+
+def _collect_chunks(store, task, name, steps, episodes, seed, overwrite, behaviour, workers,
+                    address, chunk):
+    """Independently seeded chunks as Ray tasks (aoc_cli.envs.chunked): (corpus, summary)."""
+    from aoc_cli.envs.chunked import CHUNK_EPISODES, CHUNK_STEPS, collect_chunked
+
+    with progress() as bar:
+        job = bar.add_task(f"collect {task} in chunks", total=None)
+
+        def on_progress(done: int, total: int) -> None:
+            bar.update(job, completed=done, total=total)
+
+        data, summary = collect_chunked(
+            task, steps, episodes, seed, workers=workers, address=address,
+            chunk_steps=chunk or CHUNK_STEPS, chunk_episodes=chunk or CHUNK_EPISODES,
+            progress=on_progress, behaviour=behaviour)
     return store.write(name, data, overwrite=overwrite), summary
