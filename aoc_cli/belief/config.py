@@ -66,7 +66,7 @@ class BeliefConfig:
     #: ``critic``: gradient steps of the offline critic (TD3+BC, aoc_cli.belief.critic).
     critic_steps: int = 20_000
     #: ``critic``: weight of the behaviour-cloning term in the actor's loss (TD3+BC's 1 / alpha;
-    #: 0 = plain TD3 as the reference code, which diverges offline: see docs/belief.md).
+    #: 0 = plain TD3 as the reference code; see aoc_cli/belief/critic.py).
     critic_bc_weight: float = 0.4
     #: Activation of the belief layer: ``tanh`` (bounded, no dead units) or ``relu``.
     belief_activation: str = "tanh"

@@ -18,9 +18,11 @@ with a terminal::
 with twin critics Q_1, Q_2 sharing the history GRU (as the reference code's critic does),
 target networks Q', pi' updated by Polyak averaging (tau = 0.005), s the half-width of the
 action box, sigma_r the reward's standard deviation and everything in the standardised units of
-the encoder. ``w_bc = 0`` is plain TD3 as in the reference code; offline, with nothing to keep
-pi near the data, its Q grows without bound on pendulum-het (docs/belief.md), hence the
-default ``w_bc = 0.4`` (TD3+BC's alpha = 2.5). Rows that end a truncated episode have no next
+the encoder. ``w_bc = 0`` is plain TD3 as in the reference code. Offline, nothing keeps a plain
+TD3 actor near the data, so its critic is trained on the targets of actions the corpus never
+shows (extrapolation error, the reason TD3+BC exists); the default ``w_bc = 0.4`` (TD3+BC's
+alpha = 2.5) keeps the bootstrapped actions near the logged ones. At the budgets measured here
+the two did not differ yet (benchmarks/critic_bc.py, docs/belief.md). Rows that end a truncated episode have no next
 observation in the corpus and are left out of the TD loss.
 
 The belief is the target critic's Q_1 layer ``fc3`` (d_b units, the config's activation).
