@@ -1,0 +1,63 @@
+"""Diagnostic: does AOC's decision have the expert's torque sign, per ``--belief`` kind?
+
+On rows of the noiseless swing-up controller in the *normal* system of a pendulum-het corpus
+(rows with |torque| > 0.3, where the sign matters), each model's AOC session decides among 41
+candidate torques in [-2, 2] with the row's own observation and history (the controller's
+decide, epsilon filter and hull v_hat as in a rollout). Printed per model: the share of rows
+whose chosen torque has the logged (expert's) sign, and the same for the model's own head
+l(b) (the argmax of ``predict`` over the candidates, no hull). docs/belief.md uses the same
+measurement for the value belief with and without the dynamics head.
+
+    python benchmarks/belief_sign.py --store bench/store --corpus pendulum-het-30000r-s0 \\
+        --models default,dynamics,critic,reward --rows 300
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+
+from aoc_cli.session import open_session  # noqa: E402
+from aoc_cli.store import Store  # noqa: E402
+
+
+def main() -> None:
+    p = argparse.ArgumentParser()
+    p.add_argument("--store", default="bench/store")
+    p.add_argument("--corpus", default="pendulum-het-30000r-s0")
+    p.add_argument("--models", default="default,dynamics,critic,reward")
+    p.add_argument("--rows", type=int, default=300)
+    args = p.parse_args()
+    corpus = Store.open(args.store).corpus(args.corpus)
+    sys_codes, sys_labels = corpus.tag("system")
+    pol_codes, pol_labels = corpus.tag("policy")
+    expert = (sys_codes == sys_labels.index("normal")) & \
+        (pol_codes == pol_labels.index("swingup-noise0"))
+    rows = np.flatnonzero(expert)[:args.rows]
+    acts = corpus.actions[rows][:, 0]
+    rows = rows[np.abs(acts) > 0.3]
+    sign = np.sign(corpus.actions[rows][:, 0])
+    cand = np.linspace(-2, 2, 41, dtype=np.float32)[:, None]
+    for m in args.models.split(","):
+        s = open_session(corpus, m, "default")
+        hist_len = s.model.history_length
+        hull, head = [], []
+        for r, want in zip(rows, sign):
+            h = corpus.history([r], hist_len)
+            obs = corpus.observations[r]
+            d = s.controller.decide(obs, h, candidates=cand)
+            hull.append(np.sign(d.action[0]) == want)
+            v = s.model.predict(obs[None], cand, h)
+            head.append(np.sign(cand[int(np.argmax(v)), 0]) == want)
+        print(json.dumps({"model": m, "belief": s.model.config.belief, "rows": len(rows),
+                          "hull_sign_share": round(float(np.mean(hull)), 3),
+                          "head_sign_share": round(float(np.mean(head)), 3)}), flush=True)
+
+
+if __name__ == "__main__":
+    main()
