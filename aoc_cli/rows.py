@@ -17,7 +17,9 @@ def row_multiplicity(corpus, resample: dict | None, subsample: dict | None,
     """(N,) int copies of each corpus row in a derived index, from ``{"policy=pi1": 4.0}``.
 
     Rates are per tag value: an integer part repeats the rows, a fractional part keeps that
-    fraction of whole episodes (chosen with ``seed``), so trajectories stay whole.
+    fraction of whole episodes (chosen with ``seed``), so trajectories stay whole. The counts
+    are integers: :meth:`aoc_cli.index.BeliefIndex.resample` then only repeats or drops rows
+    (its own fractional multiplicities, which sample single rows, are not used here).
     """
     n = corpus.n_rows
     counts = np.ones(n, dtype=np.int64)

@@ -43,6 +43,25 @@ if TYPE_CHECKING:
 TYPICAL_SAMPLE = 500
 
 
+@dataclass(frozen=True)
+class TypicalResidual:
+    """The corpus's typical residual: quantiles of the residuals of ``sample`` held-out corpus
+    rows decomposed against the other rows (``index.json`` ``typical_residual``). Each is None
+    for an index that recorded none (fewer than 3 rows)."""
+
+    p50: float | None = None
+    p90: float | None = None
+    p99: float | None = None
+    sample: int = 0
+
+    @classmethod
+    def from_meta(cls, meta: dict) -> "TypicalResidual":
+        """From an index's metadata (``index.json``)."""
+        rec = meta.get("typical_residual") or {}
+        return cls(*(None if rec.get(q) is None else float(rec[q]) for q in ("p50", "p90", "p99")),
+                   sample=int(rec.get("sample") or 0))
+
+
 @dataclass
 class CorpusIndex:
     """A built index: model, beliefs of every corpus row (N, d_b), row values (N,), the FAISS
@@ -56,8 +75,14 @@ class CorpusIndex:
     meta: dict
 
     @property
+    def typical(self) -> TypicalResidual:
+        """The corpus's typical residual (p50, p90, p99), as the index recorded it."""
+        return TypicalResidual.from_meta(self.meta)
+
+    @property
     def typical_residual(self) -> float | None:
-        return self.meta.get("typical_residual", {}).get("p50")
+        """The typical (p50) residual: what a decision's residual is compared with."""
+        return self.typical.p50
 
     @property
     def rows(self) -> np.ndarray:
@@ -70,10 +95,7 @@ class CorpusIndex:
 
         ``selection`` is an (N,) bool mask over corpus rows, applied at query time.
         """
-        queries = np.asarray(queries, dtype=np.float32)
-        if queries.ndim != 2 or queries.shape[1] != self.beliefs.shape[1]:
-            raise AocError(f"queries must be (Q, {self.beliefs.shape[1]}) beliefs, got "
-                           f"{queries.shape}")
+        queries = np.asarray(queries, dtype=np.float32)  # the beliefs' precision; checked there
         return decompose(self.beliefs, queries, k=k, values=self.values, index=self.index,
                          selection=selection)
 
@@ -101,8 +123,8 @@ def build_index(corpus: Corpus, model_id: str | None = None, kind: str = "auto",
 
     model = load_model(corpus, model_id)
     if (resample or subsample) and index_id == "default":
-        raise AocError("a re-sampled or sub-sampled index needs its own --index-id "
-                       "(the default index holds every row once)")
+        raise AocError("index_id must name a new index for a re-sampled or sub-sampled one "
+                       "(the default index holds every row once)", "index_id")
     model_dir = corpus.models_dir / model.id
     out = _index_dir(corpus, model.id, index_id)
     todo = f"retrain it: `aoc train {corpus.name} --model {model.id} --overwrite`"

@@ -20,12 +20,13 @@ import numpy as np
 
 from aoc_cli.baselines.common import ActionSpace, corpus_values
 from aoc_cli.baselines.features import RawFeatures
+from aoc_cli.decompose import default_k as paper_k
 from aoc_cli.index import BeliefIndex, IndexConfig
 
 
 def default_k(session) -> int:
     k = session.controller.config.k
-    return int(k) if k is not None else 2 * (int(session.model.d_b) + 1)
+    return int(k) if k is not None else paper_k(session.model.d_b)
 
 
 class NearestNeighbourController:

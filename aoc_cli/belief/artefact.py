@@ -12,6 +12,7 @@ Files (the folder is written in a temporary folder beside it and renamed into pl
 from __future__ import annotations
 
 import csv
+import functools
 import hashlib
 import json
 import time
@@ -126,9 +127,10 @@ class BeliefModel:
     def discrete(self) -> bool:
         return bool(self.dims["discrete"])
 
-    @property
+    @functools.cached_property
     def hash(self) -> str:
-        """blake2b of the weights and the config: what an index built from this model records."""
+        """blake2b of the weights and the config: what an index built from this model records.
+        Computed once: a loaded model's weights do not change (inference only)."""
         h = hashlib.blake2b(digest_size=16)
         for key, tensor in sorted(self.net.state_dict().items()):
             arr = tensor.detach().cpu().numpy()

@@ -26,6 +26,7 @@ from aoc_cli.bench.cells import Cell, Plan
 from aoc_cli.bench.common import Context, belief_config, make_task_env, session
 from aoc_cli.bench.methods import DATA, data_values, row_values
 from aoc_cli.bench.results import result_row
+from aoc_cli.decompose import default_k
 
 TASKS = ("pendulum-het", "pendulum-het-upright")
 METHODS = ["aoc", "aoc-dynamics", "aoc-critic", "aoc-reward", "aoc-normal-rows", "knn", "1nn",
@@ -71,7 +72,7 @@ def _variant(ctx: Context, method: str, corpus, env, task: str, seed: int):
 
 
 def _k_values(d_b: int) -> list[int]:
-    return [1, 10, 2 * (d_b + 1), 100]
+    return [1, 10, default_k(d_b), 100]
 
 
 def _data_task(scale: dict, task: str) -> str:

@@ -103,7 +103,7 @@ def main(argv: list[str] | None = None) -> None:
     except AocError as err:
         if debug:
             raise
-        print(f"aoc: error: {err}", file=sys.stderr)
+        print(f"aoc: error: {err.for_command_line()}", file=sys.stderr)
         sys.exit(2)
     except Exception as err:
         if debug:

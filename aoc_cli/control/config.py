@@ -68,15 +68,15 @@ class ControllerConfig:
         from aoc_cli.errors import AocError
 
         if not 0.0 < self.epsilon <= 1.0:
-            raise AocError(f"--epsilon must be in (0, 1], got {self.epsilon}")
+            raise AocError(f"epsilon must be in (0, 1], got {self.epsilon}", "epsilon")
         if self.candidates < 1:
-            raise AocError(f"--candidates must be >= 1, got {self.candidates}")
+            raise AocError(f"candidates must be >= 1, got {self.candidates}", "candidates")
         if self.residual_cap is not None and not self.residual_cap > 0:
-            raise AocError(f"--residual-cap must be > 0, got {self.residual_cap}")
+            raise AocError(f"residual_cap must be > 0, got {self.residual_cap}", "residual_cap")
         if self.k is not None and self.k < 1:
-            raise AocError(f"--k must be >= 1, got {self.k}")
+            raise AocError(f"k must be >= 1, got {self.k}", "k")
         if self.sampler not in ("uniform", "bc"):
-            raise AocError(f"unknown --sampler {self.sampler!r}: use uniform or bc")
+            raise AocError(f"sampler {self.sampler!r} is unknown: use uniform or bc", "sampler")
         return self
 
     def to_dict(self) -> dict:

@@ -110,25 +110,28 @@ class Controller:
 
     # -- one step --------------------------------------------------------------------------
     def decide(self, observation: np.ndarray, history: History,
-               candidates: np.ndarray | None = None) -> Decision:
-        """Decide at one step; ``history`` is a one-row History (1, L, ...)."""
+               candidates: np.ndarray | None = None,
+               selection: np.ndarray | None = None) -> Decision:
+        """Decide at one step; ``history`` is a one-row History (1, L, ...). ``selection``:
+        an (N,) bool row mask for this decision instead of the controller's own."""
         observation = np.asarray(observation, dtype=np.float32).reshape(-1)
         if self.model.mode == "imitation":
-            return self._imitate(observation, history)
+            return self._imitate(observation, history, selection)
         if candidates is None:
             candidates = self.sample_candidates(observation, history)
-        return self.evaluate(observation, history, candidates, choose=True)
+        return self.evaluate(observation, history, candidates, choose=True, selection=selection)
 
     def evaluate(self, observation: np.ndarray, history: History, candidates: np.ndarray,
-                 choose: bool = True) -> Decision:
+                 choose: bool = True, selection: np.ndarray | None = None) -> Decision:
         """Decompose every candidate; with ``choose``, apply the epsilon filter and argmax.
 
         Without ``choose`` the first candidate is reported (used to explain a given action).
+        ``selection``: as in :meth:`decide`.
         """
         n = len(candidates)
         # one observation and one history broadcast to the n candidates (the GRU runs once)
         beliefs = self.model.beliefs(observation[None, :], candidates, history)
-        dec = self.index.decompose(beliefs, k=self.config.k, selection=self.selection)
+        dec = self.index.decompose(beliefs, k=self.config.k, selection=self._rows(selection))
         residual = np.asarray(dec.residual, dtype=np.float64)
         value = np.asarray(dec.value, dtype=np.float64)
         if choose:
@@ -175,13 +178,17 @@ class Controller:
         """c x the index's typical p90 residual, or None (no cap set, or none recorded)."""
         if self.config.residual_cap is None:
             return None
-        meta = getattr(self.index, "meta", None) or {}
-        p90 = (meta.get("typical_residual") or {}).get("p90")
+        p90 = self.index.typical.p90
         return None if p90 is None else float(self.config.residual_cap) * float(p90)
 
-    def _imitate(self, observation: np.ndarray, history: History) -> Decision:
+    def _rows(self, selection: np.ndarray | None) -> np.ndarray | None:
+        """The row mask of one decision: the one given, else the controller's own."""
+        return self.selection if selection is None else selection
+
+    def _imitate(self, observation: np.ndarray, history: History,
+                 selection: np.ndarray | None = None) -> Decision:
         belief = self.model.beliefs(observation[None], None, history)
-        dec = self.index.decompose(belief, k=self.config.k, selection=self.selection)
+        dec = self.index.decompose(belief, k=self.config.k, selection=self._rows(selection))
         rows = _trim(dec.rows[0], dec.rows[0])
         weights = _trim(dec.weights[0], dec.rows[0])
         actions = self.corpus_actions[rows]

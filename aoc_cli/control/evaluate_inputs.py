@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from aoc_cli.decompose import default_k
 from aoc_cli.errors import AocError
 
 
@@ -18,14 +19,9 @@ def check_inputs(corpus, data, mode: str, baselines, value_target: str | None) -
         raise AocError(f"corpus {data.name!r} has no rewards: a value-mode model (target "
                        f"{value_target!r}) cannot be scored on it; evaluate an imitation-mode "
                        "model (aoc train --mode imitation) or one trained on a column")
-    mine = (corpus.observation_dim, corpus.action_dim, corpus.discrete, corpus.n_actions,
-            corpus.has_rewards)
-    theirs = (data.observation_dim, data.action_dim, data.discrete, data.n_actions,
-              data.has_rewards)
-    if mine != theirs:
-        raise AocError(
-            f"corpus {data.name!r} does not match {corpus.name!r} (observation dims, action dims "
-            f"or type, rewards: {theirs} against {mine}): evaluate it with a model of its own")
+    from aoc_cli.control.rollout import check_same_spaces
+
+    check_same_spaces(corpus, data, "evaluate it")
     if data.n_rows == 0 or data.n_episodes == 0:
         raise AocError(f"corpus {data.name!r} holds no steps to evaluate")
     names = [b.strip() for b in (baselines or []) if b.strip()]
@@ -227,7 +223,7 @@ class EvalContext:
         self.search = search_structure(self.index.index, self.index.beliefs, self.exact,
                                        self.seed)
         self.history_length = model.history_length
-        self.k = self.config.k if self.config.k is not None else 2 * (model.d_b + 1)
+        self.k = self.config.k if self.config.k is not None else default_k(model.d_b)
         self.discrete, self.n_actions = corpus.discrete, corpus.n_actions
         self.corpus_actions = np.asarray(corpus.actions)
         self.corpus_episode = corpus.episode_of(np.arange(corpus.n_rows))

@@ -9,6 +9,7 @@ from __future__ import annotations
 import time
 from collections import deque
 from dataclasses import dataclass, field
+from typing import Protocol, runtime_checkable
 
 import gymnasium as gym
 import numpy as np
@@ -17,6 +18,16 @@ from aoc_cli.control.controller import Decision
 from aoc_cli.control.monitor import OODMonitor
 from aoc_cli.errors import AocError
 from aoc_cli.store import History
+
+
+@runtime_checkable
+class Policy(Protocol):
+    """What runs in an environment: the controller, or a baseline
+    (:func:`aoc_cli.baselines.make_baseline`). ``decide`` returns a :class:`Decision` (its
+    residual is tracked and monitored) or a plain action: a (d_a,) float array, or an int for
+    a discrete space. A policy may also have ``reset()``, called at each episode start."""
+
+    def decide(self, observation: np.ndarray, history: History): ...
 
 
 class HistoryBuffer:
@@ -88,6 +99,20 @@ def check_spaces(env: gym.Env, corpus) -> None:
                            f"actions, the environment's action space is {space}")
 
 
+def check_same_spaces(corpus, data, use: str) -> None:
+    """Corpus ``data`` must have the spaces of ``corpus`` (observation and action dims, action
+    type, rewards) for ``corpus``'s model to decide on its steps; ``use`` says what is refused
+    (e.g. ``"explain its steps"``)."""
+    mine = (corpus.observation_dim, corpus.action_dim, corpus.discrete, corpus.n_actions,
+            corpus.has_rewards)
+    theirs = (data.observation_dim, data.action_dim, data.discrete, data.n_actions,
+              data.has_rewards)
+    if mine != theirs:
+        raise AocError(
+            f"corpus {data.name!r} does not match {corpus.name!r} (observation dims, action "
+            f"dims or type, rewards: {theirs} against {mine}): {use} with a model of its own")
+
+
 @dataclass
 class EpisodeResult:
     """One episode: its summary figures and per-step traces (T steps)."""
@@ -104,6 +129,8 @@ class EpisodeResult:
     decisions: list = field(default_factory=list)
     histories: list = field(default_factory=list)
     seconds: float = 0.0
+    monitor: OODMonitor | None = None
+    """The OOD monitor that flagged the steps (its running band), when one was given."""
 
     @property
     def ood_steps(self) -> int:
@@ -125,7 +152,7 @@ class EpisodeResult:
         }
 
 
-def run_episode(env: gym.Env, policy, history_length: int, corpus, episode: int, seed: int,
+def run_episode(env: gym.Env, policy: Policy, history_length: int, corpus, episode: int, seed: int,
                 monitor: OODMonitor | None = None, noise_after: int | None = None,
                 noise_std: float = 0.0, keep_decisions: bool = False) -> EpisodeResult:
     """Run ``policy.decide(observation, history)`` until the episode ends.
@@ -134,7 +161,7 @@ def run_episode(env: gym.Env, policy, history_length: int, corpus, episode: int,
     action. After step ``noise_after``, Gaussian noise of ``noise_std`` (a fraction of the
     action range) disturbs the applied action; the history records the applied action.
     """
-    result = EpisodeResult(episode=episode, seed=seed)
+    result = EpisodeResult(episode=episode, seed=seed, monitor=monitor)
     buffer = HistoryBuffer(history_length, corpus.observation_dim, corpus.action_dim,
                            corpus.discrete)
     rng = np.random.default_rng(seed + 7919)

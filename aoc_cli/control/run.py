@@ -12,14 +12,16 @@ from aoc_cli.control.config import ControllerConfig
 from aoc_cli.control.controller import Decision
 from aoc_cli.control.monitor import OODMonitor
 from aoc_cli.control.records import decision_record, write_audit
-from aoc_cli.control.rollout import EpisodeResult, check_spaces, run_episode, summarize
+from aoc_cli.control.rollout import (EpisodeResult, Policy, check_same_spaces, check_spaces,
+                                     run_episode, summarize)
 from aoc_cli.errors import AocError
 
 if TYPE_CHECKING:
     from aoc_cli.session import ModelFreeSession, Session
 
 
-def rollout(session: Session | ModelFreeSession, env, episodes: int, seed: int = 0, policy=None,
+def rollout(session: Session | ModelFreeSession, env, episodes: int, seed: int = 0,
+            policy: Policy | None = None,
             audit: str | None = None, noise_after: int | None = None, noise_std: float = 0.0,
             progress=None, reference=None) -> tuple[list[EpisodeResult], dict]:
     """Run ``episodes`` episodes (seeds ``seed``, ``seed+1``, ...) with the controller (or
@@ -42,7 +44,6 @@ def rollout(session: Session | ModelFreeSession, env, episodes: int, seed: int =
         res = run_episode(env, policy, session.history_length, session.corpus, e,
                           seed + e, monitor, noise_after, noise_std,
                           keep_decisions=audit is not None)
-        res.monitor = monitor
         results.append(res)
         if progress is not None:
             progress.update(task, advance=1, description=f"rollout (return {res.total_return:.1f})")
@@ -52,15 +53,18 @@ def rollout(session: Session | ModelFreeSession, env, episodes: int, seed: int =
 
 
 def explain_query(session: Session, observation, history, action=None,
-                  compare: list | None = None) -> list[dict]:
+                  compare: list | None = None,
+                  selection: np.ndarray | None = None) -> list[dict]:
     """Records for a query: the controller's own choice (no action), one given action, or
-    several actions side by side (``compare``)."""
-    typical = session.index.meta.get("typical_residual", {}).get("p50")
+    several actions side by side (``compare``); ``selection`` an (N,) bool row mask instead
+    of the controller's own."""
+    typical = session.index.typical_residual
     ctl = session.controller
     if compare:
         out = []
         for a in compare:
-            d = ctl.evaluate(observation, history, _as_candidates(session.corpus, [a]), choose=False)
+            d = ctl.evaluate(observation, history, _as_candidates(session.corpus, [a]),
+                             choose=False, selection=selection)
             out.append(decision_record(d, session.corpus, session.index, observation=observation,
                                        typical_residual=typical))
         return out
@@ -68,9 +72,9 @@ def explain_query(session: Session, observation, history, action=None,
         if session.model.mode == "imitation":
             raise AocError("an imitation-mode model explains its own decision; drop \"action\"")
         d = ctl.evaluate(observation, history, _as_candidates(session.corpus, [action]),
-                         choose=False)
+                         choose=False, selection=selection)
     else:
-        d = ctl.decide(observation, history)
+        d = ctl.decide(observation, history, selection=selection)
     return [decision_record(d, session.corpus, session.index, observation=observation,
                             typical_residual=typical)]
 
@@ -88,15 +92,7 @@ def explain_logged_step(session: Session, data, episode: int, step: int,
     corpus = session.corpus
     same = data.hash == corpus.hash
     if not same:
-        mine = (corpus.observation_dim, corpus.action_dim, corpus.discrete, corpus.n_actions,
-                corpus.has_rewards)
-        theirs = (data.observation_dim, data.action_dim, data.discrete, data.n_actions,
-                  data.has_rewards)
-        if mine != theirs:
-            raise AocError(
-                f"corpus {data.name!r} does not match {corpus.name!r} (observation dims, action "
-                f"dims or type, rewards: {theirs} against {mine}): explain its steps with a "
-                "model of its own")
+        check_same_spaces(corpus, data, "explain its steps")
     if not 0 <= episode < data.n_episodes:
         raise AocError(f"corpus {data.name!r} has episodes 0..{data.n_episodes - 1}, "
                        f"not {episode}")
@@ -109,18 +105,15 @@ def explain_logged_step(session: Session, data, episode: int, step: int,
     history = data.history([row], session.history_length)
     logged = data.read("actions", [row])[0]
     logged = int(logged) if data.discrete else np.asarray(logged, dtype=np.float64).tolist()
-    ctl = session.controller
-    kept = ctl.selection
+    own = session.controller.selection
+    selection = None
     if same and leave_episode_out:
-        mask = np.ones(corpus.n_rows, bool) if kept is None else kept.copy()
-        mask[start:end] = False
-        ctl.selection = mask
-    try:
-        records = explain_query(session, observation, history)
-        if session.model.mode == "value":
-            records += explain_query(session, observation, history, action=logged)
-    finally:
-        ctl.selection = kept
+        selection = np.ones(corpus.n_rows, bool) if own is None else own.copy()
+        selection[start:end] = False
+    records = explain_query(session, observation, history, selection=selection)
+    if session.model.mode == "value":
+        records += explain_query(session, observation, history, action=logged,
+                                 selection=selection)
     records[0]["logged_action"] = logged
     from aoc_cli.control.records import episode_ids
 
@@ -175,8 +168,10 @@ def _band_limits(session: Session | ModelFreeSession) -> tuple[float, float]:
     """(floor of the std, minimum edge) of the OOD bands: 0.1 x the corpus's typical p50
     residual and its p99 (see :class:`aoc_cli.control.monitor.OODMonitor`)."""
     index = getattr(session, "index", None)
-    typical = index.meta.get("typical_residual", {}) if index is not None else {}
-    return 0.1 * float(typical.get("p50") or 0.0), float(typical.get("p99") or 0.0)
+    if index is None:  # a model-free session: no band limits
+        return 0.0, 0.0
+    typical = index.typical
+    return 0.1 * (typical.p50 or 0.0), typical.p99 or 0.0
 
 
 def replay_decision(session: Session, recorded: dict) -> Decision:

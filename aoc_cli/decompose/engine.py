@@ -9,7 +9,7 @@ For each query belief y (one per candidate action of a control step):
 4. value           v_hat(y) = sum_c w_c v_c.
 
 (Definitions "Belief Corpus Residual" and "Minimal Hull and Minimal Corpus Subset" of the AOC
-paper; DESIGN.md "The method, precisely".)
+paper; docs/design.md "The method, precisely".)
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ from aoc_cli.decompose.minnorm import min_norm_point
 from aoc_cli.decompose.reference import caratheodory, lifted_nnls_weights, reference_weights
 from aoc_cli.errors import AocError
 from aoc_cli.index import BeliefIndex
+from aoc_cli.index.belief_index import check_queries
 from aoc_cli.index.threads import single_threaded_blas
 
 
@@ -72,6 +73,12 @@ class Decomposition:
     pivots: int = 0
 
 
+def default_k(d_b: int) -> int:
+    """The paper's number of neighbours per query, k = 2 (d_b + 1) (twice the size of a
+    minimal corpus subset)."""
+    return 2 * (int(d_b) + 1)
+
+
 def decompose(
     beliefs: np.ndarray,
     queries: np.ndarray,
@@ -92,7 +99,7 @@ def decompose(
     beliefs, Y, values = _check_inputs(beliefs, queries, values)
     n_rows, d = beliefs.shape
     k = config.k if k is None else k
-    k = 2 * (d + 1) if k is None else int(k)
+    k = default_k(d) if k is None else int(k)
     if k < 1:
         raise AocError(f"k must be at least 1 (got {k}); use the default 2(d+1) or a positive number")
     k = min(k, n_rows)
@@ -186,14 +193,7 @@ def _check_inputs(beliefs, queries, values):
     beliefs = np.asarray(beliefs)
     if beliefs.ndim != 2 or beliefs.shape[0] == 0:
         raise AocError(f"the corpus beliefs must be a non-empty (N, d) array; got shape {beliefs.shape}")
-    d = beliefs.shape[1]
-    Y = np.asarray(queries, dtype=np.float64)
-    if Y.ndim == 1 and Y.shape[0] == d:
-        Y = Y[None, :]
-    if Y.ndim != 2 or Y.shape[1] != d:
-        raise AocError(f"queries must have shape (Q, {d}) to match the corpus beliefs; got {np.shape(queries)}")
-    if not np.isfinite(Y).all():
-        raise AocError("queries contain NaN or infinite values; check the belief model's inputs")
+    Y = check_queries(queries, beliefs.shape[1])
     if values is not None:
         values = np.asarray(values, dtype=np.float64)
         if values.shape != (beliefs.shape[0],):

@@ -26,7 +26,7 @@ the candidate with the smallest such factor, if it is below 1, and pivots its ta
 The start. Optionally the lifted linear programme  min sum_c w_c ||b_c - y*||^2  subject to
 sum w b = y*, w in the simplex, is first solved by the same pivots (entering column = most
 negative reduced cost): its vertex is the Delaunay simplex of the neighbours containing y*
-(DESIGN.md), a good, local start. The exchange search then shrinks it until no single exchange
+(docs/design.md), a good, local start. The exchange search then shrinks it until no single exchange
 helps or the budget is spent.
 """
 

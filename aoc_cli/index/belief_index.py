@@ -215,7 +215,12 @@ class BeliefIndex:
         multiplicity: a scalar or (N,) non-negative floats over corpus rows, applied to every
         position of this index. The integer part gives copies; of the positions sharing a
         fractional part f, exactly round(f * n_f) get one more copy, chosen at random (seeded).
-        So 4 = four copies, 1 = unchanged, 0.5 = a random half, 0 = dropped.
+        So 4 = four copies, 1 = unchanged, 0.5 = a random half of the positions, 0 = dropped.
+
+        The index knows rows, not episodes: a fraction here samples single positions. The
+        command line's rates (``aoc index --resample policy=pi1:0.5``) keep whole *episodes*;
+        :func:`aoc_cli.rows.row_multiplicity` turns them into integer counts per row before
+        they reach this method, so that there is one meaning of a rate per layer.
         """
         mult = np.asarray(multiplicity, dtype=np.float64)
         if mult.ndim == 0:
@@ -357,15 +362,22 @@ def _as_beliefs(beliefs) -> np.ndarray:
     return arr
 
 
-def _as_queries(queries, dim: int) -> np.ndarray:
+def check_queries(queries, dim: int) -> np.ndarray:
+    """Query beliefs as a finite (Q, dim) float64 array (one (dim,) query becomes (1, dim));
+    anything else is an AocError. The index and the decomposition engine both check with it."""
     Y = np.asarray(queries, dtype=np.float64)
-    if Y.ndim == 1:
+    if Y.ndim == 1 and Y.shape[0] == dim:
         Y = Y[None, :]
     if Y.ndim != 2 or Y.shape[1] != dim:
-        raise AocError(f"queries must have shape (Q, {dim}) to match the beliefs; got {np.shape(queries)}")
+        raise AocError(f"queries must have shape (Q, {dim}) to match the corpus beliefs; got "
+                       f"{np.shape(queries)}")
     if not np.isfinite(Y).all():
         raise AocError("queries contain NaN or infinite values; check the belief model's inputs")
-    return np.ascontiguousarray(Y, dtype=np.float32)
+    return Y
+
+
+def _as_queries(queries, dim: int) -> np.ndarray:
+    return np.ascontiguousarray(check_queries(queries, dim), dtype=np.float32)
 
 
 def _set_threads(config: IndexConfig) -> None:

@@ -2,9 +2,8 @@
 
 from __future__ import annotations
 
-import json
 import math
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass, fields
 
 from aoc_cli.errors import AocError
 
@@ -16,7 +15,7 @@ class IndexConfig:
     """How the k nearest corpus beliefs of a query are found (step 1 of the decomposition).
 
     The index answers  N_k(y) = the k corpus rows c minimising ||b^c - y||_2  (the paper uses
-    k = 2(d_b + 1) neighbours, DESIGN.md "The method, precisely", step 1).
+    k = 2(d_b + 1) neighbours, docs/design.md "The method, precisely", step 1).
 
     kind: "flat" is exact brute force; "hnsw" (graph) and "ivf" (inverted lists) are approximate;
         "auto" picks flat up to `auto_flat_max` rows and ivf beyond: IVF-Flat keeps the index
@@ -70,9 +69,6 @@ class IndexConfig:
             return min(self.ivf_nlist, max(1, n_rows))
         target = math.sqrt(max(n_rows, 1))
         return int(min(4096, max(1, 2 ** math.floor(math.log2(max(target, 1.0))))))
-
-    def to_json(self) -> str:
-        return json.dumps(asdict(self), indent=2, sort_keys=True)
 
     @classmethod
     def from_dict(cls, data: dict) -> "IndexConfig":

@@ -161,7 +161,8 @@ def test_residual_cap_falls_back_to_the_smallest_residual_when_none_pass(maze):
 
 
 def test_residual_cap_must_be_positive():
-    with pytest.raises(AocError, match="residual-cap"):
+    # the library names its parameter (the command line shows --residual-cap)
+    with pytest.raises(AocError, match="^residual_cap must be > 0"):
         ControllerConfig(residual_cap=0.0).check()
 
 
@@ -176,5 +177,10 @@ def test_task_defaults_come_from_one_place():
     # an ingested corpus ("") or an unknown gymnasium id: the paper's defaults
     assert ControllerConfig.for_task("") == ControllerConfig.for_task("Pendulum-v1") == \
         ControllerConfig()
-    with pytest.raises(AocError, match="epsilon"):
+    with pytest.raises(AocError, match="^epsilon must be in") as err:
         ControllerConfig.for_task("maze", epsilon=2.0)
+    # the library names its parameter; the command line shows the flag
+    assert err.value.for_command_line().startswith("--epsilon must be in")
+    with pytest.raises(AocError, match="^residual_cap must be > 0") as err:
+        ControllerConfig(residual_cap=-1.0).check()
+    assert err.value.for_command_line().startswith("--residual-cap must be > 0")
