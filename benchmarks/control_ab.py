@@ -12,8 +12,9 @@ neighbour search returned different rows (or the same rows in another order), `d
 to the step's largest. Everything else (belief pass, minimal subset) is the current code in
 both arms.
 
-Usage: .venv/bin/python benchmarks/control_ab.py --old /tmp/old --sizes 100k,600k
-       [--steps 100] [--store DIR]   (the store of benchmarks/control.py, already prepared)
+Usage: .venv/bin/python benchmarks/control_ab.py --old ../aoc-old --sizes 100k,600k
+       --store DIR [--steps 100]   (the store of benchmarks/control.py, already prepared;
+       ``git worktree add ../aoc-old REV`` makes the old tree)
 """
 
 from __future__ import annotations
@@ -129,7 +130,7 @@ def main() -> None:
     ap.add_argument("--old", required=True, help="a checkout of the older tree (git worktree add)")
     ap.add_argument("--sizes", default="100k,600k")
     ap.add_argument("--steps", type=int, default=100)
-    ap.add_argument("--store", default="/tmp/benchctl6")
+    ap.add_argument("--store", required=True, help="the store benchmarks/control.py prepared")
     args = ap.parse_args()
     torch.set_num_threads(1)
     code = arms(args.old)
