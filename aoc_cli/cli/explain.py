@@ -45,9 +45,7 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Explain decisions: from JSONL queries, a recorded step of an audit log, or a logged
         step of a corpus."""
-        from aoc_cli.control import (ControllerConfig, decision_record, explain_logged_step,
-                                     parse_query, read_audit_step, replay_decision)
-        from aoc_cli.session import open_session
+        from aoc_cli.control import ControllerConfig
 
         fmt = resolve_format(fmt)
         if sum(x is not None for x in (input, audit, data)) != 1:
@@ -58,41 +56,66 @@ def register(app: typer.Typer) -> None:
         corpus = store.corpus(name)
         config = ControllerConfig.for_task(_collected_task(corpus), candidates=candidates,
                                            epsilon=epsilon, k=k, residual_cap=residual_cap)
-        records = []
+        opened = dict(model_id=model, index_id=index_id, config=config, seed=seed)
         if data is not None:
             source = corpus if data == name else store.corpus(data)
-            session = open_session(corpus, model, index_id, config, seed=seed)
-            records = explain_logged_step(session, source, episode, step)
+            records = _logged_step(corpus, source, episode, step, opened)
         elif audit is not None:
-            recorded = read_audit_step(audit, episode, step)
-            meta = recorded["meta"]
-            if meta.get("config"):
-                config = ControllerConfig(**meta["config"]).check()
-            session = open_session(corpus, meta.get("model", model), meta.get("index", index_id),
-                                   config, seed=seed)
-            decision = replay_decision(session, recorded)
-            rec = decision_record(decision, corpus, session.index, step=step,
-                                  observation=recorded["observation"],
-                                  typical_residual=session.index.typical_residual)
-            rec["episode"] = episode
-            rec["recorded_action"] = recorded["action"].tolist()
-            records.append(rec)
+            records = _recorded_step(corpus, audit, episode, step, opened)
         else:
-            session = open_session(corpus, model, index_id, config, seed=seed)
-            lines = _read_lines(input)
-            if not lines:
-                raise AocError("the input holds no queries")
-            parsed_compare = [_parse_action(c) for c in compare or []]
-            for lineno, line in lines:
-                obs, hist, action, q_compare = parse_query(line, lineno, corpus,
-                                                           session.model.history_length)
-                from aoc_cli.control import explain_query
-
-                for rec in explain_query(session, obs, hist, action,
-                                         compare=parsed_compare or q_compare):
-                    rec["query"] = lineno
-                    records.append(rec)
+            records = _queries(corpus, input, compare, opened)
         _print(records, fmt)
+
+
+def _logged_step(corpus, source, episode: int, step: int, opened: dict) -> list[dict]:
+    """``--data``: the decision at a logged step of ``source`` and what supports the logged
+    action there."""
+    from aoc_cli.control import explain_logged_step
+    from aoc_cli.session import open_session
+
+    return explain_logged_step(open_session(corpus, **opened), source, episode, step)
+
+
+def _recorded_step(corpus, audit: Path, episode: int, step: int, opened: dict) -> list[dict]:
+    """``--audit``: a recorded decision replayed with its recorded inputs and settings."""
+    from aoc_cli.control import (ControllerConfig, decision_record, read_audit_step,
+                                 replay_decision)
+    from aoc_cli.session import open_session
+
+    recorded = read_audit_step(audit, episode, step)
+    meta = recorded["meta"]
+    config = ControllerConfig(**meta["config"]).check() if meta.get("config") \
+        else opened["config"]
+    session = open_session(corpus, meta.get("model", opened["model_id"]),
+                           meta.get("index", opened["index_id"]), config, seed=opened["seed"])
+    decision = replay_decision(session, recorded)
+    rec = decision_record(decision, corpus, session.index, step=step,
+                          observation=recorded["observation"],
+                          typical_residual=session.index.typical_residual)
+    rec["episode"] = episode
+    rec["recorded_action"] = recorded["action"].tolist()
+    return [rec]
+
+
+def _queries(corpus, source: str, compare: list[str] | None, opened: dict) -> list[dict]:
+    """``--input``: JSONL queries, each its own decision or the given actions compared."""
+    from aoc_cli.control import explain_query, parse_query
+    from aoc_cli.session import open_session
+
+    session = open_session(corpus, **opened)
+    lines = _read_lines(source)
+    if not lines:
+        raise AocError("the input holds no queries")
+    parsed_compare = [_parse_action(c) for c in compare or []]
+    records = []
+    for lineno, line in lines:
+        obs, hist, action, q_compare = parse_query(line, lineno, corpus,
+                                                   session.model.history_length)
+        for rec in explain_query(session, obs, hist, action,
+                                 compare=parsed_compare or q_compare):
+            rec["query"] = lineno
+            records.append(rec)
+    return records
 
 
 def _collected_task(corpus) -> str:

@@ -55,7 +55,6 @@ def register(app: typer.Typer) -> None:
         from aoc_cli.control import ControllerConfig, rollout
         from aoc_cli.envs import make_env
         from aoc_cli.rows import row_selection
-        from aoc_cli.session import model_free_session, open_session
 
         fmt = resolve_format(fmt)
         policy, sampler = choice(policy), choice(sampler)
@@ -75,15 +74,8 @@ def register(app: typer.Typer) -> None:
         environment = make_env(env)
         selection = row_selection(corpus, parse_selection(select, "--select"),
                                   parse_selection(exclude, "--exclude"))
-        from aoc_cli.control.rollout import action_space_of
-
-        action_space = action_space_of(environment)
-        if policy in MODEL_FREE:
-            # these act without looking at the data: no model or index is needed (or opened)
-            session = model_free_session(corpus, action_space)
-        else:
-            session = open_session(corpus, model, index_id, config, selection, seed,
-                                   action_space)
+        session, baseline = _policy(policy, corpus, environment, model, index_id, config,
+                                    selection, seed)
         reference = None
         if ood_reference is not None:
             if policy in MODEL_FREE:
@@ -92,11 +84,6 @@ def register(app: typer.Typer) -> None:
             from aoc_cli.control.run import reference_from_audit
 
             reference = reference_from_audit(session, ood_reference)
-        baseline = None
-        if policy != "aoc":
-            from aoc_cli.baselines import make_baseline
-
-            baseline = make_baseline(policy, session, environment, seed=seed)
         with progress() as p:
             results, summary = rollout(session, environment, episodes, seed=seed, policy=baseline,
                                        audit=str(audit) if audit else None,
@@ -107,15 +94,37 @@ def register(app: typer.Typer) -> None:
             message(f"wrote {plot}")
         if audit is not None:
             message(f"wrote the audit log {audit}")
-        rows = [r.summary() for r in results]
-        if fmt == "json":
-            write_object({"episodes": rows, "summary": summary}, "json")
-        elif fmt == "table":
-            write_records(rows, "table", title=f"{policy} on {env} ({corpus.name})")
-            write_object(summary, "table", title="summary")
-        else:
-            write_records(rows, fmt)
-            message("summary: " + ", ".join(f"{k}={v}" for k, v in summary.items()))
+        _print(results, summary, fmt, f"{policy} on {env} ({corpus.name})")
+
+
+def _policy(policy: str, corpus, environment, model, index_id, config, selection, seed):
+    """(session, baseline or None): the session the policy acts in (model-free for zero and
+    random: no model or index is needed, or opened) and the baseline that acts, if not aoc."""
+    from aoc_cli.control.rollout import action_space_of
+    from aoc_cli.session import model_free_session, open_session
+
+    action_space = action_space_of(environment)
+    if policy in MODEL_FREE:
+        session = model_free_session(corpus, action_space)
+    else:
+        session = open_session(corpus, model, index_id, config, selection, seed, action_space)
+    if policy == "aoc":
+        return session, None
+    from aoc_cli.baselines import make_baseline
+
+    return session, make_baseline(policy, session, environment, seed=seed)
+
+
+def _print(results, summary: dict, fmt: str, title: str) -> None:
+    rows = [r.summary() for r in results]
+    if fmt == "json":
+        write_object({"episodes": rows, "summary": summary}, "json")
+    elif fmt == "table":
+        write_records(rows, "table", title=title)
+        write_object(summary, "table", title="summary")
+    else:
+        write_records(rows, fmt)
+        message("summary: " + ", ".join(f"{k}={v}" for k, v in summary.items()))
 
 
 def _plot(env_name: str, results, path: Path, noise_after) -> None:

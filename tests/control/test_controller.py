@@ -184,3 +184,17 @@ def test_task_defaults_come_from_one_place():
     with pytest.raises(AocError, match="^residual_cap must be > 0") as err:
         ControllerConfig(residual_cap=-1.0).check()
     assert err.value.for_command_line().startswith("--residual-cap must be > 0")
+
+
+def test_the_typical_residual_has_one_typed_accessor(maze):
+    from aoc_cli.session import TypicalResidual, load_index
+
+    ci = open_session(maze).index
+    recorded = ci.meta["typical_residual"]
+    assert (ci.typical.p50, ci.typical.p90, ci.typical.p99) == \
+        (recorded["p50"], recorded["p90"], recorded["p99"])
+    assert ci.typical_residual == recorded["p50"] and ci.typical.sample == recorded["sample"]
+    assert TypicalResidual.from_meta({}) == TypicalResidual(None, None, None, 0)
+    # the model's hash is computed once, and is what a fresh load computes
+    model = ci.model
+    assert model.hash is model.hash and model.hash == load_index(maze).model.hash
