@@ -66,9 +66,10 @@ class ActionSpace:
 
     def candidates(self, rng: np.random.Generator, count: int) -> np.ndarray:
         """The controller's candidates: K uniform in a box, or every discrete action."""
-        if self.discrete:
-            return np.arange(int(self.n_actions), dtype=np.int64)
-        return self.uniform(rng, count)
+        from aoc_cli.control.controller import candidate_actions
+
+        return candidate_actions(rng, count, self.low, self.high,
+                                 self.n_actions if self.discrete else None)
 
     def clip(self, action):
         """Clip a continuous action into the box; pass a discrete one through as an int."""

@@ -63,6 +63,15 @@ def action_bounds(action_space: dict, actions: np.ndarray | None = None):
     return actions.min(axis=0).astype(np.float64), actions.max(axis=0).astype(np.float64)
 
 
+def candidate_actions(rng: np.random.Generator, count: int, low: np.ndarray | None = None,
+                      high: np.ndarray | None = None, n_actions: int | None = None) -> np.ndarray:
+    """The K candidates of a step: every action of a discrete space, (n,) int, when
+    ``n_actions`` is given; else ``count`` uniform in the box [low, high], (count, d_a)."""
+    if n_actions is not None:
+        return np.arange(int(n_actions), dtype=np.int64)
+    return rng.uniform(low, high, size=(count, len(low)))
+
+
 class Controller:
     """AOC (value mode) or ABC (imitation mode) over one corpus, model and index.
 
@@ -98,10 +107,10 @@ class Controller:
     def sample_candidates(self, observation: np.ndarray, history: History) -> np.ndarray:
         """(K, d_a) float candidates, or (n,) int: every action of a discrete space."""
         if self.discrete:
-            return np.arange(int(self.corpus.n_actions), dtype=np.int64)
+            return candidate_actions(self.rng, 0, n_actions=self.corpus.n_actions)
         k = self.config.candidates
         if self.config.sampler == "uniform":
-            return self.rng.uniform(self.low, self.high, size=(k, len(self.low)))
+            return candidate_actions(self.rng, k, self.low, self.high)
         # bc: the behaviour-cloning action plus Gaussian noise (the first candidate noiseless)
         mean = np.asarray(self.bc_model.predict(observation[None], None, history))[0]
         noise = self.rng.standard_normal((k, len(self.low))) * self.config.bc_noise * self.span
