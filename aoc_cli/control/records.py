@@ -76,12 +76,14 @@ def decision_record(decision: Decision, corpus, index, step: int | None = None,
     return record
 
 
-def write_audit(path, episodes: list, meta: dict) -> None:
+def write_audit(path, episodes: list, meta: dict, corpus=None) -> None:
     """Every decision of every episode in one HDF5 file (atomically).
 
     ``episodes`` is a list of :class:`aoc_cli.control.rollout.EpisodeResult` run with
     ``keep_decisions=True``; ``meta`` (corpus, hashes, controller config...) goes in the
     file's attributes as JSON.
+    With ``corpus``, each step's supporting rows also carry their episodes' own ids
+    (``support_episode_ids``, "" where padded) when the corpus has them.
     """
     with atomic_path(path, suffix=".h5") as tmp:
         with h5py.File(tmp, "w") as f:
@@ -111,6 +113,12 @@ def write_audit(path, episodes: list, meta: dict) -> None:
                     rows[t, :n], weights[t, :n], dist[t, :n] = (
                         d.support_rows, d.support_weights, d.support_distances)
                 g["support_rows"], g["support_weights"], g["support_distances"] = rows, weights, dist
+                ids = None if corpus is None else episode_ids(corpus)
+                if ids is not None:
+                    eps = corpus.episode_of(np.maximum(rows, 0))
+                    g["support_episode_ids"] = np.where(
+                        rows >= 0, np.asarray(ids, dtype=object)[eps], "").astype(
+                        h5py.string_dtype())
                 g["actions"] = np.stack([np.asarray(d.action) for d in decisions])
                 g["values"] = np.array([np.nan if d.value is None else d.value
                                         for d in decisions])

@@ -48,7 +48,7 @@ def rollout(session: Session | ModelFreeSession, env, episodes: int, seed: int =
         if progress is not None:
             progress.update(task, advance=1, description=f"rollout (return {res.total_return:.1f})")
     if audit is not None:
-        write_audit(audit, results, session.meta())
+        write_audit(audit, results, session.meta(), corpus=session.corpus)
     return results, summarize(results)
 
 

@@ -174,3 +174,21 @@ def test_cli_summary_steps_file_and_bad_input(ward, tmp_path):
         argv = ["evaluate", "ward", "--data", "held", *args]
         code, out, err = run_aoc(*argv, env=env)
         assert code == 2 and msg in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_audit_log_names_each_supporting_row_by_its_episode_id(ward, tmp_path):
+    import h5py
+
+    from aoc_cli.control import rollout
+    from aoc_cli.envs import make_env
+
+    _root, store = ward
+    corpus = store.corpus("ward")
+    session = open_session(corpus, config=ControllerConfig())
+    rollout(session, make_env("ward"), 1, seed=0, audit=str(tmp_path / "a.h5"))
+    with h5py.File(tmp_path / "a.h5") as f:
+        rows = f["episode_0"]["support_rows"][()]
+        ids = f["episode_0"]["support_episode_ids"][()].astype(str)
+    ep = corpus.episode_of(np.maximum(rows, 0))
+    expect = np.where(rows >= 0, np.array(corpus.episode_ids, dtype=object)[ep], "")
+    assert (rows >= 0).any() and np.array_equal(ids, expect.astype(str))
