@@ -317,5 +317,5 @@ def step_records(ctx_or_session, data, res: StepScores):
         yield rec
 
 
-__all__ = ["BASELINES", "EXACT_MAX_ROWS", "LeaveEpisodeOut", "StepScores", "chunks", "evaluate", "merge",
-           "score_episodes", "step_records", "summarise", "check_inputs"]
+__all__ = ["BASELINES", "EXACT_MAX_ROWS", "LeaveEpisodeOut", "StepScores", "check_inputs",
+           "chunks", "evaluate", "merge", "score_episodes", "step_records", "summarise"]
