@@ -83,7 +83,8 @@ def register(app: typer.Typer) -> None:
 
 def _method_rows(summary: dict) -> list[dict]:
     own = "abc" if summary["mode"] == "imitation" else "aoc"
-    rows = [{"method": own, **{k: v for k, v in summary.items() if not isinstance(v, (dict, list))}}]
+    flat = {k: v for k, v in summary.items() if not isinstance(v, (dict, list))}
+    rows = [{"method": own, **flat}]
     for method, rec in summary["baselines"].items():
         rows.append({"method": method, **rec})
     return rows

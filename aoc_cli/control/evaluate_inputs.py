@@ -140,9 +140,10 @@ def search_structure(index, vectors, exact: bool | None, seed: int = 0):
 
 class KNNBaseline:
     """The k nearest corpus rows on standardised inputs (imitation: the observation; value:
-    the observation and the encoded action; exact search), k = d_b + 1 (as many rows as ABC's subset may
-    use). Imitation: the neighbours' action shares (discrete) or mean action; value: their
-    mean value for the logged action, and for discrete actions the best of the actions."""
+    the observation and the encoded action; exact search up to EXACT_MAX_ROWS rows, IVF
+    beyond), k = d_b + 1 (as many rows as ABC's subset may use). Imitation: the neighbours'
+    action shares (discrete) or mean action; value: their mean value for the logged action,
+    and for discrete actions the best of the actions."""
 
     def __init__(self, ctx: "EvalContext"):
         from aoc_cli.index import BeliefIndex

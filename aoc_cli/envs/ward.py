@@ -108,8 +108,8 @@ def clinician_decision(obs: np.ndarray, previous_obs: np.ndarray | None,
     start = np.maximum(spo2_thr - spo2, (rr - rr_thr) / 2.0)   # > 0: start oxygen
     if previous_obs is not None:
         drop = previous_obs[:, 0] - spo2
-        start = np.where((copd > 0) & (drop >= TREND_DROP), np.maximum(start, 0.5 + drop - TREND_DROP),
-                         start)
+        trend = np.maximum(start, 0.5 + drop - TREND_DROP)
+        start = np.where((copd > 0) & (drop >= TREND_DROP), trend, start)
     keep = spo2_thr + WEAN_MARGIN - spo2 + 0.5                 # > 0: stay on oxygen
     score = np.where(previous_action > 0, keep, start)
     p = 1.0 / (1.0 + np.exp(-score / noise))
