@@ -11,7 +11,9 @@ from typing import Annotated, Optional
 import typer
 
 from aoc_cli.cli.common import (CandidatesOption, CorpusArgument, EpsilonOption,
-                                FormatOption, IndexOption, KOption, ModelOption, get_store)
+                                FormatOption, IndexOption, KOption, ModelOption,
+                                RayAddressOption, WorkersOption, get_store)
+from aoc_cli.errors import AocError
 from aoc_cli.report import resolve_format, write_object, write_records
 
 IMITATION_COLUMNS = ["method", "accuracy", "balanced_accuracy", "auc", "majority_accuracy",
@@ -45,6 +47,8 @@ def register(app: typer.Typer) -> None:
                                   "~0.9999).")] = None,
         seed: Annotated[int, typer.Option(
             "--seed", help="Seed of the candidates (value mode, continuous actions).")] = 0,
+        workers: WorkersOption = None,
+        ray_address: RayAddressOption = None,
         fmt: FormatOption = None,
     ) -> None:
         """Decide every logged step of a held-out corpus in batches and score the decisions
@@ -69,8 +73,18 @@ def register(app: typer.Typer) -> None:
             def on_progress(done: int, total: int) -> None:
                 bar.update(task, completed=done, total=total)
 
-            summary, res = evaluate(session, held_out, names, seed=seed, progress=on_progress,
-                                    exact=exact)
+            if workers is None and ray_address is None:
+                summary, res = evaluate(session, held_out, names, seed=seed,
+                                        progress=on_progress, exact=exact)
+            else:  # the chunks of episodes as Ray tasks (aoc_cli.control.evaluate_ray)
+                from aoc_cli.control.evaluate_ray import evaluate_on_ray
+
+                if workers is not None and workers < 1:
+                    raise AocError(f"--workers must be >= 1, got {workers}")
+                summary, res = evaluate_on_ray(store.root, name, data, session.model.id,
+                                               index_id, config, names, seed=seed, exact=exact,
+                                               workers=workers, address=ray_address,
+                                               progress=on_progress)
         if steps_file is not None:
             from aoc_cli.store import atomic_path
 
