@@ -176,9 +176,11 @@ def _episode_mask(starts: np.ndarray, episodes: np.ndarray, a: int, b: int) -> n
 
 
 def train_streaming(corpus, config: BeliefConfig, model_id: str = "default",
-                    overwrite: bool = False, progress=None, block_rows: int = BLOCK_ROWS) -> dict:
+                    overwrite: bool = False, progress=None, block_rows: int = BLOCK_ROWS,
+                    save: bool = True, extra: dict | None = None) -> dict:
     """Train like :func:`aoc_cli.belief.train.train_model`, streaming blocks of rows
-    (module docstring); writes the model and returns its metrics."""
+    (module docstring); writes the model (unless ``save`` is false) and returns its metrics
+    (``extra`` merged in)."""
     from aoc_cli.belief.artefact import save_model
     from aoc_cli.belief.inputs import build_net, network_dims, pick_device
     from aoc_cli.belief.train import _Objective
@@ -302,7 +304,10 @@ def train_streaming(corpus, config: BeliefConfig, model_id: str = "default",
                     for k, v in final.items() if k != "loss"})
     metrics.update({"rows": corpus.n_rows, "train_rows": n_train, "val_rows": n_val,
                     "device": device.type, "threads": threads if device.type == "cpu" else None,
-                    "seconds": time.perf_counter() - started})
+                    "belief": config.belief, "seconds": time.perf_counter() - started})
+    metrics.update(extra or {})
+    if not save:  # a candidate of the model selection: its metrics only
+        return metrics
     save_model(corpus, model_id, net=net.cpu(), config=config, dims=dims, norm=norm,
                value=value_spec(config.value, config.gamma) if config.mode == "value" else None,
                values=values, metrics=metrics, history=history,

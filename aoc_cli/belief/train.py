@@ -110,7 +110,8 @@ def train_model(corpus, config: BeliefConfig, model_id: str = "default", overwri
     from aoc_cli.belief.stream import streams, train_streaming
 
     if streams(corpus, config):  # a large corpus: trained a block of rows at a time
-        return train_streaming(corpus, config, model_id, overwrite, progress)
+        return train_streaming(corpus, config, model_id, overwrite, progress, save=save,
+                               extra=extra)
     started = time.perf_counter()
     data = prepared or prepare(corpus, config, model_id, overwrite)
     if config.belief == "critic":  # its own training (aoc_cli.belief.kinds)

@@ -77,3 +77,16 @@ def test_streaming_training_learns_a_value_that_needs_the_history(corpus):
                            overwrite=True, block_rows=600)
     assert metrics["val_r2"] > 0.95          # as the in-memory path (tests/belief/test_train.py)
     assert flat["val_r2"] < 0.1
+
+
+def test_train_model_streams_a_large_corpus_and_honours_save(corpus, monkeypatch):
+    import aoc_cli.belief.stream as stream
+
+    monkeypatch.setattr(stream, "STREAM_ROWS", 1000)  # this corpus counts as large
+    cfg = BeliefConfig(value="reward", history_length=2, max_epochs=1, seed=0, threads=1)
+    metrics = train_model(corpus, cfg, "probe", overwrite=True, save=False, extra={"x": 1})
+    assert metrics["streamed"] and metrics["x"] == 1
+    assert not (corpus.models_dir / "probe").exists()
+    # the dynamics head and the other belief kinds train in memory
+    assert not stream.streams(corpus, BeliefConfig(dynamics_weight=1.0))
+    assert not stream.streams(corpus, BeliefConfig(belief="reward"))
