@@ -15,7 +15,8 @@ process so that its peak resident memory (VmHWM of /proc/self/status) is its own
 
 Each stage records seconds, peak memory (VmHWM), memory after the imports (the baseline),
 and the 1-minute load average, in STORE/scale.json; a stage already recorded is skipped, so a
-run that was interrupted resumes (``--redo STAGE`` runs a stage again). Memory is set against
+run that was interrupted resumes (``--redo STAGE`` runs a stage again; the earlier records
+are kept under ``earlier``). Memory is set against
 the corpus's float arrays (observations, actions, rewards) and the belief array (N, d_b).
 
 Usage: .venv/bin/python benchmarks/scale.py --sizes 1m,3m,10m --store DIR [--steps 200]
@@ -139,17 +140,20 @@ def stage_control(store, rows: int, steps: int, recall_steps: int) -> dict:
         if term or trunc:
             buf.reset()
             obs, _ = env.reset()
+    ms = np.asarray(times) * 1000
+    out = {"steps": steps, "step_ms": float(np.median(ms)), "p90_ms": float(np.percentile(ms, 90)),
+           "open_seconds": open_s, "kind": index.index.kind}
+    if not queries:
+        return out
     q = np.concatenate(queries).astype(np.float32)
     got = np.concatenate(found)
     t0 = time.perf_counter()
     exact = _exact_knn(index.beliefs, q, got.shape[1])
     exact_s = time.perf_counter() - t0
     hits = [len(set(g[g >= 0]) & set(e)) / len(e) for g, e in zip(got, exact)]
-    ms = np.asarray(times) * 1000
-    return {"steps": steps, "step_ms": float(np.median(ms)), "p90_ms": float(np.percentile(ms, 90)),
-            "open_seconds": open_s, "kind": index.index.kind, "k": int(got.shape[1]),
-            "recall": float(np.mean(hits)), "recall_min": float(np.min(hits)),
-            "recall_queries": int(len(q)), "exact_seconds": exact_s}
+    return {**out, "k": int(got.shape[1]), "recall": float(np.mean(hits)),
+            "recall_min": float(np.min(hits)), "recall_queries": int(len(q)),
+            "exact_seconds": exact_s}
 
 
 def run_stage(stage: str, store_dir: str, rows: int, steps: int, recall_steps: int) -> None:
@@ -220,6 +224,8 @@ def main() -> None:
             line = next((x for x in proc.stdout.splitlines() if x.startswith("RESULT ")), None)
             if proc.returncode != 0 or line is None:
                 sys.exit(f"{stage} at {rows} rows failed:\n{proc.stderr[-3000:]}")
+            if stage in done:  # a stage run again: the earlier records are kept beside it
+                done.setdefault("earlier", []).append({stage: done[stage]})
             done[stage] = json.loads(line[len("RESULT "):])
             done.update(sizes_of(args.store, rows))
             tmp = record.with_suffix(".json.tmp")
