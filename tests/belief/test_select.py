@@ -86,7 +86,7 @@ def test_no_better_than_majority_or_mean_is_said():
 
 def test_default_training_on_ward_beats_the_majority_clearly(aoc, ward):
     code, out, err = aoc("train", "ward", "--mode", "imitation", "--threads", "1", "--epochs",
-                         "15", "--format", "json")
+                         "8", "--format", "json")
     assert code == 0, err
     code, out, err = aoc("index", "ward", "--format", "json")
     assert code == 0, err
