@@ -165,6 +165,27 @@ def _normalisation(corpus, cols: Columns, ranges, discrete: bool, targets) -> No
     return Normalisation(o_mean, o_std, a_mean, a_std, r_mean[0], r_std[0], t_mean, t_std)
 
 
+def block_value_targets(corpus, cols: Columns, ranges, value: str, gamma: float) -> np.ndarray:
+    """(N,) float64 value targets computed block by block (whole episodes each): the same
+    numbers as :func:`aoc_cli.belief.targets.value_targets`, which needs the whole rewards
+    column and several (N,) float64 temporaries at once."""
+    out = np.empty(cols.n_rows, dtype=np.float64)
+    key = "rewards" if value in ("return", "mean-return", "reward") else f"columns/{value}"
+    try:
+        with h5py.File(cols.path, "r") as f:
+            ds = f[key] if key in f else None
+            for a, b in ranges:
+                part = None if ds is None else ds[a:b]
+                view = SimpleNamespace(
+                    name=corpus.name, has_rewards=corpus.has_rewards, manifest=corpus.manifest,
+                    rewards=part if key == "rewards" else None,
+                    episode_starts=cols.local_starts(a, b), column=lambda _name, p=part: p)
+                out[a:b] = value_targets(view, value, gamma)
+    except AocError:  # the whole column's check names the corpus row
+        return value_targets(corpus, value, gamma)
+    return out
+
+
 def _episode_mask(starts: np.ndarray, episodes: np.ndarray, a: int, b: int) -> np.ndarray:
     """(b - a,) bool: rows of [a, b) that belong to ``episodes`` (sorted)."""
     first = np.searchsorted(starts, a, side="right") - 1
@@ -192,7 +213,11 @@ def train_streaming(corpus, config: BeliefConfig, model_id: str = "default",
     if model_dir(corpus, model_id).exists() and not overwrite:
         raise AocError(f"model {model_id!r} of corpus {corpus.name!r} already exists: pass "
                        "--overwrite to replace it, or choose another --model")
-    values = value_targets(corpus, config.value, config.gamma) if config.mode == "value" else None
+    cols = Columns(corpus)
+    starts = cols.starts
+    ranges = blocks(starts, block_rows)
+    values = block_value_targets(corpus, cols, ranges, config.value, config.gamma) \
+        if config.mode == "value" else None
     train_eps, val_eps = split_episodes(corpus.n_episodes, config.val_fraction, config.seed)
     device = pick_device(config.device)
     threads = config.resolved_threads()
@@ -200,9 +225,6 @@ def train_streaming(corpus, config: BeliefConfig, model_id: str = "default",
         torch.set_num_threads(threads)
     dims = network_dims(corpus, config.mode)
     classify = config.mode == "imitation" and dims["discrete"]
-    cols = Columns(corpus)
-    starts = cols.starts
-    ranges = blocks(starts, block_rows)
     targets = values if config.mode == "value" else (None if classify else "actions")
     norm = _normalisation(corpus, cols, ranges, dims["discrete"], targets)
     encoder = Encoder(norm, dims["discrete"], dims["n_actions"], device)

@@ -90,3 +90,13 @@ def test_train_model_streams_a_large_corpus_and_honours_save(corpus, monkeypatch
     # the dynamics head and the other belief kinds train in memory
     assert not stream.streams(corpus, BeliefConfig(dynamics_weight=1.0))
     assert not stream.streams(corpus, BeliefConfig(belief="reward"))
+
+
+@pytest.mark.parametrize("value", ["return", "mean-return", "reward"])
+def test_block_value_targets_are_the_whole_column_targets(corpus, value):
+    from aoc_cli.belief.stream import block_value_targets
+    from aoc_cli.belief.targets import value_targets
+
+    cols = Columns(corpus)
+    got = block_value_targets(corpus, cols, blocks(cols.starts, 333), value, 0.9)
+    np.testing.assert_array_equal(got, value_targets(corpus, value, 0.9))
