@@ -7,7 +7,8 @@ round by round (old, new, new, old, ...) so that both see the same load of a sha
 Each round opens a session and times ``Controller.decide`` over the same states of a
 pendulum-het rollout (K = 100 candidates, one thread for torch, FAISS and BLAS, as `aoc rollout`
 runs). It reports the median step of each tree (the median over rounds of each round's
-median), their ratio, and whether every decision is the same: the chosen action, its value
+median), their ratio, the median of the rounds' own ratios (``paired``: a round of each tree
+run back to back sees about the same load), and whether every decision is the same: the chosen action, its value
 and residual, step by step, compared to the bit (same machine, same inputs).
 
 Usage: .venv/bin/python benchmarks/control_trees.py --old ../aoc-old --new . --sizes 100k
@@ -94,7 +95,7 @@ def main() -> None:
     from aoc_cli.store import Store  # noqa: E402
 
     store_dir = args.store or tempfile.mkdtemp(prefix="aoc-bench-trees-")
-    print(f"{'rows':>8} {'old ms':>8} {'new ms':>8} {'new/old':>8} {'rounds':>6} "
+    print(f"{'rows':>8} {'old ms':>8} {'new ms':>8} {'new/old':>8} {'paired':>7} {'rounds':>6} "
           f"{'same decisions':>15} {'load':>5}")
     for size in args.sizes.split(","):
         name = prepare(Store(store_dir), parse_size(size))
@@ -110,8 +111,12 @@ def main() -> None:
                 reference = decisions if reference is None else reference
                 same &= bool(np.array_equal(decisions, reference, equal_nan=True))
         old, new = 1e3 * np.median(medians["old"]), 1e3 * np.median(medians["new"])
-        print(f"{parse_size(size):>8} {old:>8.2f} {new:>8.2f} {new / old:>8.2f} "
+        paired = float(np.median(np.array(medians["new"]) / np.array(medians["old"])))
+        print(f"{parse_size(size):>8} {old:>8.2f} {new:>8.2f} {new / old:>8.2f} {paired:>7.2f} "
               f"{args.rounds:>6} {str(same):>15} {os.getloadavg()[0]:>5.2f}", flush=True)
+        for arm in ("old", "new"):
+            rounds = " ".join(f"{1e3 * m:.2f}" for m in medians[arm])
+            print(f"{'':>8} {arm} rounds (median ms each): {rounds}", flush=True)
 
 
 if __name__ == "__main__":
