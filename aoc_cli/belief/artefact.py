@@ -12,7 +12,6 @@ Files (the folder is written in a temporary folder beside it and renamed into pl
 from __future__ import annotations
 
 import csv
-import functools
 import hashlib
 import json
 import time
@@ -111,6 +110,7 @@ class BeliefModel:
         self.corpus_hash: str = meta["corpus_hash"]
         self.values = values
         self.net = net.eval()
+        self._hash: tuple | None = None  # (weights' versions, hash): see ``hash``
         self.device = device
         self.encoder = Encoder(Normalisation.from_dict(meta["normalisation"]),
                                self.dims["discrete"], self.dims["n_actions"], device)
@@ -127,10 +127,17 @@ class BeliefModel:
     def discrete(self) -> bool:
         return bool(self.dims["discrete"])
 
-    @functools.cached_property
+    @property
     def hash(self) -> str:
         """blake2b of the weights and the config: what an index built from this model records.
-        Computed once: a loaded model's weights do not change (inference only)."""
+        Computed once and kept while the weights are unchanged (torch counts every in-place
+        change of a tensor in its ``_version``; a loaded model's weights do not change)."""
+        versions = tuple(t._version for t in self.net.state_dict(keep_vars=True).values())
+        if self._hash is None or self._hash[0] != versions:
+            self._hash = (versions, self._weights_hash())
+        return self._hash[1]
+
+    def _weights_hash(self) -> str:
         h = hashlib.blake2b(digest_size=16)
         for key, tensor in sorted(self.net.state_dict().items()):
             arr = tensor.detach().cpu().numpy()
