@@ -84,6 +84,10 @@ def test_model_hash_identifies_weights_and_config(value_run):
     with torch.no_grad():
         c.net.head.bias += 1.0
     assert c.hash != a.hash
+    # and a model whose weights change after its hash was read is hashed again
+    with torch.no_grad():
+        b.net.head.bias += 1.0
+    assert b.hash == c.hash != a.hash
 
 
 def test_same_seed_same_weights_other_seed_other_weights(tmp_path):
