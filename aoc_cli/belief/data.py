@@ -3,6 +3,9 @@ the model folder, the value targets and the validation split by episode."""
 
 from __future__ import annotations
 
+import copy
+import math
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -62,3 +65,44 @@ def prepare(corpus, config: BeliefConfig, model_id: str, overwrite: bool) -> Tra
     starts = corpus.episode_starts
     return TrainingData(values, train_eps, val_eps, episode_rows(starts, train_eps),
                         episode_rows(starts, val_eps))
+
+
+class EarlyStopping:
+    """The training loop's bookkeeping, shared by the in-memory and the streamed loops: one
+    record per epoch, the best epoch's weights, and the stopping rule (the validation loss has
+    not improved by more than ``min_delta`` for ``patience`` epochs, or is not finite)."""
+
+    def __init__(self, net, config: BeliefConfig, started: float):
+        self.config, self.started = config, started
+        self.history: list[dict] = []
+        self.best = {"val_loss": math.inf, "epoch": 0, "state": copy.deepcopy(net.state_dict())}
+        self.stale = 0
+
+    def running(self, epoch: int, batch: int, batches: int, train_loss: float) -> dict:
+        """The progress record of a batch inside an epoch."""
+        return {"epoch": epoch, "max_epochs": self.config.max_epochs, "batch": batch,
+                "batches": batches, "train_loss": train_loss,
+                "val_loss": self.history[-1]["val_loss"] if self.history else None,
+                "best_val_loss": None if self.best["epoch"] == 0 else self.best["val_loss"],
+                "epoch_done": False}
+
+    def end_epoch(self, net, epoch: int, train_loss: float, val: dict, batches: int) -> dict:
+        """Record the epoch (val: the validation metrics, ``loss`` first), keep the weights if
+        they are the best so far; returns the epoch's progress record."""
+        record = {"epoch": epoch, "train_loss": train_loss, "val_loss": val["loss"]}
+        record.update({f"val_{k}": v for k, v in val.items() if k != "loss"})
+        record["seconds"] = time.perf_counter() - self.started
+        self.history.append(record)
+        if val["loss"] < self.best["val_loss"] - self.config.min_delta:
+            self.best = {"val_loss": val["loss"], "epoch": epoch,
+                         "state": copy.deepcopy(net.state_dict())}
+            self.stale = 0
+        else:
+            self.stale += 1
+        return {**record, "max_epochs": self.config.max_epochs, "batch": batches,
+                "batches": batches, "best_val_loss": self.best["val_loss"], "epoch_done": True}
+
+    @property
+    def done(self) -> bool:
+        last = self.history[-1]["val_loss"] if self.history else 0.0
+        return self.stale >= self.config.patience or not math.isfinite(last)

@@ -24,7 +24,6 @@ streams instead, and the beliefs of every row are always written chunk by chunk:
 
 from __future__ import annotations
 
-import copy
 import math
 import time
 from pathlib import Path
@@ -35,7 +34,7 @@ import numpy as np
 import torch
 
 from aoc_cli.belief.config import BeliefConfig
-from aoc_cli.belief.data import model_dir, split_episodes
+from aoc_cli.belief.data import EarlyStopping, model_dir, split_episodes
 from aoc_cli.belief.model import _STD_FLOOR, Encoder, Normalisation, _stats
 from aoc_cli.belief.targets import value_spec, value_targets
 from aoc_cli.errors import AocError
@@ -266,9 +265,7 @@ def train_streaming(corpus, config: BeliefConfig, model_id: str = "default",
     n_train = int(np.diff(starts)[train_eps].sum())
     n_batches = max(1, sum(math.ceil(int(_episode_mask(starts, train_sorted, a, b).sum())
                                      / config.batch_size) for a, b in ranges))
-    history: list[dict] = []
-    best = {"val_loss": math.inf, "epoch": 0, "state": copy.deepcopy(net.state_dict())}
-    stale = 0
+    stopping = EarlyStopping(net, config, started)
     for epoch in range(1, config.max_epochs + 1):
         net.train()
         total, count, done = 0.0, 0, 0
@@ -290,29 +287,15 @@ def train_streaming(corpus, config: BeliefConfig, model_id: str = "default",
                 count += len(pick)
                 done += 1
             if progress is not None:
-                progress({"epoch": epoch, "max_epochs": config.max_epochs, "batch": done,
-                          "batches": n_batches, "train_loss": total / count,
-                          "val_loss": history[-1]["val_loss"] if history else None,
-                          "best_val_loss": None if best["epoch"] == 0 else best["val_loss"],
-                          "epoch_done": False})
+                progress(stopping.running(epoch, done, n_batches, total / count))
         net.eval()
         val = validate(net)
-        record = {"epoch": epoch, "train_loss": total / max(count, 1), "val_loss": val["loss"]}
-        record.update({f"val_{k}": v for k, v in val.items() if k != "loss"})
-        record["seconds"] = time.perf_counter() - started
-        history.append(record)
-        if val["loss"] < best["val_loss"] - config.min_delta:
-            best = {"val_loss": val["loss"], "epoch": epoch,
-                    "state": copy.deepcopy(net.state_dict())}
-            stale = 0
-        else:
-            stale += 1
+        record = stopping.end_epoch(net, epoch, total / max(count, 1), val, n_batches)
         if progress is not None:
-            progress({**record, "max_epochs": config.max_epochs, "batch": n_batches,
-                      "batches": n_batches, "best_val_loss": best["val_loss"],
-                      "epoch_done": True})
-        if stale >= config.patience or not math.isfinite(val["loss"]):
+            progress(record)
+        if stopping.done:
             break
+    history, best = stopping.history, stopping.best
     net.load_state_dict(best["state"])
     net.eval()
     final = validate(net)

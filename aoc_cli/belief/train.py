@@ -5,7 +5,6 @@ The inputs are encoded once (:mod:`aoc_cli.belief.inputs`), so a mini-batch is t
 
 from __future__ import annotations
 
-import copy
 import math
 import time
 
@@ -15,7 +14,7 @@ from torch import nn
 
 from aoc_cli.belief.artefact import save_model
 from aoc_cli.belief.config import BeliefConfig
-from aoc_cli.belief.data import TrainingData, prepare
+from aoc_cli.belief.data import EarlyStopping, TrainingData, prepare
 from aoc_cli.belief.inputs import (CorpusInputs, build_net, encode_corpus, network_dims,
                                    pick_device)
 from aoc_cli.belief.model import Encoder, Normalisation
@@ -163,9 +162,7 @@ def train_model(corpus, config: BeliefConfig, model_id: str = "default", overwri
     n_batches = max(1, math.ceil(len(tr) / config.batch_size))
     report_every = max(1, n_batches // 20)
 
-    history: list[dict] = []
-    best = {"val_loss": math.inf, "epoch": 0, "state": copy.deepcopy(net.state_dict())}
-    stale = 0
+    stopping = EarlyStopping(net, config, started)
     for epoch in range(1, config.max_epochs + 1):
         net.train()
         perm = tr[torch.randperm(len(tr), generator=generator).to(device)]
@@ -180,29 +177,15 @@ def train_model(corpus, config: BeliefConfig, model_id: str = "default", overwri
             total += float(loss.detach()) * len(rows)
             count += len(rows)
             if progress is not None and (b + 1) % report_every == 0 and b + 1 < n_batches:
-                progress({"epoch": epoch, "max_epochs": config.max_epochs, "batch": b + 1,
-                          "batches": n_batches, "train_loss": total / count,
-                          "val_loss": history[-1]["val_loss"] if history else None,
-                          "best_val_loss": None if best["epoch"] == 0 else best["val_loss"],
-                          "epoch_done": False})
+                progress(stopping.running(epoch, b + 1, n_batches, total / count))
         net.eval()
         val = _evaluate(net, inputs, va, y_val, objective)
-        record = {"epoch": epoch, "train_loss": total / count, "val_loss": val["loss"]}
-        record.update({f"val_{k}": v for k, v in val.items() if k != "loss"})
-        record["seconds"] = time.perf_counter() - started
-        history.append(record)
-        if val["loss"] < best["val_loss"] - config.min_delta:
-            best = {"val_loss": val["loss"], "epoch": epoch,
-                    "state": copy.deepcopy(net.state_dict())}
-            stale = 0
-        else:
-            stale += 1
+        record = stopping.end_epoch(net, epoch, total / count, val, n_batches)
         if progress is not None:
-            progress({**record, "max_epochs": config.max_epochs, "batch": n_batches,
-                      "batches": n_batches, "best_val_loss": best["val_loss"],
-                      "epoch_done": True})
-        if stale >= config.patience or not math.isfinite(val["loss"]):
+            progress(record)
+        if stopping.done:
             break
+    history, best = stopping.history, stopping.best
 
     net.load_state_dict(best["state"])
     net.eval()
