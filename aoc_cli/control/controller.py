@@ -220,26 +220,55 @@ class Controller:
 
     # -- warnings --------------------------------------------------------------------------
     def heterogeneity(self, d: Decision) -> list[str]:
-        """Warnings when the supporting rows disagree (the paper's risky-decision signal)."""
-        keep = d.support_weights >= self.config.min_weight
-        rows = d.support_rows[keep]
+        """Warnings when the supporting rows disagree (the paper's risky-decision signal); the
+        rule is :func:`support_disagreement`'s, this adds the words."""
+        acts_flag, values_flag = support_disagreement(
+            d.support_rows[None], d.support_weights[None], self.corpus_actions,
+            self.index.values, self.config, discrete=self.discrete,
+            span=None if self.discrete else self.span, value_std=self.value_std)
+        rows = d.support_rows[d.support_weights >= self.config.min_weight]
         out = []
-        if len(rows) < 2:
-            return out
-        actions = self.corpus_actions[rows]
-        if self.discrete:
-            if len(np.unique(actions)) > 1:
+        if acts_flag[0]:
+            actions = self.corpus_actions[rows]
+            if self.discrete:
                 out.append(f"supporting rows disagree on the action: {sorted(set(actions.tolist()))}")
-        else:
-            spread = float(np.max((actions.max(0) - actions.min(0)) / self.span))
-            if spread > self.config.action_spread:
+            else:
+                spread = float(np.max((actions.max(0) - actions.min(0)) / self.span))
                 out.append(f"supporting actions spread over {spread:.0%} of the action range")
-        values = self.index.values
-        if values is not None:
-            v = values[rows]
-            if self.value_std > 0 and (v.max() - v.min()) > self.config.value_spread * self.value_std:
-                out.append(f"supporting values range from {v.min():.4g} to {v.max():.4g}")
+        if values_flag[0]:
+            v = self.index.values[rows]
+            out.append(f"supporting values range from {v.min():.4g} to {v.max():.4g}")
         return out
+
+
+def support_disagreement(rows: np.ndarray, weights: np.ndarray, corpus_actions: np.ndarray,
+                         values: np.ndarray | None, config: ControllerConfig, *, discrete: bool,
+                         span: np.ndarray | None, value_std: float) -> tuple[np.ndarray, np.ndarray]:
+    """Do the supporting rows of S decisions disagree? rows, weights (S, m), -1 padded; only
+    rows with weight >= ``min_weight`` count, and at least two of them.
+
+    Returns two (S,) bool arrays: the actions disagree (discrete: not all the same; continuous:
+    spread over more than ``action_spread`` of the action range ``span`` (d_a,) in some
+    dimension), and the values (N,) range over more than ``value_spread`` corpus value stds.
+    """
+    keep = (rows >= 0) & (weights >= config.min_weight)
+    safe = np.maximum(rows, 0)
+    many = keep.sum(1) >= 2
+    acts = corpus_actions[safe]
+    with np.errstate(invalid="ignore"):
+        if discrete:
+            big, small = np.iinfo(np.int64).max, np.iinfo(np.int64).min
+            act = np.where(keep, acts, small).max(1) != np.where(keep, acts, big).min(1)
+        else:
+            hi = np.where(keep[..., None], acts, -np.inf).max(1)
+            lo = np.where(keep[..., None], acts, np.inf).min(1)
+            act = np.max((hi - lo) / span, axis=1) > config.action_spread
+        val = np.zeros(len(rows), bool)
+        if values is not None and value_std > 0:
+            v = values[safe]
+            spread = np.where(keep, v, -np.inf).max(1) - np.where(keep, v, np.inf).min(1)
+            val = spread > config.value_spread * value_std
+    return act & many, val & many
 
 
 def _trim(values: np.ndarray, rows: np.ndarray) -> np.ndarray:

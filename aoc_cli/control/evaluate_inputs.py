@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from aoc_cli.control.controller import support_disagreement
 from aoc_cli.decompose import default_k
 from aoc_cli.errors import AocError
 
@@ -43,28 +44,12 @@ def episode_rows(starts: np.ndarray, episodes: np.ndarray) -> np.ndarray:
 
 
 def heterogeneity(ctx: "EvalContext", rows: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """(S,) bool: the supporting rows (S, m) with weight >= min_weight disagree, as
-    :meth:`aoc_cli.control.controller.Controller.heterogeneity` warns (actions differ,
-    continuous actions spread over ``action_spread`` of the range, values over
-    ``value_spread`` corpus value stds)."""
-    cfg = ctx.config
-    keep = (rows >= 0) & (weights >= cfg.min_weight)
-    safe = np.maximum(rows, 0)
-    many = keep.sum(1) >= 2
-    acts = ctx.corpus_actions[safe]
-    if ctx.discrete:
-        big, small = np.iinfo(np.int64).max, np.iinfo(np.int64).min
-        warn = np.where(keep, acts, small).max(1) != np.where(keep, acts, big).min(1)
-    else:
-        hi = np.where(keep[..., None], acts, -np.inf).max(1)
-        lo = np.where(keep[..., None], acts, np.inf).min(1)
-        warn = np.max((hi - lo) / ctx.span, axis=1) > cfg.action_spread
-    values = ctx.index.values
-    if values is not None and ctx.value_std > 0:
-        v = values[safe]
-        spread = np.where(keep, v, -np.inf).max(1) - np.where(keep, v, np.inf).min(1)
-        warn = warn | (spread > cfg.value_spread * ctx.value_std)
-    return warn & many
+    """(S,) bool: the supporting rows (S, m) disagree, by the controller's own rule
+    (:func:`aoc_cli.control.controller.support_disagreement`)."""
+    acts, values = support_disagreement(
+        rows, weights, ctx.corpus_actions, ctx.index.values, ctx.config, discrete=ctx.discrete,
+        span=None if ctx.discrete else ctx.span, value_std=ctx.value_std)
+    return acts | values
 
 
 def candidate_beliefs(model, obs: np.ndarray, hist, cands: np.ndarray,
