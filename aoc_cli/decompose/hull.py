@@ -32,6 +32,8 @@ helps or the budget is spent.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 
@@ -52,43 +54,86 @@ def minimal_subset(
     lp_start: first move to the lifted-LP (Delaunay) vertex. budget: exchange pivots at most.
     Returns (weights (Q, k) with the new support, support (Q, k) bool, pivots used).
     """
-    n_q, k, d = points.shape
+    d = points.shape[2]
     support = weights > 0
     weights = np.where(support, weights, 0.0)
     scale2 = np.maximum(np.max(np.where(valid, (points**2).sum(-1), 0.0), axis=1), 1e-300)
-    z = points - offset[:, None, :]  # neighbours relative to y*
-    xx = (offset**2).sum(-1)
-    on_face = np.abs(np.einsum("qkd,qd->qk", points, offset) - xx[:, None]) <= face_tol * scale2[:, None]
-    candidate = valid & on_face & ~support
+    candidate = valid & _on_face(points, offset, scale2, face_tol) & ~support
     s = support.sum(1)
     todo = np.flatnonzero((s >= 2) & candidate.any(1))
     if todo.size == 0:
         return weights, support, 0
 
-    # tableau of the problems with something to exchange, slots padded to s_max
     # rescale about y* (barycentric coordinates are unchanged) so every system is well scaled
+    z = points - offset[:, None, :]  # neighbours relative to y*
     zt = z[todo] / np.sqrt(scale2[todo])[:, None, None]
-    sup, cand = support[todo], candidate[todo]
-    n = todo.size
-    s_max = int(s[todo].max())
-    order = np.argsort(~sup, axis=1, kind="stable")[:, :s_max]  # support columns first
-    in_slot = np.take_along_axis(sup, order, axis=1)  # (n, s_max) real slot?
-    Z_S = np.take_along_axis(zt, order[:, :, None], axis=1) * in_slot[:, :, None]
-    H = Z_S @ Z_S.transpose(0, 2, 1) + in_slot[:, :, None] * in_slot[:, None, :]
-    H += np.eye(s_max) * ((~in_slot)[:, :, None] + 1e-12)  # ridge: a degenerate support stays solvable
-    rhs = np.einsum("qsd,qkd->qsk", Z_S, zt) + in_slot[:, :, None]
-    sol = _solve(H, np.concatenate([rhs, in_slot[:, :, None].astype(float)], axis=2))
-    T, lam = sol[:, :, :k], sol[:, :, k]
-    fit = np.einsum("qsk,qsd->qkd", T, Z_S) - zt
-    in_aff = (fit**2).sum(-1) + (T.sum(1) - 1.0) ** 2 <= 1e-14
-    eligible = cand & in_aff & valid[todo]
-    slot_col = np.where(in_slot, order, -1)
-    r = np.arange(n)
-    sq = (zt**2).sum(-1)
-    pivots = 0
+    tab = _Tableau.build(zt, support[todo], candidate[todo], valid[todo])
+    pivots = _delaunay_start(tab, zt, d) if lp_start else 0
+    pivots += _exchange(tab, budget)
+    new_w, good = _exact_weights(tab, zt)
+    weights = weights.copy()
+    support = support.copy()
+    weights[todo[good]] = new_w[good]
+    support[todo[good]] = new_w[good] > 0
+    return weights, support, pivots
 
-    def pivot(mask: np.ndarray, enter: np.ndarray, leave: np.ndarray) -> None:
-        rows = r[mask]
+
+def _on_face(
+    points: np.ndarray, offset: np.ndarray, scale2: np.ndarray, face_tol: float
+) -> np.ndarray:
+    """(Q, k) bool: neighbours on the supporting hyperplane {b : <b - y*, y* - y> = 0} (all of
+    them when the residual is 0), relative to the squared radius scale2 (Q,)."""
+    xx = (offset**2).sum(-1)
+    gap = np.abs(np.einsum("qkd,qd->qk", points, offset) - xx[:, None])
+    return gap <= face_tol * scale2[:, None]
+
+
+@dataclass
+class _Tableau:
+    """The simplex tableau of the n problems with something to exchange, s_max slots each.
+
+    T: (n, s_max, k) barycentric coordinates beta of every neighbour in the current support.
+    lam: (n, s_max) those of y*. slot_col: (n, s_max) the neighbour in each slot, -1 if empty.
+    in_slot: (n, s_max) real slot (supports smaller than s_max are padded).
+    eligible: (n, k) neighbours that may enter (on the face, in the support's affine hull).
+    """
+
+    T: np.ndarray
+    lam: np.ndarray
+    slot_col: np.ndarray
+    in_slot: np.ndarray
+    eligible: np.ndarray
+
+    @classmethod
+    def build(
+        cls, zt: np.ndarray, sup: np.ndarray, cand: np.ndarray, valid: np.ndarray
+    ) -> _Tableau:
+        """zt: (n, k, d) neighbours relative to y*, rescaled; sup, cand, valid: (n, k) bool."""
+        k = zt.shape[1]
+        s_max = int(sup.sum(1).max())
+        order = np.argsort(~sup, axis=1, kind="stable")[:, :s_max]  # support columns first
+        in_slot = np.take_along_axis(sup, order, axis=1)  # (n, s_max) real slot?
+        Z_S = np.take_along_axis(zt, order[:, :, None], axis=1) * in_slot[:, :, None]
+        H = _lifted_gram(Z_S, in_slot)
+        rhs = np.einsum("qsd,qkd->qsk", Z_S, zt) + in_slot[:, :, None]
+        sol = _solve(H, np.concatenate([rhs, in_slot[:, :, None].astype(float)], axis=2))
+        T, lam = sol[:, :, :k], sol[:, :, k]
+        fit = np.einsum("qsk,qsd->qkd", T, Z_S) - zt
+        in_aff = (fit**2).sum(-1) + (T.sum(1) - 1.0) ** 2 <= 1e-14
+        return cls(T, lam, np.where(in_slot, order, -1), in_slot, cand & in_aff & valid)
+
+    def ratio_test(self) -> tuple[np.ndarray, np.ndarray]:
+        """Leaving slot for every entering column, and its pivot element: (n, k) each."""
+        T = self.T
+        pos = (T > 1e-12) & self.in_slot[:, :, None]
+        ratio = np.where(pos, self.lam[:, :, None] / np.where(pos, T, 1.0), np.inf)
+        leave = np.argmin(ratio, axis=1)  # (n, k)
+        return leave, np.take_along_axis(T, leave[:, None, :], axis=1)[:, 0, :]
+
+    def pivot(self, mask: np.ndarray, enter: np.ndarray, leave: np.ndarray) -> None:
+        """Column enter[q] replaces slot leave[q] in every problem q of mask (n,) bool."""
+        T, lam = self.T, self.lam
+        rows = np.arange(mask.size)[mask]
         c, i = enter[rows], leave[rows]
         col = T[rows, :, c]  # (m, s_max)
         piv = col[np.arange(rows.size), i]
@@ -98,59 +143,75 @@ def minimal_subset(
         prow = T[rows, i, :] / piv[:, None]
         T[rows] -= col[:, :, None] * prow[:, None, :]
         T[rows, i, :] = prow
-        old = slot_col[rows, i]
-        slot_col[rows, i] = c
-        eligible[rows, c] = False
-        eligible[rows, old] = True
+        old = self.slot_col[rows, i]
+        self.slot_col[rows, i] = c
+        self.eligible[rows, c] = False
+        self.eligible[rows, old] = True
 
-    def ratio_test() -> tuple[np.ndarray, np.ndarray]:
-        """Leaving slot for every entering column, and its pivot element."""
-        pos = (T > 1e-12) & in_slot[:, :, None]
-        ratio = np.where(pos, lam[:, :, None] / np.where(pos, T, 1.0), np.inf)
-        leave = np.argmin(ratio, axis=1)  # (n, k)
-        return leave, np.take_along_axis(T, leave[:, None, :], axis=1)[:, 0, :]
 
-    if lp_start:
-        for _ in range(4 * (d + 1) + 16):
-            cost_S = np.where(in_slot, sq[r[:, None], np.maximum(slot_col, 0)], 0.0)
-            reduced = sq - np.einsum("qs,qsk->qk", cost_S, T)
-            leave, piv = ratio_test()
-            reduced = np.where(eligible & (piv > 1e-9), reduced, 0.0)
-            enter = np.argmin(reduced, axis=1)
-            go = reduced[r, enter] < -1e-12
-            if not go.any():
-                break
-            pivot(go, enter, leave[r, enter])
-            pivots += 1
+def _delaunay_start(tab: _Tableau, zt: np.ndarray, d: int) -> int:
+    """Pivot to the vertex of the lifted LP  min sum_c w_c ||b_c - y*||^2  (entering column =
+    most negative reduced cost): the Delaunay simplex containing y*. Returns the pivots made."""
+    r = np.arange(zt.shape[0])
+    sq = (zt**2).sum(-1)
+    pivots = 0
+    for _ in range(4 * (d + 1) + 16):
+        cost_S = np.where(tab.in_slot, sq[r[:, None], np.maximum(tab.slot_col, 0)], 0.0)
+        reduced = sq - np.einsum("qs,qsk->qk", cost_S, tab.T)
+        leave, piv = tab.ratio_test()
+        reduced = np.where(tab.eligible & (piv > 1e-9), reduced, 0.0)
+        enter = np.argmin(reduced, axis=1)
+        go = reduced[r, enter] < -1e-12
+        if not go.any():
+            break
+        tab.pivot(go, enter, leave[r, enter])
+        pivots += 1
+    return pivots
 
+
+def _exchange(tab: _Tableau, budget: int) -> int:
+    """Exchange vertices while one shrinks the volume (the smallest factor |beta_ic| < 1), at
+    most budget rounds. Returns the pivots made."""
+    r = np.arange(tab.T.shape[0])
+    pivots = 0
     for _ in range(budget):
-        leave, piv = ratio_test()
-        factor = np.where(eligible & (piv > 1e-9), piv, np.inf)
+        leave, piv = tab.ratio_test()
+        factor = np.where(tab.eligible & (piv > 1e-9), piv, np.inf)
         enter = np.argmin(factor, axis=1)
         go = factor[r, enter] < 1.0 - 1e-9
         if not go.any():
             break
-        pivot(go, enter, leave[r, enter])
+        tab.pivot(go, enter, leave[r, enter])
         pivots += 1
+    return pivots
 
-    # exact barycentric weights on the final support (no drift from the pivots)
+
+def _exact_weights(tab: _Tableau, zt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The barycentric weights of y* on the final support, solved afresh (no drift from the
+    pivots): (n, k) weights and (n,) bool, True where they are a valid convex combination giving
+    y* back (an exchange is kept only then)."""
+    n, k = zt.shape[:2]
+    in_slot, slot_col = tab.in_slot, tab.slot_col
     cols = np.maximum(slot_col, 0)
     Z_S = np.take_along_axis(zt, cols[:, :, None], axis=1) * in_slot[:, :, None]
-    H = Z_S @ Z_S.transpose(0, 2, 1) + in_slot[:, :, None] * in_slot[:, None, :]
-    H += np.eye(s_max) * ((~in_slot)[:, :, None] + 1e-12)
-    lam = _solve(H, in_slot[:, :, None].astype(float))[:, :, 0]
-    # keep an exchange only if its weights are a valid convex combination giving y* back
+    lam = _solve(_lifted_gram(Z_S, in_slot), in_slot[:, :, None].astype(float))[:, :, 0]
     miss = np.sqrt((np.einsum("qs,qsd->qd", lam, Z_S) ** 2).sum(1))
-    good = (miss <= 1e-9) & (np.where(in_slot, lam, 0.0) >= -1e-9).all(1) & (np.abs(lam.sum(1) - 1) <= 1e-9)
+    convex = (np.where(in_slot, lam, 0.0) >= -1e-9).all(1) & (np.abs(lam.sum(1) - 1) <= 1e-9)
+    good = (miss <= 1e-9) & convex
     lam = np.where(in_slot, np.maximum(lam, 0.0), 0.0)
     lam /= lam.sum(1, keepdims=True)
     new_w = np.zeros((n, k))
     new_w[np.nonzero(in_slot)[0], slot_col[in_slot]] = lam[in_slot]
-    weights = weights.copy()
-    support = support.copy()
-    weights[todo[good]] = new_w[good]
-    support[todo[good]] = new_w[good] > 0
-    return weights, support, pivots
+    return new_w, good
+
+
+def _lifted_gram(Z_S: np.ndarray, in_slot: np.ndarray) -> np.ndarray:
+    """(n, s, s) lifted Gram matrix Z_S Z_S^T + 1 1^T of the slots; empty slots get the identity
+    and a 1e-12 ridge keeps a degenerate support solvable."""
+    s_max = in_slot.shape[1]
+    H = Z_S @ Z_S.transpose(0, 2, 1) + in_slot[:, :, None] * in_slot[:, None, :]
+    H += np.eye(s_max) * ((~in_slot)[:, :, None] + 1e-12)
+    return H
 
 
 def _solve(H: np.ndarray, rhs: np.ndarray) -> np.ndarray:
