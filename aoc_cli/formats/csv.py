@@ -30,6 +30,7 @@ from __future__ import annotations
 import csv
 import fnmatch
 import gzip
+import io
 import json
 import zlib
 from dataclasses import dataclass
@@ -47,17 +48,21 @@ MAPPING_KEYS = {"id", "time", "observations", "actions", "reward", "terminal", "
 
 
 def read_table(path: Path, progress=None) -> tuple[list[str], dict[str, np.ndarray]]:
-    """A CSV (``.tsv``: tab-separated; ``.gz``: gzip) -> (header, column name -> (N,) str)."""
-    lines = _read_lines(path)
+    """A CSV (``.tsv``: tab-separated; ``.gz``: gzip) -> (header, column name -> (N,) str).
+
+    Quoted fields may span lines (free-text notes exported from a spreadsheet); blank lines
+    are skipped.
+    """
+    text = _read_text(path)
     delimiter = "\t" if ".tsv" in path.suffixes else ","
     try:
-        return _parse(path, lines, delimiter, progress)
+        return _parse(path, text, delimiter, progress)
     except csv.Error as err:
         raise AocError(f"cannot read {path} as CSV ({err}): fix the file") from None
 
 
-def _read_lines(path: Path) -> list[str]:
-    """The lines of a text file (gunzipped for ``.gz``); unreadable is one AocError."""
+def _read_text(path: Path) -> str:
+    """The text of a file (gunzipped for ``.gz``); unreadable or empty is one AocError."""
     opener = gzip.open if path.suffix == ".gz" else open
     try:
         with opener(path, "rt", encoding="utf-8-sig", newline="") as fh:
@@ -65,31 +70,34 @@ def _read_lines(path: Path) -> list[str]:
     except (OSError, UnicodeDecodeError, EOFError, zlib.error) as err:
         raise AocError(f"cannot read {path} as UTF-8 text ({type(err).__name__}: {err}); "
                        "a .gz file must be gzip-compressed CSV") from None
-    lines = text.splitlines()
-    if not lines:
+    if not text.strip():
         raise AocError(f"{path} is empty: expected a header line and one row per step")
-    return lines
+    return text
 
 
-def _parse(path: Path, lines: list[str], delimiter: str, progress):
-    header = [h.strip() for h in next(csv.reader([lines[0]], delimiter=delimiter))]
+def _parse(path: Path, text: str, delimiter: str, progress):
+    reader = csv.reader(io.StringIO(text), delimiter=delimiter)
+    header = [h.strip() for h in next(reader)]
     if "" in header:
         raise AocError(f"{path}: header column {header.index('') + 1} has no name: name it")
     if len(set(header)) != len(header):
         dup = sorted({h for h in header if header.count(h) > 1})
         raise AocError(f"{path} repeats column names {dup}: rename them")
-    body = [ln for ln in lines[1:] if ln.strip()]
     rows: list[list[str]] = []
-    chunks = range(0, len(body), CHUNK_LINES)
+    # The progress bar counts physical lines (a quoted field may span several).
+    chunks = range(0, text.count("\n") + 1, CHUNK_LINES)
     if progress is None or len(chunks) < 2:  # no bar for a file read in one go
         progress = no_progress
     for start in progress(chunks, f"reading {path.name}", len(chunks)):
-        part = list(csv.reader(body[start:start + CHUNK_LINES], delimiter=delimiter))
-        for i, r in enumerate(part):
+        for r in reader:
+            if not r or (len(r) == 1 and not r[0].strip()):
+                continue  # a blank line
             if len(r) != len(header):
-                raise AocError(f"{path}: data row {start + i + 1} has {len(r)} fields, the "
-                               f"header has {len(header)}: fix the file")
-        rows.extend(part)
+                raise AocError(f"{path}: data row {len(rows) + 1} (line {reader.line_num}) has "
+                               f"{len(r)} fields, the header has {len(header)}: fix the file")
+            rows.append(r)
+            if reader.line_num >= start + CHUNK_LINES:
+                break
     if not rows:
         return header, {h: np.array([], dtype=str) for h in header}
     cols = [np.array(c, dtype=str) for c in zip(*rows)]

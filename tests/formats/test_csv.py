@@ -108,3 +108,28 @@ def test_non_numeric_observation_cell_is_named(tmp_path):
                      [[0, 0, 1.0, 0.1], [0, 1, "high", 0.2]])
     with pytest.raises(AocError, match="column 'obs_a', data row 2 holds 'high'"):
         read_dataset(path)
+
+
+def test_quoted_fields_may_span_lines_and_blank_lines_are_skipped(tmp_path):
+    """A spreadsheet export with a free-text note column: a note holding a line break and a
+    comma stays one field of one row; a blank line is no row."""
+    text = ('id,t,obs_a,act_u,note\n'
+            'p1,0,1.5,0,"calm"\n'
+            'p1,1,2.5,1,"short of breath,\nO2 started"\n'
+            '\n'
+            'p2,0,3.5,0,""\n')
+    path = tmp_path / "notes.csv"
+    path.write_text(text)
+    data = read_dataset(path, options=ReadOptions(tag_columns=["note"]))
+    assert data.episode_ids == ["p1", "p2"]
+    np.testing.assert_array_equal(data.observations[:, 0], [1.5, 2.5, 3.5])
+    np.testing.assert_array_equal(data.actions[:, 0], [0, 1, 0])
+    codes, labels = data.tags["note"]
+    assert labels[codes[1]] == "short of breath,\nO2 started"
+
+
+def test_a_row_with_too_many_fields_names_its_line(tmp_path):
+    path = tmp_path / "bad.csv"
+    path.write_text('id,t,obs_a,act_u\np1,0,"two\nlines",0\np1,1,2.0,0,9\n')
+    with pytest.raises(AocError, match=r"data row 2 \(line 4\) has 5 fields, the header has 4"):
+        read_dataset(path)
