@@ -203,7 +203,6 @@ def train_streaming(corpus, config: BeliefConfig, model_id: str = "default",
     (``extra`` merged in)."""
     from aoc_cli.belief.artefact import save_model
     from aoc_cli.belief.inputs import build_net, network_dims, pick_device
-    from aoc_cli.belief.train import _Objective
 
     started = time.perf_counter()
     config.validate()
@@ -227,84 +226,25 @@ def train_streaming(corpus, config: BeliefConfig, model_id: str = "default",
     targets = values if config.mode == "value" else (None if classify else "actions")
     norm = _normalisation(corpus, cols, ranges, dims["discrete"], targets)
     encoder = Encoder(norm, dims["discrete"], dims["n_actions"], device)
-    L, use_action = config.history_length, dims["use_action"]
-
-    def block(a, b, mask=None):
-        """(inputs, local rows, targets) of the rows of [a, b) in ``mask``."""
-        inputs, lo = block_inputs(cols, encoder, a, b, L, use_action, device)
-        rows = np.arange(a, b) if mask is None else np.arange(a, b)[mask]
-        if classify:
-            with h5py.File(cols.path, "r") as f:
-                y = torch.as_tensor(f["actions"][a:b][rows - a], device=device)
-        elif config.mode == "value":
-            y = encoder.targets(values[rows])
-        else:
-            with h5py.File(cols.path, "r") as f:
-                y = encoder.targets(f["actions"][a:b][rows - a])
-        return inputs, torch.as_tensor(rows - lo, device=device), y
-
-    # validation: the first validation episodes, up to VAL_ROWS_MAX rows, in memory
-    lengths = np.diff(starts)[val_eps]
-    kept = val_eps[:max(1, int(np.searchsorted(np.cumsum(lengths), VAL_ROWS_MAX, "right")))]
-    val_parts = [block(int(starts[e]), int(starts[e + 1])) for e in kept]
-    objective = _Objective(config.mode, dims["discrete"])
-
-    def validate(net) -> dict:
-        with torch.no_grad():
-            outs = [net(*inp.batch(rows))[1] for inp, rows, _y in val_parts]
-            ys = torch.cat([y for _i, _r, y in val_parts])
-            return objective.metrics(net, None, torch.cat(outs), ys, None)
-
+    data = _Blocks(cols, ranges, encoder, config, dims["use_action"], classify, values,
+                      device)
+    val_parts = data.validation(val_eps)
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(config.seed)
         net = build_net(dims, config).to(device)
-    optimiser = torch.optim.Adam(net.parameters(), lr=config.lr)
-    rng = np.random.default_rng(config.seed)
-    generator = torch.Generator().manual_seed(config.seed)
-    train_sorted = np.sort(train_eps)
-    n_train = int(np.diff(starts)[train_eps].sum())
-    n_batches = max(1, sum(math.ceil(int(_episode_mask(starts, train_sorted, a, b).sum())
-                                     / config.batch_size) for a, b in ranges))
-    stopping = EarlyStopping(net, config, started)
-    for epoch in range(1, config.max_epochs + 1):
-        net.train()
-        total, count, done = 0.0, 0, 0
-        for j in rng.permutation(len(ranges)):
-            a, b = ranges[j]
-            mask = _episode_mask(starts, train_sorted, a, b)
-            if not mask.any():
-                continue
-            inputs, local, y = block(a, b, mask)
-            perm = torch.randperm(len(local), generator=generator)
-            for i in range(0, len(local), config.batch_size):
-                pick = perm[i:i + config.batch_size]
-                _beliefs, out = net(*inputs.batch(local[pick]))
-                loss = objective.main_loss(out, y[pick])
-                optimiser.zero_grad(set_to_none=True)
-                loss.backward()
-                optimiser.step()
-                total += float(loss.detach()) * len(pick)
-                count += len(pick)
-                done += 1
-            if progress is not None:
-                progress(stopping.running(epoch, done, n_batches, total / count))
-        net.eval()
-        val = validate(net)
-        record = stopping.end_epoch(net, epoch, total / max(count, 1), val, n_batches)
-        if progress is not None:
-            progress(record)
-        if stopping.done:
-            break
+    stopping = _fit_streamed(net, data, val_parts, np.sort(train_eps), config, started,
+                             progress)
     history, best = stopping.history, stopping.best
     net.load_state_dict(best["state"])
     net.eval()
-    final = validate(net)
+    final = val_parts.metrics(net)
+    n_train = int(np.diff(starts)[train_eps].sum())
     n_val = int(np.diff(starts)[val_eps].sum())
     metrics = {"model": model_id, "mode": config.mode, "epochs": len(history),
                "best_epoch": best["epoch"],
                "train_loss": history[best["epoch"] - 1]["train_loss"] if best["epoch"] else None,
                "val_loss": final["loss"], "streamed": True,
-               "val_rows_scored": int(sum(len(r) for _i, r, _y in val_parts))}
+               "val_rows_scored": val_parts.n_rows}
     metrics.update({k if k.startswith("val_") else f"val_{k}": v
                     for k, v in final.items() if k != "loss"})
     metrics.update({"rows": corpus.n_rows, "train_rows": n_train, "val_rows": n_val,
@@ -319,3 +259,98 @@ def train_streaming(corpus, config: BeliefConfig, model_id: str = "default",
                split={"episodes": corpus.n_episodes, "val_episodes": len(val_eps),
                       "train_rows": n_train, "val_rows": n_val})
     return metrics
+
+
+class _Blocks:
+    """The corpus's blocks of rows ``ranges`` ([a, b) each), encoded on demand with their
+    targets (the value targets ``values`` (N,), or the actions)."""
+
+    def __init__(self, cols: Columns, ranges, encoder: Encoder, config: BeliefConfig,
+                 use_action: bool, classify: bool, values, device: torch.device):
+        from aoc_cli.belief.train import _Objective
+
+        self.cols, self.ranges, self.encoder, self.values = cols, ranges, encoder, values
+        self.config, self.use_action, self.classify, self.device = (config, use_action,
+                                                                    classify, device)
+        self.objective = _Objective(config.mode, encoder.discrete)
+
+    def block(self, a: int, b: int, mask=None):
+        """(inputs, local rows, targets) of the rows of [a, b) in ``mask`` ((b - a,) bool)."""
+        cols, device = self.cols, self.device
+        inputs, lo = block_inputs(cols, self.encoder, a, b, self.config.history_length,
+                                  self.use_action, device)
+        rows = np.arange(a, b) if mask is None else np.arange(a, b)[mask]
+        if self.classify:
+            with h5py.File(cols.path, "r") as f:
+                y = torch.as_tensor(f["actions"][a:b][rows - a], device=device)
+        elif self.config.mode == "value":
+            y = self.encoder.targets(self.values[rows])
+        else:
+            with h5py.File(cols.path, "r") as f:
+                y = self.encoder.targets(f["actions"][a:b][rows - a])
+        return inputs, torch.as_tensor(rows - lo, device=device), y
+
+    def validation(self, val_eps: np.ndarray) -> _Validation:
+        """The first validation episodes, up to VAL_ROWS_MAX rows, encoded in memory."""
+        starts = self.cols.starts
+        lengths = np.diff(starts)[val_eps]
+        kept = val_eps[:max(1, int(np.searchsorted(np.cumsum(lengths), VAL_ROWS_MAX, "right")))]
+        parts = [self.block(int(starts[e]), int(starts[e + 1])) for e in kept]
+        return _Validation(parts, self.objective)
+
+
+class _Validation:
+    """The validation rows kept in memory: (inputs, local rows, targets) per episode."""
+
+    def __init__(self, parts: list, objective):
+        self.parts, self.objective = parts, objective
+        self.n_rows = int(sum(len(r) for _i, r, _y in parts))
+
+    def metrics(self, net) -> dict:
+        with torch.no_grad():
+            outs = [net(*inp.batch(rows))[1] for inp, rows, _y in self.parts]
+            ys = torch.cat([y for _i, _r, y in self.parts])
+            return self.objective.metrics(net, None, torch.cat(outs), ys, None)
+
+
+def _fit_streamed(net, data: _Blocks, val: _Validation, train_sorted: np.ndarray,
+                  config: BeliefConfig, started: float, progress) -> EarlyStopping:
+    """Adam epoch by epoch: the blocks in a random order, the training rows of a block (of the
+    episodes ``train_sorted``) in a random order, until the validation loss stops improving."""
+    optimiser = torch.optim.Adam(net.parameters(), lr=config.lr)
+    rng = np.random.default_rng(config.seed)
+    generator = torch.Generator().manual_seed(config.seed)
+    starts, ranges, objective = data.cols.starts, data.ranges, data.objective
+    n_batches = max(1, sum(math.ceil(int(_episode_mask(starts, train_sorted, a, b).sum())
+                                     / config.batch_size) for a, b in ranges))
+    stopping = EarlyStopping(net, config, started)
+    for epoch in range(1, config.max_epochs + 1):
+        net.train()
+        total, count, done = 0.0, 0, 0
+        for j in rng.permutation(len(ranges)):
+            a, b = ranges[j]
+            mask = _episode_mask(starts, train_sorted, a, b)
+            if not mask.any():
+                continue
+            inputs, local, y = data.block(a, b, mask)
+            perm = torch.randperm(len(local), generator=generator)
+            for i in range(0, len(local), config.batch_size):
+                pick = perm[i:i + config.batch_size]
+                _beliefs, out = net(*inputs.batch(local[pick]))
+                loss = objective.main_loss(out, y[pick])
+                optimiser.zero_grad(set_to_none=True)
+                loss.backward()
+                optimiser.step()
+                total += float(loss.detach()) * len(pick)
+                count += len(pick)
+                done += 1
+            if progress is not None:
+                progress(stopping.running(epoch, done, n_batches, total / count))
+        net.eval()
+        record = stopping.end_epoch(net, epoch, total / max(count, 1), val.metrics(net),
+                                    n_batches)
+        if progress is not None:
+            progress(record)
+        if stopping.done:
+            break
+    return stopping

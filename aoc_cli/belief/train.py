@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -117,47 +118,111 @@ def train_model(corpus, config: BeliefConfig, model_id: str = "default", overwri
         from aoc_cli.belief.kinds import train_critic_model
 
         return train_critic_model(corpus, config, model_id, data, progress)
-    values, val_eps = data.values, data.val_episodes
-    train_rows, val_rows = data.train_rows, data.val_rows
 
     device = pick_device(config.device)
     threads = config.resolved_threads()
     if device.type == "cpu":
         torch.set_num_threads(threads)
-    dims = network_dims(corpus, config.mode)
-    if config.mode == "value" and config.dynamics_weight > 0:
-        dims["dynamics"] = dims["observation"]
-    classify = config.mode == "imitation" and dims["discrete"]
-    if config.mode == "value":  # --belief reward: trained on r, head refitted to v below
-        targets = corpus.rewards if config.belief == "reward" else values
-    else:
-        targets = None if classify else corpus.actions
-    norm = Normalisation.fit(corpus.observations, corpus.actions, corpus.rewards,
-                             dims["discrete"], targets)
-    encoder = Encoder(norm, dims["discrete"], dims["n_actions"], device)
-    inputs = encode_corpus(corpus, encoder, config.history_length, dims["use_action"], device)
-    y_all = torch.as_tensor(corpus.actions, device=device) if classify \
-        else encoder.targets(targets)
-    dyn = dyn_valid = dyn_standard = None
-    if dims.get("dynamics", 0) > 0:
-        delta, valid = dynamics_targets(corpus)
-        mean, std = (delta[valid].mean(0), delta[valid].std(0)) if valid.any() \
-            else (np.zeros(delta.shape[1]), np.ones(delta.shape[1]))
-        std = np.where(std > 1e-6, std, 1.0)
-        dyn_standard = {"mean": mean, "std": std}
-        dyn = torch.as_tensor((delta - mean) / std, dtype=torch.float32, device=device)
-        dyn_valid = torch.as_tensor(valid, dtype=torch.float32, device=device).bool()
-    objective = _Objective(config.mode, dims["discrete"], config.dynamics_weight, dyn,
-                           dyn_valid)
-
+    problem = _Problem.build(corpus, config, data.values, device)
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(config.seed)
-        net = build_net(dims, config).to(device)
+        net = build_net(problem.dims, config).to(device)
+    tr = torch.as_tensor(data.train_rows, device=device)
+    va = torch.as_tensor(data.val_rows, device=device)
+    stopping = _fit(net, problem, tr, va, config, started, progress)
+
+    net.load_state_dict(stopping.best["state"])
+    net.eval()
+    metrics = _final_metrics(net, problem, tr, va, corpus, config, model_id, stopping)
+    if config.belief == "reward":
+        from aoc_cli.belief.kinds import refit_value_head
+
+        problem.norm, head = refit_value_head(net, problem.inputs, data.values, data.train_rows,
+                                              data.val_rows, problem.norm, device)
+        metrics["val_reward_r2"] = metrics.pop("val_r2")
+        metrics.update(head)
+    metrics.update({"rows": corpus.n_rows, "train_rows": len(data.train_rows),
+                    "val_rows": len(data.val_rows), "device": device.type,
+                    "threads": threads if device.type == "cpu" else None,
+                    "belief": config.belief})
+    metrics["seconds"] = time.perf_counter() - started
+    metrics.update(extra or {})  # e.g. how the settings were chosen (aoc_cli.belief.select)
+    if not save:  # a candidate of the model selection: its metrics only
+        return metrics
+    save_model(corpus, model_id, net=net.cpu(), config=config, dims=problem.dims,
+               norm=problem.norm,
+               value=value_spec(config.value, config.gamma) if config.mode == "value" else None,
+               values=data.values, metrics=metrics, history=stopping.history,
+               split={"episodes": corpus.n_episodes, "val_episodes": len(data.val_episodes),
+                      "train_rows": len(data.train_rows), "val_rows": len(data.val_rows)},
+               dynamics_target=problem.dynamics_standard)
+    return metrics
+
+
+@dataclass
+class _Problem:
+    """What the network is fitted to, encoded once on ``device``.
+
+    dims: the network's sizes (:func:`aoc_cli.belief.inputs.network_dims`, with ``dynamics``
+    when the auxiliary head is trained). classify: imitation of discrete actions.
+    norm, inputs: the fitted normalisation and every row's encoded inputs.
+    targets: (N, ...) the encoded targets (class ids when classifying).
+    objective: the loss and validation metrics. dynamics_standard: mean and std of o' - o
+    (saved with the model) or None.
+    """
+
+    dims: dict
+    classify: bool
+    norm: Normalisation
+    inputs: CorpusInputs
+    targets: torch.Tensor
+    objective: _Objective
+    dynamics_standard: dict | None
+
+    @classmethod
+    def build(cls, corpus, config: BeliefConfig, values, device: torch.device) -> _Problem:
+        dims = network_dims(corpus, config.mode)
+        if config.mode == "value" and config.dynamics_weight > 0:
+            dims["dynamics"] = dims["observation"]
+        classify = config.mode == "imitation" and dims["discrete"]
+        if config.mode == "value":  # --belief reward: trained on r, head refitted to v later
+            targets = corpus.rewards if config.belief == "reward" else values
+        else:
+            targets = None if classify else corpus.actions
+        norm = Normalisation.fit(corpus.observations, corpus.actions, corpus.rewards,
+                                 dims["discrete"], targets)
+        encoder = Encoder(norm, dims["discrete"], dims["n_actions"], device)
+        inputs = encode_corpus(corpus, encoder, config.history_length, dims["use_action"], device)
+        y_all = torch.as_tensor(corpus.actions, device=device) if classify \
+            else encoder.targets(targets)
+        dyn = dyn_valid = dyn_standard = None
+        if dims.get("dynamics", 0) > 0:
+            dyn, dyn_valid, dyn_standard = _standard_dynamics(corpus, device)
+        objective = _Objective(config.mode, dims["discrete"], config.dynamics_weight, dyn,
+                               dyn_valid)
+        return cls(dims, classify, norm, inputs, y_all, objective, dyn_standard)
+
+
+def _standard_dynamics(corpus, device: torch.device):
+    """The auxiliary target o' - o standardised: (N, d_o) float32 tensor, (N,) bool tensor of
+    the rows that have one, and the ``{"mean", "std"}`` used."""
+    delta, valid = dynamics_targets(corpus)
+    mean, std = (delta[valid].mean(0), delta[valid].std(0)) if valid.any() \
+        else (np.zeros(delta.shape[1]), np.ones(delta.shape[1]))
+    std = np.where(std > 1e-6, std, 1.0)
+    dyn = torch.as_tensor((delta - mean) / std, dtype=torch.float32, device=device)
+    dyn_valid = torch.as_tensor(valid, dtype=torch.float32, device=device).bool()
+    return dyn, dyn_valid, {"mean": mean, "std": std}
+
+
+def _fit(net, problem: _Problem, tr: torch.Tensor, va: torch.Tensor, config: BeliefConfig,
+         started: float, progress) -> EarlyStopping:
+    """Adam on mini-batches of the training rows ``tr``, epoch by epoch, until the validation
+    loss on ``va`` stops improving (:class:`aoc_cli.belief.data.EarlyStopping`, returned)."""
+    inputs, y_all, objective = problem.inputs, problem.targets, problem.objective
     optimiser = torch.optim.Adam(net.parameters(), lr=config.lr,
                                  weight_decay=config.weight_decay)
     generator = torch.Generator().manual_seed(config.seed)
-    tr = torch.as_tensor(train_rows, device=device)
-    va = torch.as_tensor(val_rows, device=device)
     y_val = y_all[va]
     n_batches = max(1, math.ceil(len(tr) / config.batch_size))
     report_every = max(1, n_batches // 20)
@@ -165,7 +230,7 @@ def train_model(corpus, config: BeliefConfig, model_id: str = "default", overwri
     stopping = EarlyStopping(net, config, started)
     for epoch in range(1, config.max_epochs + 1):
         net.train()
-        perm = tr[torch.randperm(len(tr), generator=generator).to(device)]
+        perm = tr[torch.randperm(len(tr), generator=generator).to(tr.device)]
         total, count = 0.0, 0
         for b in range(n_batches):
             rows = perm[b * config.batch_size:(b + 1) * config.batch_size]
@@ -185,41 +250,26 @@ def train_model(corpus, config: BeliefConfig, model_id: str = "default", overwri
             progress(record)
         if stopping.done:
             break
-    history, best = stopping.history, stopping.best
+    return stopping
 
-    net.load_state_dict(best["state"])
-    net.eval()
+
+def _final_metrics(net, problem: _Problem, tr: torch.Tensor, va: torch.Tensor, corpus,
+                   config: BeliefConfig, model_id: str, stopping: EarlyStopping) -> dict:
+    """The trained (best) network's loss and R^2 or accuracy on the training and validation
+    rows, with the epochs run."""
+    inputs, y_all, objective = problem.inputs, problem.targets, problem.objective
     final_train = _evaluate(net, inputs, tr, y_all[tr], objective)
-    final_val = _evaluate(net, inputs, va, y_val, objective)
-    metrics = {"model": model_id, "mode": config.mode, "epochs": len(history),
-               "best_epoch": best["epoch"], "train_loss": final_train["loss"],
+    final_val = _evaluate(net, inputs, va, y_all[va], objective)
+    metrics = {"model": model_id, "mode": config.mode, "epochs": len(stopping.history),
+               "best_epoch": stopping.best["epoch"], "train_loss": final_train["loss"],
                "val_loss": final_val["loss"]}
-    if classify:
-        majority = np.bincount(corpus.actions[val_rows], minlength=dims["n_actions"]).max()
+    if problem.classify:
+        val_rows = va.cpu().numpy()
+        majority = np.bincount(corpus.actions[val_rows], minlength=problem.dims["n_actions"]).max()
         metrics["val_accuracy"] = final_val["accuracy"]
         metrics["val_majority_accuracy"] = float(majority / len(val_rows))
     else:
         metrics["val_r2"] = final_val["r2"]
         if "dynamics_r2" in final_val:
             metrics["val_dynamics_r2"] = final_val["dynamics_r2"]
-    if config.belief == "reward":
-        from aoc_cli.belief.kinds import refit_value_head
-
-        norm, head = refit_value_head(net, inputs, values, train_rows, val_rows, norm, device)
-        metrics["val_reward_r2"] = metrics.pop("val_r2")
-        metrics.update(head)
-    metrics.update({"rows": corpus.n_rows, "train_rows": len(train_rows),
-                    "val_rows": len(val_rows), "device": device.type,
-                    "threads": threads if device.type == "cpu" else None,
-                    "belief": config.belief})
-    metrics["seconds"] = time.perf_counter() - started
-    metrics.update(extra or {})  # e.g. how the settings were chosen (aoc_cli.belief.select)
-    if not save:  # a candidate of the model selection: its metrics only
-        return metrics
-    save_model(corpus, model_id, net=net.cpu(), config=config, dims=dims, norm=norm,
-               value=value_spec(config.value, config.gamma) if config.mode == "value" else None,
-               values=values, metrics=metrics, history=history,
-               split={"episodes": corpus.n_episodes, "val_episodes": len(val_eps),
-                      "train_rows": len(train_rows), "val_rows": len(val_rows)},
-               dynamics_target=dyn_standard)
     return metrics

@@ -97,37 +97,29 @@ class CorpusData:
         n = self.n_rows
         if n == 0:
             raise AocError("the data has zero rows: nothing to store")
-        obs = np.asarray(self.observations)
-        if obs.ndim == 1:
-            obs = obs[:, None]
-        if obs.ndim != 2:
-            raise AocError(f"observations must be (rows, dims), got shape {obs.shape}")
-        if not np.issubdtype(obs.dtype, np.floating):
-            obs = obs.astype(np.float32)
-        self.observations = obs
-        act = np.asarray(self.actions)
-        if self.discrete:
-            if act.ndim == 2 and act.shape[1] == 1:
-                act = act[:, 0]
-            if act.ndim != 1:
-                raise AocError(f"discrete actions must be one integer per row, got {act.shape}")
-            if np.issubdtype(act.dtype, np.floating):
-                if not np.all(np.isfinite(act)) or np.any(act != np.round(act)):
-                    bad = int(np.flatnonzero(~np.isfinite(act) | (act != np.round(act)))[0])
-                    raise AocError(f"discrete action of row {bad} is not an integer: {act[bad]}")
-            act = act.astype(np.int64)
-        else:
-            if act.ndim == 1:
-                act = act[:, None]
-            if act.ndim != 2:
-                raise AocError(f"actions must be (rows, dims), got shape {act.shape}")
-            if not np.issubdtype(act.dtype, np.floating):
-                act = act.astype(np.float32)
-        self.actions = act
-        lengths = {"observations": n, "actions": len(act),
-                   "terminals": len(self.terminals), "truncations": len(self.truncations)}
+        self.observations = _observation_array(self.observations)
+        self.actions = _action_array(self.actions, self.discrete)
         if self.rewards is not None:
             self.rewards = np.asarray(self.rewards, dtype=np.float64).reshape(-1)
+        self._check_lengths()
+        self.terminals = np.asarray(self.terminals, dtype=bool).reshape(-1)
+        self.truncations = np.asarray(self.truncations, dtype=bool).reshape(-1)
+        starts = np.asarray(self.episode_starts, dtype=np.int64)
+        if starts[0] != 0 or starts[-1] != n or np.any(np.diff(starts) <= 0):
+            raise AocError("episode offsets must start at 0, end at the row count and increase")
+        self.episode_starts = starts
+        self._check_finite()
+        self._check_names()
+        self.tags = {k: (np.asarray(c, dtype=np.int32), [str(x) for x in lab])
+                     for k, (c, lab) in self.tags.items()}
+        self.columns = {k: np.asarray(v, dtype=np.float64) for k, v in self.columns.items()}
+        return self
+
+    def _check_lengths(self) -> None:
+        """Every per-row array has one entry per row."""
+        lengths = {"observations": self.n_rows, "actions": len(self.actions),
+                   "terminals": len(self.terminals), "truncations": len(self.truncations)}
+        if self.rewards is not None:
             lengths["rewards"] = len(self.rewards)
         for name, (codes, _labels) in self.tags.items():
             lengths[f"tags/{name}"] = len(codes)
@@ -138,13 +130,11 @@ class CorpusData:
                 "arrays of different lengths: "
                 + ", ".join(f"{k} has {v}" for k, v in lengths.items())
             )
-        self.terminals = np.asarray(self.terminals, dtype=bool).reshape(-1)
-        self.truncations = np.asarray(self.truncations, dtype=bool).reshape(-1)
-        starts = np.asarray(self.episode_starts, dtype=np.int64)
-        if starts[0] != 0 or starts[-1] != n or np.any(np.diff(starts) <= 0):
-            raise AocError("episode offsets must start at 0, end at the row count and increase")
-        self.episode_starts = starts
-        for name, arr in (("observations", obs), ("actions", act), ("rewards", self.rewards)):
+
+    def _check_finite(self) -> None:
+        """No NaN/inf observation, action or reward; the error names the first such row."""
+        for name, arr in (("observations", self.observations), ("actions", self.actions),
+                          ("rewards", self.rewards)):
             if arr is None or not np.issubdtype(arr.dtype, np.floating) or all_finite(arr):
                 continue
             finite = np.isfinite(arr) if arr.ndim == 1 else np.isfinite(arr).all(axis=1)
@@ -154,16 +144,15 @@ class CorpusData:
                     f"{name} of row {bad} is not finite (NaN or inf): fix the data or pass "
                     "--drop-nonfinite to drop the episodes that hold such rows"
                 )
+
+    def _check_names(self) -> None:
+        """Tag and column names that can be stored as HDF5 dataset names."""
         for kind, names in (("tag", self.tags), ("column", self.columns)):
             for key in names:
                 if not isinstance(key, str) or not key.strip() or "/" in key or \
                         key in (".", ".."):
                     raise AocError(f"{kind} name {key!r} cannot be stored: give it a name "
                                    "without '/' (rename the source column)")
-        self.tags = {k: (np.asarray(c, dtype=np.int32), [str(x) for x in lab])
-                     for k, (c, lab) in self.tags.items()}
-        self.columns = {k: np.asarray(v, dtype=np.float64) for k, v in self.columns.items()}
-        return self
 
     def nonfinite_episodes(self) -> np.ndarray:
         """(E,) bool: episodes holding a NaN/inf observation, action or reward."""
@@ -250,3 +239,37 @@ def gather_history(
     else:
         rew = np.where(mask, rewards[safe], 0.0).astype(np.float32)
     return History(obs, act, rew, mask)
+
+
+def _observation_array(observations) -> np.ndarray:
+    """(N, d_o) observations, floating (integers become float32)."""
+    obs = np.asarray(observations)
+    if obs.ndim == 1:
+        obs = obs[:, None]
+    if obs.ndim != 2:
+        raise AocError(f"observations must be (rows, dims), got shape {obs.shape}")
+    if not np.issubdtype(obs.dtype, np.floating):
+        obs = obs.astype(np.float32)
+    return obs
+
+
+def _action_array(actions, discrete: bool) -> np.ndarray:
+    """(N,) int64 discrete actions (whole numbers only) or (N, d_a) floating continuous ones."""
+    act = np.asarray(actions)
+    if discrete:
+        if act.ndim == 2 and act.shape[1] == 1:
+            act = act[:, 0]
+        if act.ndim != 1:
+            raise AocError(f"discrete actions must be one integer per row, got {act.shape}")
+        if np.issubdtype(act.dtype, np.floating):
+            if not np.all(np.isfinite(act)) or np.any(act != np.round(act)):
+                bad = int(np.flatnonzero(~np.isfinite(act) | (act != np.round(act)))[0])
+                raise AocError(f"discrete action of row {bad} is not an integer: {act[bad]}")
+        return act.astype(np.int64)
+    if act.ndim == 1:
+        act = act[:, None]
+    if act.ndim != 2:
+        raise AocError(f"actions must be (rows, dims), got shape {act.shape}")
+    if not np.issubdtype(act.dtype, np.floating):
+        act = act.astype(np.float32)
+    return act
