@@ -58,16 +58,8 @@ def register(app: typer.Typer) -> None:
 
         fmt = resolve_format(fmt)
         policy, sampler = choice(policy), choice(sampler)
-        if episodes < 1:
-            raise AocError(f"--episodes must be >= 1, got {episodes}")
         store = get_store()
-        from aoc_cli.store.paths import check_output
-
-        for flag, path in (("--audit", audit), ("--plot", plot)):
-            if path is not None:
-                check_output(path, flag, store.root)
-        if noise_std != noise_std or noise_std < 0 or noise_std == float("inf"):
-            raise AocError(f"--noise-std must be a finite number >= 0, got {noise_std}")
+        _check_arguments(store, episodes, noise_std, audit, plot)
         corpus = store.corpus(name)
         config = ControllerConfig.for_task(env, candidates=candidates, epsilon=epsilon, k=k,
                                            sampler=sampler, residual_cap=residual_cap)
@@ -76,14 +68,7 @@ def register(app: typer.Typer) -> None:
                                   parse_selection(exclude, "--exclude"))
         session, baseline = _policy(policy, corpus, environment, model, index_id, config,
                                     selection, seed)
-        reference = None
-        if ood_reference is not None:
-            if policy in MODEL_FREE:
-                raise AocError(f"--ood-reference needs the AOC controller's residuals; "
-                               f"--policy {policy} has none")
-            from aoc_cli.control.run import reference_from_audit
-
-            reference = reference_from_audit(session, ood_reference)
+        reference = _ood_reference(policy, session, ood_reference)
         with progress() as p:
             results, summary = rollout(session, environment, episodes, seed=seed, policy=baseline,
                                        audit=str(audit) if audit else None,
@@ -95,6 +80,31 @@ def register(app: typer.Typer) -> None:
         if audit is not None:
             message(f"wrote the audit log {audit}")
         _print(results, summary, fmt, f"{policy} on {env} ({corpus.name})")
+
+
+def _check_arguments(store, episodes: int, noise_std: float, audit, plot) -> None:
+    """Refuse bad numbers and output paths (into the store) before any work."""
+    from aoc_cli.store.paths import check_output
+
+    if episodes < 1:
+        raise AocError(f"--episodes must be >= 1, got {episodes}")
+    for flag, path in (("--audit", audit), ("--plot", plot)):
+        if path is not None:
+            check_output(path, flag, store.root)
+    if noise_std != noise_std or noise_std < 0 or noise_std == float("inf"):
+        raise AocError(f"--noise-std must be a finite number >= 0, got {noise_std}")
+
+
+def _ood_reference(policy: str, session, path):
+    """The per-step OOD band of an audit log of clean rollouts (--ood-reference), or None."""
+    if path is None:
+        return None
+    if policy in MODEL_FREE:
+        raise AocError(f"--ood-reference needs the AOC controller's residuals; "
+                       f"--policy {policy} has none")
+    from aoc_cli.control.run import reference_from_audit
+
+    return reference_from_audit(session, path)
 
 
 def _policy(policy: str, corpus, environment, model, index_id, config, selection, seed):
