@@ -77,6 +77,15 @@ class BeliefMode(str, Enum):
     imitation = "imitation"
 
 
+class BeliefKind(str, Enum):
+    """``--belief``: what the value-mode belief is trained on (aoc_cli.belief.config.BELIEFS)."""
+
+    value = "value"
+    critic = "critic"
+    reward = "reward"
+    dynamics = "dynamics"
+
+
 def choice(value: Enum | str | None) -> str | None:
     """The plain string of an enum choice (None stays None)."""
     return value.value if isinstance(value, Enum) else value

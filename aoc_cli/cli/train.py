@@ -9,7 +9,8 @@ import typer
 from aoc_cli.belief import select
 from aoc_cli.belief.config import BeliefConfig
 from aoc_cli.belief.data import prepare
-from aoc_cli.cli.common import BeliefMode, CorpusArgument, FormatOption, choice, get_store
+from aoc_cli.cli.common import (BeliefKind, BeliefMode, CorpusArgument, FormatOption, choice,
+                                get_store)
 from aoc_cli.report.output import message, progress, resolve_format, write_object
 
 #: Flag defaults are the config's (the paper's) defaults.
@@ -24,12 +25,12 @@ def train(
         "--mode", case_sensitive=False,
         help="value: b(o, a, h) predicts v (AOC); imitation: b(o, h) predicts the action "
              "(ABC, reward-free data).")] = BeliefMode(_D.mode),
-    belief: str = typer.Option(_D.belief, "--belief",
-                               help="Value mode: what the belief is trained on: value (regress "
-                                    "--value), critic (an offline TD3+BC critic's last hidden "
-                                    "layer), reward (a model of the immediate reward) or "
-                                    "dynamics (value + the o' - o head). The linear head maps "
-                                    "every belief to --value."),
+    belief: Annotated[BeliefKind, typer.Option(
+        "--belief", case_sensitive=False,
+        help="Value mode: what the belief is trained on: value (regress --value), critic (an "
+             "offline TD3+BC critic's last hidden layer), reward (a model of the immediate "
+             "reward) or dynamics (value + the o' - o head). The linear head maps every "
+             "belief to --value.")] = BeliefKind(_D.belief),
     critic_steps: int = typer.Option(_D.critic_steps, "--critic-steps",
                                      help="--belief critic: gradient steps."),
     critic_bc_weight: float = typer.Option(_D.critic_bc_weight, "--critic-bc-weight",
@@ -77,7 +78,7 @@ def train(
 ) -> None:
     """Train the belief model b and linear head l of corpus NAME; print the final metrics."""
     fmt = resolve_format(fmt)
-    config = BeliefConfig(mode=choice(mode), belief=belief, critic_steps=critic_steps,
+    config = BeliefConfig(mode=choice(mode), belief=choice(belief), critic_steps=critic_steps,
                           critic_bc_weight=critic_bc_weight, value=value, gamma=gamma,
                           dynamics_weight=dynamics_weight,
                           belief_dim=belief_dim, max_epochs=epochs,

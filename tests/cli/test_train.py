@@ -73,7 +73,7 @@ def test_belief_kinds_train_from_the_cli_and_are_recorded(aoc, corpora, belief, 
 
 
 @pytest.mark.parametrize("args, says", [
-    (["--belief", "q"], "unknown --belief 'q'"),
+    (["--belief", "q"], "unknown --belief: 'q' is not one of 'value', 'critic'"),
     (["--belief", "critic", "--dynamics-weight", "1"], "--dynamics-weight belongs"),
     (["--belief", "reward", "--mode", "imitation"], "needs --mode value"),
 ])
