@@ -261,7 +261,6 @@ def open_session(corpus: Corpus, model_id: str | None = None, index_id: str = "d
     """Load the model and index of ``corpus`` and build a controller; ``selection`` an (N,)
     bool row mask (:func:`aoc_cli.rows.row_selection`)."""
     config = (config or ControllerConfig()).check()
-    _one_thread()
     index = load_index(corpus, model_id, index_id)
     bc_model = None
     if config.sampler == "bc" and index.model.mode == "value" and not corpus.discrete:
@@ -278,13 +277,3 @@ def open_session(corpus: Corpus, model_id: str | None = None, index_id: str = "d
 def model_free_session(corpus: Corpus, action_space: dict | None = None) -> ModelFreeSession:
     """A session for the zero and random policies: no model or index is opened."""
     return ModelFreeSession(corpus, action_space)
-
-
-def _one_thread() -> None:
-    """A control step is ~100 small queries: one thread each for torch and FAISS is fastest,
-    and two thread pools (torch's and FAISS's OpenMP) must not fight over the cores."""
-    import faiss
-    import torch
-
-    torch.set_num_threads(1)
-    faiss.omp_set_num_threads(1)

@@ -8,9 +8,8 @@
 Names are imported lazily, so that importing the config (as every CLI start does) does not
 import torch.
 
-OpenMP threads wait passively: ``aoc_cli`` (imported before this package) sets
-``OMP_WAIT_POLICY=PASSIVE`` unless set otherwise; with the default busy-waiting, two torch
-threads on two cores shared with other processes ran a training step ~30x slower.
+Threads: training sets torch's threads (``BeliefConfig.threads``) for its own duration only;
+the ``aoc`` command makes OpenMP threads wait passively (:mod:`aoc_cli.threads`).
 """
 
 from __future__ import annotations

@@ -90,9 +90,7 @@ def train_critic_model(corpus, config: BeliefConfig, model_id: str, data,
 
     started = time.perf_counter()
     device = pick_device(config.device)
-    threads = config.resolved_threads()
-    if device.type == "cpu":
-        torch.set_num_threads(threads)
+    threads = config.resolved_threads()  # set by train_model for the training (aoc_cli.threads)
     dims = network_dims(corpus, "value")
     norm = Normalisation.fit(corpus.observations, corpus.actions, corpus.rewards,
                              dims["discrete"], data.values)

@@ -39,6 +39,7 @@ from aoc_cli.belief.model import _STD_FLOOR, Encoder, Normalisation, _stats
 from aoc_cli.belief.targets import value_spec, value_targets
 from aoc_cli.errors import AocError
 from aoc_cli.store import atomic_path
+from aoc_cli.threads import thread_limits
 
 #: Corpora with more rows than this train by streaming (when the model has no dynamics head).
 STREAM_ROWS = 2_000_000
@@ -201,8 +202,7 @@ def train_streaming(corpus, config: BeliefConfig, model_id: str = "default",
     """Train like :func:`aoc_cli.belief.train.train_model`, streaming blocks of rows
     (module docstring); writes the model (unless ``save`` is false) and returns its metrics
     (``extra`` merged in)."""
-    from aoc_cli.belief.artefact import save_model
-    from aoc_cli.belief.inputs import build_net, network_dims, pick_device
+    from aoc_cli.belief.inputs import pick_device
 
     started = time.perf_counter()
     config.validate()
@@ -219,8 +219,19 @@ def train_streaming(corpus, config: BeliefConfig, model_id: str = "default",
     train_eps, val_eps = split_episodes(corpus.n_episodes, config.val_fraction, config.seed)
     device = pick_device(config.device)
     threads = config.resolved_threads()
-    if device.type == "cpu":
-        torch.set_num_threads(threads)
+    with thread_limits(torch=threads if device.type == "cpu" else None):
+        return _train_streaming(corpus, config, model_id, cols, ranges, values, train_eps,
+                                val_eps, device, threads, started, progress, save, extra)
+
+
+def _train_streaming(corpus, config: BeliefConfig, model_id: str, cols: Columns, ranges,
+                     values, train_eps, val_eps, device: torch.device, threads: int,
+                     started: float, progress, save: bool, extra: dict | None) -> dict:
+    """train_streaming's work, in its thread context."""
+    from aoc_cli.belief.artefact import save_model
+    from aoc_cli.belief.inputs import build_net, network_dims
+
+    starts = cols.starts
     dims = network_dims(corpus, config.mode)
     classify = config.mode == "imitation" and dims["discrete"]
     targets = values if config.mode == "value" else (None if classify else "actions")

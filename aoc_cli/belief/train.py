@@ -20,6 +20,7 @@ from aoc_cli.belief.inputs import (CorpusInputs, build_net, encode_corpus, netwo
                                    pick_device)
 from aoc_cli.belief.model import Encoder, Normalisation
 from aoc_cli.belief.targets import value_spec
+from aoc_cli.threads import thread_limits
 
 #: Rows per forward pass when evaluating (no gradients).
 EVAL_BATCH = 65536
@@ -114,15 +115,21 @@ def train_model(corpus, config: BeliefConfig, model_id: str = "default", overwri
                                extra=extra)
     started = time.perf_counter()
     data = prepared or prepare(corpus, config, model_id, overwrite)
-    if config.belief == "critic":  # its own training (aoc_cli.belief.kinds)
-        from aoc_cli.belief.kinds import train_critic_model
-
-        return train_critic_model(corpus, config, model_id, data, progress)
-
     device = pick_device(config.device)
     threads = config.resolved_threads()
-    if device.type == "cpu":
-        torch.set_num_threads(threads)
+    with thread_limits(torch=threads if device.type == "cpu" else None):
+        if config.belief == "critic":  # its own training (aoc_cli.belief.kinds)
+            from aoc_cli.belief.kinds import train_critic_model
+
+            return train_critic_model(corpus, config, model_id, data, progress)
+        return _train(corpus, config, model_id, data, device, threads, started, progress, save,
+                      extra)
+
+
+def _train(corpus, config: BeliefConfig, model_id: str, data: TrainingData,
+           device: torch.device, threads: int, started: float, progress, save: bool,
+           extra: dict | None) -> dict:
+    """train_model's in-memory path, in its thread context."""
     problem = _Problem.build(corpus, config, data.values, device)
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(config.seed)

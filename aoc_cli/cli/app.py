@@ -15,16 +15,21 @@ import sys
 from pathlib import Path
 from typing import Optional
 
-import typer
+from aoc_cli.threads import wait_passively
+
+# before anything loads OpenMP (torch, FAISS): its threads wait passively (aoc_cli.threads)
+wait_passively()
+
+import typer  # noqa: E402
 
 try:  # typer >= 0.2x carries its own copy of click
-    from typer._click import exceptions as usage
+    from typer._click import exceptions as usage  # noqa: E402
 except ImportError:  # pragma: no cover - older typer on click
-    from click import exceptions as usage
+    from click import exceptions as usage  # noqa: E402
 
-from aoc_cli import __version__
-from aoc_cli.cli.common import state
-from aoc_cli.errors import AocError
+from aoc_cli import __version__  # noqa: E402
+from aoc_cli.cli.common import state  # noqa: E402
+from aoc_cli.errors import AocError  # noqa: E402
 
 #: Command modules in the order of the data flow.
 COMMANDS = ["ingest", "collect", "train", "index", "explain", "evaluate", "rollout", "bench",

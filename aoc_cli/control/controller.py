@@ -24,6 +24,7 @@ import numpy as np
 from aoc_cli.control.config import ControllerConfig
 from aoc_cli.errors import AocError
 from aoc_cli.store import History
+from aoc_cli.threads import one_thread
 
 
 @dataclass
@@ -122,13 +123,16 @@ class Controller:
                candidates: np.ndarray | None = None,
                selection: np.ndarray | None = None) -> Decision:
         """Decide at one step; ``history`` is a one-row History (1, L, ...). ``selection``:
-        an (N,) bool row mask for this decision instead of the controller's own."""
+        an (N,) bool row mask for this decision instead of the controller's own. Runs with one
+        thread in torch, FAISS and BLAS (:func:`aoc_cli.threads.one_thread`)."""
         observation = np.asarray(observation, dtype=np.float32).reshape(-1)
-        if self.model.mode == "imitation":
-            return self._imitate(observation, history, selection)
-        if candidates is None:
-            candidates = self.sample_candidates(observation, history)
-        return self.evaluate(observation, history, candidates, choose=True, selection=selection)
+        with one_thread():
+            if self.model.mode == "imitation":
+                return self._imitate(observation, history, selection)
+            if candidates is None:
+                candidates = self.sample_candidates(observation, history)
+            return self.evaluate(observation, history, candidates, choose=True,
+                                 selection=selection)
 
     def evaluate(self, observation: np.ndarray, history: History, candidates: np.ndarray,
                  choose: bool = True, selection: np.ndarray | None = None) -> Decision:
@@ -139,8 +143,9 @@ class Controller:
         """
         n = len(candidates)
         # one observation and one history broadcast to the n candidates (the GRU runs once)
-        beliefs = self.model.beliefs(observation[None, :], candidates, history)
-        dec = self.index.decompose(beliefs, k=self.config.k, selection=self._rows(selection))
+        with one_thread():
+            beliefs = self.model.beliefs(observation[None, :], candidates, history)
+            dec = self.index.decompose(beliefs, k=self.config.k, selection=self._rows(selection))
         residual = np.asarray(dec.residual, dtype=np.float64)
         value = np.asarray(dec.value, dtype=np.float64)
         if choose:

@@ -35,6 +35,7 @@ from aoc_cli.control.evaluate_inputs import (EXACT_MAX_ROWS, EvalContext, candid
                                              check_inputs, episode_rows, heterogeneity)
 from aoc_cli.decompose import decompose
 from aoc_cli.errors import AocError
+from aoc_cli.threads import one_thread
 
 BASELINES = ("knn", "bc")
 #: Held-out steps per chunk (whole episodes; a chunk has at least one episode).
@@ -267,16 +268,18 @@ def evaluate(session, data, baselines=BASELINES, seed: int = 0, progress=None,
     """Score every step of corpus ``data`` with ``session`` (its corpus, model, index and
     controller settings); ``progress(done_steps, total_steps)``. ``exact``: search the
     session's own index (True), an IVF structure built for the run (False), or the index up
-    to :data:`EXACT_MAX_ROWS` corpus rows and IVF beyond (None). Returns (summary, steps)."""
+    to :data:`EXACT_MAX_ROWS` corpus rows and IVF beyond (None). Returns (summary, steps).
+    Runs with one thread in torch, FAISS and BLAS (:func:`aoc_cli.threads.one_thread`)."""
     started = time.perf_counter()
-    ctx = EvalContext.build(session, data, baselines, seed, exact)
-    parts, done = [], 0
-    for group in chunks(ctx, chunk_steps):
-        part = score_episodes(ctx, group)
-        parts.append(part)
-        done += len(part.row)
-        if progress is not None:
-            progress(done, ctx.data.n_rows)
+    with one_thread():
+        ctx = EvalContext.build(session, data, baselines, seed, exact)
+        parts, done = [], 0
+        for group in chunks(ctx, chunk_steps):
+            part = score_episodes(ctx, group)
+            parts.append(part)
+            done += len(part.row)
+            if progress is not None:
+                progress(done, ctx.data.n_rows)
     res = merge(parts)
     summary = summarise(ctx, res)
     summary["seconds"] = time.perf_counter() - started

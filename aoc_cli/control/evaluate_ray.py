@@ -34,13 +34,11 @@ def _context(spec: dict):
 
 
 def _score(spec: dict, groups: list) -> list:
-    import faiss
-    import torch
+    from aoc_cli.threads import one_thread
 
-    torch.set_num_threads(1)
-    faiss.omp_set_num_threads(1)
-    ctx = _context(spec)
-    return [score_episodes(ctx, group) for group in groups]
+    with one_thread():
+        ctx = _context(spec)
+        return [score_episodes(ctx, group) for group in groups]
 
 
 def evaluate_on_ray(store_root, name: str, data: str, model: str | None, index_id: str,

@@ -78,13 +78,14 @@ class BeliefIndex:
         if n_rows == 0:
             raise AocError("the corpus has no beliefs to index; compute beliefs for a non-empty corpus first")
         kind = config.resolved_kind(n_rows)
-        _set_threads(config)
-        index = _new_faiss(kind, beliefs, config)
-        # IVF chunk by chunk: FAISS's temporaries (assignments, distances) stay the chunk's
-        # size, a memory-mapped belief array is read once in order, and the lists are the same
-        step = ADD_CHUNK if kind == "ivf" else max(n_rows, 1)
-        for a in range(0, n_rows, step):
-            index.add(np.ascontiguousarray(beliefs[a:a + step]))
+        with faiss_threads(config.threads):
+            index = _new_faiss(kind, beliefs, config)
+            # IVF chunk by chunk: FAISS's temporaries (assignments, distances) stay the
+            # chunk's size, a memory-mapped belief array is read once in order, and the lists
+            # are the same
+            step = ADD_CHUNK if kind == "ivf" else max(n_rows, 1)
+            for a in range(0, n_rows, step):
+                index.add(np.ascontiguousarray(beliefs[a:a + step]))
         return cls(index, config, kind, n_rows, None, beliefs)
 
     @property
@@ -178,10 +179,9 @@ class BeliefIndex:
         sel = None if selection is None else self.select(selection)
         available = self.size if sel is None else sel.count
         kk = min(int(k), available)
-        _set_threads(self.config)
         dist = np.full((Y.shape[0], int(k)), np.inf)
         pos = np.full((Y.shape[0], int(k)), -1, dtype=np.int64)
-        with single_threaded_blas():
+        with single_threaded_blas(), faiss_threads(self.config.threads):
             if sel is not None and sel.positions is not None:
                 # a small selection: exact over the selected rows, whatever the kind
                 d2, p = _exact_among(Y, self.vectors(sel.positions), kk)
@@ -242,13 +242,13 @@ class BeliefIndex:
         if positions.size == 0:
             raise AocError("re-sampling leaves no corpus rows; give some rows a positive multiplicity")
         vectors = np.ascontiguousarray(self.vectors(positions))
-        _set_threads(self.config)
-        if self.kind == "ivf":
-            index = faiss.clone_index(self.index)
-            index.reset()  # keeps the trained coarse quantiser: no re-training
-        else:
-            index = _new_faiss(self.kind, vectors, self.config)
-        index.add(vectors)
+        with faiss_threads(self.config.threads):
+            if self.kind == "ivf":
+                index = faiss.clone_index(self.index)
+                index.reset()  # keeps the trained coarse quantiser: no re-training
+            else:
+                index = _new_faiss(self.kind, vectors, self.config)
+            index.add(vectors)
         row_of = self.row_of[positions]
         return BeliefIndex(index, self.config, self.kind, self.n_rows, row_of, self.beliefs)
 
@@ -378,8 +378,3 @@ def check_queries(queries, dim: int) -> np.ndarray:
 
 def _as_queries(queries, dim: int) -> np.ndarray:
     return np.ascontiguousarray(check_queries(queries, dim), dtype=np.float32)
-
-
-def _set_threads(config: IndexConfig) -> None:
-    if config.threads > 0:
-        faiss.omp_set_num_threads(config.threads)

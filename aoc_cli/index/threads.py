@@ -4,7 +4,9 @@ The decomposition multiplies many tiny matrices. OpenBLAS splits even a (100, 20
 product over threads, and next to FAISS's OpenMP threads on a small machine that turns a 50 us
 product into milliseconds. `single_threaded_blas()` sets OpenBLAS's thread-local thread count
 to 1 for the duration of a call (openblas_set_num_threads_local, OpenBLAS >= 0.3.27) and
-restores it; where numpy does not ship that OpenBLAS it does nothing.
+restores it; where numpy does not ship that OpenBLAS it does nothing. `faiss_threads(n)` does
+the same for FAISS's OpenMP threads. Together with torch's threads they make the process-wide
+context of :mod:`aoc_cli.threads`; this module is the part of it that needs no torch.
 """
 
 from __future__ import annotations
@@ -41,17 +43,22 @@ def _setter():
 
 
 @contextmanager
-def single_threaded_blas():
-    """Run the block with numpy's OpenBLAS limited to one thread (on this thread only)."""
+def blas_threads(n: int):
+    """Run the block with numpy's OpenBLAS limited to n threads (on this thread only)."""
     fn = _setter()
     if fn is None:
         yield
         return
-    previous = fn(1)
+    previous = fn(int(n))
     try:
         yield
     finally:
         fn(previous)
+
+
+def single_threaded_blas():
+    """Run the block with numpy's OpenBLAS limited to one thread (on this thread only)."""
+    return blas_threads(1)
 
 
 @contextmanager
@@ -66,8 +73,10 @@ def faiss_threads(n: int):
         yield
         return
     previous = faiss.omp_get_max_threads()
-    faiss.omp_set_num_threads(n)
+    if previous != n:
+        faiss.omp_set_num_threads(n)
     try:
         yield
     finally:
-        faiss.omp_set_num_threads(previous)
+        if previous != n:
+            faiss.omp_set_num_threads(previous)

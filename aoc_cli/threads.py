@@ -1,0 +1,76 @@
+"""The thread pools of one process, set together and given back: torch's intra-op threads,
+FAISS's OpenMP threads and numpy's OpenBLAS threads.
+
+Library code never changes them for good. Work with a thread need of its own runs inside
+:func:`thread_limits`, which restores the caller's settings when the block ends:
+
+* a control step (``Controller.decide`` / ``Controller.evaluate``) and the batched scoring of
+  ``aoc evaluate`` run in :func:`one_thread`: a step is ~100 small queries, threads only add
+  synchronisation there, and torch's and FAISS's pools must not fight over the cores;
+* training runs with ``BeliefConfig.threads`` torch threads (default: every core);
+* the decomposition keeps BLAS to one thread and a single-query FAISS search to one thread
+  (:mod:`aoc_cli.index.threads`, the numpy + FAISS layer's own part of this).
+
+A setting already in place costs nothing to set again, so the contexts nest freely.
+
+``OMP_WAIT_POLICY`` is not a setting of a running pool: OpenMP reads it once, when its runtime
+is loaded (the first import of torch or FAISS). The ``aoc`` command sets it to ``PASSIVE``
+(unless the user set it) in its entry point, before anything loads OpenMP
+(:func:`wait_passively`, called by :mod:`aoc_cli.cli.app`); the benchmarks call it first too.
+A program using the library decides for itself. Why the command sets it: OpenMP threads
+busy-wait by default, and two torch threads training on two cores shared with other processes
+ran ~30x slower; a control step, one thread in each pool, does not depend on it
+(docs/benchmarks.md, "One thread context").
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from contextlib import ExitStack, contextmanager
+from typing import Iterator
+
+
+def wait_passively() -> bool:
+    """Set ``OMP_WAIT_POLICY=PASSIVE`` unless the environment sets it. True when it can still
+    take effect (neither torch nor FAISS is loaded yet)."""
+    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+    return "torch" not in sys.modules and "faiss" not in sys.modules
+
+
+@contextmanager
+def thread_limits(torch: int | None = None, faiss: int | None = None,
+                  blas: int | None = None) -> Iterator[None]:
+    """Run the block with torch's intra-op threads, FAISS's OpenMP threads and numpy's OpenBLAS
+    threads (this thread's) set to the given counts; None (or 0) leaves that pool as it is.
+    Each pool is given back its previous count when the block ends."""
+    with ExitStack() as stack:
+        if torch:
+            stack.enter_context(_torch_threads(int(torch)))
+        if faiss or blas:
+            from aoc_cli.index.threads import blas_threads, faiss_threads
+
+            if faiss:
+                stack.enter_context(faiss_threads(int(faiss)))
+            if blas:
+                stack.enter_context(blas_threads(int(blas)))
+        yield
+
+
+def one_thread():
+    """:func:`thread_limits` with one thread in every pool: how a control step runs."""
+    return thread_limits(torch=1, faiss=1, blas=1)
+
+
+@contextmanager
+def _torch_threads(n: int) -> Iterator[None]:
+    import torch
+
+    previous = torch.get_num_threads()
+    if previous != n:
+        torch.set_num_threads(n)
+    try:
+        yield
+    finally:
+        if torch.get_num_threads() != previous:
+            torch.set_num_threads(previous)
