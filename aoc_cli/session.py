@@ -33,6 +33,7 @@ from aoc_cli.control.controller import Controller
 from aoc_cli.decompose import decompose
 from aoc_cli.errors import AocError
 from aoc_cli.index import BeliefIndex
+from aoc_cli.progress import Progress
 from aoc_cli.rows import row_multiplicity
 from aoc_cli.store import Corpus, atomic_dir, check_name, derived, writing_model
 
@@ -113,9 +114,10 @@ def _index_dir(corpus, model_id: str, index_id: str) -> Path:
 
 def build_index(corpus: Corpus, model_id: str | None = None, kind: str = "auto",
                 index_id: str = "default", resample: dict | None = None,
-                subsample: dict | None = None, seed: int = 0, progress=None,
-                **params) -> CorpusIndex:
-    """Compute (or reuse) the beliefs of every row and build an index over them.
+                subsample: dict | None = None, seed: int = 0,
+                progress: Progress | None = None, **params) -> CorpusIndex:
+    """Compute (or reuse) the beliefs of every row and build an index over them; ``progress``:
+    the rows whose beliefs are computed (:mod:`aoc_cli.progress`).
 
     Built in a temporary folder beside the index folder (new beliefs staged in it) and
     swapped in only when everything succeeded (:mod:`aoc_cli.store.derived`)."""
@@ -137,15 +139,11 @@ def build_index(corpus: Corpus, model_id: str | None = None, kind: str = "auto",
         if fresh:
             beliefs = derived.open_beliefs(model_dir, f"beliefs of model {model.id!r}", todo)
         else:
-            callback = None
             if progress is not None:
-                task = progress.add_task("beliefs of every row", total=corpus.n_rows)
-
-                def callback(done, total):
-                    progress.update(task, completed=done, total=total)
+                progress(0, corpus.n_rows, "beliefs of every row")
             # chunk by chunk into a memory-mapped file: (N, d_b) is never held in memory
             staged = write_row_beliefs(model, corpus, Path(tmp) / derived.BELIEFS,
-                                       progress=callback)
+                                       progress=progress)
             beliefs = np.load(staged, mmap_mode="r", allow_pickle=False)
             derived.check_finite(beliefs, f"model {model.id!r} of corpus {corpus.name!r}",
                                  todo)

@@ -54,7 +54,7 @@ def main() -> None:
                               "q_logged_mean": round(record["val_q_mean"], 2)}), flush=True)
 
         fit = fit_critic(corpus, inputs, enc, config, data.train_rows, data.val_rows,
-                         torch.device("cpu"), progress=report)
+                         torch.device("cpu"), on_record=report)
         with torch.no_grad():
             o, a, h = inputs.batch(va)
             q_logged = fit.critic.first(o, a, h).numpy() * fit.reward_scale

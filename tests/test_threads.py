@@ -71,7 +71,7 @@ def test_a_control_step_runs_on_one_thread_and_leaves_the_callers_setting(maze, 
 def test_training_sets_its_threads_for_its_own_duration(maze, two_threads):
     seen = []
     train_model(maze, BeliefConfig(seed=0, threads=1, max_epochs=1), "one",
-                progress=lambda record: seen.append(torch.get_num_threads()))
+                progress=lambda *report: seen.append(torch.get_num_threads()))
     assert seen and set(seen) == {1}
     assert torch.get_num_threads() == 2
 

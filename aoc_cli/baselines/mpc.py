@@ -110,10 +110,9 @@ class MPCPolicy:
         self.seed = int(seed)
         self.episodes = 0
         if model is None:
-            from aoc_cli.report import message
-
-            message(f"training the mpc dynamics model on corpus {session.corpus.name!r} for "
-                    f"{self.config.epochs} epochs")
+            if progress is not None:
+                progress(0, self.config.epochs, f"training the mpc dynamics model on corpus "
+                                                f"{session.corpus.name!r}")
             model = train_dynamics(session.corpus, session.model.history_length, self.config,
                                    progress)
         self.net, self.features = model

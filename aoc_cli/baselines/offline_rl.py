@@ -140,10 +140,9 @@ class OfflineRLPolicy:
         self.actions = ActionSpace(session, env)
         config = config or OfflineRLConfig(seed=seed)
         if agent is None:
-            from aoc_cli.report import message
-
-            message(f"training {algo} (d3rlpy) on corpus {session.corpus.name!r} for "
-                    f"{config.steps} gradient steps")
+            if progress is not None:
+                progress(0, config.steps, f"training {algo} (d3rlpy) on corpus "
+                                          f"{session.corpus.name!r}")
             bounds = None if self.actions.discrete else (self.actions.low, self.actions.high)
             agent, features = train_agent(algo, session.corpus, session.model.history_length,
                                           config, bounds, progress)

@@ -144,11 +144,11 @@ class CriticFit:
 
 def fit_critic(corpus, inputs, encoder: Encoder, config: BeliefConfig,
                train_rows: np.ndarray, val_rows: np.ndarray, device: torch.device,
-               progress=None) -> CriticFit:
+               on_record=None) -> CriticFit:
     """Train the twin critic and the actor on ``train_rows`` for ``config.critic_steps`` steps.
 
     ``inputs`` is :func:`aoc_cli.belief.inputs.encode_corpus` of the corpus with the actions;
-    ``progress(record)`` is called every RECORD_EVERY steps.
+    ``on_record(record)`` is called with each record (every RECORD_EVERY steps).
     """
     if corpus.discrete:
         raise AocError("--belief critic needs continuous actions (its actor is a TD3 actor): "
@@ -225,8 +225,8 @@ def fit_critic(corpus, inputs, encoder: Encoder, config: BeliefConfig,
             record["seconds"] = time.perf_counter() - started
             history.append(record)
             running, count = 0.0, 0
-            if progress is not None:
-                progress(record)
+            if on_record is not None:
+                on_record(record)
             if not math.isfinite(record["train_loss"]):
                 raise AocError("the critic diverged (the TD loss is not finite): lower "
                                "--lr or raise --critic-bc-weight")

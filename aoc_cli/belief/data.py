@@ -106,3 +106,17 @@ class EarlyStopping:
     def done(self) -> bool:
         last = self.history[-1]["val_loss"] if self.history else 0.0
         return self.stale >= self.config.patience or not math.isfinite(last)
+
+
+def report(progress, record: dict, unit: str = "epoch") -> None:
+    """Report a training record (:meth:`EarlyStopping.running` / ``end_epoch``) to
+    ``progress`` (:mod:`aoc_cli.progress`): the epochs (or steps) done of the most, labelled
+    with the batch and the losses."""
+    if progress is None:
+        return
+    val, best = record["val_loss"], record["best_val_loss"]
+    label = (f"{unit} {record['epoch']} batch {record['batch']}/{record['batches']} "
+             f"train {record['train_loss']:.4f}"
+             + ("" if val is None else f" val {val:.4f}")
+             + ("" if best is None else f" best {best:.4f}"))
+    progress(record["epoch"] - (0 if record["epoch_done"] else 1), record["max_epochs"], label)

@@ -84,6 +84,7 @@ def train_critic_model(corpus, config: BeliefConfig, model_id: str, data,
     (those of every model, plus ``val_td_loss`` and ``val_q_mean``)."""
     from aoc_cli.belief.artefact import save_model
     from aoc_cli.belief.critic import fit_critic
+    from aoc_cli.belief.data import report
     from aoc_cli.belief.model import Encoder
     from aoc_cli.belief.targets import value_spec
     from aoc_cli.belief.inputs import encode_corpus, network_dims, pick_device
@@ -98,12 +99,11 @@ def train_critic_model(corpus, config: BeliefConfig, model_id: str, data,
     inputs = encode_corpus(corpus, encoder, config.history_length, True, device)
 
     def on_record(record):
-        if progress is not None:
-            progress({**record, "max_epochs": config.critic_steps, "batch": 1, "batches": 1,
-                      "best_val_loss": None, "epoch_done": True})
+        report(progress, {**record, "max_epochs": config.critic_steps, "batch": 1,
+                          "batches": 1, "best_val_loss": None, "epoch_done": True}, "step")
 
     fit = fit_critic(corpus, inputs, encoder, config, data.train_rows, data.val_rows, device,
-                     progress=on_record)
+                     on_record=on_record)
     net = fit.critic.q1
     q_head = {"weight": net.head.weight.detach().cpu().double().numpy()[0].tolist(),
               "bias": float(net.head.bias.detach()), "reward_scale": fit.reward_scale}

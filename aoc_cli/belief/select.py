@@ -74,10 +74,11 @@ def _score(metrics: dict) -> float:
 
 
 def select_and_train(corpus, config: BeliefConfig, open_names: list[str], model_id: str,
-                     overwrite: bool, prepared, progress=None, on_candidate=None) -> dict:
+                     overwrite: bool, prepared, progress=None) -> dict:
     """Search ``open_names`` (see the module docstring), then train and save the chosen
     configuration as ``model_id``; the final metrics, with ``selection`` (what was tried and
-    why the winner was chosen). ``on_candidate(record)`` is called after each candidate."""
+    why the winner was chosen). ``progress`` (:mod:`aoc_cli.progress`): each candidate tried
+    as a label (its settings and loss), then the final training's epochs."""
     import time
 
     from aoc_cli.belief.train import train_model
@@ -99,8 +100,10 @@ def select_and_train(corpus, config: BeliefConfig, open_names: list[str], model_
                         if k in m})
             tried.append(rec)
             cache[key] = rec
-            if on_candidate is not None:
-                on_candidate(rec)
+            if progress is not None:
+                progress(0, None, "choosing settings: " + ", ".join(
+                    f"{k} {rec[k]}" for k in ("history_length", "hidden", "weight_decay"))
+                    + f" val loss {rec['val_loss']:.4f}")
         return cache[key]
 
     reasons = []

@@ -34,7 +34,7 @@ import numpy as np
 import torch
 
 from aoc_cli.belief.config import BeliefConfig
-from aoc_cli.belief.data import EarlyStopping, model_dir, split_episodes
+from aoc_cli.belief.data import EarlyStopping, model_dir, report, split_episodes
 from aoc_cli.belief.model import _STD_FLOOR, Encoder, Normalisation, _stats
 from aoc_cli.belief.targets import value_spec, value_targets
 from aoc_cli.errors import AocError
@@ -105,7 +105,7 @@ def blocks(starts: np.ndarray, block_rows: int = BLOCK_ROWS) -> list[tuple[int, 
 
 def write_row_beliefs(model, corpus, path: str | Path, progress=None) -> Path:
     """Beliefs (N, d_b) float32 of every row written to the ``.npy`` file ``path`` in
-    batches (module docstring); ``progress(done, total)`` after each batch."""
+    batches (module docstring); ``progress``: rows done (:mod:`aoc_cli.progress`)."""
     from aoc_cli.belief.artefact import check_corpus
 
     check_corpus(model, corpus)
@@ -356,12 +356,10 @@ def _fit_streamed(net, data: _Blocks, val: _Validation, train_sorted: np.ndarray
                 count += len(pick)
                 done += 1
             if progress is not None:
-                progress(stopping.running(epoch, done, n_batches, total / count))
+                report(progress, stopping.running(epoch, done, n_batches, total / count))
         net.eval()
-        record = stopping.end_epoch(net, epoch, total / max(count, 1), val.metrics(net),
-                                    n_batches)
-        if progress is not None:
-            progress(record)
+        report(progress, stopping.end_epoch(net, epoch, total / max(count, 1), val.metrics(net),
+                                            n_batches))
         if stopping.done:
             break
     return stopping

@@ -15,7 +15,7 @@ from torch import nn
 
 from aoc_cli.belief.artefact import save_model
 from aoc_cli.belief.config import BeliefConfig
-from aoc_cli.belief.data import EarlyStopping, TrainingData, prepare
+from aoc_cli.belief.data import EarlyStopping, TrainingData, prepare, report
 from aoc_cli.belief.inputs import (CorpusInputs, build_net, encode_corpus, network_dims,
                                    pick_device)
 from aoc_cli.belief.model import Encoder, Normalisation
@@ -101,10 +101,10 @@ def train_model(corpus, config: BeliefConfig, model_id: str = "default", overwri
                 extra: dict | None = None) -> dict:
     """Learn b and l on ``corpus`` and write ``corpus.models_dir/<model_id>/``; final metrics.
 
-    ``progress``, when given, is called with a dict (``epoch``, ``max_epochs``, ``batch``,
-    ``batches``, ``train_loss`` running mean, ``val_loss`` and ``best_val_loss`` or None,
-    ``epoch_done``) every few batches, and at the end of every epoch with the epoch's metrics
-    (also ``val_r2`` or ``val_accuracy``, ``seconds``). ``save=False`` trains and returns the
+    ``progress`` (:mod:`aoc_cli.progress`): the epochs done of ``max_epochs``, every few
+    batches and at the end of every epoch, labelled with the batch and the running train,
+    validation and best validation losses (the per-epoch records are the saved ``history``).
+    ``save=False`` trains and returns the
     metrics without writing the model; ``extra`` is merged into the saved metrics. ``prepared`` is the
     result of :func:`aoc_cli.belief.data.prepare` for the same arguments, when already known.
     """
@@ -249,12 +249,10 @@ def _fit(net, problem: _Problem, tr: torch.Tensor, va: torch.Tensor, config: Bel
             total += float(loss.detach()) * len(rows)
             count += len(rows)
             if progress is not None and (b + 1) % report_every == 0 and b + 1 < n_batches:
-                progress(stopping.running(epoch, b + 1, n_batches, total / count))
+                report(progress, stopping.running(epoch, b + 1, n_batches, total / count))
         net.eval()
         val = _evaluate(net, inputs, va, y_val, objective)
-        record = stopping.end_epoch(net, epoch, total / count, val, n_batches)
-        if progress is not None:
-            progress(record)
+        report(progress, stopping.end_epoch(net, epoch, total / count, val, n_batches))
         if stopping.done:
             break
     return stopping

@@ -123,8 +123,9 @@ def run_on_ray(plan, ctx, scale: dict, cells: list[Cell], done, workers: int | N
     for cell in cells:
         if cell.prep not in preps:
             preps[cell.prep] = prepare.remote(plan_ref, spec, scale, cell.prep)
-    bar = None if progress is None else progress.add_task(
-        f"{ctx.experiment}: {len(cells)} cells on Ray", total=len(cells))
+    label, n_done = f"{ctx.experiment}: {len(cells)} cells on Ray", 0
+    if progress is not None:
+        progress(0, len(cells), label)
     queue = [(cell, 1) for cell in cells]
     running: dict = {}
     reported: set = set()
@@ -157,10 +158,9 @@ def run_on_ray(plan, ctx, scale: dict, cells: list[Cell], done, workers: int | N
                     except Exception:  # noqa: BLE001 - the cell prepared itself
                         pass
         done(cell, result)
-        if bar is not None:
-            progress.advance(bar)
-    if bar is not None:
-        progress.remove_task(bar)
+        n_done += 1
+        if progress is not None:
+            progress(n_done, len(cells), label)
 
 
 def _error_text(err: Exception) -> str:

@@ -14,6 +14,7 @@ import numpy as np
 
 from aoc_cli.baselines import MissingExtra, extra_missing, make_baseline
 from aoc_cli.errors import AocError
+from aoc_cli.progress import stage
 
 #: Methods that are not controllers: the data's own average return.
 DATA = "data"
@@ -56,18 +57,9 @@ class Runner:
         self.log = log or (lambda text: None)
         self.cache: dict = {}
 
-    def _bar(self, label: str, total: int):
-        return None if self.progress is None else self.progress.add_task(label, total=total)
-
-    def _tick(self, bar):
-        def tick(done, total):
-            if bar is not None:
-                self.progress.update(bar, completed=done, total=total)
-        return tick
-
-    def _drop(self, bar):
-        if bar is not None:
-            self.progress.remove_task(bar)
+    def _stage(self, label: str, total: int):
+        """The Progress of one training or rollout (:func:`aoc_cli.progress.stage`)."""
+        return stage(self.progress, label, total)
 
     def policy(self, method: str, session, env, seed: int):
         """The controller object of ``method`` (None for AOC itself)."""
@@ -90,14 +82,11 @@ class Runner:
             if key in self.cache:
                 options["model" if method == "mpc" else "agent"] = self.cache[key]
             else:
-                bar = self._bar(f"train {method} on {session.corpus.name}",
-                                b.mpc_epochs if method == "mpc" else b.offline_rl_steps)
-                options["progress"] = self._tick(bar)
+                options["progress"] = self._stage(
+                    f"train {method} on {session.corpus.name}",
+                    b.mpc_epochs if method == "mpc" else b.offline_rl_steps)
                 started = time.perf_counter()
-                try:
-                    policy = make_baseline(method, session, env, seed=seed, **options)
-                finally:
-                    self._drop(bar)
+                policy = make_baseline(method, session, env, seed=seed, **options)
                 self.log(f"train {method} on {session.corpus.name}: "
                          f"{time.perf_counter() - started:.1f} s")
                 self.cache[key] = (policy.net, policy.features) if method == "mpc" \
@@ -120,27 +109,17 @@ class Runner:
             policy = self.policy(method, session, env, seed)
         except MissingExtra as err:
             return MethodRun(method, status="skipped", note=str(err))
-        bar = self._bar(f"{method} {label}".strip(), episodes)
-
-        class _Proxy:  # rollout() reports progress through add_task/update on this object
-            def add_task(_self, _desc, total=None):
-                return bar
-
-            def update(_self, task, advance=0, description=None):
-                if bar is not None:
-                    self.progress.update(bar, advance=advance)
-
         try:
             results, summary = rollout(session, env, episodes, seed=episode_seed(seed),
                                        policy=policy, noise_after=noise_after,
-                                       noise_std=noise_std, progress=_Proxy())
+                                       noise_std=noise_std,
+                                       progress=self._stage(f"{method} {label}".strip(),
+                                                            episodes))
         except (AocError, ArithmeticError, ValueError, RuntimeError) as err:
             # one failing method must not lose the others' results: reported as failed
             self.log(f"{method} {label}: failed: {type(err).__name__}: {err}")
             return MethodRun(method, status="failed", note=f"{type(err).__name__}: {err}",
                              seconds=time.perf_counter() - started)
-        finally:
-            self._drop(bar)
         return MethodRun(method, results, summary, seconds=time.perf_counter() - started)
 
 

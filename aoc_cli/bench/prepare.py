@@ -23,6 +23,7 @@ from pathlib import Path
 
 from aoc_cli.belief import BeliefConfig
 from aoc_cli.errors import AocError
+from aoc_cli.progress import stage
 from aoc_cli.store import Store
 
 #: BeliefConfig fields that do not change the trained model.
@@ -60,14 +61,9 @@ class Artefacts:
         self.progress = progress
         self.built: list[dict] = []
 
-    def _task(self, label: str, total: int | None):
-        if self.progress is None:
-            return None
-        return self.progress.add_task(label, total=total)
-
-    def _done(self, task) -> None:
-        if task is not None and self.progress is not None:
-            self.progress.remove_task(task)
+    def _stage(self, label: str, total: int | None):
+        """The Progress of one preparation step (:func:`aoc_cli.progress.stage`)."""
+        return stage(self.progress, label, total)
 
     # -- corpus ----------------------------------------------------------------------------
     def corpus(self, task: str, rows: int | None = None, episodes: int | None = None,
@@ -85,15 +81,9 @@ class Artefacts:
                     _same_policies(c, task, behaviour):
                 return c
         started = time.perf_counter()
-        bar = self._task(f"collect {name}", rows or episodes)
-
-        def tick(done, total):
-            if bar is not None:
-                self.progress.update(bar, completed=done, total=total)
-
-        data, _summary = collect(task, steps=rows, episodes=episodes, seed=seed, progress=tick,
+        data, _summary = collect(task, steps=rows, episodes=episodes, seed=seed,
+                                 progress=self._stage(f"collect {name}", rows or episodes),
                                  behaviour=behaviour)
-        self._done(bar)
         c = self.store.write(name, data, overwrite=True)
         self._record("collect", name, started)
         return c
@@ -113,16 +103,8 @@ class Artefacts:
             if saved == wanted and meta.get("corpus_hash") == corpus.hash:
                 return model_id
         started = time.perf_counter()
-        bar = self._task(f"train {corpus.name}/{model_id}", config.max_epochs)
-
-        def tick(info):
-            if bar is not None and info.get("epoch_done"):
-                self.progress.update(bar, completed=info["epoch"],
-                                     description=f"train {corpus.name}/{model_id} "
-                                                 f"(val {info['val_loss']:.3g})")
-
-        train_model(corpus, config, model_id, overwrite=True, progress=tick)
-        self._done(bar)
+        train_model(corpus, config, model_id, overwrite=True,
+                    progress=self._stage(f"train {corpus.name}/{model_id}", config.max_epochs))
         self._record("train", f"{corpus.name}/{model_id}", started)
         return model_id
 

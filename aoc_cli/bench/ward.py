@@ -151,11 +151,12 @@ def run_ward(out: Path, bench_store: Path, scale: str = "full", splits: int | No
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     rows: list[dict] = []
-    task = progress.add_task("bench ward", total=n_splits) if progress is not None else None
+    if progress is not None:
+        progress(0, n_splits, "bench ward")
     for s in range(n_splits):
         rows += run_split(store, data, s, cfg["patients"])
         if progress is not None:
-            progress.advance(task)
+            progress(s + 1, n_splits, "bench ward")
         if log is not None:
             abc = next(r for r in rows if r["method"] == "abc" and r["split"] == s)
             log(f"ward split {s}: abc accuracy {abc['accuracy']:.3f} auc {abc['auc']:.3f}")

@@ -10,7 +10,8 @@ import typer
 from aoc_cli.cli.common import (EpisodesOption, EpsilonOption, FormatOption, RayAddressOption,
                                ResidualCapOption, WorkersOption)
 from aoc_cli.errors import AocError
-from aoc_cli.report import message, progress, resolve_format, write_records
+from aoc_cli.progress import stage
+from aoc_cli.report import ProgressBar, message, resolve_format, write_records
 
 COLUMNS = ["experiment", "task", "method", "setting", "seeds", "return_mean",
            "return_mean_std", "success_rate", "upper_gate", "lower_gate", "ood_delay",
@@ -73,22 +74,20 @@ def register(app: typer.Typer) -> None:
                 f"{_duration(eta)} on a 2-core machine (less when the bench store at "
                 f"{bench_store} already holds the corpora and models)")
         records = []
-        with progress() as bar:
-            overall = bar.add_task(f"bench {experiment}", total=len(names))
-            for name in names:
+        with ProgressBar(f"bench {experiment}") as bar:
+            for i, name in enumerate(names):
                 target = (out / name if out is not None else None) if experiment == "all" \
                     else out
-                bar.update(overall, description=f"bench {name}")
+                label = f"bench {name}" + (f" ({i + 1}/{len(names)})" if len(names) > 1 else "")
                 if epsilon is not None and name in ("epsilon", "two-gates"):
                     message(f"{name}: --epsilon ignored (epsilon is what it varies)")
                 report = run_experiment(name, scale, seeds, target, bench_store, episodes,
-                                        chosen, log=message, progress=bar,
+                                        chosen, log=message, progress=stage(bar, label),
                                         epsilon=None if name in ("epsilon", "two-gates")
                                         else epsilon, residual_cap=residual_cap,
                                         sizes=row_counts,
                                         behaviour=behaviour if name in SIZED else "mix",
                                         workers=workers, address=ray_address)
-                bar.advance(overall)
                 for rec in report["summary"]:
                     if rec["status"] != "ok":
                         message(f"{name}: {rec['method']} {rec['status']} ({rec['note']})")
@@ -104,7 +103,7 @@ def _ward(out, bench_store, scale, splits, fmt) -> None:
 
     if splits is not None and splits < 1:
         raise AocError(f"--seeds (random patient splits) must be >= 1, got {splits}")
-    with progress() as bar:
+    with ProgressBar("bench ward") as bar:
         report = run_ward(out or Path("bench/ward"), bench_store, scale, splits, log=message,
                           progress=bar)
     message(f"ward: wrote {report['out']}/results.csv, summary.md, summary.json and ward.png "

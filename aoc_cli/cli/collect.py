@@ -11,7 +11,7 @@ import typer
 from aoc_cli.cli.common import (EpisodesOption, FormatOption, RayAddressOption, WorkersOption,
                                 get_store)
 from aoc_cli.errors import AocError
-from aoc_cli.report.output import message, progress, write_records
+from aoc_cli.report.output import ProgressBar, message, write_records
 
 LIST_COLUMNS = ["name", "gym_id", "horizon", "default_steps", "default_episodes", "policies",
                 "success"]
@@ -105,14 +105,9 @@ def _collect(store, t, task, name, steps, episodes, seed, overwrite, behaviour="
     """Run the task's policies and write the corpus: (corpus, per-policy summary)."""
     from aoc_cli.envs import collect
 
-    with progress() as bar:
-        job = bar.add_task(f"collect {t.name}", total=None)
-
-        def on_progress(done: int, total: int) -> None:
-            bar.update(job, completed=done, total=total)
-
+    with ProgressBar(f"collect {t.name}") as bar:
         data, summary = collect(task, steps=steps, episodes=episodes, seed=seed,
-                                progress=on_progress, behaviour=behaviour)
+                                progress=bar, behaviour=behaviour)
     return store.write(name, data, overwrite=overwrite), summary
 
 
@@ -121,14 +116,9 @@ def _collect_chunks(store, task, name, steps, episodes, seed, overwrite, behavio
     """Independently seeded chunks as Ray tasks (aoc_cli.envs.chunked): (corpus, summary)."""
     from aoc_cli.envs.chunked import CHUNK_EPISODES, CHUNK_STEPS, collect_chunked
 
-    with progress() as bar:
-        job = bar.add_task(f"collect {task} in chunks", total=None)
-
-        def on_progress(done: int, total: int) -> None:
-            bar.update(job, completed=done, total=total)
-
+    with ProgressBar(f"collect {task} in chunks") as bar:
         data, summary = collect_chunked(
             task, steps, episodes, seed, workers=workers, address=address,
             chunk_steps=chunk or CHUNK_STEPS, chunk_episodes=chunk or CHUNK_EPISODES,
-            progress=on_progress, behaviour=behaviour)
+            progress=bar, behaviour=behaviour)
     return store.write(name, data, overwrite=overwrite), summary

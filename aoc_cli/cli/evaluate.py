@@ -56,7 +56,7 @@ def register(app: typer.Typer) -> None:
         from aoc_cli.cli.explain import _collected_task
         from aoc_cli.control import ControllerConfig
         from aoc_cli.control.evaluate import evaluate, step_records
-        from aoc_cli.report.output import progress
+        from aoc_cli.report.output import ProgressBar
         from aoc_cli.session import open_session
 
         fmt = resolve_format(fmt)
@@ -67,12 +67,8 @@ def register(app: typer.Typer) -> None:
         config = ControllerConfig.for_task(_collected_task(corpus), candidates=candidates,
                                            epsilon=epsilon, k=k, residual_cap=None)
         session = open_session(corpus, model, index_id, config, seed=seed)
-        with progress(transient=True) as bar:
-            task = bar.add_task(f"evaluate {name} on {data}", total=held_out.n_rows)
-
-            def on_progress(done: int, total: int) -> None:
-                bar.update(task, completed=done, total=total)
-
+        with ProgressBar(f"evaluate {name} on {data}", held_out.n_rows,
+                         transient=True) as on_progress:
             if workers is None and ray_address is None:
                 summary, res = evaluate(session, held_out, names, seed=seed,
                                         progress=on_progress, exact=exact)

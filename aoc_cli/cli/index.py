@@ -8,7 +8,7 @@ import typer
 
 from aoc_cli.cli.common import (CorpusArgument, FormatOption, IndexKind, ModelOption, choice,
                                 get_store, parse_rates)
-from aoc_cli.report import progress, write_object
+from aoc_cli.report import ProgressBar, write_object
 
 
 def register(app: typer.Typer) -> None:
@@ -42,7 +42,7 @@ def register(app: typer.Typer) -> None:
                 from aoc_cli.errors import AocError
 
                 raise AocError(f"--subsample rates are <= 1 (got {rate} for {key}); use --resample")
-        with progress() as p:
+        with ProgressBar("index") as p:
             ci = build_index(corpus, model, kind=choice(kind), index_id=index_id, resample=rates_r,
                              subsample=rates_s, seed=seed, progress=p)
         meta = ci.meta

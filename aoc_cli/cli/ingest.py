@@ -53,7 +53,7 @@ def register(app: typer.Typer) -> None:
         """Read a dataset (Minari, D4RL HDF5, d3rlpy, NPZ, CSV) into corpus NAME."""
         from aoc_cli.formats import ReadOptions
         from aoc_cli.formats import ingest as run_ingest
-        from aoc_cli.report.output import iter_progress, resolve_format, write_object
+        from aoc_cli.report.output import ProgressBar, resolve_format, write_object
 
         resolve_format(fmt)
         options = ReadOptions(
@@ -62,8 +62,10 @@ def register(app: typer.Typer) -> None:
             discrete_actions=discrete_actions, columns_file=columns,
             obs_columns=_names(obs_columns), act_columns=_names(act_columns),
             reward_column=reward_column, id_column=id_column, time_column=time_column,
-            terminal_column=terminal_column, static=static, progress=iter_progress,
+            terminal_column=terminal_column, static=static,
         )
-        result = run_ingest(path, name, store=get_store(), fmt=source_format, options=options,
-                            overwrite=overwrite, append=append)
+        with ProgressBar(f"ingest {name}") as bar:
+            options.progress = bar
+            result = run_ingest(path, name, store=get_store(), fmt=source_format,
+                                options=options, overwrite=overwrite, append=append)
         write_object(result.summary(), fmt, title=f"ingested {name}")

@@ -13,7 +13,8 @@ from aoc_cli.cli.common import (CandidatesOption, CorpusArgument, EpisodesOption
                                 ResidualCapOption, SamplerName, SamplerOption, SelectOption,
                                 choice, get_store, parse_selection)
 from aoc_cli.errors import AocError
-from aoc_cli.report import message, progress, resolve_format, write_object, write_records
+from aoc_cli.report import (ProgressBar, message, resolve_format, write_object,
+                            write_records)
 
 #: Policies that need no model or index: they run on a corpus before anything is trained.
 MODEL_FREE = ("zero", "random")
@@ -69,7 +70,7 @@ def register(app: typer.Typer) -> None:
         session, baseline = _policy(policy, corpus, environment, model, index_id, config,
                                     selection, seed)
         reference = _ood_reference(policy, session, ood_reference)
-        with progress() as p:
+        with ProgressBar("rollout", episodes) as p:
             results, summary = rollout(session, environment, episodes, seed=seed, policy=baseline,
                                        audit=str(audit) if audit else None,
                                        noise_after=noise_after, noise_std=noise_std, progress=p,

@@ -11,7 +11,7 @@ from aoc_cli.belief.config import BeliefConfig
 from aoc_cli.belief.data import prepare
 from aoc_cli.cli.common import (BeliefKind, BeliefMode, CorpusArgument, FormatOption, choice,
                                 get_store)
-from aoc_cli.report.output import message, progress, resolve_format, write_object
+from aoc_cli.report.output import ProgressBar, message, resolve_format, write_object
 
 #: Flag defaults are the config's (the paper's) defaults.
 _D = BeliefConfig()
@@ -128,32 +128,14 @@ def _train(corpus, config: BeliefConfig, model: str, overwrite: bool, open_names
     corpus.verify_content()  # the columns prepare read are cached: hashing reads nothing again
     from aoc_cli.belief.train import train_model  # imports torch: only once the input is good
 
-    with progress(transient=True) as bar:
-        critic = config.belief == "critic"  # counted in gradient steps, not epochs
-        task = bar.add_task(f"training {name}/{model}",
-                            total=config.critic_steps if critic else config.max_epochs)
-
-        def on_progress(event: dict) -> None:
-            val = event["val_loss"]
-            best = event["best_val_loss"]
-            text = (f"{'step' if critic else 'epoch'} {event['epoch']} "
-                    f"batch {event['batch']}/{event['batches']} "
-                    f"train {event['train_loss']:.4f}"
-                    + ("" if val is None else f" val {val:.4f}")
-                    + ("" if best is None else f" best {best:.4f}"))
-            bar.update(task, completed=event["epoch"] - (0 if event["epoch_done"] else 1),
-                       description=text)
-
+    critic = config.belief == "critic"  # counted in gradient steps, not epochs
+    with ProgressBar(f"training {name}/{model}",
+                     config.critic_steps if critic else config.max_epochs, transient=True) as bar:
         if open_names:
-            def on_candidate(rec: dict) -> None:
-                bar.update(task, description="choosing settings: " + ", ".join(
-                    f"{k} {rec[k]}" for k in ("history_length", "hidden", "weight_decay"))
-                    + f" val loss {rec['val_loss']:.4f}")
-
             return select.select_and_train(corpus, config, open_names, model, overwrite,
-                                           prepared, on_progress, on_candidate)
+                                           prepared, bar)
         extra = {"selection": {"searched": [], "why": defaults_note}} if defaults_note else None
-        return train_model(corpus, config, model, overwrite=overwrite, progress=on_progress,
+        return train_model(corpus, config, model, overwrite=overwrite, progress=bar,
                            prepared=prepared, extra=extra)
 
 

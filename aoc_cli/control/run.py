@@ -15,6 +15,7 @@ from aoc_cli.control.records import decision_record, write_audit
 from aoc_cli.control.rollout import (EpisodeResult, Policy, check_same_spaces, check_spaces,
                                      run_episode, summarize)
 from aoc_cli.errors import AocError
+from aoc_cli.progress import Progress
 
 if TYPE_CHECKING:
     from aoc_cli.session import ModelFreeSession, Session
@@ -23,11 +24,13 @@ if TYPE_CHECKING:
 def rollout(session: Session | ModelFreeSession, env, episodes: int, seed: int = 0,
             policy: Policy | None = None,
             audit: str | None = None, noise_after: int | None = None, noise_std: float = 0.0,
-            progress=None, reference=None) -> tuple[list[EpisodeResult], dict]:
+            progress: Progress | None = None, reference=None
+            ) -> tuple[list[EpisodeResult], dict]:
     """Run ``episodes`` episodes (seeds ``seed``, ``seed+1``, ...) with the controller (or
     another ``policy`` with a ``decide(observation, history)`` method). ``reference``: a (T,)
     band from :func:`aoc_cli.control.monitor.reference_band` for the OOD monitor, instead of
-    the running band of each episode's own steps."""
+    the running band of each episode's own steps. ``progress``: episodes done
+    (:mod:`aoc_cli.progress`)."""
     check_spaces(env, session.corpus)
     controller = getattr(session, "controller", None)
     policy = policy or controller
@@ -36,7 +39,8 @@ def rollout(session: Session | ModelFreeSession, env, episodes: int, seed: int =
     cfg = controller.config if controller is not None else None
     floor, minimum = _band_limits(session)
     results = []
-    task = progress.add_task("rollout", total=episodes) if progress is not None else None
+    if progress is not None:
+        progress(0, episodes, "rollout")
     for e in range(episodes):
         monitor = None if cfg is None else OODMonitor(
             warmup=cfg.ood_warmup, sigmas=cfg.ood_sigmas, floor=floor, minimum=minimum,
@@ -46,7 +50,7 @@ def rollout(session: Session | ModelFreeSession, env, episodes: int, seed: int =
                           keep_decisions=audit is not None)
         results.append(res)
         if progress is not None:
-            progress.update(task, advance=1, description=f"rollout (return {res.total_return:.1f})")
+            progress(e + 1, episodes, f"rollout (return {res.total_return:.1f})")
     if audit is not None:
         write_audit(audit, results, session.meta(), corpus=session.corpus)
     return results, summarize(results)

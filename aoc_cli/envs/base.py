@@ -14,10 +14,8 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from aoc_cli.errors import AocError
+from aoc_cli.progress import Progress  # noqa: F401  (collection reports rows, or episodes, done)
 from aoc_cli.store import CorpusData, episode_starts_from_lengths
-
-#: ``progress(done, total)``: rows done of ``total`` (or episodes, when collecting by episodes).
-Progress = Callable[[int, int], None]
 
 
 @dataclass(frozen=True)

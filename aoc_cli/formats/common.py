@@ -11,26 +11,22 @@ import contextlib
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Iterable, Iterator
+from typing import Iterator
 
 import h5py
 import numpy as np
 
 from aoc_cli.errors import AocError, warn
+from aoc_cli.progress import Progress
 from aoc_cli.store import CorpusData, box_space, discrete_space, episode_starts_from_lengths
 from aoc_cli.store.corpus import all_finite
-
-
-def no_progress(items: Iterable, description: str, total: int | None = None) -> Iterable:
-    """The default progress hook: iterate silently."""
-    return items
 
 
 @dataclass
 class ReadOptions:
     """How to read a dataset (the flags of ``aoc ingest``).
 
-    ``progress(items, description, total)`` wraps slow loops (the CLI passes a rich bar).
+    ``progress`` (:mod:`aoc_cli.progress`): the chunks or episodes read by slow loops.
     The CSV fields are ignored by the other readers.
     """
 
@@ -48,7 +44,7 @@ class ReadOptions:
     time_column: str | None = None
     terminal_column: str | None = None
     static: Path | None = None
-    progress: Callable[..., Iterable] = no_progress
+    progress: Progress | None = None
 
 
 @contextlib.contextmanager

@@ -39,7 +39,8 @@ from pathlib import Path
 import numpy as np
 
 from aoc_cli.errors import AocError, warn
-from aoc_cli.formats.common import ReadOptions, action_space_of, encode_labels, no_progress
+from aoc_cli.formats.common import ReadOptions, action_space_of, encode_labels
+from aoc_cli.progress import tracked
 from aoc_cli.store import CorpusData, box_space
 
 CHUNK_LINES = 50_000
@@ -86,9 +87,9 @@ def _parse(path: Path, text: str, delimiter: str, progress):
     rows: list[list[str]] = []
     # The progress bar counts physical lines (a quoted field may span several).
     chunks = range(0, text.count("\n") + 1, CHUNK_LINES)
-    if progress is None or len(chunks) < 2:  # no bar for a file read in one go
-        progress = no_progress
-    for start in progress(chunks, f"reading {path.name}", len(chunks)):
+    if len(chunks) < 2:  # no bar for a file read in one go
+        progress = None
+    for start in tracked(chunks, progress, f"reading {path.name}", len(chunks)):
         for r in reader:
             if not r or (len(r) == 1 and not r[0].strip()):
                 continue  # a blank line

@@ -26,9 +26,9 @@ from aoc_cli.formats.common import (
     check_lengths,
     flat_observations,
     from_flat,
-    no_progress,
     open_h5,
 )
+from aoc_cli.progress import tracked
 from aoc_cli.store import CorpusData, box_space, episode_starts_from_lengths
 
 _EPISODE_KEY = re.compile(r"^observations_(\d+)(?:_\d+)?$")
@@ -67,8 +67,8 @@ def read_d3rlpy(path: Path, options: ReadOptions) -> CorpusData:
         version = f["version"][()] if "version" in f else b"?"
         source["version"] = version.decode() if isinstance(version, bytes) else str(version)
         obs, act, rew, term, lengths = [], [], [], [], []
-        progress = options.progress if n_ep > 100 else no_progress
-        for i in progress(range(n_ep), "reading d3rlpy episodes", n_ep):
+        progress = options.progress if n_ep > 100 else None
+        for i in tracked(range(n_ep), progress, "reading d3rlpy episodes", n_ep):
             o = _observations(f, i, path)
             a = _get(f, f"actions_{i}", path)
             r = _get(f, f"rewards_{i}", path).reshape(-1) if f"rewards_{i}" in f else None

@@ -23,7 +23,8 @@ from pathlib import Path
 import numpy as np
 
 from aoc_cli.errors import AocError
-from aoc_cli.formats.common import ReadOptions, encode_labels, no_progress
+from aoc_cli.formats.common import ReadOptions, encode_labels
+from aoc_cli.progress import tracked
 from aoc_cli.store import CorpusData, box_space, discrete_space, episode_starts_from_lengths
 
 BATCH_EPISODES = 256
@@ -116,9 +117,9 @@ def _read_episodes(dataset, folder: Path, options: ReadOptions, flatten, to_acti
     out["tags"] = {c: [] for c in options.tag_columns}
     indices = list(dataset.episode_indices)
     batches = [indices[i:i + BATCH_EPISODES] for i in range(0, len(indices), BATCH_EPISODES)]
-    progress = options.progress if len(batches) > 1 else no_progress
+    progress = options.progress if len(batches) > 1 else None
     try:
-        for batch in progress(batches, "reading Minari episodes", len(batches)):
+        for batch in tracked(batches, progress, "reading Minari episodes", len(batches)):
             for ep in dataset.storage.get_episodes(batch):
                 _add_episode(out, ep, options, flatten, to_action)
     except (OSError, RuntimeError, ValueError, TypeError, KeyError) as err:

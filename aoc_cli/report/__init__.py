@@ -2,6 +2,7 @@
 
 from aoc_cli.report.output import (
     FORMATS,
+    ProgressBar,
     console,
     message,
     progress,
@@ -13,6 +14,7 @@ from aoc_cli.report.output import (
 
 __all__ = [
     "FORMATS",
+    "ProgressBar",
     "console",
     "message",
     "progress",

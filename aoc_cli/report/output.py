@@ -12,7 +12,7 @@ import io
 import json
 import math
 import sys
-from typing import Any, Iterable, Sequence
+from typing import Any, Sequence
 
 import numpy as np
 from rich.console import Console
@@ -171,16 +171,33 @@ def progress(transient: bool = False) -> Progress:
     )
 
 
+class ProgressBar:
+    """:class:`aoc_cli.progress.Progress` drawn as a rich bar on stderr (shown as
+    :func:`progress` is): ``with ProgressBar("label") as p: work(..., progress=p)``; the
+    reports set the bar's count, total and label."""
+
+    def __init__(self, label: str = "", total: float | None = None, transient: bool = False):
+        self._bars, self._label, self._total = progress(transient), label, total
+        self._task = None
+
+    def __enter__(self) -> "ProgressBar":
+        self._bars.__enter__()
+        self._task = self._bars.add_task(self._label, total=self._total)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._bars.__exit__(*exc)
+
+    def __call__(self, done: float, total: float | None = None, label: str | None = None) -> None:
+        changes: dict = {"completed": done}
+        if total is not None:
+            changes["total"] = total
+        if label is not None:
+            changes["description"] = label
+        self._bars.update(self._task, **changes)
+
+
 def _force_progress() -> bool:
     import os
 
     return os.environ.get("AOC_PROGRESS", "") == "1"
-
-
-def iter_progress(items: Iterable, description: str, total: int | None = None):
-    """Iterate with a progress bar on stderr."""
-    with progress() as p:
-        task = p.add_task(description, total=total)
-        for item in items:
-            yield item
-            p.advance(task)
