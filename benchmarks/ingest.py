@@ -49,15 +49,23 @@ def generate(path: Path, rows: int, d_o: int = 17, d_a: int = 6, episode: int = 
         f["timeouts"] = timeouts
 
 
-def time_ingest(src: Path, store_root: Path, repeats: int) -> list[float]:
+def time_ingest(src: Path, store_root: Path, repeats: int,
+                float_opts: dict | None = None) -> list[float]:
+    """Seconds to ingest ``src``; with ``float_opts``, to read it and write it with those
+    dataset options for the float columns (Store.write's ``float_opts``)."""
     from aoc_cli.formats import ingest
+    from aoc_cli.formats.ingest import read_dataset
     from aoc_cli.store import Store
 
     store = Store(store_root)
     times = []
     for _ in range(repeats):
         t = time.perf_counter()
-        ingest(src, "bench", store=store, overwrite=True)
+        if float_opts is None:
+            ingest(src, "bench", store=store, overwrite=True)
+        else:
+            store.write("bench", read_dataset(src, None, None), overwrite=True,
+                        float_opts=float_opts)
         times.append(time.perf_counter() - t)
     return times
 
@@ -95,8 +103,6 @@ def time_history(store_root: Path, repeats: int, lookups: int = 100_000, length:
 
 
 def compare_compression(src: Path, root: Path, repeats: int) -> list[dict]:
-    import aoc_cli.store.writer as store_mod
-
     settings = {
         "none (contiguous)": {},
         "lzf": dict(compression="lzf"),
@@ -104,19 +110,14 @@ def compare_compression(src: Path, root: Path, repeats: int) -> list[dict]:
         "gzip-1": dict(compression="gzip", compression_opts=1),
         "gzip-1 + shuffle": dict(compression="gzip", compression_opts=1, shuffle=True),
     }
-    saved = store_mod.FLOAT_OPTS
     out = []
-    try:
-        for label, opts in settings.items():
-            store_mod.FLOAT_OPTS = opts
-            times = time_ingest(src, root / label.replace(" ", "_"), repeats)
-            size = (root / label.replace(" ", "_") / "bench" / "corpus.h5").stat().st_size
-            cold, warm = time_history(root / label.replace(" ", "_"), repeats)
-            out.append({"float columns": label, "ingest s": statistics.median(times),
-                        "size MB": size / 1e6, "history cold s": statistics.median(cold),
-                        "history warm s": statistics.median(warm)})
-    finally:
-        store_mod.FLOAT_OPTS = saved
+    for label, opts in settings.items():
+        times = time_ingest(src, root / label.replace(" ", "_"), repeats, float_opts=opts)
+        size = (root / label.replace(" ", "_") / "bench" / "corpus.h5").stat().st_size
+        cold, warm = time_history(root / label.replace(" ", "_"), repeats)
+        out.append({"float columns": label, "ingest s": statistics.median(times),
+                    "size MB": size / 1e6, "history cold s": statistics.median(cold),
+                    "history warm s": statistics.median(warm)})
     return out
 
 

@@ -111,10 +111,11 @@ class Store:
             warn(f"--append: corpus {name!r} does not exist in {self.root}; creating it")
 
     def write(self, name: str, data: CorpusData, *, overwrite: bool = False,
-              append: bool = False) -> Corpus:
+              append: bool = False, float_opts: dict | None = None) -> Corpus:
         """Validate and store ``data`` as corpus ``name`` (see
         :func:`aoc_cli.store.writer.write_corpus`)."""
         from aoc_cli.store.writer import write_corpus
 
         check_name(name)
-        return write_corpus(self.root, name, data, overwrite=overwrite, append=append)
+        return write_corpus(self.root, name, data, overwrite=overwrite, append=append,
+                            float_opts=float_opts)

@@ -23,13 +23,14 @@ from aoc_cli.store.reader import SCHEMA_VERSION, Corpus
 
 
 def write_corpus(root: Path, name: str, data: CorpusData, *, overwrite: bool = False,
-                 append: bool = False) -> Corpus:
+                 append: bool = False, float_opts: dict | None = None) -> Corpus:
     """Validate and store ``data`` as corpus ``root/name`` (atomically, under its lock).
 
     ``append`` adds the episodes to an existing corpus with the same spaces (a missing one is
     created; ``aoc ingest`` warns); derived models are kept but become stale (their corpus
     hash no longer matches). A damaged corpus folder (no manifest) is replaced only with
-    ``overwrite``.
+    ``overwrite``. ``float_opts``: h5py dataset options of the float columns instead of
+    :data:`FLOAT_OPTS` (benchmarks/ingest.py compares compressions with it).
     """
     from aoc_cli.store.store import Store
 
@@ -47,7 +48,8 @@ def write_corpus(root: Path, name: str, data: CorpusData, *, overwrite: bool = F
             keep_models = old.path / "models"
         Path(root).mkdir(parents=True, exist_ok=True)
         with atomic_dir(store.path(name)) as tmp:
-            digest = _write_h5(tmp / "corpus.h5", data)
+            digest = _write_h5(tmp / "corpus.h5", data,
+                               FLOAT_OPTS if float_opts is None else float_opts)
             if keep_models is not None and keep_models.is_dir():
                 shutil.copytree(keep_models, tmp / "models")
             files = {"corpus.h5": file_record(tmp / "corpus.h5")}
@@ -102,21 +104,22 @@ def concat(a: CorpusData, b: CorpusData) -> CorpusData:
 #: gzip-1 + shuffle saved 25% of the bytes for 20x the write time and lzf 2%, and a contiguous
 #: uncompressed dataset can be memory-mapped (:meth:`Corpus.read` of large columns).
 #: Flags, step counters and tag codes compress 50-100x cheaply: gzip-1 + shuffle, chunked.
+#: (Constants: a different setting is passed to :func:`write_corpus`, never patched here.)
 FLOAT_OPTS: dict = {}
 SMALL_OPTS: dict = dict(compression="gzip", compression_opts=1, shuffle=True)
 CHUNK_ROWS = 1 << 16
 
 
-def _write_h5(path: Path, data: CorpusData) -> str:
-    """Write the arrays (float columns contiguous, the rest chunked gzip-1 + shuffle) and
-    return their content hash."""
+def _write_h5(path: Path, data: CorpusData, float_opts: dict) -> str:
+    """Write the arrays (float columns with ``float_opts``: contiguous when empty; the rest
+    chunked gzip-1 + shuffle) and return their content hash."""
 
     def put(f, key, arr):
         arr = np.ascontiguousarray(arr)
-        if np.issubdtype(arr.dtype, np.floating) and not FLOAT_OPTS:
+        if np.issubdtype(arr.dtype, np.floating) and not float_opts:
             f.create_dataset(key, data=arr)
             return
-        opts = FLOAT_OPTS if np.issubdtype(arr.dtype, np.floating) else SMALL_OPTS
+        opts = float_opts if np.issubdtype(arr.dtype, np.floating) else SMALL_OPTS
         chunks = (max(1, min(len(arr), CHUNK_ROWS)),) + arr.shape[1:]
         f.create_dataset(key, data=arr, chunks=chunks, **opts)
 

@@ -148,3 +148,18 @@ def test_atomic_files_get_the_mode_of_a_plain_open(tmp_path):
         os.umask(old)
     assert (tmp_path / "a.json").stat().st_mode & 0o777 == 0o644
     assert (tmp_path / "plain").stat().st_mode & 0o777 == 0o644
+
+
+def test_float_columns_are_contiguous_unless_other_dataset_options_are_passed(tmp_path):
+    import h5py
+
+    store = Store(tmp_path)
+    plain = store.write("plain", make_data())
+    packed = store.write("packed", make_data(), float_opts=dict(compression="gzip"))
+    with h5py.File(plain.path / "corpus.h5") as f:
+        assert f["observations"].chunks is None and f["observations"].compression is None
+        assert f["terminals"].compression == "gzip"  # flags: always compressed
+    with h5py.File(packed.path / "corpus.h5") as f:
+        assert f["observations"].compression == "gzip"
+    assert packed.hash == plain.hash  # the same content, stored differently
+    np.testing.assert_array_equal(packed.load().observations, plain.load().observations)
