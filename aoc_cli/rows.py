@@ -1,8 +1,13 @@
 """Row masks and multiplicities from a corpus's tags, episodes and row ranges.
 
 A selection (:func:`row_selection`) is an (N,) bool mask over corpus rows that the controller
-applies at query time, with no rebuild; a multiplicity (:func:`row_multiplicity`) is the (N,)
-int count of copies of each row in a derived (re-sampled or sub-sampled) index.
+applies at query time, with no rebuild; a multiplicity (:func:`episode_multiplicity`) is the
+(N,) int count of copies of each row in a derived (re-sampled or sub-sampled) index.
+
+Two rates, two names. An *episode rate* (``build_index(episode_rates=...)``, ``aoc index
+--episode-rate``) keeps or repeats whole episodes of a tag value: 0.5 keeps half of its
+episodes. A *row rate* (:meth:`aoc_cli.index.BeliefIndex.resample`, the index layer, which
+knows rows, not episodes) samples single index positions: 0.5 keeps half of the positions.
 """
 
 from __future__ import annotations
@@ -12,26 +17,25 @@ import numpy as np
 from aoc_cli.errors import AocError
 
 
-def row_multiplicity(corpus, resample: dict | None, subsample: dict | None,
-                     seed: int) -> np.ndarray:
-    """(N,) int copies of each corpus row in a derived index, from ``{"policy=pi1": 4.0}``.
+def episode_multiplicity(corpus, episode_rates: dict | None, seed: int) -> np.ndarray:
+    """(N,) int copies of each corpus row in a derived index, from episode rates
+    ``{"policy=pi1": 4.0}``.
 
     Rates are per tag value: an integer part repeats the rows, a fractional part keeps that
     fraction of whole episodes (chosen with ``seed``), so trajectories stay whole. The counts
     are integers: :meth:`aoc_cli.index.BeliefIndex.resample` then only repeats or drops rows
-    (its own fractional multiplicities, which sample single rows, are not used here).
+    (its own fractional row rates, which sample single rows, are not used here).
     """
     n = corpus.n_rows
     counts = np.ones(n, dtype=np.int64)
     rng = np.random.default_rng(seed)
-    rates = {**(resample or {}), **(subsample or {})}
-    for key, rate in rates.items():
+    for key, rate in (episode_rates or {}).items():
         tag, _, label = key.partition("=")
         codes, labels = corpus.tag(tag)
         if label not in labels:
             raise AocError(f"tag {tag!r} has no value {label!r} (values: {', '.join(labels)})")
         if rate < 0:
-            raise AocError(f"a sampling rate must be >= 0, got {rate} for {key}")
+            raise AocError(f"an episode rate must be >= 0, got {rate} for {key}")
         mask = codes == labels.index(label)
         whole, frac = int(np.floor(rate)), rate - np.floor(rate)
         episodes = np.unique(corpus.episode_of(np.flatnonzero(mask)))

@@ -14,9 +14,9 @@ Layout under ``<corpus>/models/<model>/``::
     index/<index_id>/index.json     what it was built from (corpus, model hashes), kind, size
 
 The ``default`` index holds every row once. Derived indexes re-sample or sub-sample rows by
-tag (the paper's adaptivity experiment) with no retraining: a rate of 4 for ``policy=pi1``
-repeats pi1's rows four times, 0.5 keeps a random half of its episodes
-(:func:`aoc_cli.rows.row_multiplicity`).
+tag (the paper's adaptivity experiment) with no retraining: an episode rate of 4 for
+``policy=pi1`` repeats pi1's rows four times, 0.5 keeps a random half of its episodes
+(:func:`aoc_cli.rows.episode_multiplicity`).
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ from aoc_cli.decompose import decompose
 from aoc_cli.errors import AocError
 from aoc_cli.index import BeliefIndex
 from aoc_cli.progress import Progress
-from aoc_cli.rows import row_multiplicity
+from aoc_cli.rows import episode_multiplicity
 from aoc_cli.store import Corpus, atomic_dir, check_name, derived, writing_model
 
 if TYPE_CHECKING:
@@ -113,18 +113,24 @@ def _index_dir(corpus, model_id: str, index_id: str) -> Path:
 
 
 def build_index(corpus: Corpus, model_id: str | None = None, kind: str = "auto",
-                index_id: str = "default", resample: dict | None = None,
-                subsample: dict | None = None, seed: int = 0,
-                progress: Progress | None = None, **params) -> CorpusIndex:
+                index_id: str = "default", episode_rates: dict | None = None,
+                seed: int = 0, progress: Progress | None = None, *,
+                resample: dict | None = None, subsample: dict | None = None,
+                **params) -> CorpusIndex:
     """Compute (or reuse) the beliefs of every row and build an index over them; ``progress``:
     the rows whose beliefs are computed (:mod:`aoc_cli.progress`).
+
+    ``episode_rates`` ``{"TAG=VALUE": rate}`` derive an index that keeps or repeats whole
+    episodes (:func:`aoc_cli.rows.episode_multiplicity`); ``resample`` and ``subsample``, the
+    older names, are merged into them.
 
     Built in a temporary folder beside the index folder (new beliefs staged in it) and
     swapped in only when everything succeeded (:mod:`aoc_cli.store.derived`)."""
     from aoc_cli.belief.stream import write_row_beliefs
 
+    episode_rates = {**(resample or {}), **(subsample or {}), **(episode_rates or {})}
     model = load_model(corpus, model_id)
-    if (resample or subsample) and index_id == "default":
+    if episode_rates and index_id == "default":
         raise AocError("index_id must name a new index for a re-sampled or sub-sampled one "
                        "(the default index holds every row once)", "index_id")
     model_dir = corpus.models_dir / model.id
@@ -149,15 +155,15 @@ def build_index(corpus: Corpus, model_id: str | None = None, kind: str = "auto",
                                  todo)
         start = time.perf_counter()
         index = BeliefIndex.build(beliefs, kind=kind, seed=seed, **params)
-        if resample or subsample:
-            index = index.resample(row_multiplicity(corpus, resample, subsample, seed))
+        if episode_rates:
+            index = index.resample(episode_multiplicity(corpus, episode_rates, seed))
         seconds = time.perf_counter() - start
         index.save(tmp / "index.faiss")
         meta = {
             "index_id": index_id, "model": model.id, "model_hash": model.hash,
             "corpus": corpus.name, "corpus_hash": corpus.hash, "kind": index.kind,
             "rows": int(index.size), "belief_dim": int(beliefs.shape[1]),
-            "resample": resample or {}, "subsample": subsample or {}, "seed": seed,
+            "episode_rates": episode_rates, "seed": seed,
             "build_seconds": seconds, "built": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         }
         ci = CorpusIndex(index_id, model, beliefs, model.values, index, meta)
@@ -191,7 +197,7 @@ def load_index(corpus: Corpus, model_id: str | None = None, index_id: str = "def
     out = _index_dir(corpus, model.id, index_id)
     hint = f"aoc index {corpus.name} --model {model.id}"
     if index_id != "default":
-        hint += f" --index-id {index_id} (with its --resample/--subsample)"
+        hint += f" --index-id {index_id} (with its --episode-rate)"
     if not (out / "index.json").is_file():
         raise AocError(f"no index {index_id!r} for model {model.id!r} of corpus "
                        f"{corpus.name!r}: run `{hint}`")

@@ -9,7 +9,7 @@ from the user's ``corpora/``. Names say what was built:
 * model ``default`` (value mode) and ``bc`` (imitation mode) of a corpus, trained with
   ``aoc_cli.belief.train_model``; reused when the saved config equals the wanted one and the
   corpus hash matches (``load_model`` refuses stale models anyway);
-* index ``default`` and derived indexes (e.g. ``pi1x0.5``: ``--resample policy=pi1:0.5``),
+* index ``default`` and derived indexes (e.g. ``pi1x0.5``: ``--episode-rate policy=pi1:0.5``),
   built by ``aoc_cli.session.build_index``; reused when ``load_index`` accepts them and
   they were built with the same rates.
 """
@@ -115,12 +115,13 @@ class Artefacts:
 
         try:
             ci = load_index(corpus, model_id, index_id)
-            if (ci.meta.get("resample") or {}) == (resample or {}):
+            built = ci.meta.get("episode_rates", ci.meta.get("resample")) or {}
+            if built == (resample or {}):
                 return ci
         except AocError:
             pass
         started = time.perf_counter()
-        ci = build_index(corpus, model_id, index_id=index_id, resample=resample, seed=seed)
+        ci = build_index(corpus, model_id, index_id=index_id, episode_rates=resample, seed=seed)
         self._record("index", f"{corpus.name}/{model_id}/{index_id}", started)
         return ci
 

@@ -22,11 +22,14 @@ def register(app: typer.Typer) -> None:
         index_id: Annotated[str, typer.Option(
             "--index", "--index-id",
             help="Name of the index (derived indexes need their own).")] = "default",
-        resample: Annotated[Optional[List[str]], typer.Option(
-            "--resample", help="TAG=VALUE:RATE, e.g. policy=pi1:4 (repeat those rows).")] = None,
+        episode_rate: Annotated[Optional[List[str]], typer.Option(
+            "--episode-rate", "--resample",
+            help="TAG=VALUE:RATE, a derived index keeping whole episodes of that tag value: "
+                 "policy=pi1:4 repeats them four times, policy=pi1:0.5 keeps a random half "
+                 "of them (--resample: the older name).")] = None,
         subsample: Annotated[Optional[List[str]], typer.Option(
-            "--subsample", help="TAG=VALUE:RATE, e.g. policy=pi1:0.5 (keep a share of those "
-                                "episodes).")] = None,
+            "--subsample", help="TAG=VALUE:RATE, an episode rate of at most 1 (kept for "
+                                "older scripts; same as --episode-rate).")] = None,
         seed: Annotated[int, typer.Option(
             "--seed", help="Seed of sub-sampling and of the typical-residual sample.")] = 0,
         fmt: FormatOption = None,
@@ -35,16 +38,17 @@ def register(app: typer.Typer) -> None:
         from aoc_cli.session import build_index
 
         corpus = get_store().corpus(name)
-        rates_r = parse_rates(resample, "--resample")
+        rates = parse_rates(episode_rate, "--episode-rate")
         rates_s = parse_rates(subsample, "--subsample")
         for key, rate in rates_s.items():
             if rate > 1:
                 from aoc_cli.errors import AocError
 
-                raise AocError(f"--subsample rates are <= 1 (got {rate} for {key}); use --resample")
+                raise AocError(f"--subsample rates are <= 1 (got {rate} for {key}); use "
+                               "--episode-rate")
         with ProgressBar("index") as p:
-            ci = build_index(corpus, model, kind=choice(kind), index_id=index_id, resample=rates_r,
-                             subsample=rates_s, seed=seed, progress=p)
+            ci = build_index(corpus, model, kind=choice(kind), index_id=index_id,
+                             episode_rates={**rates_s, **rates}, seed=seed, progress=p)
         meta = ci.meta
         write_object({
             "corpus": corpus.name, "model": meta["model"], "index": meta["index_id"],

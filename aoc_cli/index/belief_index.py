@@ -2,8 +2,8 @@
 
 Entries of the FAISS index are *positions*; `row_of[position]` is the corpus row a position
 stands for. A base index has one position per row (row_of = identity); a derived index built by
-`resample` / `subsample` repeats or drops rows (multiplicity 4 = four copies of the row, 0.5 = a
-seeded random half), so the same code answers "the k nearest rows of the re-weighted corpus"
+`resample` / `subsample` repeats or drops rows (a row rate of 4 = four copies of the row, 0.5 = a
+seeded random half of the positions), so the same code answers "the k nearest rows of the re-weighted corpus"
 (the paper's adaptivity experiment) with no retraining. Every answer is in corpus rows.
 """
 
@@ -209,26 +209,26 @@ class BeliefIndex:
         return self._direct(Y, k, sel) if out is None else out
 
     # ---------------------------------------------------------------- adaptivity
-    def resample(self, multiplicity, seed: int | None = None) -> "BeliefIndex":
-        """A derived index where corpus row c appears multiplicity[c] times.
+    def resample(self, row_rates, seed: int | None = None) -> "BeliefIndex":
+        """A derived index where corpus row c appears row_rates[c] times.
 
-        multiplicity: a scalar or (N,) non-negative floats over corpus rows, applied to every
+        row_rates: a scalar or (N,) non-negative floats over corpus rows, applied to every
         position of this index. The integer part gives copies; of the positions sharing a
         fractional part f, exactly round(f * n_f) get one more copy, chosen at random (seeded).
         So 4 = four copies, 1 = unchanged, 0.5 = a random half of the positions, 0 = dropped.
 
-        The index knows rows, not episodes: a fraction here samples single positions. The
-        command line's rates (``aoc index --resample policy=pi1:0.5``) keep whole *episodes*;
-        :func:`aoc_cli.rows.row_multiplicity` turns them into integer counts per row before
-        they reach this method, so that there is one meaning of a rate per layer.
+        The index knows rows, not episodes: a fraction here is a *row rate*, sampling single
+        positions. The session's *episode rates* (``aoc index --episode-rate policy=pi1:0.5``)
+        keep whole episodes; :func:`aoc_cli.rows.episode_multiplicity` turns them into integer
+        counts per row before they reach this method.
         """
-        mult = np.asarray(multiplicity, dtype=np.float64)
+        mult = np.asarray(row_rates, dtype=np.float64)
         if mult.ndim == 0:
             mult = np.full(self.n_rows, float(mult))
         if mult.shape != (self.n_rows,):
-            raise AocError(f"multiplicity needs one value per corpus row ({self.n_rows}); got shape {mult.shape}")
+            raise AocError(f"row_rates needs one value per corpus row ({self.n_rows}); got shape {mult.shape}")
         if not np.all(np.isfinite(mult)) or (mult < 0).any():
-            raise AocError("multiplicities must be finite and non-negative; fix the re-sampling weights")
+            raise AocError("row_rates must be finite and non-negative; fix the re-sampling weights")
         per_pos = mult[self.row_of]
         base = np.floor(per_pos)
         frac = np.round(per_pos - base, 12)
@@ -240,7 +240,7 @@ class BeliefIndex:
             counts[rng.choice(members, size=extra, replace=False)] += 1
         positions = np.repeat(np.arange(self.size, dtype=np.int64), counts)
         if positions.size == 0:
-            raise AocError("re-sampling leaves no corpus rows; give some rows a positive multiplicity")
+            raise AocError("re-sampling leaves no corpus rows; give some rows a positive row rate")
         vectors = np.ascontiguousarray(self.vectors(positions))
         with faiss_threads(self.config.threads):
             if self.kind == "ivf":

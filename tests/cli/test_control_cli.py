@@ -242,6 +242,16 @@ def test_derived_index_resamples_a_policy_without_retraining(run, maze_root):
     codes, labels = corpus.tag("policy")
     n_pi1 = int((codes == labels.index("pi1")).sum())
     assert json.loads(out)["rows"] == corpus.n_rows + 2 * n_pi1
+    # --episode-rate is the documented name of --resample: 0.5 keeps half of pi1's episodes
+    code, out, err = run("index", "maze", "--index-id", "pi1half", "--episode-rate",
+                         "policy=pi1:0.5", "-f", "json")
+    assert code == 0, err
+    meta = json.loads((corpus.models_dir / "default" / "index" / "pi1half" / "index.json")
+                      .read_text())
+    assert meta["episode_rates"] == {"policy=pi1": 0.5}
+    episodes = np.unique(corpus.episode_of(np.flatnonzero(codes == labels.index("pi1"))))
+    kept = json.loads(out)["rows"] - (corpus.n_rows - n_pi1)
+    assert len(episodes) > 1 and 0 < kept < n_pi1
     code, out, err = run("rollout", "maze", "--env", "maze", "--index", "pi1x3", "-n", "1", "-f", "json")
     assert code == 0, err
 
