@@ -130,23 +130,7 @@ def _decompose(beliefs, Y, k, values, index, reference, selection, config) -> De
     P = B - Y[:, None, :]  # neighbours relative to the query, p_c = b_c - y
 
     # 2. corpus residual and projection: min_{w in simplex} ||B^T w - y||, exactly
-    if reference:
-        weights, failed = np.zeros(valid.shape), np.arange(n_q)
-    else:
-        solved = min_norm_point(P, valid, tol=config.qp_tol)
-        weights, failed = solved.weights, np.flatnonzero(~solved.ok)
-    for q in failed:
-        c = np.flatnonzero(valid[q])
-        try:
-            w = reference_weights(B[q, c], Y[q])
-        except RuntimeError:  # piqp stalled at every tolerance: an active-set solver instead
-            w = lifted_nnls_weights(B[q, c], Y[q])
-        w = caratheodory(B[q, c], w)
-        # keep whichever of the two answers has the smaller residual: near a zero residual
-        # the batched solver's certificate can fail while its point is the better one
-        if reference or np.sum((w @ P[q, c]) ** 2) <= np.sum((weights[q, c] @ P[q, c]) ** 2):
-            weights[q] = 0.0
-            weights[q, c] = w
+    weights, failed = _residual_weights(B, Y, P, valid, reference, config.qp_tol)
     offset = np.einsum("qk,qkd->qd", weights, P)  # y* - y
     residual = np.sqrt((offset**2).sum(1))
 
@@ -158,15 +142,7 @@ def _decompose(beliefs, Y, k, values, index, reference, selection, config) -> De
     residual[full] = 0.0
     offset[full] = 0.0
 
-    m = min(d + 1, k)
-    order = np.argsort(-weights, axis=1, kind="stable")[:, :m]
-    w_out = np.take_along_axis(weights, order, axis=1)
-    used = w_out > 0
-    rows = np.where(used, np.take_along_axis(neighbours, order, axis=1), -1)
-    w_out = np.where(used, w_out, 0.0)
-    w_out /= w_out.sum(1, keepdims=True)
-    dist = np.sqrt(np.take_along_axis(np.einsum("qkd,qkd->qk", P, P), order, axis=1))
-    dist = np.where(used, dist, np.nan)
+    rows, w_out, dist, used = _subset_columns(weights, neighbours, P, min(d + 1, k))
 
     # 4. value estimate: v_hat = sum_c w_c v_c over the subset
     # as v_0 + sum_c w_c (v_c - v_0), v_0 the heaviest row's value: equal row values give that
@@ -187,6 +163,47 @@ def _decompose(beliefs, Y, k, values, index, reference, selection, config) -> De
         fallbacks=int(len(failed)) if not reference else 0,
         pivots=pivots,
     )
+
+
+def _residual_weights(B: np.ndarray, Y: np.ndarray, P: np.ndarray, valid: np.ndarray,
+                      reference: bool, qp_tol: float) -> tuple[np.ndarray, np.ndarray]:
+    """Step 2: (Q, k) simplex weights of y* over the neighbours B (Q, k, d) of queries Y
+    (Q, d), P = B - y, and the queries that went to the reference QP. The batched solver
+    first; a query it cannot certify (or every query, with ``reference``) is solved by the
+    reference QP (piqp, else an active-set solver), and the smaller residual is kept."""
+    if reference:
+        weights, failed = np.zeros(valid.shape), np.arange(Y.shape[0])
+    else:
+        solved = min_norm_point(P, valid, tol=qp_tol)
+        weights, failed = solved.weights, np.flatnonzero(~solved.ok)
+    for q in failed:
+        c = np.flatnonzero(valid[q])
+        try:
+            w = reference_weights(B[q, c], Y[q])
+        except RuntimeError:  # piqp stalled at every tolerance: an active-set solver instead
+            w = lifted_nnls_weights(B[q, c], Y[q])
+        w = caratheodory(B[q, c], w)
+        # keep whichever of the two answers has the smaller residual: near a zero residual
+        # the batched solver's certificate can fail while its point is the better one
+        if reference or np.sum((w @ P[q, c]) ** 2) <= np.sum((weights[q, c] @ P[q, c]) ** 2):
+            weights[q] = 0.0
+            weights[q, c] = w
+    return weights, failed
+
+
+def _subset_columns(weights: np.ndarray, neighbours: np.ndarray, P: np.ndarray, m: int):
+    """The minimal subset as m columns by decreasing weight: rows (Q, m) (-1 padded),
+    weights (Q, m) normalised to sum 1, distances ||b_c - y|| (Q, m) (nan padded), and the
+    (Q, m) bool of the columns used."""
+    order = np.argsort(-weights, axis=1, kind="stable")[:, :m]
+    w_out = np.take_along_axis(weights, order, axis=1)
+    used = w_out > 0
+    rows = np.where(used, np.take_along_axis(neighbours, order, axis=1), -1)
+    w_out = np.where(used, w_out, 0.0)
+    w_out /= w_out.sum(1, keepdims=True)
+    dist = np.sqrt(np.take_along_axis(np.einsum("qkd,qkd->qk", P, P), order, axis=1))
+    dist = np.where(used, dist, np.nan)
+    return rows, w_out, dist, used
 
 
 def _check_inputs(beliefs, queries, values):
