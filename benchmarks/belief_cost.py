@@ -20,6 +20,10 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
+from aoc_cli.threads import wait_passively  # noqa: E402
+
+wait_passively()  # OpenMP threads wait passively, as under the aoc command (aoc_cli/threads.py)
+
 from aoc_cli.control import HistoryBuffer  # noqa: E402
 from aoc_cli.envs import make_env  # noqa: E402
 from aoc_cli.session import open_session  # noqa: E402

@@ -28,6 +28,10 @@ import time
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
+from aoc_cli.threads import wait_passively  # noqa: E402
+
+wait_passively()  # OpenMP threads wait passively, as under the aoc command (aoc_cli/threads.py)
+
 import torch  # noqa: E402
 
 import aoc_cli.index.belief_index as BI  # noqa: E402

@@ -69,7 +69,8 @@ json.dump({"times": times, "decisions": decisions}, open(out, "w"))
 def run_tree(tree: str, store: str, name: str, steps: int) -> dict:
     with tempfile.NamedTemporaryFile(suffix=".json", delete=False) as f:
         out = f.name
-    env = {**os.environ, "PYTHONPATH": os.path.abspath(tree), "OMP_NUM_THREADS": "1"}
+    env = {**os.environ, "PYTHONPATH": os.path.abspath(tree), "OMP_NUM_THREADS": "1",
+           "OMP_WAIT_POLICY": os.environ.get("OMP_WAIT_POLICY", "PASSIVE")}  # as `aoc` sets it
     subprocess.run([sys.executable, "-c", WORKER, store, name, str(steps), out], env=env,
                    check=True, cwd=tempfile.gettempdir())
     with open(out) as f:

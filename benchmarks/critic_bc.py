@@ -15,6 +15,10 @@ import argparse
 import json
 import tempfile
 
+from aoc_cli.threads import wait_passively  # noqa: E402
+
+wait_passively()  # OpenMP threads wait passively, as under the aoc command (aoc_cli/threads.py)
+
 import torch
 
 

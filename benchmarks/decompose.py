@@ -29,6 +29,10 @@ import time
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
+from aoc_cli.threads import wait_passively  # noqa: E402
+
+wait_passively()  # OpenMP threads wait passively, as under the aoc command (aoc_cli/threads.py)
+
 import faiss  # noqa: E402
 import numpy as np  # noqa: E402
 

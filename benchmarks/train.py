@@ -36,6 +36,10 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
+from aoc_cli.threads import wait_passively  # noqa: E402
+
+wait_passively()  # OpenMP threads wait passively, as under the aoc command (aoc_cli/threads.py)
+
 from aoc_cli.belief import (BeliefConfig, episode_rows, load_model, logistic_probe,  # noqa: E402
                             split_episodes, train_model)
 from aoc_cli.envs import collect  # noqa: E402
