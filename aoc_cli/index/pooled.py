@@ -29,7 +29,6 @@ def pooled_search(ix, Y: np.ndarray, k: int, sel, available: int, depth: int = 0
     cfg = ix.config
     kp = int(min(available, max(math.ceil(cfg.pool_factor * k), cfg.pool_min, k)))
     c = Y.mean(axis=0, keepdims=True)
-    spread = np.sqrt(((Y.astype(np.float64) - c.astype(np.float64)) ** 2).sum(axis=1))
     for attempt in range(3):
         with faiss_threads(1):  # one query: threads only add synchronisation
             Dc, Ic = ix.index.search(c, kp, params=ix._params(sel, kp))
@@ -42,9 +41,7 @@ def pooled_search(ix, Y: np.ndarray, k: int, sel, available: int, depth: int = 0
             return d2, pos  # the pool is every available row
         if pool.size < kp:  # an IVF ran out of probed rows: the pool bounds nothing
             return ix._direct(Y, k, sel)
-        radius = math.sqrt(max(float(Dc[0, pool.size - 1]), 0.0))
-        kth = np.sqrt(np.maximum(d2[:, -1], 0.0))
-        certified = kth <= (radius - spread) - 1e-5 * radius
+        certified = within_pool(d2[:, -1], Y, c[0], float(Dc[0, pool.size - 1]))
         if certified.all() or kp >= available:
             return d2, pos
         if attempt < 2 and 0.3 <= certified.mean() < 0.95:
@@ -107,10 +104,7 @@ def _split(ix, Y: np.ndarray, k: int, sel, available: int, depth: int):
             continue
         gd2, gp = exact_among(Y[g], V, k)
         d2[g], pos[g] = gd2, pool[gp]
-        radius = math.sqrt(max(r2, 0.0))
-        spread = np.sqrt(((Y[g].astype(np.float64) - C[j].astype(np.float64)) ** 2).sum(axis=1))
-        kth = np.sqrt(np.maximum(gd2[:, -1], 0.0))
-        todo[g] = ~(kth <= (radius - spread) - 1e-5 * radius)
+        todo[g] = ~within_pool(gd2[:, -1], Y[g], C[j], r2)
     rest = np.flatnonzero(todo)
     if rest.size:
         d2[rest], pos[rest] = _split(ix, Y[rest], k, sel, available, depth + 1)
@@ -168,3 +162,19 @@ def exact_among(Y: np.ndarray, V: np.ndarray, k: int) -> tuple[np.ndarray, np.nd
     if k > 0:
         pool_knn(Y32, V32, k, pos, d2)
     return d2, pos
+
+
+def within_pool(kth_d2: np.ndarray, Y: np.ndarray, centre: np.ndarray,
+                pool_d2: float) -> np.ndarray:
+    """The pool certificate: (Q,) bool, True where a query's k nearest rows are certainly
+    among the pool, the rows within squared distance ``pool_d2`` of ``centre`` (d,).
+
+    kth_d2: (Q,) each query's k-th squared distance within the pool; Y: (Q, d) the queries.
+    By the triangle inequality a row nearer to query y than its k-th pool row (distance
+    kth) is within kth + ||y - centre|| of the centre; when that is inside the pool's radius
+    (less a relative 1e-5 for rounding), no row outside the pool can be among y's k nearest.
+    """
+    radius = math.sqrt(max(pool_d2, 0.0))
+    spread = np.sqrt(((Y.astype(np.float64) - centre.astype(np.float64)) ** 2).sum(axis=1))
+    kth = np.sqrt(np.maximum(kth_d2, 0.0))
+    return kth <= (radius - spread) - 1e-5 * radius
