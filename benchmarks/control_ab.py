@@ -2,10 +2,11 @@
 
 Separate processes drift with the load of a shared machine (+-15 % between runs here); this
 script alternates, step by step and in alternating order, the current code and the current code
-with an older tree's decomposition: its `aoc_cli/decompose/engine.py` (steps 1-4),
-`aoc_cli/decompose/minnorm.py` (the residual QP), `aoc_cli/index/grouped.py` (the exact
-grouped scan of a flat index) and `aoc_cli/index/pooled.py` (the batch search of an IVF / HNSW
-index), on the same states and the same candidates, and checks that both give the same
+with an older tree's decomposition and search: its `aoc_cli/decompose/engine.py` (steps 1-4),
+`aoc_cli/decompose/minnorm.py` (the residual QP) and its `aoc_cli/index/belief_index.py` with
+the batch searches it uses (`scan_kernels.py`, `grouped.py`, `cells.py`, `pooled.py`, those the
+tree has), each arm's `BeliefIndex` over the same FAISS index and beliefs, on the same states
+and the same candidates, and checks that both give the same
 decision: `differ` counts the steps whose chosen candidate differs, `rows` the steps whose
 neighbour search returned different rows (or the same rows in another order), `d res` and
 `d value` are the largest change of a candidate's residual and value over all steps, relative
@@ -46,7 +47,8 @@ from control import advance, parse_size  # noqa: E402
 
 
 def load(tree: str, rel: str, name: str):
-    """The module at tree/rel, imported under `name` (its own imports resolve to this tree)."""
+    """The module at tree/rel, imported under `name` (its own imports resolve to this tree,
+    except the modules already swapped in by `arms`)."""
     spec = importlib.util.spec_from_file_location(name, os.path.join(tree, rel))
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module
@@ -54,43 +56,55 @@ def load(tree: str, rel: str, name: str):
     return module
 
 
+#: The older tree's modules of the step, loaded in this order; while they load, each stands in
+#: for its name in ``sys.modules`` so the later ones import the older ones (then restored).
+OLD = ("aoc_cli/index/scan_kernels.py", "aoc_cli/index/grouped.py", "aoc_cli/index/cells.py",
+       "aoc_cli/index/pooled.py", "aoc_cli/index/belief_index.py",
+       "aoc_cli/decompose/minnorm.py", "aoc_cli/decompose/engine.py")
+
+
 def arms(old_tree: str) -> dict:
-    grouped = load(old_tree, "aoc_cli/index/grouped.py", "old_grouped")
-    minnorm = load(old_tree, "aoc_cli/decompose/minnorm.py", "old_minnorm")
-    engine = load(old_tree, "aoc_cli/decompose/engine.py", "old_engine")
-    pooled = load(old_tree, "aoc_cli/index/pooled.py", "old_pooled")
-    engine.min_norm_point = minnorm.min_norm_point
-    return {"new": {"grouped_search": BI.grouped_search, "ScanData": BI.ScanData,
-                    "decompose": build.decompose, "pooled_search": BI.pooled_search,
-                    "exact_among": BI._exact_among},
-            "old": {"grouped_search": grouped.grouped_search, "ScanData": grouped.ScanData,
-                    "decompose": engine.decompose, "pooled_search": pooled.pooled_search,
-                    "exact_among": pooled.exact_among}}
+    saved, old = {}, {}
+    try:
+        for rel in OLD:
+            if not os.path.exists(os.path.join(old_tree, rel)):
+                continue
+            name = rel[:-3].replace("/", ".")
+            old[name] = load(old_tree, rel, "old_" + name.rsplit(".", 1)[1])
+            saved[name] = sys.modules.get(name)
+            sys.modules[name] = old[name]
+    finally:
+        for name, module in saved.items():
+            if module is None:
+                sys.modules.pop(name, None)
+            else:
+                sys.modules[name] = module
+    return {"new": {"decompose": build.decompose, "index": BI.BeliefIndex},
+            "old": {"decompose": old["aoc_cli.decompose.engine"].decompose,
+                    "index": old["aoc_cli.index.belief_index"].BeliefIndex}}
 
 
 def run(store: Store, name: str, steps: int, code: dict) -> str:
     corpus = store.corpus(name)
     session = open_session(corpus)
-    ctl, model, index = session.controller, session.model, session.index.index
-    scans: dict = {}
+    ctl, model, base = session.controller, session.model, session.index.index
     found: dict = {"old": [], "new": []}  # the rows of every search of the step, per arm
-    search = type(index).search
+    index = {}
+    for arm in ("old", "new"):  # each arm's BeliefIndex over the same FAISS index and beliefs
+        ix = code[arm]["index"](base.index, base.config, base.kind, base.n_rows, None, base.beliefs)
+        search = type(ix).search
 
-    def recorded(self, *a, **kw):
-        out = search(self, *a, **kw)
-        found[current].append(out[1].copy())
-        return out
+        def recorded(*a, _arm=arm, _ix=ix, _search=search, **kw):
+            out = _search(_ix, *a, **kw)
+            found[_arm].append(out[1].copy())
+            return out
+
+        ix.search = recorded
+        index[arm] = ix
 
     def use(arm: str) -> None:
-        nonlocal current
-        current = arm
-        BI.grouped_search, BI.ScanData = code[arm]["grouped_search"], code[arm]["ScanData"]
-        BI.pooled_search, BI._exact_among = code[arm]["pooled_search"], code[arm]["exact_among"]
         build.decompose = code[arm]["decompose"]
-        index._scan = scans.get(arm)
-
-    current = "new"
-    index.search = recorded.__get__(index)
+        session.index.index = index[arm]
 
     env = make_env("pendulum-het")
     buf = HistoryBuffer(model.history_length, corpus.observation_dim, 1, False)
@@ -108,7 +122,6 @@ def run(store: Store, name: str, steps: int, code: dict) -> str:
             t0 = time.perf_counter()
             dec[arm] = ctl.decide(obs, h, candidates=cand)
             times[arm].append(time.perf_counter() - t0)
-            scans[arm] = index._scan
         a, b = dec["old"], dec["new"]
         differ += int(a.chosen != b.chosen)
         rows += int(len(found["old"]) != len(found["new"]) or not all(
@@ -118,9 +131,8 @@ def run(store: Store, name: str, steps: int, code: dict) -> str:
         dval = max(dval, _rel(a.candidate_values, b.candidate_values))
         obs = advance(env, buf, obs, b.action)
     use("new")
-    del index.search
     o, n = np.array(times["old"][2:]), np.array(times["new"][2:])  # the first steps build scans
-    return (f"{corpus.n_rows:>8} {index.kind:>5} {1e3 * np.median(o):>8.2f} {1e3 * np.median(n):>8.2f} "
+    return (f"{corpus.n_rows:>8} {base.kind:>5} {1e3 * np.median(o):>8.2f} {1e3 * np.median(n):>8.2f} "
             f"{np.median(o) / np.median(n):>6.2f} {np.median(o / n):>9.2f} {differ:>7d} {rows:>5d} "
             f"{dres:>8.1e} {dval:>8.1e} {os.getloadavg()[0]:>5.2f}")
 

@@ -19,7 +19,7 @@ import numpy as np
 
 from aoc_cli.errors import AocError
 from aoc_cli.index.config import IndexConfig
-from aoc_cli.index.grouped import ScanData, grouped_search
+from aoc_cli.index.cells import CellData, cells_search
 from aoc_cli.index.pooled import exact_among as _exact_among, pooled_search
 from aoc_cli.index.threads import faiss_threads, single_threaded_blas
 from aoc_cli.store.atomic import atomic_path, write_json, write_npy
@@ -64,7 +64,7 @@ class BeliefIndex:
         self._row_of = None if row_of is None else np.asarray(row_of, dtype=np.int64)
         self.beliefs = beliefs
         self._store = _storage_view(index, kind)
-        self._scan: ScanData | None = None  # built on the first batched search of a flat index
+        self._cells: CellData | None = None  # built on the first batched search (flat, IVF)
 
     # ---------------------------------------------------------------- building
     @classmethod
@@ -168,10 +168,11 @@ class BeliefIndex:
         queries: (Q, d) beliefs. selection: None, a row mask (N,) bool, an array of rows, or a
         prepared `Selection`. Returns distances (Q, k) float64, Euclidean, ascending, and rows
         (Q, k) int64 corpus rows; when fewer than k rows are available the tail is padded with
-        inf / -1. A batch of a flat index is searched exactly by one scan at the centroids of
-        groups of nearby queries (grouped.py); a batch of an approximate index is served by
-        one search at its centroid when that answer is certified (see
-        IndexConfig.pool_factor), the rest by groups and then query by query.
+        inf / -1. A batch (Q >= 2) of a flat or IVF-Flat index is searched exactly, cell by
+        cell with distance bounds (cells.py: k-means cells of a flat index, the inverted lists
+        of an IVF); a batch of an HNSW index is served by one search at its centroid when
+        that answer is certified (see IndexConfig.pool_factor), the rest by groups and then
+        query by query (pooled.py); a single query by FAISS (approximate for IVF and HNSW).
         """
         Y = _as_queries(queries, self.dim)
         if k < 1:
@@ -186,8 +187,9 @@ class BeliefIndex:
                 # a small selection: exact over the selected rows, whatever the kind
                 d2, p = _exact_among(Y, self.vectors(sel.positions), kk)
                 dist[:, :kk], pos[:, :kk] = d2, sel.positions[p]
-            elif Y.shape[0] >= 2 and self.kind == "flat" and self._store is not None:
-                dist[:, :kk], pos[:, :kk] = self._grouped(Y, kk, sel, available)
+            elif Y.shape[0] >= 2 and self.cells() is not None:
+                dist[:, :kk], pos[:, :kk] = cells_search(Y, self.cells(), kk,
+                                                         None if sel is None else sel.mask)
             elif Y.shape[0] >= 2:
                 dist[:, :kk], pos[:, :kk] = pooled_search(self, Y, kk, sel, available)
             else:
@@ -201,12 +203,16 @@ class BeliefIndex:
         D = np.where(I >= 0, D.astype(np.float64), np.inf)
         return D, I
 
-    def _grouped(self, Y: np.ndarray, k: int, sel: Selection | None, available: int):
-        """Exact search of a flat index: one scan at group centroids (see grouped.py)."""
-        if self._scan is None:
-            self._scan = ScanData.of(self._store)
-        out = grouped_search(Y, self._scan, k, None if sel is None else sel.mask)
-        return self._direct(Y, k, sel) if out is None else out
+    def cells(self) -> CellData | None:
+        """The rows cell by cell for the exact batch search (cells.py), built at the first call:
+        k-means cells of a flat index, the inverted lists of an IVF-Flat (L2) one; None for
+        any other index (HNSW: batches by pooled.py)."""
+        if self._cells is None or self._cells.ids.shape[0] != self.size:
+            if self.kind == "flat" and self._store is not None:
+                self._cells = CellData.kmeans(self._store, self.config.seed)
+            elif isinstance(self.index, faiss.IndexIVFFlat) and self.index.metric_type == faiss.METRIC_L2:
+                self._cells = CellData.ivf(self.index, self.config.seed)
+        return self._cells
 
     # ---------------------------------------------------------------- adaptivity
     def resample(self, row_rates, seed: int | None = None) -> "BeliefIndex":
