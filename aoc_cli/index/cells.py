@@ -224,8 +224,12 @@ def _visit(y32, y, lo, hi, yh, shift, T, radius, offsets, rho, rows, head, ids, 
     heap (hd, hr); T: a bound on its k-th distance known beforehand (inf: none)."""
     d = y.shape[0]
     top, toph = _bounds(T, shift)
-    order = np.argsort(lo)
-    for j in range(lo.shape[0]):
+    if T == np.inf:
+        order = np.argsort(lo)
+    else:  # only the cells the bound leaves, sorted (a few of them)
+        order = np.flatnonzero(lo - radius <= T + SLACK * (hi + T) + 1e-30)
+        order = order[np.argsort(lo[order])]
+    for j in range(order.shape[0]):
         l = order[j]
         a, b = offsets[l], offsets[l + 1]
         slack = SLACK * (hi[l] + T) + 1e-30
