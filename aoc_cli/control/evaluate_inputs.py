@@ -139,7 +139,7 @@ class KNNBaseline:
         self.mean, self.std = obs.mean(0), np.where(obs.std(0) > 1e-9, obs.std(0), 1.0)
         self.value = ctx.mode == "value"
         x = self.features(ctx, obs, ctx.corpus_actions)
-        # exact (flat: a batch is one grouped scan, aoc_cli/index/grouped.py), or IVF when large
+        # exact (flat: a batch is searched cell by cell, aoc_cli/index/cells.py), or IVF when large
         x = x.astype(np.float32)
         self.nn = search_structure(None, x, ctx.exact, ctx.seed) or \
             BeliefIndex.build(x, kind="flat")

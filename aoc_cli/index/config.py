@@ -17,17 +17,17 @@ class IndexConfig:
     The index answers  N_k(y) = the k corpus rows c minimising ||b^c - y||_2  (the paper uses
     k = 2(d_b + 1) neighbours, docs/design.md "The method, precisely", step 1).
 
-    kind: "flat" is exact brute force; "hnsw" (graph) and "ivf" (inverted lists) are approximate;
-        "auto" picks flat up to `auto_flat_max` rows and ivf beyond: IVF-Flat keeps the index
-        at ~1.1x the belief array (HNSW with M = 32 needs ~4x), and a control step's batch
-        costs one search of the index (see pool_factor), so HNSW's faster single queries
-        matter little.
+    kind: "flat" is exact brute force; "hnsw" (graph) and "ivf" (inverted lists) are approximate
+        for a single query; a batch of queries (a control step's candidates) is searched
+        exactly for flat and IVF-Flat (cell by cell with distance bounds, cells.py: an IVF's
+        lists are its cells). "auto" picks flat up to `auto_flat_max` rows and ivf beyond:
+        IVF-Flat keeps the index at ~1.1x the belief array (HNSW with M = 32 needs ~4x).
     hnsw_m, hnsw_ef_construction, hnsw_ef_search: graph degree and beam widths (the search beam
         is raised to at least the number of neighbours asked for).
     ivf_nlist: number of inverted lists (0: sqrt(N) rounded down to a power of two, at most 4096);
         ivf_nprobe: lists visited per query; ivf_train_max: rows used to train the coarse quantiser.
-    pool_factor, pool_min: batched search with an approximate kind (a flat index answers a batch
-        with the exact grouped scan of ``aoc_cli/index/grouped.py`` instead). The Q queries of
+    pool_factor, pool_min: batched search of an HNSW index (a flat or IVF-Flat index answers a
+        batch exactly by the cell search of ``aoc_cli/index/cells.py`` instead). The Q queries of
         one control step lie close together, so the index is searched once, at their centroid c, for k' = max(pool_factor * k,
         pool_min) rows. A row outside that pool is at least d_k'(c) - ||y_i - c|| from query i
         (triangle inequality), so query i's k nearest rows inside the pool are its exact k

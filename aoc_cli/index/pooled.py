@@ -1,7 +1,8 @@
-"""Batched search of an approximate (HNSW, IVF) index: one search at the batch's centroid
-serves every query it can certify by the triangle inequality, groups of the rest are searched
-at their own centroids, and what is left query by query (see IndexConfig.pool_factor). A flat
-index uses the exact grouped scan of ``grouped.py`` instead.
+"""Batched search of an HNSW index (or an IVF other than IVF-Flat L2): one search at the
+batch's centroid serves every query it can certify by the triangle inequality, groups of the
+rest are searched at their own centroids, and what is left query by query (see
+IndexConfig.pool_factor). A flat or IVF-Flat index uses the exact cell search of
+``cells.py`` instead; ``exact_among`` also serves small selections of any index.
 
 Shapes: Y (Q, d) float32 queries; results (Q, k) squared distances float64 and positions int64.
 """
@@ -13,7 +14,7 @@ import math
 import faiss
 import numpy as np
 
-from aoc_cli.index.scan_kernels import list_dists, pool_knn
+from aoc_cli.index.scan_kernels import pool_knn
 from aoc_cli.index.threads import faiss_threads
 
 
@@ -75,30 +76,15 @@ def _split(ix, Y: np.ndarray, k: int, sel, available: int, depth: int):
     cfg = ix.config
     base = max(math.ceil(cfg.pool_factor * k), cfg.pool_min, k)
     kp = int(min(available, (6 if ivf else 2) * base))
-    lists = _ivf_lists(ix) if ivf and sel is None else None
-    if lists is None:
-        with faiss_threads(1):
-            Dc, Ic = ix.index.search(C, kp, params=ix._params(sel, kp))
-    else:  # the same probed lists as FAISS's search, their rows scanned here (see _ivf_lists)
-        with faiss_threads(1):
-            Ic = ix.index.quantizer.search(C, min(ix.config.ivf_nprobe, ix.index.nlist))[1]
+    with faiss_threads(1):
+        Dc, Ic = ix.index.search(C, kp, params=ix._params(sel, kp))
     d2 = np.empty((n, k))
     pos = np.empty((n, k), dtype=np.int64)
     todo = np.zeros(n, dtype=bool)
     for j, g in enumerate(groups):
-        if lists is None:
-            pool = Ic[j][Ic[j] >= 0]
-            r2 = float(Dc[j, pool.size - 1]) if pool.size else -1.0
-            V = ix.vectors(pool) if pool.size >= kp else None
-        else:
-            offsets, ids, vecs = lists
-            dist, at = list_dists(C[j], Ic[j], offsets, vecs)
-            r2 = -1.0
-            if dist.size >= kp:  # the rows within the kp-th distance (ties included)
-                r2 = float(np.partition(dist, kp - 1)[kp - 1])
-                at = at[dist <= r2]
-            order = np.argsort(ids[at], kind="stable")  # ties between queries' rows: lower id
-            pool, V = ids[at[order]], vecs[at[order]]
+        pool = Ic[j][Ic[j] >= 0]
+        r2 = float(Dc[j, pool.size - 1]) if pool.size else -1.0
+        V = ix.vectors(pool) if pool.size >= kp else None
         if pool.size < kp:  # too few rows (selection, IVF): the pool bounds nothing
             todo[g] = True
             continue
@@ -109,40 +95,6 @@ def _split(ix, Y: np.ndarray, k: int, sel, available: int, depth: int):
     if rest.size:
         d2[rest], pos[rest] = _split(ix, Y[rest], k, sel, available, depth + 1)
     return d2, pos
-
-
-def _ivf_lists(ix):
-    """(offsets (nlist + 1,) int64, ids (N,) int64, vectors (N, d) float32): the inverted
-    lists of an IVF-Flat L2 index copied list after list (built once, kept on ``ix``), or None
-    for any other index.
-
-    A group's pool is then the rows of its centroid's probed lists (the lists FAISS's own
-    search would scan, from the same quantizer call) within the kp-th smallest float32
-    distance, from one compiled pass (``list_dists``) and a partition, instead of FAISS's
-    k = kp heap search. A certified query's
-    k nearest are within radius (1 - 1e-5) of the centroid, so they are in any such pool and
-    the answer is the same; the pool's order (ascending index position) only breaks exact
-    ties, as FAISS's order of equal distances does.
-    """
-    index = ix.index
-    cached = getattr(ix, "_pooled_lists", None)
-    if cached is not None and cached[0] is index and cached[1] == index.ntotal:
-        return cached[2]
-    lists = None
-    if isinstance(index, faiss.IndexIVFFlat) and index.metric_type == faiss.METRIC_L2:
-        inv = index.invlists
-        sizes = np.array([inv.list_size(l) for l in range(index.nlist)], dtype=np.int64)
-        offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
-        ids = np.empty(int(offsets[-1]), dtype=np.int64)
-        vecs = np.empty((int(offsets[-1]), index.d), dtype=np.float32)
-        for l in np.flatnonzero(sizes):
-            a, b = offsets[l], offsets[l + 1]
-            ids[a:b] = faiss.rev_swig_ptr(inv.get_ids(int(l)), int(b - a))
-            codes = faiss.rev_swig_ptr(inv.get_codes(int(l)), int(b - a) * index.code_size)
-            vecs[a:b] = np.frombuffer(codes, dtype=np.float32).reshape(-1, index.d)
-        lists = (offsets, ids, vecs)
-    ix._pooled_lists = (index, index.ntotal, lists)
-    return lists
 
 
 def exact_among(Y: np.ndarray, V: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:

@@ -1,113 +1,12 @@
-"""Compiled inner loops of the grouped scan (grouped.py): numba, single-threaded, float64 tests.
-
-Both kernels walk the (M, G) float32 matrix D2 of the rows' squared distances to the G group
-centroids (minus ||c_g||^2, as the GEMM gives them) once, row by row, so the per-row work is a
-few compares instead of several numpy passes over M entries.
+"""Compiled pieces shared by the exact searches (numba, single-threaded): the k nearest rows
+of a pool (``pool_knn``, pooled.py's ``exact_among``) and the heap of the k best ordered by
+(distance, position) that it and the cell search (cells.py) keep.
 """
 
 from __future__ import annotations
 
 import numba
 import numpy as np
-
-
-@numba.njit(cache=True, nogil=True)
-def sample_kth(D2, step, j):  # pragma: no cover - compiled
-    """(G,) float64: for each column g, the (j + 1)-th smallest of D2[::step, g] (D2: (M, G)
-    float32), kept by an insertion into the j + 1 smallest seen."""
-    M, G = D2.shape
-    best = np.full((G, j + 1), np.inf, dtype=np.float32)
-    for m in range(0, M, step):
-        for g in range(G):
-            x = D2[m, g]
-            if x < best[g, j]:
-                b = j
-                while b > 0 and best[g, b - 1] > x:
-                    best[g, b] = best[g, b - 1]
-                    b -= 1
-                best[g, b] = x
-    return best[:, j].astype(np.float64)
-
-
-@numba.njit(cache=True, nogil=True)
-def rows_under(D2, thresholds):  # pragma: no cover - compiled
-    """(p,) int64 ascending rows m with D2[m, g] <= thresholds[g] for some group g.
-
-    D2: (M, G) float32; thresholds: (G,) float64."""
-    M, G = D2.shape
-    t32 = _up32(thresholds)
-    out = np.empty(M, dtype=np.int64)
-    n = 0
-    for m in range(M):
-        hit = False
-        for g in range(G):  # branch-free: vectorised
-            hit |= D2[m, g] <= t32[g]
-        if hit:
-            out[n] = m
-            n += 1
-    return out[:n]
-
-
-@numba.njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
-def ball_knn(D2, limit, starts, members, hi, lo, Y, u2, rows, Y32, rows32, k, out_rows, out_d2):  # pragma: no cover
-    """Exact k nearest rows of every query among the rows its group's centroid bounds keep.
-
-    D2: (M, G) float32 centroid distances (D2 scale: ||b - c_g||^2 - ||c_g||^2, with rounding);
-    limit: (G,) a row with D2[m, g] > limit[g] is farther than u_i from every query i of group g;
-    starts (G + 1,), members (Q,): the queries of group g are members[starts[g]:starts[g + 1]];
-    hi, lo: (Q,) float64, a row with D2[m, g] > hi[i] or < lo[i] (g the group of query i) is
-    farther than u_i from query i (its annulus about c_g, rounding included);
-    Y: (Q, d) float64 queries and Y32 the same in float32; u2: (Q,) float64 bound on each
-    query's k-th squared distance; rows: (M, d) float64 and rows32 (M, d) float32, the rows.
-
-    Fills out_rows (Q, k) int64 and out_d2 (Q, k) float64 (squared distances from the
-    differences, ascending; ties by row), and returns the fewest rows any query found within its
-    bound (< k: the bound was beaten by rounding, and the answer is incomplete). The float32
-    distance (any summation order) only filters; the kept distances are float64, summed in
-    order.
-    """
-    M, G = D2.shape
-    Q, d = Y.shape
-    heap_d = np.full((Q, k), np.inf)
-    heap_r = np.full((Q, k), -1, dtype=np.int64)
-    found = np.zeros(Q, dtype=np.int64)
-    l32 = _up32(limit)
-    hi32 = _up32(hi)
-    lo32 = -_up32(-lo)
-    # float32 squared distances of float32 data (all terms >= 0) are within (d + 2) 2^-24 of
-    # the exact value, relatively: a row whose float32 distance exceeds u2 (1 + 1e-5) is out
-    u2f = _up32(u2 * (1.0 + 1e-5))
-    for m in range(M):
-        hit = False
-        for g in range(G):  # branch-free: vectorised; most rows are in no ball
-            hit |= D2[m, g] <= l32[g]
-        if not hit:
-            continue
-        for g in range(G):
-            x = D2[m, g]
-            if x > l32[g]:
-                continue
-            for s in range(starts[g], starts[g + 1]):
-                i = members[s]
-                if x > hi32[i] or x < lo32[i]:
-                    continue
-                e32 = np.float32(0.0)
-                for t in range(d):
-                    x32 = rows32[m, t] - Y32[i, t]
-                    e32 += x32 * x32
-                if e32 > u2f[i]:
-                    continue
-                e = 0.0
-                for t in range(d):
-                    diff = rows[m, t] - Y[i, t]
-                    e = e + diff * diff
-                if e > u2[i]:
-                    continue
-                found[i] += 1
-                if e < heap_d[i, 0]:  # a max-heap of the k best (ties: the earlier rows stay)
-                    _replace_top(heap_d[i], heap_r[i], e, m)
-    _sort_heaps(heap_d, heap_r, out_d2, out_rows)
-    return found.min() if Q else k
 
 
 @numba.njit(cache=True, nogil=True)
@@ -175,16 +74,6 @@ def _sq32(a, b):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
-def _up32(x):  # pragma: no cover - compiled
-    """x (float64) as float32 rounded up, so a float32 x <= _up32(t) holds whenever x <= t."""
-    out = x.astype(np.float32)
-    for g in range(x.shape[0]):
-        if np.float64(out[g]) < x[g]:
-            out[g] = np.nextafter(out[g], np.float32(np.inf))
-    return out
-
-
-@numba.njit(cache=True, nogil=True)
 def _replace_top(hd, hr, e, m):  # pragma: no cover - compiled
     """Replace the largest entry of the max-heap (hd, hr), ordered by (distance, row), by
     (e, m) and restore the heap (the entry evicted among equal distances is the latest row)."""
@@ -203,32 +92,6 @@ def _replace_top(hd, hr, e, m):  # pragma: no cover - compiled
         p = c
     hd[p] = e
     hr[p] = m
-
-
-@numba.njit(cache=True, nogil=True)
-def list_dists(c, lists, offsets, vecs):  # pragma: no cover - compiled
-    """The float32 squared distances of c to the rows of the given inverted lists.
-
-    c: (d,) float32 point; lists: (p,) int64 list numbers (< 0: none); offsets (nlist + 1,) and
-    vecs (N, d) float32: the lists' rows, list after list. Returns (n,) float32 distances (from
-    the differences, as FAISS's IVF-Flat scan computes them; within (d + 2) 2^-24 of the exact
-    value, relatively) and (n,) int64 the rows' indices into vecs, in list order.
-    """
-    n = 0
-    for l in lists:
-        if l >= 0:
-            n += offsets[l + 1] - offsets[l]
-    dist = np.empty(n, dtype=np.float32)
-    idx = np.empty(n, dtype=np.int64)
-    n = 0
-    for l in lists:
-        if l < 0:
-            continue
-        for m in range(offsets[l], offsets[l + 1]):
-            dist[n] = _sq32(vecs[m], c)
-            idx[n] = m
-            n += 1
-    return dist, idx
 
 
 @numba.njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})

@@ -1,4 +1,5 @@
-"""The grouped scan of a flat index (control-step batches) returns the exact k nearest rows."""
+"""The batch search of a flat index (control-step batches, cells.py) returns the exact k
+nearest rows."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ import pytest
 
 from aoc_cli.index import BeliefIndex
 from aoc_cli.index.pooled import exact_among as _exact_among
-from aoc_cli.index.grouped import ScanData, grouped_search
+from aoc_cli.index.cells import CellData, cells_search
 
 
 def brute_force(beliefs: np.ndarray, queries: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
@@ -54,7 +55,7 @@ def corpus(beliefs):
 
 
 @pytest.mark.parametrize("length", [0.05, 0.5, 2.0])
-def test_grouped_scan_equals_brute_force_on_spread_batches(beliefs, corpus, length):
+def test_batch_search_equals_brute_force_on_spread_batches(beliefs, corpus, length):
     index = BeliefIndex.build(corpus, kind="flat")
     for _ in range(3):
         queries = beliefs.control_step(100, length)
@@ -63,9 +64,7 @@ def test_grouped_scan_equals_brute_force_on_spread_batches(beliefs, corpus, leng
         spread = np.linalg.norm(queries - queries.mean(0), axis=1).max()
         if length >= 2.0:
             assert spread > np.median(truth_d[:, -1])
-        out = grouped_search(queries, ScanData.of(corpus), 42)
-        assert out is not None
-        d2, pos = out
+        d2, pos = cells_search(queries, index.cells(), 42)
         assert (np.sort(pos, axis=1) == truth_rows).all()
         np.testing.assert_allclose(np.sqrt(d2), truth_d, rtol=1e-7, atol=1e-9)
         dist, rows = index.search(queries, 42)  # the same through the index
@@ -73,16 +72,17 @@ def test_grouped_scan_equals_brute_force_on_spread_batches(beliefs, corpus, leng
         np.testing.assert_allclose(dist, truth_d, rtol=1e-7, atol=1e-9)
 
 
-def test_grouped_scan_is_exact_for_scattered_queries_and_small_k(corpus):
+def test_batch_search_is_exact_for_scattered_queries_and_small_k(corpus):
     rng = np.random.default_rng(7)
     queries = rng.uniform(-1, 1, (37, 20)).astype(np.float32)  # no structure at all
+    cells = CellData.kmeans(corpus)
     for k in (1, 5, 42):
         _, truth_rows = brute_force(corpus, queries, k)
-        _, pos = grouped_search(queries, ScanData.of(corpus), k)
+        _, pos = cells_search(queries, cells, k)
         assert (np.sort(pos, axis=1) == truth_rows).all()
 
 
-def test_grouped_scan_respects_a_row_mask_and_copies(beliefs, corpus):
+def test_batch_search_respects_a_row_mask_and_copies(beliefs, corpus):
     index = BeliefIndex.build(corpus, kind="flat")
     rng = np.random.default_rng(8)
     allowed = rng.random(len(corpus)) < 0.4  # too many rows for the small-selection path
@@ -98,47 +98,9 @@ def test_grouped_scan_respects_a_row_mask_and_copies(beliefs, corpus):
     assert (np.sort(rows, axis=1) == np.sort(np.repeat(truth, 2, axis=1), axis=1)).all()
 
 
-def test_exact_among_and_grouped_scan_agree_on_the_distances(beliefs, corpus):
+def test_exact_among_and_the_cell_search_agree_on_the_distances(beliefs, corpus):
     queries = beliefs.control_step(60, 1.0)
     d2_all, pos_all = _exact_among(queries, corpus, 42)
-    d2, pos = grouped_search(queries, ScanData.of(corpus), 42)
+    d2, pos = cells_search(queries, CellData.kmeans(corpus), 42)
     assert (np.sort(pos, 1) == np.sort(pos_all, 1)).all()
     np.testing.assert_allclose(d2, d2_all, rtol=1e-9)
-
-
-def test_ball_kernel_keeps_the_k_nearest_with_ties_and_counts_rows_under_the_bound():
-    from aoc_cli.index.scan_kernels import ball_knn
-
-    rng = np.random.default_rng(3)
-    rows = rng.integers(0, 4, (300, 3)).astype(np.float64)  # many exact distance ties
-    Y = rng.integers(0, 4, (9, 3)) + 0.25
-    d2 = ((rows[None] - Y[:, None]) ** 2).sum(-1)
-    k = 7
-    kth = np.sort(d2, axis=1)[:, k - 1]
-    G = 2
-    D2 = np.zeros((300, G), np.float32)
-    starts, members = np.array([0, 5, 9]), np.arange(9)
-    inf = np.full(9, np.inf)
-    by_row = np.arange(300)[None].repeat(9, 0)
-
-    def run(u2, hi=inf):
-        out_r, out_d = np.empty((9, k), np.int64), np.empty((9, k))
-        found = ball_knn(D2, np.full(G, np.inf), starts, members, hi, -inf, Y, u2, rows,
-                         Y.astype(np.float32), rows.astype(np.float32), k, out_r, out_d)
-        return found, out_r, out_d
-
-    for u2 in (kth, kth + 0.5, np.where(np.arange(9) == 4, kth - 0.01, kth + 0.01)):
-        found, out_r, out_d = run(u2)
-        assert found == ((d2 <= u2[:, None]).sum(1)).min()
-        full = np.lexsort((by_row, d2), axis=1)[:, :k]
-        ok = np.arange(9) != 4 if found < k else np.ones(9, bool)
-        np.testing.assert_array_equal(out_r[ok], full[ok])  # nearest first, ties by row
-        np.testing.assert_array_equal(out_d[ok], np.take_along_axis(d2, full, 1)[ok])
-    # a row outside query 0's annulus (D2 above its bound) is never returned to it
-    D2[full[0, 0], 0] = 5.0
-    hi = inf.copy()
-    hi[0] = 4.0
-    found, out_r, _ = run(kth + 0.5, hi)
-    rest = np.lexsort((np.arange(300), np.where(np.arange(300) == full[0, 0], np.inf, d2[0])))[:k]
-    np.testing.assert_array_equal(out_r[0], rest)
-    np.testing.assert_array_equal(out_r[1:], np.lexsort((by_row, d2), axis=1)[1:, :k])
