@@ -87,13 +87,18 @@ class CellData:
         nonempty = sizes > 0
         radius[nonempty] = np.maximum.reduceat(rho, offsets[:-1][nonempty])
         rows = np.ascontiguousarray(rows[order], dtype=np.float32)
+        return cls._with_axes(centres, offsets, rows, np.ascontiguousarray(ids[order], dtype=np.int64),
+                              rho, radius, seed)
+
+    @classmethod
+    def _with_axes(cls, centres, offsets, rows, ids, rho, radius, seed) -> "CellData":
+        """The cells with the rows' principal coordinates added (computed by blocks)."""
         mean, axes = _principal_axes(rows, seed)
         head = np.empty((rows.shape[0], axes.shape[1]), dtype=np.float32)
         for a in range(0, rows.shape[0], BLOCK):
             head[a:a + BLOCK] = (rows[a:a + BLOCK].astype(np.float64) - mean) @ axes
         reach = float(np.sqrt(np.einsum("mh,mh->m", head, head).max(initial=0.0)))
-        return cls(centres, offsets, rows, np.ascontiguousarray(ids[order], dtype=np.int64),
-                   rho, radius, mean, axes, head, reach)
+        return cls(centres, offsets, rows, ids, rho, radius, mean, axes, head, reach)
 
     @classmethod
     def kmeans(cls, rows: np.ndarray, seed: int = 0) -> "CellData":
@@ -112,21 +117,29 @@ class CellData:
 
     @classmethod
     def ivf(cls, index: faiss.IndexIVFFlat, seed: int = 0) -> "CellData":
-        """The cells of an IVF-Flat (L2) index: its inverted lists around its coarse centroids."""
+        """The cells of an IVF-Flat (L2) index: its inverted lists around its coarse centroids,
+        read list by list (each list's rows sorted as they are copied: one copy of the rows)."""
         inv = index.invlists
         L, d = index.nlist, index.d
+        centres = np.ascontiguousarray(index.quantizer.reconstruct_n(0, L), dtype=np.float64)
         sizes = np.array([inv.list_size(l) for l in range(L)], dtype=np.int64)
         offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
-        ids = np.empty(int(offsets[-1]), dtype=np.int64)
-        rows = np.empty((int(offsets[-1]), d), dtype=np.float32)
+        M = int(offsets[-1])
+        rows = np.empty((M, d), dtype=np.float32)
+        ids = np.empty(M, dtype=np.int64)
+        rho = np.empty(M)
+        radius = np.zeros(L)
         for l in np.flatnonzero(sizes):
-            a, b = offsets[l], offsets[l + 1]
-            ids[a:b] = faiss.rev_swig_ptr(inv.get_ids(int(l)), int(b - a))
-            codes = faiss.rev_swig_ptr(inv.get_codes(int(l)), int(b - a) * index.code_size)
-            rows[a:b] = np.frombuffer(codes, dtype=np.float32).reshape(-1, d)
-        centres = index.quantizer.reconstruct_n(0, L)
-        assign = np.repeat(np.arange(L, dtype=np.int64), sizes)
-        return cls.of(centres, assign, rows, ids, seed)
+            a, b = int(offsets[l]), int(offsets[l + 1])
+            own = np.array(faiss.rev_swig_ptr(inv.get_ids(int(l)), b - a), dtype=np.int64)
+            codes = faiss.rev_swig_ptr(inv.get_codes(int(l)), (b - a) * index.code_size)
+            vecs = np.frombuffer(codes, dtype=np.float32).reshape(-1, d)
+            diff = vecs.astype(np.float64) - centres[l]
+            r = np.sqrt(np.einsum("md,md->m", diff, diff))
+            order = np.lexsort((own, r))
+            rows[a:b], ids[a:b], rho[a:b] = vecs[order], own[order], r[order]
+            radius[l] = r.max()
+        return cls._with_axes(centres, offsets, rows, ids, rho, radius, seed)
 
 
 def cells_search(Y: np.ndarray, cells: CellData, k: int,
