@@ -1,0 +1,70 @@
+"""Train one belief row's model of ``aoc bench`` by itself: the bench's corpus and the bench's
+configuration (``aoc_cli.bench.beliefs.model_config`` at the scale), for one task and size.
+
+``aoc bench pendulum-het --sizes N --methods aoc-critic`` trains a critic for each of the two
+tasks' corpora (random and upright start); this trains the one asked for, so a single cell can
+be measured on a shared machine, then indexed and rolled out with the CLI as the bench does:
+
+    python benchmarks/belief_cell.py --task pendulum-het-upright --rows 100000 --kind critic
+    export AOC_STORE=bench/store C=pendulum-het-upright-100000r-s0
+    aoc index $C --model critic
+    aoc rollout $C --env pendulum-het-upright --model critic -n 8 --seed 10000
+
+Prints the validation record every 500 critic steps (or every epoch) and the final metrics as
+JSON lines; the model is ``models/<kind>/`` of the corpus, where the bench looks for it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+from aoc_cli.threads import wait_passively  # noqa: E402
+
+wait_passively()  # OpenMP threads wait passively, as under the aoc command (aoc_cli/threads.py)
+
+from aoc_cli.belief import train_model  # noqa: E402
+from aoc_cli.bench import lunar, pendulum  # noqa: E402
+from aoc_cli.bench.beliefs import model_config  # noqa: E402
+from aoc_cli.bench.prepare import Artefacts  # noqa: E402
+
+SCALES = {"pendulum-het": pendulum.SCALES, "pendulum-het-upright": pendulum.SCALES,
+          "lunar": lunar.SCALES}
+
+
+def main() -> None:
+    p = argparse.ArgumentParser()
+    p.add_argument("--store", default="bench/store")
+    p.add_argument("--task", default="pendulum-het-upright", choices=sorted(SCALES))
+    p.add_argument("--rows", type=int, default=100_000)
+    p.add_argument("--kind", default="critic", choices=("critic", "reward", "value"))
+    p.add_argument("--scale", default="full", choices=("tiny", "quick", "full"))
+    p.add_argument("--critic-steps", type=int, help="instead of the scale's")
+    p.add_argument("--model", help="model id (default: the kind, as the bench names it; "
+                   "the bench's value model is `default`)")
+    p.add_argument("--seed", type=int, default=0)
+    args = p.parse_args()
+    scale = dict(SCALES[args.task][args.scale])
+    if args.critic_steps is not None:
+        scale["critic_steps"] = args.critic_steps
+    artefacts = Artefacts(args.store, log=lambda text: print(text, file=sys.stderr, flush=True))
+    corpus = artefacts.corpus(args.task, rows=args.rows, seed=args.seed)
+    config = model_config(scale, args.kind, args.seed)
+
+    def progress(record: dict) -> None:
+        if record.get("epoch_done"):
+            print(json.dumps({k: record.get(k) for k in
+                              ("epoch", "train_loss", "val_loss", "val_r2", "val_q_mean",
+                               "seconds") if k in record}), flush=True)
+
+    metrics = train_model(corpus, config, model_id=args.model or args.kind, overwrite=True,
+                          progress=progress)
+    print(json.dumps({"corpus": corpus.name, **metrics}), flush=True)
+
+
+if __name__ == "__main__":
+    main()
