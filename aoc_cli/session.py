@@ -30,7 +30,7 @@ import numpy as np
 
 from aoc_cli.control.config import ControllerConfig
 from aoc_cli.control.controller import Controller
-from aoc_cli.decompose import decompose
+from aoc_cli.decompose import decompose, default_k
 from aoc_cli.errors import AocError
 from aoc_cli.index import BeliefIndex
 from aoc_cli.progress import Progress
@@ -97,8 +97,24 @@ class CorpusIndex:
         ``selection`` is an (N,) bool mask over corpus rows, applied at query time.
         """
         queries = np.asarray(queries, dtype=np.float32)  # the beliefs' precision; checked there
-        return decompose(self.beliefs, queries, k=k, values=self.values, index=self.index,
-                         selection=selection)
+        return decompose(self.beliefs, queries, k=self.k if k is None else k,
+                         values=self.values, index=self.index, selection=selection)
+
+    @property
+    def k(self) -> int:
+        """Neighbours per query when none is given: the one the index was built with
+        (``index.json`` ``k``, :func:`neighbours`); the paper's for an index without it."""
+        return int(self.meta.get("k") or default_k(self.beliefs.shape[1]))
+
+
+def neighbours(corpus: Corpus, model) -> int:
+    """The default neighbours per query of ``model`` on ``corpus``: the paper's 2 (d_b + 1);
+    for an imitation model of discrete actions, enough for a full minimal subset of the
+    rarest action at its base rate (:func:`aoc_cli.decompose.default_k`)."""
+    if model.mode != "imitation" or not corpus.discrete or corpus.n_rows == 0:
+        return default_k(model.d_b)
+    counts = np.bincount(np.asarray(corpus.actions, dtype=np.int64))
+    return default_k(model.d_b, float(counts[counts > 0].min() / corpus.n_rows))
 
 
 def load_model(corpus: Corpus, model_id: str | None) -> BeliefModel:
@@ -165,6 +181,7 @@ def build_index(corpus: Corpus, model_id: str | None = None, kind: str = "auto",
             "rows": int(index.size), "belief_dim": int(beliefs.shape[1]),
             "episode_rates": episode_rates, "seed": seed,
             "build_seconds": seconds, "built": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+            "k": neighbours(corpus, model),
         }
         ci = CorpusIndex(index_id, model, beliefs, model.values, index, meta)
         meta["typical_residual"] = typical_residual(ci, seed)
@@ -188,7 +205,7 @@ def typical_residual(ci: CorpusIndex, seed: int = 0) -> dict:
     dec = ci.decompose(np.asarray(ci.beliefs[np.sort(sample)]), selection=selection)
     r = dec.residual
     return {"p50": float(np.quantile(r, 0.5)), "p90": float(np.quantile(r, 0.9)),
-            "p99": float(np.quantile(r, 0.99)), "sample": int(len(sample))}
+            "p99": float(np.quantile(r, 0.99)), "sample": int(len(sample)), "k": ci.k}
 
 
 def load_index(corpus: Corpus, model_id: str | None = None, index_id: str = "default") -> CorpusIndex:

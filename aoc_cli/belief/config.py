@@ -74,6 +74,14 @@ class BeliefConfig:
     #: L2 penalty of Adam (0: the paper's objective; ``aoc train`` may choose one on small
     #: corpora, aoc_cli.belief.select).
     weight_decay: float = 0.0
+    #: Imitation, discrete actions: ``none`` or ``balanced`` (each action's cross-entropy
+    #: weighted by N / (n_actions * N_action) on the training rows, so a rare action counts as
+    #: much as a common one). The validation loss stays the plain cross-entropy.
+    class_weight: str = "none"
+    #: Imitation, discrete actions: label smoothing of the training cross-entropy (0: none).
+    label_smoothing: float = 0.0
+    #: Dropout after each of the two hidden fully connected layers (0: none, the paper's).
+    dropout: float = 0.0
     batch_size: int = 500
     max_epochs: int = 200
     #: Stop after this many epochs without a validation-loss improvement of ``min_delta``.
@@ -130,6 +138,12 @@ class BeliefConfig:
             raise AocError(f"--patience must be >= 1, got {self.patience}")
         if not self.weight_decay >= 0:
             raise AocError(f"--weight-decay must be >= 0, got {self.weight_decay}")
+        if self.class_weight not in ("none", "balanced"):
+            raise AocError(f"unknown --class-weight {self.class_weight!r}: use none or balanced")
+        if not 0.0 <= self.label_smoothing < 1.0:
+            raise AocError(f"--label-smoothing must be in [0, 1), got {self.label_smoothing}")
+        if not 0.0 <= self.dropout < 1.0:
+            raise AocError(f"--dropout must be in [0, 1), got {self.dropout}")
         if not self.lr > 0:
             raise AocError(f"--lr must be > 0, got {self.lr}")
         if not 0.0 < self.val_fraction < 1.0:

@@ -90,5 +90,6 @@ def build_net(dims: dict, config: BeliefConfig) -> BeliefNet:
     return BeliefNet(dims["observation"], dims["action_input"], dims["output"],
                      config.history_length, hidden=config.hidden,
                      belief_dim=config.belief_dim, use_action=dims["use_action"],
-                     belief_activation=config.belief_activation,
+                     belief_activation=config.belief_activation, dropout=config.dropout,
+                     seed=config.seed,
                      dynamics_dim=dims.get("dynamics", 0))

@@ -122,12 +122,29 @@ class Encoder:
         return z * self.t_std + self.t_mean
 
 
+class SeededDropout(nn.Module):
+    """Dropout whose masks come from its own generator (seeded), so a training run is
+    repeatable whatever else drew from torch's global generator; identity in eval mode."""
+
+    def __init__(self, p: float, seed: int = 0):
+        super().__init__()
+        self.p = float(p)
+        self.generator = torch.Generator().manual_seed(int(seed))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        if not self.training or self.p == 0.0:
+            return x
+        keep = torch.rand(x.shape, generator=self.generator).to(x.device) >= self.p
+        return x * keep / (1.0 - self.p)
+
+
 class BeliefNet(nn.Module):
     """b (GRU over the history, then three fully connected layers) and the linear head l."""
 
     def __init__(self, d_o: int, d_a_in: int, out_dim: int, history_length: int,
                  hidden: int = 128, belief_dim: int = 20, use_action: bool = True,
-                 belief_activation: str = "tanh", dynamics_dim: int = 0):
+                 belief_activation: str = "tanh", dynamics_dim: int = 0,
+                 dropout: float = 0.0, seed: int = 0):
         super().__init__()
         self.history_length = int(history_length)
         self.use_action = bool(use_action)
@@ -142,6 +159,8 @@ class BeliefNet(nn.Module):
         #: Auxiliary linear head b -> next-observation change; used by training only.
         self.dynamics = nn.Linear(belief_dim, dynamics_dim) if dynamics_dim > 0 else None
         self.belief_activation = torch.tanh if belief_activation == "tanh" else torch.relu
+        #: Dropout after fc1 and fc2 (active in training mode only; no parameters).
+        self.drop = SeededDropout(dropout, seed) if dropout > 0 else nn.Identity()
 
     def belief(self, obs: torch.Tensor, act: torch.Tensor | None,
                steps: torch.Tensor | None) -> torch.Tensor:
@@ -164,8 +183,8 @@ class BeliefNet(nn.Module):
         parts.append(obs)
         if self.use_action:
             parts.append(act)
-        x = torch.relu(self.fc1(torch.cat(parts, dim=-1)))
-        x = torch.relu(self.fc2(x))
+        x = self.drop(torch.relu(self.fc1(torch.cat(parts, dim=-1))))
+        x = self.drop(torch.relu(self.fc2(x)))
         return self.belief_activation(self.fc3(x))
 
     def forward(self, obs, act, steps) -> tuple[torch.Tensor, torch.Tensor]:

@@ -25,6 +25,8 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+import numpy as np
+
 from aoc_cli.belief.config import BeliefConfig
 
 SELECT_MAX_ROWS = 20_000
@@ -67,6 +69,50 @@ def why_no_search(corpus, config: BeliefConfig, given: dict, paper: bool) -> str
         return f"--belief {config.belief}: the paper's settings"
     return (f"the corpus has {corpus.n_rows} rows, over the {SELECT_MAX_ROWS} up to which "
             "settings are chosen by validation: the paper's settings")
+
+
+def abc_validation(actions: np.ndarray, n_actions: int, k: int | None = None):
+    """An ``inspect`` hook for :func:`aoc_cli.belief.train.train_model` (discrete imitation):
+    decompose the validation rows' beliefs (float32, as the index holds them) over the
+    training rows' beliefs and score the decisions as ``aoc evaluate`` does (the score of an
+    action = its weight in the minimal corpus subset; k as ``aoc index`` would choose it for
+    the training rows unless given). Returns ``val_abc_accuracy``, ``val_abc_auc``,
+    ``val_abc_k``. ``actions`` (N,) the corpus's discrete actions."""
+    import torch
+
+    from aoc_cli.control.scores import auc
+    from aoc_cli.decompose import decompose, default_k
+
+    actions = np.asarray(actions, dtype=np.int64)
+
+    def inspect(net, inputs, data) -> dict:
+        rows = torch.as_tensor(np.concatenate([data.train_rows, data.val_rows]),
+                               device=inputs.obs.device)
+        with torch.no_grad():
+            b = torch.cat([net(*inputs.batch(rows[i:i + 65536]))[0]
+                           for i in range(0, len(rows), 65536)]).cpu().numpy()
+        n_tr = len(data.train_rows)
+        a_tr, y = actions[data.train_rows], actions[data.val_rows]
+        counts = np.bincount(a_tr)
+        kk = k if k is not None else default_k(b.shape[1], counts[counts > 0].min() / n_tr)
+        dec = decompose(b[:n_tr], b[n_tr:], k=kk)
+        scores = abc_scores(dec.rows, dec.weights, a_tr, n_actions)
+        return {"val_abc_accuracy": float(np.mean(scores.argmax(1) == y)),
+                "val_abc_auc": auc(y, scores), "val_abc_k": int(min(kk, n_tr))}
+
+    return inspect
+
+
+def abc_scores(rows: np.ndarray, weights: np.ndarray, actions: np.ndarray,
+               n_actions: int) -> np.ndarray:
+    """(Q, n_actions) each action's weight in the minimal corpus subsets ``rows`` (Q, m)
+    (-1 padded) with ``weights`` (Q, m), ``actions`` (N,) the corpus rows' actions."""
+    used = rows >= 0
+    scores = np.zeros((len(rows), n_actions))
+    q = np.repeat(np.arange(len(rows)), rows.shape[1])
+    np.add.at(scores, (q, actions[np.maximum(rows, 0)].reshape(-1)),
+              np.where(used, weights, 0.0).reshape(-1))
+    return scores
 
 
 def _score(metrics: dict) -> float:
@@ -133,8 +179,11 @@ def select_and_train(corpus, config: BeliefConfig, open_names: list[str], model_
         "rule": f"settings left open are chosen by validation on corpora of at most "
                 f"{SELECT_MAX_ROWS} rows",
     }
+    inspect = None
+    if config.mode == "imitation" and corpus.discrete:  # ABC's own decisions, validated
+        inspect = abc_validation(corpus.actions, int(corpus.n_actions))
     metrics = train_model(corpus, best, model_id, overwrite=overwrite, progress=progress,
-                          prepared=prepared, extra={"selection": selection})
+                          prepared=prepared, extra={"selection": selection}, inspect=inspect)
     return metrics
 
 

@@ -206,6 +206,10 @@ def train_streaming(corpus, config: BeliefConfig, model_id: str = "default",
 
     started = time.perf_counter()
     config.validate()
+    if config.class_weight != "none" or config.label_smoothing > 0:
+        raise AocError(f"--class-weight and --label-smoothing are not available for corpora "
+                       f"of over {STREAM_ROWS:,} rows (trained a block at a time): train "
+                       "without them")
     if config.dynamics_weight > 0:
         raise AocError("the dynamics head is trained in memory, not streamed")
     if model_dir(corpus, model_id).exists() and not overwrite:

@@ -46,19 +46,33 @@ def _r2(out: torch.Tensor, y: torch.Tensor) -> float:
     return float(r2.mean())
 
 
+def class_weights(actions: np.ndarray, n_actions: int) -> np.ndarray:
+    """(n_actions,) ``balanced`` weights N / (n_actions * N_a) of discrete actions (N,); an
+    action absent from ``actions`` gets weight 0."""
+    counts = np.bincount(np.asarray(actions, dtype=np.int64), minlength=n_actions)
+    return np.where(counts > 0, len(actions) / (n_actions * np.maximum(counts, 1)), 0.0)
+
+
 class _Objective:
     """Loss and validation metric of one mode, on encoded targets; with a dynamics weight,
     plus that weight times the squared error of the auxiliary head on the standardised o' - o
-    (rows whose next observation is known only)."""
+    (rows whose next observation is known only). Discrete imitation: the training loss may
+    weight the actions (``class_weight`` (n,)) and smooth the labels; the validation metric is
+    always the plain cross-entropy, so candidates of the model selection compare alike."""
 
     def __init__(self, mode: str, discrete: bool, dynamics_weight: float = 0.0,
-                 dyn: torch.Tensor | None = None, dyn_valid: torch.Tensor | None = None):
+                 dyn: torch.Tensor | None = None, dyn_valid: torch.Tensor | None = None,
+                 class_weight: torch.Tensor | None = None, label_smoothing: float = 0.0):
         self.classify = mode == "imitation" and discrete
         self.weight = float(dynamics_weight) if dyn is not None else 0.0
         self.dyn, self.dyn_valid = dyn, dyn_valid
+        self.class_weight, self.label_smoothing = class_weight, float(label_smoothing)
 
-    def main_loss(self, out: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+    def main_loss(self, out: torch.Tensor, y: torch.Tensor, train: bool = False) -> torch.Tensor:
         if self.classify:
+            if train:
+                return nn.functional.cross_entropy(out, y, weight=self.class_weight,
+                                                   label_smoothing=self.label_smoothing)
             return nn.functional.cross_entropy(out, y)
         return nn.functional.mse_loss(out, y)
 
@@ -68,7 +82,7 @@ class _Objective:
         return (err * valid).sum() / valid.sum().clamp_min(1)
 
     def loss(self, net, b, out, y, rows) -> torch.Tensor:
-        loss = self.main_loss(out, y)
+        loss = self.main_loss(out, y, train=True)
         if self.weight > 0:
             loss = loss + self.weight * self.dynamics_loss(net, b, rows)
         return loss
@@ -98,7 +112,7 @@ def _evaluate(net, inputs: CorpusInputs, rows: torch.Tensor, y: torch.Tensor, ob
 
 def train_model(corpus, config: BeliefConfig, model_id: str = "default", overwrite: bool = False,
                 progress=None, prepared: TrainingData | None = None, save: bool = True,
-                extra: dict | None = None) -> dict:
+                extra: dict | None = None, inspect=None) -> dict:
     """Learn b and l on ``corpus`` and write ``corpus.models_dir/<model_id>/``; final metrics.
 
     ``progress`` (:mod:`aoc_cli.progress`): the epochs done of ``max_epochs``, every few
@@ -107,6 +121,9 @@ def train_model(corpus, config: BeliefConfig, model_id: str = "default", overwri
     ``save=False`` trains and returns the
     metrics without writing the model; ``extra`` is merged into the saved metrics. ``prepared`` is the
     result of :func:`aoc_cli.belief.data.prepare` for the same arguments, when already known.
+    ``inspect(net, inputs, data)``, when given, is called with the trained network (best
+    weights, eval mode), the encoded corpus and the split; its dict is merged into the metrics
+    (the model selection's validation of the decomposition, aoc_cli.belief.select).
     """
     from aoc_cli.belief.stream import streams, train_streaming
 
@@ -123,12 +140,12 @@ def train_model(corpus, config: BeliefConfig, model_id: str = "default", overwri
 
             return train_critic_model(corpus, config, model_id, data, progress)
         return _train(corpus, config, model_id, data, device, threads, started, progress, save,
-                      extra)
+                      extra, inspect)
 
 
 def _train(corpus, config: BeliefConfig, model_id: str, data: TrainingData,
            device: torch.device, threads: int, started: float, progress, save: bool,
-           extra: dict | None) -> dict:
+           extra: dict | None, inspect=None) -> dict:
     """train_model's in-memory path, in its thread context."""
     problem = _Problem.build(corpus, config, data.values, device)
     with torch.random.fork_rng(devices=[]):
@@ -141,6 +158,8 @@ def _train(corpus, config: BeliefConfig, model_id: str, data: TrainingData,
     net.load_state_dict(stopping.best["state"])
     net.eval()
     metrics = _final_metrics(net, problem, tr, va, corpus, config, model_id, stopping)
+    if inspect is not None:
+        metrics.update(inspect(net, problem.inputs, data))
     if config.belief == "reward":
         from aoc_cli.belief.kinds import refit_value_head
 
@@ -205,8 +224,13 @@ class _Problem:
         dyn = dyn_valid = dyn_standard = None
         if dims.get("dynamics", 0) > 0:
             dyn, dyn_valid, dyn_standard = _standard_dynamics(corpus, device)
+        cw = None
+        if classify and config.class_weight == "balanced":
+            cw = torch.as_tensor(class_weights(corpus.actions, dims["n_actions"]),
+                                 dtype=torch.float32, device=device)
         objective = _Objective(config.mode, dims["discrete"], config.dynamics_weight, dyn,
-                               dyn_valid)
+                               dyn_valid, class_weight=cw,
+                               label_smoothing=config.label_smoothing if classify else 0.0)
         return cls(dims, classify, norm, inputs, y_all, objective, dyn_standard)
 
 

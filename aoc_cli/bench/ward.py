@@ -87,7 +87,8 @@ def run_split(store, data, split: int, patients: int, seed: int = 0) -> list[dic
     abc_seconds = time.perf_counter() - started
     chosen = metrics["selection"]["chosen"]
     rows = [{"method": "abc", "accuracy": summary["accuracy"], "auc": summary["auc"],
-             "support_max": summary["support_max"], "seconds": abc_seconds, **chosen}]
+             "support_max": summary["support_max"], "k": summary["k"],
+             "val_abc_auc": metrics.get("val_abc_auc"), "seconds": abc_seconds, **chosen}]
     for name, key in (("abc-head", "bc"), ("knn", "knn")):
         b = summary["baselines"][key]
         rows.append({"method": name, "accuracy": b["accuracy"], "auc": b["auc"]})

@@ -111,7 +111,9 @@ EpsilonOption = Annotated[Optional[float], typer.Option(
                       "task's setting, else 0.5).")]
 
 KOption = Annotated[Optional[int], typer.Option(
-    "--k", help="Nearest corpus beliefs per query (default 2(d_b+1)).")]
+    "--k", help="Nearest corpus beliefs per query (default: the index's, 2(d_b+1); an "
+                "imitation model of discrete actions: at least (d_b+1) / the rarest "
+                "action's share, up to 16(d_b+1)).")]
 
 ResidualCapOption = Annotated[Optional[float], typer.Option(
     "--residual-cap", help="Also drop candidates whose residual exceeds this many times the "

@@ -56,6 +56,15 @@ def train(
     weight_decay: Optional[float] = typer.Option(
         None, "--weight-decay", help="Adam's L2 penalty (default: chosen among 0, 1e-4, 1e-3 "
                                      "on small corpora, else 0)."),
+    dropout: float = typer.Option(_D.dropout, "--dropout",
+                                  help="Dropout after the two hidden layers while training "
+                                       "(0: none, the paper's)."),
+    class_weight: str = typer.Option(_D.class_weight, "--class-weight",
+                                     help="Imitation, discrete actions: none, or balanced "
+                                          "(each action's loss weighted by its rarity)."),
+    label_smoothing: float = typer.Option(_D.label_smoothing, "--label-smoothing",
+                                          help="Imitation, discrete actions: label smoothing "
+                                               "of the training loss (0: none)."),
     paper: bool = typer.Option(False, "--paper", help="The paper's settings for everything "
                                                       "not given (L 4, 128 units, no weight "
                                                       "decay): no selection."),
@@ -83,7 +92,9 @@ def train(
                           dynamics_weight=dynamics_weight,
                           belief_dim=belief_dim, max_epochs=epochs,
                           batch_size=batch_size, lr=lr, patience=patience,
-                          val_fraction=val_fraction, seed=seed, threads=threads)
+                          val_fraction=val_fraction, seed=seed, threads=threads,
+                          dropout=dropout, class_weight=class_weight,
+                          label_smoothing=label_smoothing)
     given = {"history_length": history_length, "hidden": hidden, "weight_decay": weight_decay}
     config = select.with_defaults(config, given).validate()
     corpus = get_store().corpus(name)
@@ -105,6 +116,11 @@ def train(
     if chosen:
         message("chose " + ", ".join(f"{k} {v}" for k, v in chosen["chosen"].items()
                                      if k in chosen["searched"]) + " by " + chosen["why"])
+    if metrics.get("val_abc_accuracy") is not None:
+        auc = metrics.get("val_abc_auc")
+        message(f"ABC's own decisions on the validation episodes (k {metrics['val_abc_k']}): "
+                f"accuracy {metrics['val_abc_accuracy']:.3f}"
+                + ("" if auc is None else f", AUC {auc:.3f}"))
     warning = select.baseline_check(metrics)
     if warning:
         message(f"[yellow]warning:[/] {warning}")

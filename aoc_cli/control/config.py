@@ -35,7 +35,9 @@ class ControllerConfig:
     """c: also drop candidates whose residual exceeds c x the corpus's typical p90 residual
     (None: no cap; ignored for an index built without ``typical_residual``)."""
     k: int | None = None
-    """Nearest corpus beliefs per query; None = 2 (d_b + 1)."""
+    """Nearest corpus beliefs per query; None = the index's (``index.json`` ``k``): 2 (d_b + 1),
+    or for an imitation model of discrete actions (d_b + 1) / the rarest action's share,
+    between 2 (d_b + 1) and 16 (d_b + 1) (aoc_cli.decompose.default_k)."""
     sampler: str = "uniform"
     """uniform (in a box action space) | bc (a behaviour-cloning model plus Gaussian noise)."""
     bc_model: str = "bc"

@@ -255,6 +255,7 @@ def summarise(ctx: EvalContext, res: StepScores) -> dict:
     out["extrapolating_share"] = sc.extrapolating_share(res.residual, typical)
     out["heterogeneity_share"] = float(np.mean(res.warning))
     out["support_max"] = int((res.support_rows >= 0).sum(1).max())
+    out["k"] = int(ctx.k)
     out["search"] = ctx.search.describe() if hasattr(ctx.search, "describe") \
         else f"the index ({ctx.index.index.kind}, exact)" if ctx.index.index.kind == "flat" \
         else f"the index ({ctx.index.index.kind})"

@@ -8,7 +8,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from aoc_cli.control.controller import support_disagreement
-from aoc_cli.decompose import default_k
 from aoc_cli.errors import AocError
 
 
@@ -209,7 +208,7 @@ class EvalContext:
         self.search = search_structure(self.index.index, self.index.beliefs, self.exact,
                                        self.seed)
         self.history_length = model.history_length
-        self.k = self.config.k if self.config.k is not None else default_k(model.d_b)
+        self.k = self.config.k if self.config.k is not None else self.index.k
         self.discrete, self.n_actions = corpus.discrete, corpus.n_actions
         self.corpus_actions = np.asarray(corpus.actions)
         self.corpus_episode = corpus.episode_of(np.arange(corpus.n_rows))

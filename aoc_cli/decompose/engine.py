@@ -73,10 +73,22 @@ class Decomposition:
     pivots: int = 0
 
 
-def default_k(d_b: int) -> int:
-    """The paper's number of neighbours per query, k = 2 (d_b + 1) (twice the size of a
-    minimal corpus subset)."""
-    return 2 * (int(d_b) + 1)
+#: The most neighbours :func:`default_k` asks for, as a multiple of d_b + 1.
+MAX_K_FACTOR = 16
+
+
+def default_k(d_b: int, rarest_share: float | None = None) -> int:
+    """Neighbours per query: the paper's k = 2 (d_b + 1) (twice the size of a minimal corpus
+    subset). With ``rarest_share`` (discrete imitation: the share of the corpus rows that
+    hold its rarest action), at least (d_b + 1) / rarest_share, so that a neighbourhood at the
+    corpus's base rates holds a full minimal subset's worth (d_b + 1) of rows of every action,
+    and at most 16 (d_b + 1). Balanced binary actions give the paper's k; ward's treatment
+    (11% of rows, d_b = 20) gives 191 (docs/design.md, "Neighbours in imitation mode")."""
+    d1 = int(d_b) + 1
+    k = 2 * d1
+    if rarest_share is not None and rarest_share > 0:
+        k = min(max(k, int(np.ceil(d1 / float(rarest_share)))), MAX_K_FACTOR * d1)
+    return k
 
 
 def decompose(
