@@ -75,7 +75,7 @@ class BeliefConfig:
     #: corpora, aoc_cli.belief.select).
     weight_decay: float = 0.0
     #: Imitation, discrete actions: ``none`` or ``balanced`` (each action's cross-entropy
-    #: weighted by N / (n_actions * N_action) on the training rows, so a rare action counts as
+    #: weighted by N / (n_actions * N_action) over the corpus rows, so a rare action counts as
     #: much as a common one). The validation loss stays the plain cross-entropy.
     class_weight: str = "none"
     #: Imitation, discrete actions: label smoothing of the training cross-entropy (0: none).
