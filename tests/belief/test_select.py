@@ -88,6 +88,7 @@ def test_default_training_on_ward_beats_the_majority_clearly(aoc, ward):
     code, out, err = aoc("train", "ward", "--mode", "imitation", "--threads", "1", "--epochs",
                          "8", "--format", "json")
     assert code == 0, err
+    _check_abc_validation(ward, json.loads(out), err)
     code, out, err = aoc("index", "ward", "--format", "json")
     assert code == 0, err
     code, out, err = aoc("evaluate", "ward", "--data", "held", "--baselines", "none",
@@ -96,3 +97,90 @@ def test_default_training_on_ward_beats_the_majority_clearly(aoc, ward):
     s = json.loads(out)
     assert s["accuracy"] >= s["majority_accuracy"] + 0.03, s
     assert s["auc"] >= 0.85 and s["support_max"] <= 21
+
+
+def test_abc_scores_are_each_actions_weight_in_the_subset():
+    rows = np.array([[3, 0, -1], [1, 2, 4]])
+    weights = np.array([[0.7, 0.3, 0.0], [0.5, 0.25, 0.25]])
+    actions = np.array([0, 1, 2, 1, 0])
+    s = select.abc_scores(rows, weights, actions, 3)
+    assert np.allclose(s, [[0.3, 0.7, 0.0], [0.25, 0.5, 0.25]], rtol=0, atol=1e-15)
+
+
+def test_neighbours_per_query_follow_the_rarest_action():
+    from aoc_cli.decompose import default_k
+
+    assert default_k(20) == 42                      # the paper's 2 (d_b + 1)
+    assert default_k(20, 0.5) == 42                 # balanced binary actions: the same
+    assert default_k(20, 0.11) == 191               # ceil(21 / 0.11)
+    assert default_k(20, 0.25) == 84
+    assert default_k(20, 0.001) == 16 * 21          # capped
+    assert default_k(4, 1 / 3) == 15
+
+
+def test_class_weights_and_training_options(ward):
+    """balanced class weights by hand; dropout repeatable under its seed and changing the
+    fit; the validation loss stays the plain cross-entropy whatever the training loss."""
+    import torch
+
+    from aoc_cli.belief import load_model
+    from aoc_cli.belief.config import BeliefConfig
+    from aoc_cli.belief.data import prepare
+    from aoc_cli.belief.train import class_weights, train_model
+
+    assert np.allclose(class_weights(np.array([0, 0, 0, 1]), 2), [4 / 6, 4 / 2])
+    assert np.allclose(class_weights(np.array([0, 2, 2, 2]), 3), [4 / 3, 0.0, 4 / 9])
+    corpus = ward.corpus("ward")
+    base = dict(mode="imitation", history_length=0, hidden=16, max_epochs=2, threads=1, seed=3)
+
+    def fit(model_id, **kw):
+        return train_model(corpus, BeliefConfig(**base, **kw), model_id, overwrite=True)
+
+    a, b, plain = fit("d1", dropout=0.3), fit("d2", dropout=0.3), fit("d0")
+    assert a["val_loss"] == b["val_loss"] and a["val_loss"] != plain["val_loss"]
+    smooth = fit("ls", label_smoothing=0.2, class_weight="balanced")
+    model = load_model(corpus, "ls")
+    split = prepare(corpus, BeliefConfig(**base), "x", True)
+    rows = split.val_rows
+    head = model.head_weights
+    logits = model.beliefs(np.asarray(corpus.observations)[rows], None, None).astype(
+        np.float64) @ head.weight.T + head.bias
+    ce = torch.nn.functional.cross_entropy(torch.as_tensor(logits, dtype=torch.float32),
+                                           torch.as_tensor(np.asarray(corpus.actions)[rows]))
+    assert smooth["val_loss"] == pytest.approx(float(ce), rel=1e-4)
+
+
+def test_bad_training_options_are_one_line(aoc, ward):
+    for flag, value in (("--class-weight", "rare"), ("--dropout", "1"),
+                        ("--label-smoothing", "-0.1")):
+        code, out, err = aoc("train", "ward", flag, value, *QUICK)
+        assert code == 2 and out == "", (flag, err)
+        assert err.strip().count("\n") == 0 and flag in err, err
+
+
+def _check_abc_validation(ward, m, err):
+    """The chosen model's metrics hold ABC's own decisions on the validation episodes
+    (val_abc_*): recomputed here from the saved model, the split and the decomposition."""
+    from aoc_cli.belief import load_model
+    from aoc_cli.belief.config import BeliefConfig
+    from aoc_cli.belief.data import prepare
+    from aoc_cli.control.scores import auc
+    from aoc_cli.decompose import decompose, default_k
+
+    assert "ABC's own decisions on the validation episodes" in err
+    corpus = ward.corpus("ward")
+    model = load_model(corpus, "default")
+    cfg = BeliefConfig.from_dict(json.loads((corpus.models_dir / "default" / "config.json")
+                                            .read_text())["config"])
+    split = prepare(corpus, cfg, "x", True)
+    acts = np.asarray(corpus.actions)
+    b = model.beliefs(np.asarray(corpus.observations), None,
+                      corpus.history(np.arange(corpus.n_rows), model.history_length))
+    a_tr, y = acts[split.train_rows], acts[split.val_rows]
+    k = default_k(model.d_b, np.bincount(a_tr).min() / len(a_tr))
+    assert m["val_abc_k"] == k > default_k(model.d_b)  # ward's treatment is rare
+    dec = decompose(b[split.train_rows], b[split.val_rows], k=k)
+    scores = select.abc_scores(dec.rows, dec.weights, a_tr, 2)
+    # the same network; beliefs through the saved model's float32 path (a row may flip)
+    assert m["val_abc_accuracy"] == pytest.approx(np.mean(scores.argmax(1) == y), abs=0.01)
+    assert m["val_abc_auc"] == pytest.approx(auc(y, scores), abs=0.02)
