@@ -184,3 +184,14 @@ def _check_abc_validation(ward, m, err):
     # the same network; beliefs through the saved model's float32 path (a row may flip)
     assert m["val_abc_accuracy"] == pytest.approx(np.mean(scores.argmax(1) == y), abs=0.01)
     assert m["val_abc_auc"] == pytest.approx(auc(y, scores), abs=0.02)
+
+
+def test_streamed_training_refuses_the_loss_options(ward):
+    from aoc_cli.belief.config import BeliefConfig
+    from aoc_cli.belief.stream import train_streaming
+    from aoc_cli.errors import AocError
+
+    corpus = ward.corpus("ward")
+    for kw in ({"class_weight": "balanced"}, {"label_smoothing": 0.1}):
+        with pytest.raises(AocError, match="not available for corpora"):
+            train_streaming(corpus, BeliefConfig(mode="imitation", threads=1, **kw), "s")

@@ -72,6 +72,9 @@ def test_imitation_metrics_match_a_hand_computation(ward):
     # the imitation k: (d_b + 1) / the rarest action's share, within [2, 16] (d_b + 1)
     share = np.bincount(corpus.actions).min() / corpus.n_rows
     assert summary["k"] == session.index.k == min(max(10, int(np.ceil(5 / share))), 80)
+    assert session.index.meta["typical_residual"]["k"] == session.index.k  # measured alike
+    # a value model of the same corpus keeps the paper's k = 2 (d_b + 1)
+    assert open_session(corpus, "value", config=ControllerConfig()).index.k == 10
     assert summary["residual"]["p50"] == pytest.approx(np.median(r), abs=1e-12)
     # every decision traced to at most d_b + 1 named rows, with the patient's own id
     assert summary["support_max"] <= 5
