@@ -3,8 +3,9 @@
 For each size: collect pendulum-het rows, train the belief model (a short training: the
 benchmark measures the step, not the policy), index, then time ``Controller.decide`` on states
 of real rollouts (belief pass for the K candidates + neighbours + decomposition + choice),
-median over steps, and split into the belief pass, the decomposition and, inside it, the
-neighbour search. One thread for torch, FAISS and BLAS (as `aoc rollout` runs). The 1-minute
+median over steps (wall clock, and `cpu ms` the process's CPU time of the same step: on a
+shared, oversubscribed machine the wall time includes waiting for a core), and split into the
+belief pass, the decomposition and, inside it, the neighbour search. One thread for torch, FAISS and BLAS (as `aoc rollout` runs). The 1-minute
 load average is printed with each line: the machine is shared.
 
 Usage: .venv/bin/python benchmarks/control.py --sizes 100k,600k [--steps 200] [--store DIR]
@@ -70,12 +71,13 @@ def time_steps(store: Store, name: str, steps: int) -> dict:
     env = make_env("pendulum-het")
     buf = HistoryBuffer(model.history_length, corpus.observation_dim, 1, False)
     obs, _ = env.reset(seed=1)
-    total, belief, decomp, search = [], [], [], []
+    total, cpu, belief, decomp, search = [], [], [], [], []
     for _ in range(steps):
         h = buf.history()
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         d = ctl.decide(obs, h)
         total.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
         t0 = time.perf_counter()
         b = model.beliefs(np.asarray(obs, np.float32)[None], d.candidates, h)  # as decide()
         belief.append(time.perf_counter() - t0)
@@ -87,7 +89,7 @@ def time_steps(store: Store, name: str, steps: int) -> dict:
         search.append(time.perf_counter() - t0)
         obs = advance(env, buf, obs, d.action)
     ms = lambda xs: 1000 * float(np.median(xs))  # noqa: E731
-    return {"rows": corpus.n_rows, "step_ms": ms(total), "belief_ms": ms(belief),
+    return {"rows": corpus.n_rows, "step_ms": ms(total), "cpu_ms": ms(cpu), "belief_ms": ms(belief),
             "decompose_ms": ms(decomp), "search_ms": ms(search), "kind": index.index.kind}
 
 
@@ -100,12 +102,12 @@ def main() -> None:
     args = ap.parse_args()
     torch.set_num_threads(1)
     store = Store(args.store or tempfile.mkdtemp(prefix="aoc-bench-control-"))
-    print(f"{'rows':>8} {'kind':>5} {'step ms':>8} {'belief ms':>10} {'decompose ms':>13} "
+    print(f"{'rows':>8} {'kind':>5} {'step ms':>8} {'cpu ms':>7} {'belief ms':>10} {'decompose ms':>13} "
           f"{'search ms':>10} {'load':>5}")
     for size in args.sizes.split(","):
         name = prepare(store, parse_size(size), args.kind)
         r = time_steps(store, name, args.steps)
-        print(f"{r['rows']:>8} {r['kind']:>5} {r['step_ms']:>8.2f} {r['belief_ms']:>10.2f} "
+        print(f"{r['rows']:>8} {r['kind']:>5} {r['step_ms']:>8.2f} {r['cpu_ms']:>7.2f} {r['belief_ms']:>10.2f} "
               f"{r['decompose_ms']:>13.2f} {r['search_ms']:>10.2f} {os.getloadavg()[0]:>5.2f}",
               flush=True)
 

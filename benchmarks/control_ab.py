@@ -110,6 +110,7 @@ def run(store: Store, name: str, steps: int, code: dict) -> str:
     buf = HistoryBuffer(model.history_length, corpus.observation_dim, 1, False)
     obs, _ = env.reset(seed=1)
     times: dict = {"old": [], "new": []}
+    cpu: dict = {"old": [], "new": []}
     differ, rows, dres, dval = 0, 0, 0.0, 0.0
     for s in range(steps):
         h = buf.history()
@@ -119,9 +120,10 @@ def run(store: Store, name: str, steps: int, code: dict) -> str:
         found["new"].clear()
         for arm in (("new", "old") if s % 2 else ("old", "new")):
             use(arm)
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             dec[arm] = ctl.decide(obs, h, candidates=cand)
             times[arm].append(time.perf_counter() - t0)
+            cpu[arm].append(time.process_time() - c0)
         a, b = dec["old"], dec["new"]
         differ += int(a.chosen != b.chosen)
         rows += int(len(found["old"]) != len(found["new"]) or not all(
@@ -132,8 +134,10 @@ def run(store: Store, name: str, steps: int, code: dict) -> str:
         obs = advance(env, buf, obs, b.action)
     use("new")
     o, n = np.array(times["old"][2:]), np.array(times["new"][2:])  # the first steps build scans
+    co, cn = np.median(cpu["old"][2:]), np.median(cpu["new"][2:])
     return (f"{corpus.n_rows:>8} {base.kind:>5} {1e3 * np.median(o):>8.2f} {1e3 * np.median(n):>8.2f} "
-            f"{np.median(o) / np.median(n):>6.2f} {np.median(o / n):>9.2f} {differ:>7d} {rows:>5d} "
+            f"{np.median(o) / np.median(n):>6.2f} {np.median(o / n):>9.2f} {1e3 * co:>7.2f} "
+            f"{1e3 * cn:>7.2f} {co / cn:>6.2f} {differ:>7d} {rows:>5d} "
             f"{dres:>8.1e} {dval:>8.1e} {os.getloadavg()[0]:>5.2f}")
 
 
@@ -152,6 +156,7 @@ def main() -> None:
     code = arms(args.old)
     store = Store(args.store)
     print(f"{'rows':>8} {'kind':>5} {'old ms':>8} {'new ms':>8} {'ratio':>6} {'per-step':>9} "
+          f"{'old cpu':>7} {'new cpu':>7} {'cpu x':>6} "
           f"{'differ':>7} {'rows':>5} {'d res':>8} {'d value':>8} {'load':>5}")
     for size in args.sizes.split(","):
         print(run(store, f"pend{parse_size(size)}", args.steps, code), flush=True)
