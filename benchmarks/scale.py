@@ -10,7 +10,8 @@ process so that its peak resident memory (VmHWM of /proc/self/status) is its own
   index (IVF above 200k rows: trained on a sample, filled chunk by chunk);
 * control: ``--steps`` control steps of AOC (K = 100 candidates) on a pendulum-het rollout,
   one thread; median step time (and the first step's, which builds the batch search's
-  cells); recall@k of the neighbours the decomposition used against
+  cells), the peak memory after the steps (before the recall, which reads every belief);
+  recall@k of the neighbours the decomposition used against
   exact search (faiss.knn over the memory-mapped beliefs, in chunks) on the candidate beliefs
   of the first ``--recall-steps`` steps.
 
@@ -143,7 +144,8 @@ def stage_control(store, rows: int, steps: int, recall_steps: int) -> dict:
             obs, _ = env.reset()
     ms = np.asarray(times) * 1000
     out = {"steps": steps, "step_ms": float(np.median(ms)), "p90_ms": float(np.percentile(ms, 90)),
-           "first_ms": float(ms[0]), "open_seconds": open_s, "kind": index.index.kind}
+           "first_ms": float(ms[0]), "open_seconds": open_s, "kind": index.index.kind,
+           "steps_peak_mb": memory()["VmHWM"]}  # before the recall reads every belief
     if not queries:
         return out
     q = np.concatenate(queries).astype(np.float32)
