@@ -207,7 +207,7 @@ class BeliefIndex:
         """The rows cell by cell for the exact batch search (cells.py), built at the first call:
         k-means cells of a flat index, the inverted lists of an IVF-Flat (L2) one; None for
         any other index (HNSW: batches by pooled.py)."""
-        if self._cells is None or self._cells.ids.shape[0] != self.size:
+        if self._cells is None or self._cells.size != self.size:
             if self.kind == "flat" and self._store is not None:
                 self._cells = CellData.kmeans(self._store, self.config.seed)
             elif isinstance(self.index, faiss.IndexIVFFlat) and self.index.metric_type == faiss.METRIC_L2:

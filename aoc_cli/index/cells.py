@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import faiss
 import numba
 import numpy as np
+from numba.typed import List
 
 from aoc_cli.index.scan_kernels import _replace_top, _sort_heaps, _sq32
 
@@ -48,62 +49,44 @@ SLACK = 1e-9
 class CellData:
     """The rows of an index cell after cell (built once per index; M rows, L cells, d dims).
 
-    centres: (L, d) float64; offsets: (L + 1,) int64, cell l is rows[offsets[l]:offsets[l+1]];
-    rows: (M, d) float32; ids: (M,) int64 index position of each stored row; rho: (M,) float64
-    ||row - centre||, ascending within a cell; radius: (L,) float64 largest rho of each cell;
-    mean: (d,) float64 and axes: (d, HEAD) float64 orthonormal principal axes; head: (M, HEAD)
-    float32 the rows' coordinates (row - mean) @ axes; reach: float64, max ||head row||.
+    centres: (L, d) float64; offsets: (L + 1,) int64, cell l holds the stored rows
+    offsets[l] <= m < offsets[l + 1]; rows / ids: typed lists of L arrays, cell l's rows
+    (n_l, d) float32 and their index positions (n_l,) int64 (for an IVF, FAISS's own inverted
+    lists, sorted in place: no copy); rho: (M,) float64 ||row - centre||, ascending within a
+    cell; radius: (L,) float64 largest rho of each cell; mean: (d,) float64 and axes: (d, HEAD)
+    float64 orthonormal principal axes; head: (M, HEAD) float32 the rows' coordinates
+    (row - mean) @ axes; reach: float64, max ||head row||; owner: what holds the rows' memory.
     """
 
     centres: np.ndarray
     offsets: np.ndarray
-    rows: np.ndarray
-    ids: np.ndarray
+    rows: List
+    ids: List
     rho: np.ndarray
     radius: np.ndarray
     mean: np.ndarray
     axes: np.ndarray
     head: np.ndarray
     reach: float
+    owner: object = None
 
-    @classmethod
-    def of(cls, centres: np.ndarray, assign: np.ndarray, rows: np.ndarray,
-           ids: np.ndarray, seed: int = 0) -> "CellData":
-        """Cells from a cell number per row. centres (L, d); assign (M,) int64 in [0, L);
-        rows (M, d) float32 in any order; ids (M,) int64 their index positions."""
-        centres = np.ascontiguousarray(centres, dtype=np.float64)
-        assign = np.asarray(assign, dtype=np.int64)
-        L = centres.shape[0]
-        rho = np.empty(rows.shape[0])
-        for a in range(0, rows.shape[0], BLOCK):
-            diff = np.asarray(rows[a:a + BLOCK], dtype=np.float64) - centres[assign[a:a + BLOCK]]
-            rho[a:a + BLOCK] = np.sqrt(np.einsum("md,md->m", diff, diff))
-        # cell by cell, then by rho, then by position (the order only decides what is skipped)
-        order = np.lexsort((ids, rho, assign))
-        sizes = np.bincount(assign, minlength=L)
-        offsets = np.concatenate(([0], np.cumsum(sizes))).astype(np.int64)
-        rho = rho[order]
-        radius = np.zeros(L)
-        nonempty = sizes > 0
-        radius[nonempty] = np.maximum.reduceat(rho, offsets[:-1][nonempty])
-        rows = np.ascontiguousarray(rows[order], dtype=np.float32)
-        return cls._with_axes(centres, offsets, rows, np.ascontiguousarray(ids[order], dtype=np.int64),
-                              rho, radius, seed)
+    @property
+    def size(self) -> int:
+        """M, the rows stored."""
+        return int(self.offsets[-1])
 
-    @classmethod
-    def _with_axes(cls, centres, offsets, rows, ids, rho, radius, seed) -> "CellData":
-        """The cells with the rows' principal coordinates added (computed by blocks)."""
-        mean, axes = _principal_axes(rows, seed)
-        head = np.empty((rows.shape[0], axes.shape[1]), dtype=np.float32)
-        for a in range(0, rows.shape[0], BLOCK):
-            head[a:a + BLOCK] = (rows[a:a + BLOCK].astype(np.float64) - mean) @ axes
-        reach = float(np.sqrt(np.einsum("mh,mh->m", head, head).max(initial=0.0)))
-        return cls(centres, offsets, rows, ids, rho, radius, mean, axes, head, reach)
+    def stored(self) -> tuple[np.ndarray, np.ndarray]:
+        """(rows (M, d) float32, ids (M,) int64) cell after cell, as one copy (for checks)."""
+        d = self.centres.shape[1]
+        if not len(self.rows):
+            return np.empty((0, d), np.float32), np.empty(0, np.int64)
+        return np.concatenate(list(self.rows)), np.concatenate(list(self.ids))
 
     @classmethod
     def kmeans(cls, rows: np.ndarray, seed: int = 0) -> "CellData":
         """k-means cells of the (M, d) float32 rows of a flat index (about sqrt(M) / 2 cells,
-        trained on a sample; the cells decide the speed, never the answer)."""
+        trained on a sample; the cells decide the speed, never the answer). The rows are
+        copied in cell order."""
         M, d = rows.shape
         L = int(min(4096, 2 ** int(np.floor(np.log2(max(np.sqrt(M) / 2, 1.0))))))
         rng = np.random.default_rng(seed)
@@ -113,33 +96,63 @@ class CellData:
         assign = np.empty(M, dtype=np.int64)
         for a in range(0, M, BLOCK):
             assign[a:a + BLOCK] = km.index.search(np.ascontiguousarray(rows[a:a + BLOCK]), 1)[1][:, 0]
-        return cls.of(km.centroids, assign, rows, np.arange(M, dtype=np.int64), seed)
+        order = np.argsort(assign, kind="stable")
+        sizes = np.bincount(assign, minlength=L)
+        offsets = np.concatenate(([0], np.cumsum(sizes))).astype(np.int64)
+        copy = np.ascontiguousarray(rows[order], dtype=np.float32)
+        ids = order.astype(np.int64)
+        cells = [(copy[offsets[l]:offsets[l + 1]], ids[offsets[l]:offsets[l + 1]]) for l in range(L)]
+        return cls._sorted(np.asarray(km.centroids, np.float64), cells, seed, (copy, ids))
 
     @classmethod
     def ivf(cls, index: faiss.IndexIVFFlat, seed: int = 0) -> "CellData":
-        """The cells of an IVF-Flat (L2) index: its inverted lists around its coarse centroids,
-        read list by list (each list's rows sorted as they are copied: one copy of the rows)."""
-        inv = index.invlists
+        """The cells of an IVF-Flat (L2) index: its inverted lists around its coarse centroids.
+        The lists are read in place (FAISS's arrays: no copy of the rows) and each list is
+        sorted in place by (rho, position): FAISS's own search scans whole lists, so the order
+        inside a list changes none of its answers but the order of exactly tied distances."""
+        inv = faiss.downcast_InvertedLists(faiss.extract_index_ivf(index).invlists)
+        in_place = isinstance(inv, faiss.ArrayInvertedLists)  # else (on disk...) a copy
         L, d = index.nlist, index.d
         centres = np.ascontiguousarray(index.quantizer.reconstruct_n(0, L), dtype=np.float64)
-        sizes = np.array([inv.list_size(l) for l in range(L)], dtype=np.int64)
-        offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
-        M = int(offsets[-1])
-        rows = np.empty((M, d), dtype=np.float32)
-        ids = np.empty(M, dtype=np.int64)
-        rho = np.empty(M)
+        cells = []
+        for l in range(L):
+            n = int(inv.list_size(l))
+            if n == 0:
+                cells.append((np.empty((0, d), np.float32), np.empty(0, np.int64)))
+                continue
+            codes = faiss.rev_swig_ptr(inv.get_codes(l), n * index.code_size)
+            vecs = codes.view(np.float32).reshape(n, d)
+            own = faiss.rev_swig_ptr(inv.get_ids(l), n).view(np.int64)
+            cells.append((vecs, own) if in_place else (vecs.copy(), own.copy()))
+        return cls._sorted(centres, cells, seed, index)
+
+    @classmethod
+    def _sorted(cls, centres: np.ndarray, cells: list, seed: int, owner) -> "CellData":
+        """Sort every cell's (rows, ids) in place by (rho, position) and add the rest."""
+        L = centres.shape[0]
+        sizes = np.array([len(ids) for _, ids in cells], dtype=np.int64)
+        offsets = np.concatenate(([0], np.cumsum(sizes))).astype(np.int64)
+        rho = np.empty(int(offsets[-1]))
         radius = np.zeros(L)
-        for l in np.flatnonzero(sizes):
-            a, b = int(offsets[l]), int(offsets[l + 1])
-            own = np.array(faiss.rev_swig_ptr(inv.get_ids(int(l)), b - a), dtype=np.int64)
-            codes = faiss.rev_swig_ptr(inv.get_codes(int(l)), (b - a) * index.code_size)
-            vecs = np.frombuffer(codes, dtype=np.float32).reshape(-1, d)
-            diff = vecs.astype(np.float64) - centres[l]
-            r = np.sqrt(np.einsum("md,md->m", diff, diff))
-            order = np.lexsort((own, r))
-            rows[a:b], ids[a:b], rho[a:b] = vecs[order], own[order], r[order]
-            radius[l] = r.max()
-        return cls._with_axes(centres, offsets, rows, ids, rho, radius, seed)
+        rows_list, ids_list = List(), List()
+        for l, (vecs, own) in enumerate(cells):
+            if len(own):
+                diff = vecs.astype(np.float64) - centres[l]
+                r = np.sqrt(np.einsum("md,md->m", diff, diff))
+                order = np.lexsort((own, r))
+                vecs[:] = vecs[order]
+                own[:] = own[order]
+                rho[offsets[l]:offsets[l + 1]] = r[order]
+                radius[l] = r.max()
+            rows_list.append(vecs)
+            ids_list.append(own)
+        mean, axes = _principal_axes(cells, seed)
+        head = np.empty((int(offsets[-1]), axes.shape[1]), dtype=np.float32)
+        for l, (vecs, _) in enumerate(cells):
+            head[offsets[l]:offsets[l + 1]] = (vecs.astype(np.float64) - mean) @ axes
+        reach = float(np.sqrt(np.einsum("mh,mh->m", head, head).max(initial=0.0)))
+        return cls(centres, offsets, rows_list, ids_list, rho, radius, mean, axes, head, reach,
+                   owner)
 
 
 def cells_search(Y: np.ndarray, cells: CellData, k: int,
@@ -180,15 +193,17 @@ def cells_search(Y: np.ndarray, cells: CellData, k: int,
     return d2, pos
 
 
-def _principal_axes(rows: np.ndarray, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """(mean (d,), axes (d, HEAD)) of the rows (from a sample of at most 65,536 rows)."""
-    M, d = rows.shape
+def _principal_axes(cells: list, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """(mean (d,), axes (d, HEAD)) of the cells' rows (from a sample of at most ~65,536)."""
+    total = sum(len(ids) for _, ids in cells)
     rng = np.random.default_rng(seed)
-    sample = rows[np.sort(rng.choice(M, min(M, 1 << 16), replace=False))].astype(np.float64)
+    keep = min(1.0, (1 << 16) / max(total, 1))
+    sample = np.concatenate([vecs[rng.random(len(vecs)) < keep] for vecs, _ in cells])
+    sample = sample.astype(np.float64)
     mean = sample.mean(axis=0)
     centred = sample - mean
     vectors = np.linalg.eigh(centred.T @ centred)[1][:, ::-1]
-    return mean, np.ascontiguousarray(vectors[:, :min(HEAD, d)])
+    return mean, np.ascontiguousarray(vectors[:, :min(HEAD, sample.shape[1])])
 
 
 @numba.njit(cache=True, nogil=True)
@@ -200,8 +215,8 @@ def cells_knn(Y32, Y, seq, lo, hi, YH, shift, radius, offsets, rho, rows, head, 
     searched (neighbours next to each other: each starts from the bound its predecessor
     gives); lo, hi: (Q, L) bounds of ||y_i - z_l||; YH: (Q, H) float32 principal coordinates
     of the queries and shift (Q,) the bound on their and the rows' rounding; radius (L,),
-    offsets (L + 1,), rho (M,), rows (M, d) float32, head (M, H) float32, ids (M,): the cells
-    (CellData); allowed: (P,) bool over positions, or empty for all.
+    offsets (L + 1,), rho (M,), rows (typed list of L (n_l, d) float32), head (M, H) float32,
+    ids (typed list of L (n_l,) int64): the cells (CellData); allowed: (P,) bool over positions, or empty for all.
     """
     Q, d = Y.shape
     L = lo.shape[1]
@@ -248,10 +263,12 @@ def _visit(y32, y, lo, hi, yh, shift, T, radius, offsets, rho, rows, head, ids, 
         order = order[np.argsort(lo[order])]
     for j in range(order.shape[0]):
         l = order[j]
-        a, b = offsets[l], offsets[l + 1]
+        a0 = offsets[l]
+        a, b = a0, offsets[l + 1]
         slack = SLACK * (hi[l] + T) + 1e-30
         if a == b or lo[l] - radius[l] > T + slack:
             continue  # no row of this cell is within T
+        V, I = rows[l], ids[l]
         if T < np.inf:  # the rows with lo - T <= rho <= hi + T: binary searches
             b = a + np.searchsorted(rho[a:b], hi[l] + T + slack, side="right")
             a = a + np.searchsorted(rho[a:b], lo[l] - T - slack)
@@ -260,16 +277,16 @@ def _visit(y32, y, lo, hi, yh, shift, T, radius, offsets, rho, rows, head, ids, 
         for m in range(a, b):
             if buf[m - a] > toph:
                 continue
-            p = ids[m]
+            p = I[m - a0]
             if check and not allowed[p]:
                 continue
             # float32 (all terms >= 0: within (d + 2) 2^-24 of the exact value,
             # relatively) filters; the float64 distance, summed in order, ranks
-            if _sq32(rows[m], y32) > top:
+            if _sq32(V[m - a0], y32) > top:
                 continue
             e = 0.0
             for t in range(d):
-                diff = np.float64(rows[m, t]) - y[t]
+                diff = np.float64(V[m - a0, t]) - y[t]
                 e = e + diff * diff
             if e < hd[0] or (e == hd[0] and p < hr[0]):
                 _replace_top(hd, hr, e, p)

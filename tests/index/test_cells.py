@@ -3,6 +3,7 @@ the lower position, for k-means cells of a flat index and the inverted lists of 
 
 from __future__ import annotations
 
+import faiss
 import numpy as np
 import pytest
 
@@ -71,9 +72,15 @@ def test_ivf_cells_are_its_lists_and_the_batch_search_is_exact():
     ix = BeliefIndex.build(B, kind="ivf", ivf_nlist=32, ivf_nprobe=2)
     cells = ix.cells()
     assert cells.centres.shape == (32, 20)
-    assert np.array_equal(np.sort(cells.ids), np.arange(8000))
-    stored = cells.rows
-    np.testing.assert_array_equal(stored, B[cells.ids])  # every row once, cell by cell
+    stored, ids = cells.stored()
+    assert np.array_equal(np.sort(ids), np.arange(8000))
+    np.testing.assert_array_equal(stored, B[ids])  # every row once, cell by cell
+    # the cells are FAISS's own lists (sorted in place), not a copy
+    inv = ix.index.invlists
+    first = int(np.flatnonzero(np.diff(cells.offsets))[0])
+    codes = faiss.rev_swig_ptr(inv.get_codes(first), inv.list_size(first) * ix.index.code_size)
+    assert np.shares_memory(cells.rows[first], codes)
+    np.testing.assert_array_equal(codes.view(np.float32).reshape(-1, 20), cells.rows[first])
     # rho ascending within each cell, below the cell's radius
     for l in range(32):
         r = cells.rho[cells.offsets[l]:cells.offsets[l + 1]]
