@@ -138,7 +138,13 @@ def _decompose(beliefs, Y, k, values, index, reference, selection, config) -> De
     # 1. neighbours: the k nearest corpus beliefs of every query
     _, neighbours = index.search(Y, k, selection)
     valid = neighbours >= 0
-    B = np.asarray(np.take(beliefs, np.maximum(neighbours, 0), axis=0), dtype=np.float64)
+    # float32 beliefs (as an index stores them) are read from the index's own rows where it
+    # keeps them in memory: the same values, and a memory-mapped array's pages stay out
+    gather = getattr(index, "row_beliefs", None) if beliefs.dtype == np.float32 else None
+    B32 = gather(np.maximum(neighbours, 0)) if gather is not None else None
+    if B32 is None:
+        B32 = np.take(beliefs, np.maximum(neighbours, 0), axis=0)
+    B = np.asarray(B32, dtype=np.float64).reshape(neighbours.shape + (beliefs.shape[1],))
     P = B - Y[:, None, :]  # neighbours relative to the query, p_c = b_c - y
 
     # 2. corpus residual and projection: min_{w in simplex} ||B^T w - y||, exactly

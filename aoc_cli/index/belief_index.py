@@ -203,6 +203,14 @@ class BeliefIndex:
         D = np.where(I >= 0, D.astype(np.float64), np.inf)
         return D, I
 
+    def row_beliefs(self, rows: np.ndarray) -> np.ndarray | None:
+        """(n, d) float32 beliefs of the corpus rows (n,) from the batch search's cells, the
+        same values as the belief array's (the index stores them as given); None when the index
+        has no cells (yet) or is derived (a row may be at several positions or none)."""
+        if self.derived or self._cells is None or self._cells.size != self.size:
+            return None
+        return self._cells.gather(rows)
+
     def cells(self) -> CellData | None:
         """The rows cell by cell for the exact batch search (cells.py), built at the first call:
         k-means cells of a flat index, the inverted lists of an IVF-Flat (L2) one; None for

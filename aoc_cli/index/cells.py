@@ -69,11 +69,25 @@ class CellData:
     head: np.ndarray
     reach: float
     owner: object = None
+    _where: np.ndarray | None = None  # (M,) stored row of each position, built by gather
 
     @property
     def size(self) -> int:
         """M, the rows stored."""
         return int(self.offsets[-1])
+
+    def gather(self, positions: np.ndarray) -> np.ndarray:
+        """(n, d) float32 rows stored at the given index positions (n,) (all in [0, M)), read
+        from the cells (not from a memory-mapped belief array: its pages stay out of memory)."""
+        if self._where is None:
+            where = np.empty(self.size, dtype=np.int64)  # position -> stored row
+            for l in range(len(self.ids)):
+                where[self.ids[l]] = np.arange(self.offsets[l], self.offsets[l + 1])
+            self._where = where
+        positions = np.ascontiguousarray(positions, dtype=np.int64).reshape(-1)
+        out = np.empty((positions.shape[0], self.centres.shape[1]), dtype=np.float32)
+        _gather(self.rows, self.offsets, self._where, positions, out)
+        return out
 
     def stored(self) -> tuple[np.ndarray, np.ndarray]:
         """(rows (M, d) float32, ids (M,) int64) cell after cell, as one copy (for checks)."""
@@ -323,3 +337,12 @@ def _up32(x):  # pragma: no cover - compiled
     if np.float64(out) < x:
         out = np.nextafter(out, np.float32(np.inf))
     return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _gather(rows, offsets, where, positions, out):  # pragma: no cover - compiled
+    """out[i] = the stored row of positions[i] (rows: typed list of the cells' arrays)."""
+    for i in range(positions.shape[0]):
+        m = where[positions[i]]
+        l = np.searchsorted(offsets, m, side="right") - 1
+        out[i] = rows[l][m - offsets[l]]

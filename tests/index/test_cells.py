@@ -99,3 +99,14 @@ def test_a_start_bound_from_the_previous_query_never_loses_rows():
     Y = np.concatenate([B[:3], B[:3], np.full((2, 20), 50.0, np.float32)])
     d2, pos = cells_search(Y, CellData.kmeans(B, 0), 10)
     np.testing.assert_array_equal(pos, brute(B, Y, 10)[1])
+
+
+@pytest.mark.parametrize("kind", ["flat", "ivf"])
+def test_row_beliefs_come_from_the_cells_with_the_arrays_values(kind):
+    B = clustered(5000, seed=9)
+    ix = BeliefIndex.build(B, kind=kind, ivf_nlist=16)
+    rows = np.random.default_rng(0).integers(0, 5000, (7, 42))
+    assert ix.row_beliefs(rows) is None  # no cells before the first batch search
+    ix.search(batch(B, 20, 1), 5)
+    np.testing.assert_array_equal(ix.row_beliefs(rows), B[rows.ravel()])
+    assert ix.resample(2.0).row_beliefs(rows) is None  # derived: rows are not positions
