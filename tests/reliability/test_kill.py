@@ -17,8 +17,8 @@ SLOW_INGEST = """
 import sys, time
 import aoc_cli.store.writer as writer
 real = writer._write_h5
-def slow(path, data):
-    digest = real(path, data)
+def slow(path, data, *options):
+    digest = real(path, data, *options)
     print("writing", flush=True)
     time.sleep(60)
     return digest
