@@ -10,7 +10,7 @@ be measured on a shared machine, then indexed and rolled out with the CLI as the
     aoc index $C --model critic
     aoc rollout $C --env pendulum-het-upright --model critic -n 8 --seed 10000
 
-Prints the validation record every 500 critic steps (or every epoch) and the final metrics as
+Prints the training's progress reports (the critic's every 500 steps) and the final metrics as
 JSON lines; the model is ``models/<kind>/`` of the corpus, where the bench looks for it.
 """
 
@@ -55,11 +55,9 @@ def main() -> None:
     corpus = artefacts.corpus(args.task, rows=args.rows, seed=args.seed)
     config = model_config(scale, args.kind, args.seed)
 
-    def progress(record: dict) -> None:
-        if record.get("epoch_done"):
-            print(json.dumps({k: record.get(k) for k in
-                              ("epoch", "train_loss", "val_loss", "val_r2", "val_q_mean",
-                               "seconds") if k in record}), flush=True)
+    def progress(done: int, total: int, label: str) -> None:
+        """aoc_cli.progress's protocol: the epochs (or critic steps) done of the most."""
+        print(json.dumps({"done": done, "total": total, "label": label}), flush=True)
 
     metrics = train_model(corpus, config, model_id=args.model or args.kind, overwrite=True,
                           progress=progress)
