@@ -88,3 +88,24 @@ def test_importing_the_library_leaves_omp_wait_policy_alone_the_command_sets_it(
     assert _wait_policy("import aoc_cli, aoc_cli.session") == "None"
     assert _wait_policy("import aoc_cli.cli.app") == "PASSIVE"
     assert _wait_policy("import aoc_cli.cli.app", OMP_WAIT_POLICY="ACTIVE") == "ACTIVE"
+
+
+def test_a_rollout_runs_every_policys_steps_on_one_thread(maze, two_threads):
+    from aoc_cli.baselines import make_baseline
+    from aoc_cli.control import rollout
+    from aoc_cli.envs import make_env
+
+    session = open_session(maze, config=ControllerConfig.for_task("maze"), seed=0)
+    env = make_env("maze")
+    policy = make_baseline("zero", session, env)
+    seen = []
+    decide = policy.decide
+
+    def recording(*args, **kw):
+        seen.append((torch.get_num_threads(), faiss.omp_get_max_threads()))
+        return decide(*args, **kw)
+
+    policy.decide = recording
+    rollout(session, env, 1, policy=policy)
+    assert seen and set(seen) == {(1, 1)}
+    assert (torch.get_num_threads(), faiss.omp_get_max_threads()) == (2, 2)

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+import sys
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -16,6 +17,7 @@ from aoc_cli.control.rollout import (EpisodeResult, Policy, check_same_spaces, c
                                      run_episode, summarize)
 from aoc_cli.errors import AocError
 from aoc_cli.progress import Progress
+from aoc_cli.threads import thread_limits
 
 if TYPE_CHECKING:
     from aoc_cli.session import ModelFreeSession, Session
@@ -30,7 +32,7 @@ def rollout(session: Session | ModelFreeSession, env, episodes: int, seed: int =
     another ``policy`` with a ``decide(observation, history)`` method). ``reference``: a (T,)
     band from :func:`aoc_cli.control.monitor.reference_band` for the OOD monitor, instead of
     the running band of each episode's own steps. ``progress``: episodes done
-    (:mod:`aoc_cli.progress`)."""
+    (:mod:`aoc_cli.progress`). The steps run with one thread in torch, FAISS and BLAS."""
     check_spaces(env, session.corpus)
     controller = getattr(session, "controller", None)
     policy = policy or controller
@@ -41,16 +43,19 @@ def rollout(session: Session | ModelFreeSession, env, episodes: int, seed: int =
     results = []
     if progress is not None:
         progress(0, episodes, "rollout")
-    for e in range(episodes):
-        monitor = None if cfg is None else OODMonitor(
-            warmup=cfg.ood_warmup, sigmas=cfg.ood_sigmas, floor=floor, minimum=minimum,
-            reference=reference)
-        res = run_episode(env, policy, session.history_length, session.corpus, e,
-                          seed + e, monitor, noise_after, noise_std,
-                          keep_decisions=audit is not None)
-        results.append(res)
-        if progress is not None:
-            progress(e + 1, episodes, f"rollout (return {res.total_return:.1f})")
+    # every policy's steps with one thread in each pool, as the controller's own
+    # (aoc_cli.threads; torch's only when a policy has loaded it)
+    with thread_limits(torch=1 if "torch" in sys.modules else None, faiss=1, blas=1):
+        for e in range(episodes):
+            monitor = None if cfg is None else OODMonitor(
+                warmup=cfg.ood_warmup, sigmas=cfg.ood_sigmas, floor=floor, minimum=minimum,
+                reference=reference)
+            res = run_episode(env, policy, session.history_length, session.corpus, e,
+                              seed + e, monitor, noise_after, noise_std,
+                              keep_decisions=audit is not None)
+            results.append(res)
+            if progress is not None:
+                progress(e + 1, episodes, f"rollout (return {res.total_return:.1f})")
     if audit is not None:
         write_audit(audit, results, session.meta(), corpus=session.corpus)
     return results, summarize(results)
