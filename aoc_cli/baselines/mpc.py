@@ -22,6 +22,7 @@ import numpy as np
 from aoc_cli.baselines.common import ActionSpace, require
 from aoc_cli.baselines.features import RawFeatures
 from aoc_cli.errors import AocError
+from aoc_cli.threads import thread_limits
 
 
 @dataclass
@@ -53,15 +54,20 @@ def _transitions(corpus) -> np.ndarray:
 
 
 def train_dynamics(corpus, history_length: int, config: MPCConfig, progress=None):
-    """Fit f on ``corpus`` (module docstring); returns (net, features)."""
-    import torch
-    from torch import nn
-
+    """Fit f on ``corpus`` (module docstring) with ``config.threads`` torch threads (for the
+    fit only, aoc_cli.threads); returns (net, features)."""
     if corpus.discrete:
         raise AocError("the mpc baseline needs continuous actions")
     if corpus.rewards is None:
         raise AocError(f"corpus {corpus.name!r} has no rewards: mpc needs them")
-    torch.set_num_threads(max(1, int(config.threads)))
+    with thread_limits(torch=max(1, int(config.threads))):
+        return _fit_dynamics(corpus, history_length, config, progress)
+
+
+def _fit_dynamics(corpus, history_length: int, config: MPCConfig, progress):
+    import torch
+    from torch import nn
+
     features = RawFeatures.fit(corpus, history_length, with_action=True)
     rows = _transitions(corpus)
     x_all = features.corpus_features(corpus)
@@ -156,6 +162,7 @@ class MPCPolicy:
             u_max=torch.as_tensor(self.actions.high, dtype=torch.float32))
 
     def decide(self, observation, history):
+        """The planner's action, with ``config.threads`` torch threads (as it was trained)."""
         torch = self.torch
         if self.planner is None:
             self.reset()
@@ -163,5 +170,6 @@ class MPCPolicy:
         self.context = torch.as_tensor(ctx, dtype=torch.float32)
         state = torch.as_tensor(np.append(np.asarray(observation, np.float64), 0.0),
                                 dtype=torch.float32)
-        action = self.planner.command(state)
+        with thread_limits(torch=max(1, int(self.config.threads))):
+            action = self.planner.command(state)
         return self.actions.clip(action.detach().cpu().numpy())

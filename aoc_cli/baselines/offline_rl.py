@@ -26,6 +26,7 @@ import numpy as np
 from aoc_cli.baselines.common import ActionSpace, require
 from aoc_cli.baselines.features import RawFeatures
 from aoc_cli.errors import AocError
+from aoc_cli.threads import thread_limits
 
 ALGOS = ("td3bc", "cql")
 
@@ -93,9 +94,9 @@ def corpus_dataset(corpus, features: RawFeatures):
 
 def train_agent(algo: str, corpus, history_length: int, config: OfflineRLConfig,
                 bounds: tuple[np.ndarray, np.ndarray] | None = None, progress=None):
-    """Train a d3rlpy ``algo`` (td3bc | cql) on ``corpus``; returns (agent, features)."""
+    """Train a d3rlpy ``algo`` (td3bc | cql) on ``corpus`` with ``config.threads`` torch
+    threads (for the fit only, aoc_cli.threads); returns (agent, features)."""
     d3rlpy = require("d3rlpy", algo)
-    import torch
 
     quiet_d3rlpy()
     if algo not in ALGOS:
@@ -103,7 +104,12 @@ def train_agent(algo: str, corpus, history_length: int, config: OfflineRLConfig,
     if algo == "td3bc" and corpus.discrete:
         raise AocError("td3bc needs continuous actions; use the cql baseline for a discrete "
                        "action space")
-    torch.set_num_threads(max(1, int(config.threads)))
+    with thread_limits(torch=max(1, int(config.threads))):
+        return _fit_agent(d3rlpy, algo, corpus, history_length, config, bounds, progress)
+
+
+def _fit_agent(d3rlpy, algo: str, corpus, history_length: int, config: OfflineRLConfig,
+               bounds, progress):
     d3rlpy.seed(int(config.seed))
     features = RawFeatures.fit(corpus, history_length, with_action=False)
     dataset = corpus_dataset(corpus, features)
@@ -139,6 +145,7 @@ class OfflineRLPolicy:
         self.name = algo
         self.actions = ActionSpace(session, env)
         config = config or OfflineRLConfig(seed=seed)
+        self.threads = max(1, int(config.threads))
         if agent is None:
             if progress is not None:
                 progress(0, config.steps, f"training {algo} (d3rlpy) on corpus "
@@ -151,7 +158,9 @@ class OfflineRLPolicy:
         self.agent, self.features = agent, features
 
     def decide(self, observation, history):
+        """The agent's action, with ``config.threads`` torch threads (as it was trained)."""
         x = self.features.transform(np.asarray(observation, np.float32).reshape(1, -1), None,
                                     history)
-        action = np.asarray(self.agent.predict(x))[0]
+        with thread_limits(torch=self.threads):
+            action = np.asarray(self.agent.predict(x))[0]
         return self.actions.clip(action)
