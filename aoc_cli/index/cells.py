@@ -40,6 +40,8 @@ from aoc_cli.index.scan_kernels import _replace_top, _sort_heaps, _sq32
 HEAD = 4
 #: Rows per block when rows are read, rotated or assigned (bounds the temporaries).
 BLOCK = 1 << 18
+#: Queries searched at once (bounds the (Q, L) query-centre distance bounds).
+QUERY_CHUNK = 1024
 #: Relative slack of the triangle-inequality tests (far above the rounding of rho, T and the
 #: centre bounds; a larger slack only keeps more rows).
 SLACK = 1e-9
@@ -175,8 +177,13 @@ def cells_search(Y: np.ndarray, cells: CellData, k: int,
 
     Y: (Q, d) queries (used as float32); allowed: (P,) bool over index positions (None: all),
     with at least k allowed. Returns (squared distances (Q, k) float64 ascending, positions
-    (Q, k) int64); ties by the lower position.
+    (Q, k) int64); ties by the lower position. Queries are searched QUERY_CHUNK at a time (the
+    (Q, L) query-centre bounds stay small for a large Q).
     """
+    if Y.shape[0] > QUERY_CHUNK:
+        parts = [cells_search(Y[a:a + QUERY_CHUNK], cells, k, allowed)
+                 for a in range(0, Y.shape[0], QUERY_CHUNK)]
+        return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
     Y32 = np.ascontiguousarray(Y, dtype=np.float32)
     Y64 = Y32.astype(np.float64)
     Z = cells.centres

@@ -110,3 +110,16 @@ def test_row_beliefs_come_from_the_cells_with_the_arrays_values(kind):
     ix.search(batch(B, 20, 1), 5)
     np.testing.assert_array_equal(ix.row_beliefs(rows), B[rows.ravel()])
     assert ix.resample(2.0).row_beliefs(rows) is None  # derived: rows are not positions
+
+
+def test_many_queries_are_searched_in_chunks_with_the_same_answer(monkeypatch):
+    import aoc_cli.index.cells as cells_module
+
+    B = clustered(3000, seed=10)
+    cells = CellData.kmeans(B, 0)
+    Y = batch(B, 50, 3)
+    whole = cells_search(Y, cells, 6)
+    monkeypatch.setattr(cells_module, "QUERY_CHUNK", 7)
+    chunked = cells_search(Y, cells, 6)
+    np.testing.assert_array_equal(chunked[1], whole[1])
+    np.testing.assert_array_equal(chunked[1], brute(B, Y, 6)[1])
