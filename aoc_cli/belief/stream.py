@@ -332,7 +332,8 @@ def _fit_streamed(net, data: _Blocks, val: _Validation, train_sorted: np.ndarray
                   config: BeliefConfig, started: float, progress) -> EarlyStopping:
     """Adam epoch by epoch: the blocks in a random order, the training rows of a block (of the
     episodes ``train_sorted``) in a random order, until the validation loss stops improving."""
-    optimiser = torch.optim.Adam(net.parameters(), lr=config.lr)
+    optimiser = torch.optim.Adam(net.parameters(), lr=config.lr,
+                                 weight_decay=config.weight_decay)
     rng = np.random.default_rng(config.seed)
     generator = torch.Generator().manual_seed(config.seed)
     starts, ranges, objective = data.cols.starts, data.ranges, data.objective

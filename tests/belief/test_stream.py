@@ -100,3 +100,17 @@ def test_block_value_targets_are_the_whole_column_targets(corpus, value):
     cols = Columns(corpus)
     got = block_value_targets(corpus, cols, blocks(cols.starts, 333), value, 0.9)
     np.testing.assert_array_equal(got, value_targets(corpus, value, 0.9))
+
+
+def test_streaming_training_applies_the_weight_decay(corpus):
+    """--weight-decay reaches the streamed optimiser as the in-memory one (it was ignored)."""
+    fast = dict(value="reward", max_epochs=3, patience=3, seed=0, threads=1, batch_size=250,
+                hidden=32, history_length=0)
+
+    def norm(model_id, decay):
+        train_streaming(corpus, BeliefConfig(weight_decay=decay, **fast), model_id,
+                        overwrite=True, block_rows=600)
+        net = load_model(corpus, model_id).net
+        return float(torch.sqrt(sum((p.detach() ** 2).sum() for p in net.parameters())))
+
+    assert norm("wd", 0.5) < 0.9 * norm("plain", 0.0)
