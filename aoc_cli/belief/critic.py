@@ -150,12 +150,7 @@ def fit_critic(corpus, inputs, encoder: Encoder, config: BeliefConfig,
     ``inputs`` is :func:`aoc_cli.belief.inputs.encode_corpus` of the corpus with the actions;
     ``on_record(record)`` is called with each record (every RECORD_EVERY steps).
     """
-    if corpus.discrete:
-        raise AocError("--belief critic needs continuous actions (its actor is a TD3 actor): "
-                       "use --belief value or reward for a discrete action space")
-    if not corpus.has_rewards:
-        raise AocError(f"corpus {corpus.name!r} has no rewards: --belief critic learns Q "
-                       "from them; use --mode imitation")
+    _refuse_unsuitable(corpus)
     started = time.perf_counter()
     nxt_np, done_np, usable = transitions(corpus)
     scale = float(encoder.norm.reward_std)
@@ -169,14 +164,7 @@ def fit_critic(corpus, inputs, encoder: Encoder, config: BeliefConfig,
         raise AocError("no training row has a next row in its episode: --belief critic needs "
                        "episodes longer than one step")
     low, high = action_box(corpus, encoder)
-    d_o, d_a = corpus.observation_dim, corpus.action_dim
-    with torch.random.fork_rng(devices=[]):
-        torch.manual_seed(config.seed)
-        critic = TwinCritic(d_o, d_a, config).to(device)
-        actor = Actor(d_o, d_a, config, low.to(device), high.to(device)).to(device)
-    critic_t, actor_t = copy.deepcopy(critic), copy.deepcopy(actor)
-    for p in list(critic_t.parameters()) + list(actor_t.parameters()):
-        p.requires_grad_(False)
+    critic, actor, critic_t, actor_t = _networks(corpus, config, low, high, device)
     opt_q = torch.optim.Adam(critic.parameters(), lr=LR)
     opt_pi = torch.optim.Adam(actor.parameters(), lr=LR)
     generator = torch.Generator().manual_seed(config.seed)
@@ -208,17 +196,8 @@ def fit_critic(corpus, inputs, encoder: Encoder, config: BeliefConfig,
         running += float(loss_q.detach())
         count += 1
         if step % POLICY_EVERY == 0:
-            pi = actor(o, h)
-            q = critic.first(o, pi, h)
-            loss_pi = -q.mean() / q.abs().mean().detach().clamp_min(1e-6) \
-                + config.critic_bc_weight * ((pi - a) ** 2).mean()
-            opt_pi.zero_grad(set_to_none=True)
-            loss_pi.backward()
-            opt_pi.step()
-            with torch.no_grad():
-                for net, target in ((critic, critic_t), (actor, actor_t)):
-                    for p, pt in zip(net.parameters(), target.parameters()):
-                        pt.mul_(1 - TAU).add_(p, alpha=TAU)
+            _actor_step(actor, critic, opt_pi, o, a, h, config.critic_bc_weight)
+            _soft_update(((critic, critic_t), (actor, actor_t)))
         if step % RECORD_EVERY == 0 or step == config.critic_steps:
             record = {"epoch": step, "train_loss": running / count,
                       **_validate(td_batch, va, critic_t, scale)}
@@ -231,6 +210,51 @@ def fit_critic(corpus, inputs, encoder: Encoder, config: BeliefConfig,
                 raise AocError("the critic diverged (the TD loss is not finite): lower "
                                "--lr or raise --critic-bc-weight")
     return CriticFit(critic_t, actor_t, history, scale)
+
+
+def _networks(corpus, config: BeliefConfig, low: torch.Tensor, high: torch.Tensor,
+              device: torch.device) -> tuple[TwinCritic, Actor, TwinCritic, Actor]:
+    """The twin critic and the actor, seeded by ``config.seed`` (without touching the global
+    generator), and their frozen target copies."""
+    d_o, d_a = corpus.observation_dim, corpus.action_dim
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(config.seed)
+        critic = TwinCritic(d_o, d_a, config).to(device)
+        actor = Actor(d_o, d_a, config, low.to(device), high.to(device)).to(device)
+    critic_t, actor_t = copy.deepcopy(critic), copy.deepcopy(actor)
+    for p in list(critic_t.parameters()) + list(actor_t.parameters()):
+        p.requires_grad_(False)
+    return critic, actor, critic_t, actor_t
+
+
+def _refuse_unsuitable(corpus) -> None:
+    """The corpora a TD3 critic cannot be trained on: discrete actions, no rewards."""
+    if corpus.discrete:
+        raise AocError("--belief critic needs continuous actions (its actor is a TD3 actor): "
+                       "use --belief value or reward for a discrete action space")
+    if not corpus.has_rewards:
+        raise AocError(f"corpus {corpus.name!r} has no rewards: --belief critic learns Q "
+                       "from them; use --mode imitation")
+
+
+def _actor_step(actor: Actor, critic: TwinCritic, opt_pi, o, a, h, bc_weight: float) -> None:
+    """One TD3+BC actor update: maximise the first critic's Q, normalised by its mean
+    magnitude, plus ``bc_weight`` times the squared distance to the logged actions (all (B, .))."""
+    pi = actor(o, h)
+    q = critic.first(o, pi, h)
+    loss_pi = -q.mean() / q.abs().mean().detach().clamp_min(1e-6) \
+        + bc_weight * ((pi - a) ** 2).mean()
+    opt_pi.zero_grad(set_to_none=True)
+    loss_pi.backward()
+    opt_pi.step()
+
+
+def _soft_update(pairs) -> None:
+    """Polyak averaging of each (network, target) pair: target <- (1 - TAU) target + TAU net."""
+    with torch.no_grad():
+        for net, target in pairs:
+            for p, pt in zip(net.parameters(), target.parameters()):
+                pt.mul_(1 - TAU).add_(p, alpha=TAU)
 
 
 def _validate(td_batch, va: torch.Tensor, critic_t: TwinCritic, scale: float) -> dict:
