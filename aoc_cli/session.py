@@ -30,7 +30,7 @@ import numpy as np
 
 from aoc_cli.control.config import ControllerConfig
 from aoc_cli.control.controller import Controller
-from aoc_cli.decompose import decompose, default_k
+from aoc_cli.decompose import decompose, default_k, rarest_share
 from aoc_cli.errors import AocError
 from aoc_cli.index import BeliefIndex
 from aoc_cli.progress import Progress
@@ -113,8 +113,7 @@ def neighbours(corpus: Corpus, model) -> int:
     rarest action at its base rate (:func:`aoc_cli.decompose.default_k`)."""
     if model.mode != "imitation" or not corpus.discrete or corpus.n_rows == 0:
         return default_k(model.d_b)
-    counts = np.bincount(np.asarray(corpus.actions, dtype=np.int64))
-    return default_k(model.d_b, float(counts[counts > 0].min() / corpus.n_rows))
+    return default_k(model.d_b, rarest_share(corpus.actions))
 
 
 def load_model(corpus: Corpus, model_id: str | None) -> BeliefModel:

@@ -81,7 +81,7 @@ def abc_validation(actions: np.ndarray, n_actions: int, k: int | None = None):
     import torch
 
     from aoc_cli.control.scores import auc
-    from aoc_cli.decompose import decompose, default_k
+    from aoc_cli.decompose import decompose, default_k, rarest_share
 
     actions = np.asarray(actions, dtype=np.int64)
 
@@ -93,8 +93,7 @@ def abc_validation(actions: np.ndarray, n_actions: int, k: int | None = None):
                            for i in range(0, len(rows), 65536)]).cpu().numpy()
         n_tr = len(data.train_rows)
         a_tr, y = actions[data.train_rows], actions[data.val_rows]
-        counts = np.bincount(a_tr)
-        kk = k if k is not None else default_k(b.shape[1], counts[counts > 0].min() / n_tr)
+        kk = k if k is not None else default_k(b.shape[1], rarest_share(a_tr))
         dec = decompose(b[:n_tr], b[n_tr:], k=kk)
         scores = abc_scores(dec.rows, dec.weights, a_tr, n_actions)
         return {"val_abc_accuracy": float(np.mean(scores.argmax(1) == y)),

@@ -5,6 +5,7 @@ four steps (neighbours, exact corpus residual and projection, minimal corpus sub
 a whole batch of queries at once; see `engine.py`, which reads top to bottom.
 """
 
-from aoc_cli.decompose.engine import DecomposeConfig, Decomposition, decompose, default_k
+from aoc_cli.decompose.engine import DecomposeConfig, Decomposition, decompose, default_k, \
+    rarest_share
 
-__all__ = ["DecomposeConfig", "Decomposition", "decompose", "default_k"]
+__all__ = ["DecomposeConfig", "Decomposition", "decompose", "default_k", "rarest_share"]

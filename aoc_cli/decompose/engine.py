@@ -91,6 +91,14 @@ def default_k(d_b: int, rarest_share: float | None = None) -> int:
     return k
 
 
+def rarest_share(actions: np.ndarray) -> float | None:
+    """The share of the rows (N,) of discrete ``actions`` that hold the rarest action present
+    (None for no rows): what :func:`default_k` scales the imitation k by."""
+    counts = np.bincount(np.asarray(actions, dtype=np.int64))
+    counts = counts[counts > 0]
+    return float(counts.min() / counts.sum()) if len(counts) else None
+
+
 def decompose(
     beliefs: np.ndarray,
     queries: np.ndarray,

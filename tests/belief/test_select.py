@@ -114,6 +114,10 @@ def test_neighbours_per_query_follow_the_rarest_action():
     assert default_k(20, 0.5) == 42                 # balanced binary actions: the same
     assert default_k(20, 0.11) == 191               # ceil(21 / 0.11)
     assert default_k(20, 0.25) == 84
+    from aoc_cli.decompose import rarest_share
+
+    assert rarest_share(np.array([2, 0, 2, 2, 0, 2, 2, 2])) == 0.25  # action 1 absent: not rarest
+    assert rarest_share(np.array([], dtype=np.int64)) is None
     assert default_k(20, 0.001) == 16 * 21          # capped
     assert default_k(4, 1 / 3) == 15
 
