@@ -82,9 +82,30 @@ def usage_message(err: usage.UsageError) -> str:
     return f"{message} (see `{command} --help`)"
 
 
+def global_options_first(args: list[str]) -> list[str]:
+    """``aoc``'s own options (``--store DIR``, ``--store=DIR``, ``--debug``) moved before the
+    command wherever they were typed, so ``aoc evaluate ward --store s`` works as
+    ``aoc --store s evaluate ward`` (no command has options of these names). Nothing after a
+    ``--`` is touched."""
+    front: list[str] = []
+    rest: list[str] = []
+    i, end = 0, args.index("--") if "--" in args else len(args)
+    while i < end:
+        arg = args[i]
+        if arg == "--debug" or arg.startswith("--store="):
+            front.append(arg)
+        elif arg == "--store" and i + 1 < end:
+            front += args[i:i + 2]
+            i += 1
+        else:
+            rest.append(arg)
+        i += 1
+    return front + rest + args[end:]
+
+
 def main(argv: list[str] | None = None) -> None:
     """Console-script entry point."""
-    args = list(argv if argv is not None else sys.argv[1:])
+    args = global_options_first(list(argv if argv is not None else sys.argv[1:]))
     debug = "--debug" in args or bool(os.environ.get("AOC_DEBUG"))
     previous = _terminate_like_interrupt()
     code = 0

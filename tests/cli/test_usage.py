@@ -70,3 +70,17 @@ def test_the_index_is_named_alike_in_every_command(aoc_inproc):
         code, out, _ = aoc_inproc(command, "--help")
         text = " ".join(out.replace("│", " ").split())
         assert code == 0 and "--index,--index-id" in text, command
+
+
+def test_the_global_options_may_follow_the_command(aoc_inproc, tmp_path):
+    """`aoc info x --store DIR --debug` is `aoc --store DIR --debug info x` (users type the
+    store after the command; it used to be 'No such option: --store')."""
+    from aoc_cli.cli.app import global_options_first
+
+    assert global_options_first(["info", "x", "--store", "s", "--debug"]) == \
+        ["--store", "s", "--debug", "info", "x"]
+    assert global_options_first(["info", "--store=s", "x", "--", "--debug"]) == \
+        ["--store=s", "info", "x", "--", "--debug"]
+    assert global_options_first(["info", "x", "--store"]) == ["info", "x", "--store"]
+    code, out, err = aoc_inproc("info", "nope", "--store", str(tmp_path / "elsewhere"))
+    assert code == 2 and "no corpus 'nope'" in err and "elsewhere" in err, err
