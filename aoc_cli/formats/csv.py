@@ -40,7 +40,6 @@ import numpy as np
 
 from aoc_cli.errors import AocError, warn
 from aoc_cli.formats.common import ReadOptions, action_space_of, encode_labels
-from aoc_cli.progress import tracked
 from aoc_cli.store import CorpusData, box_space
 
 CHUNK_LINES = 50_000
@@ -85,20 +84,21 @@ def _parse(path: Path, text: str, delimiter: str, progress):
         dup = sorted({h for h in header if header.count(h) > 1})
         raise AocError(f"{path} repeats column names {dup}: rename them")
     rows: list[list[str]] = []
-    # The progress bar counts physical lines (a quoted field may span several).
-    chunks = range(0, text.count("\n") + 1, CHUNK_LINES)
-    if len(chunks) < 2:  # no bar for a file read in one go
+    # progress in physical lines (a quoted field may span several); no bar for a small file
+    lines, label = text.count("\n") + 1, f"reading {path.name}"
+    if lines <= CHUNK_LINES:
         progress = None
-    for start in tracked(chunks, progress, f"reading {path.name}", len(chunks)):
-        for r in reader:
-            if not r or (len(r) == 1 and not r[0].strip()):
-                continue  # a blank line
-            if len(r) != len(header):
-                raise AocError(f"{path}: data row {len(rows) + 1} (line {reader.line_num}) has "
-                               f"{len(r)} fields, the header has {len(header)}: fix the file")
-            rows.append(r)
-            if reader.line_num >= start + CHUNK_LINES:
-                break
+    for r in reader:
+        if not r or (len(r) == 1 and not r[0].strip()):
+            continue  # a blank line
+        if len(r) != len(header):
+            raise AocError(f"{path}: data row {len(rows) + 1} (line {reader.line_num}) has "
+                           f"{len(r)} fields, the header has {len(header)}: fix the file")
+        rows.append(r)
+        if progress is not None and len(rows) % CHUNK_LINES == 0:
+            progress(min(reader.line_num, lines), lines, label)
+    if progress is not None:
+        progress(lines, lines, label)
     if not rows:
         return header, {h: np.array([], dtype=str) for h in header}
     cols = [np.array(c, dtype=str) for c in zip(*rows)]

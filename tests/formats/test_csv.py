@@ -133,3 +133,16 @@ def test_a_row_with_too_many_fields_names_its_line(tmp_path):
     path.write_text('id,t,obs_a,act_u\np1,0,"two\nlines",0\np1,1,2.0,0,9\n')
     with pytest.raises(AocError, match=r"data row 2 \(line 4\) has 5 fields, the header has 4"):
         read_dataset(path)
+
+
+def test_reading_reports_progress_in_lines_up_to_the_whole_file(tmp_path, monkeypatch):
+    import aoc_cli.formats.csv as csv_module
+
+    monkeypatch.setattr(csv_module, "CHUNK_LINES", 2)
+    path = tmp_path / "p.csv"
+    path.write_text("a,b\n" + "".join(f"{i},{i}\n" for i in range(7)))  # 9 lines with the last
+    seen = []
+    header, cols = csv_module.read_table(path, lambda *a: seen.append(a))
+    assert header == ["a", "b"] and cols["a"].tolist() == [str(i) for i in range(7)]
+    done = [s[0] for s in seen]
+    assert done == sorted(done) and seen[-1] == (9, 9, "reading p.csv") and len(seen) == 4
