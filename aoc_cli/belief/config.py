@@ -63,8 +63,10 @@ class BeliefConfig:
     #: Value mode: weight of the auxiliary loss that makes b(o, a, h) also predict the change of
     #: observation o' - o through a second linear head (0 = the paper's objective exactly).
     dynamics_weight: float = 0.0
-    #: ``critic``: gradient steps of the offline critic (TD3+BC, aoc_cli.belief.critic).
-    critic_steps: int = 20_000
+    #: ``critic``: gradient steps of the offline critic (TD3+BC, aoc_cli.belief.critic). 10,000 is
+    #: what the bench's full scale trains and what docs/results.md measures (pendulum-het upright
+    #: at 100k: -0.051; lunar at 0.3M: 265.8); the TD loss rises again after ~6,000 steps there.
+    critic_steps: int = 10_000
     #: ``critic``: weight of the behaviour-cloning term in the actor's loss (TD3+BC's 1 / alpha;
     #: 0 = plain TD3 as the reference code; see aoc_cli/belief/critic.py).
     critic_bc_weight: float = 0.4
