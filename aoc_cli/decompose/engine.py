@@ -33,8 +33,9 @@ class DecomposeConfig:
 
     k: neighbours per query; None means the paper's k = 2 (d_b + 1) (appendix "Finding the
         Minimal Convex Hull Efficiently"), clipped to the corpus size.
-    qp_tol: optimality tolerance of step 2, on the Frank-Wolfe gap
-        <x, x> - min_c <b_c - y, x>  with x = y* - y, relative to the squared neighbourhood radius.
+    qp_tol: relative optimality tolerance of step 2, on the Frank-Wolfe gap
+        <x, x> - min_c <b_c - y, x>  with x = y* - y: at most qp_tol ||x||^2 plus 1e-15 of the
+        squared neighbourhood radius (minnorm.py), so ||x|| - r <= qp_tol ||x|| + 1e-15 / ||x||.
     lp_start: step 3 starts from the lifted-LP vertex, the Delaunay simplex containing y*
         (min sum w_c ||b_c - y*||^2 s.t. B^T w = y*, w in simplex).
     exchange_budget: at most this many volume-reducing vertex exchanges in step 3.

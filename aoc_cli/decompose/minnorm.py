@@ -10,27 +10,48 @@ Wolfe's algorithm (Wolfe 1976, "Finding the nearest point in a polytope") solves
 finite number of steps: it keeps a "corral" S of affinely independent points and their weights,
 
     major cycle:  x = sum_{i in S} lam_i p_i;  j = argmin_c <p_c, x>;
-                  stop if <x, x> - <p_j, x> <= tol, else S <- S + {j};
+                  stop if x is certified optimal (below), else S <- S + {j};
     minor cycle:  alpha = argmin { ||sum_S alpha_i p_i|| : sum alpha = 1 } (affine minimiser);
                   if alpha > 0: lam <- alpha, next major cycle;
                   else move lam towards alpha until a weight hits 0 and drop that point.
 
 The stopping test is the optimality condition of the QP (x is the nearest point of the hull iff
-<p_c, x> >= <x, x> for every c), so a returned answer is verified, not trusted.
+<p_c, x> >= <x, x> for every c), so a returned answer is verified, not trusted. With the
+Frank-Wolfe gap  gap = <x, x> - min_c <p_c, x>  every point of the hull has <p, x> >= <x, x> - gap,
+hence  r* >= ||x|| - gap / ||x||  (and r* >= 0): the loop stops when (points rescaled to radius 1)
 
-The affine minimiser is never solved from scratch. With the lifted Gram matrix
-H_S = P_S P_S^T + 1 1^T (positive definite iff S is affinely independent) the affine minimiser is
-alpha = H_S^{-1} 1 / (1^T H_S^{-1} 1), and H_S^{-1} is kept (embedded in a fixed (m, m) slot
-array, zero on empty slots) by one rank-one update per cycle:
+    ||x|| <= ABS_TOL   or   gap <= tol ||x||^2 + GAP_TOL,
 
-    add j at empty slot s:   g = H_{S,j}, u = H_S^{-1} g, sigma = H_jj - g.u,
-                             H^{-1} <- H^{-1} + (u - e_s)(u - e_s)^T / sigma
-    drop slot s:             c = H^{-1} e_s,  H^{-1} <- H^{-1} - c c^T / c_s
+i.e. when ||x|| - r* <= min(||x||, tol ||x|| + GAP_TOL / ||x||): relative to ||x|| itself, not
+to the radius. An absolute test gap <= tol bounds ||x||^2 - r*^2, which near a zero residual
+allows ||x|| several times r*. GAP_TOL = 1e-15 is the floor of the computed gap (x carries
+rounding of ~1e-16 at radius 1, and so does <x, x> - <p_j, x>: on the recorded upright problems
+1e-16 certifies half of them, 1e-15 all), so a residual near 3e-8 of the radius is certified to
+~3e-8 at worst (ABS_TOL): below the precision of float32 beliefs (~6e-8 of their own magnitude,
+which exceeds the radius).
 
-so each cycle costs a few small matrix-vector products and no factorisation. Each problem of
+The affine minimiser is never solved from scratch. With the lifted points q_c = (p_c, 1) and the
+lifted Gram matrix H_S = P_S P_S^T + 1 1^T (positive definite iff S is affinely independent),
+alpha = H_S^{-1} 1 / (1^T H_S^{-1} 1). The loop keeps a QR factorisation of the lifted corral,
+[q_i]_{i in S} = U R (U (d + 1, |S|) orthonormal columns, R upper triangular, H_S = R^T R), and
+gets alpha by two triangular solves (R^T z = 1, R a = z):
+
+    add j:    Gram-Schmidt of q_j against U, twice (r = U^T q_j, e = q_j - U r, rho = ||e||):
+              U <- [U, e / rho], R <- [[R, r], [0, rho]]
+    drop i:   delete column i of R and restore its triangle by Givens rotations of rows
+              (t, t + 1), t >= i, applied to U's columns alike
+
+so each cycle costs a few small matrix-vector products and no factorisation. rho is the
+distance of q_j from the corral's span computed from the difference vector itself, exact to
+rounding even for nearly duplicate points; the previous rank-one update of H_S^{-1} got it
+as H_jj - g^T H_S^{-1} g, which loses all precision when S is nearly affinely dependent
+(beliefs of a trained network on a low-dimensional surface: H_S's condition number is the
+square of the lifted points'; docs/benchmarks.md, "The residual QP per belief"). A point with
+rho <= RHO_MIN lies in the corral's affine hull, where its gap is rounding: x is then accepted
+when that gap passes the test above with 10 rho ||x|| added. Each problem of
 the batch runs its own loop in compiled code (numba, float64) and stops as soon as it is
 optimal (a lockstep numpy iteration paid ~80 array calls a cycle for the slowest problem).
-Problems that do not converge within the budget (degenerate corrals, loss of precision) are
+Problems that are not certified within the budget (cycling, a degenerate corral) are
 reported as failed and the caller solves them with the reference QP.
 """
 
@@ -71,9 +92,10 @@ def min_norm_point(
     points: (Q, k, d) float64, neighbour beliefs minus the query (p_c = b_c - y).
     valid: (Q, k) bool, which points exist (padding when fewer than k neighbours); at least one
         per problem.
-    tol: optimality tolerance on the Frank-Wolfe gap <x,x> - min_c <p_c,x>, relative to the
-        squared radius of the point set (points are rescaled to radius 1 internally) plus
-        1e-10 * ||x||^2, so small residuals are resolved to relative precision.
+    tol: relative optimality tolerance: a problem stops when the Frank-Wolfe gap
+        <x,x> - min_c <p_c,x> is at most tol ||x||^2 + GAP_TOL, or ||x|| <= ABS_TOL (points
+        rescaled to radius 1 internally), so ||x|| - r* <= tol ||x|| + GAP_TOL / ||x||
+        (module docstring).
     """
     points = np.ascontiguousarray(points, dtype=np.float64)
     n_q, k, d = points.shape
@@ -91,24 +113,33 @@ def min_norm_point(
     return MinNormResult(weights, weights > 0, residual, ok, int(iters.max(initial=0)))
 
 
+#: The certificate's floors, on the unit-radius scale: a problem is solved when ||x|| <= ABS_TOL
+#: or gap <= tol ||x||^2 + GAP_TOL, so ||x|| - r* <= min(||x||, tol ||x|| + GAP_TOL / ||x||).
+ABS_TOL = 3e-8
+GAP_TOL = 1e-15
+#: A point whose lifted distance from the span of the lifted corral is below this (unit
+#: radius) lies in the corral's affine hull up to rounding: it is not added.
+RHO_MIN = 1e-12
+
+
 @numba.njit(cache=True, nogil=True)
 def _wolfe_batch(points, valid, tol, max_iter, out_w, out_res, out_ok, out_it):  # pragma: no cover
     n_q, k, d = points.shape
-    m = min(k, d + 1)  # an affinely independent corral has at most d + 1 points
+    D = d + 1  # lifted points q_c = (p_c, 1)
+    m = min(k, D)  # an affinely independent corral has at most d + 1 points
     PT = np.empty((d, k))  # transposed: <p_c, x> for all c vectorises over c
     sq = np.empty(k)
     xP = np.empty(k)
-    H = np.zeros((m, m))
-    a = np.zeros(m)
+    U = np.zeros((D, m))  # orthonormal basis of the lifted corral's span (columns)
+    R = np.zeros((m, m))  # the lifted corral (as columns) = U R, R upper triangular
     lam = np.zeros(m)
     alpha = np.zeros(m)
-    act = np.zeros(m, dtype=np.bool_)
-    slot = np.zeros(m, dtype=np.int64)
-    Ps = np.zeros((m, d))
+    a = np.zeros(m)
+    z = np.zeros(m)
+    r = np.zeros(m)
+    idx = np.zeros(m, dtype=np.int64)
     x = np.zeros(d)
-    g = np.zeros(m)
-    u = np.zeros(m)
-    v = np.zeros(m)
+    e = np.zeros(D)
     for q in range(n_q):
         # rescale to radius 1
         big = 0.0
@@ -130,41 +161,74 @@ def _wolfe_batch(points, valid, tol, max_iter, out_w, out_res, out_ok, out_it): 
             sq[c] = sq[c] / s2
             if sq[c] < sq[j0]:
                 j0 = c
-        H[:, :] = 0.0
-        a[:] = 0.0
+        # the corral {j0}: q_j0 = U[:, 0] R[0, 0]
+        U[:, :] = 0.0
+        R[:, :] = 0.0
         lam[:] = 0.0
-        act[:] = False
-        H[0, 0] = 1.0 / (sq[j0] + 1.0)
-        a[0] = H[0, 0]
-        act[0] = True
-        slot[0] = j0
-        lam[0] = 1.0
+        nrm = 0.0
         for t in range(d):
-            Ps[0, t] = PT[t, j0]
-        nact = 1
+            nrm += PT[t, j0] * PT[t, j0]
+        nrm = np.sqrt(nrm + 1.0)
+        for t in range(d):
+            U[t, 0] = PT[t, j0] / nrm
+        U[d, 0] = 1.0 / nrm
+        R[0, 0] = nrm
+        idx[0] = j0
+        lam[0] = 1.0
+        n = 1
         failed = False
         done = False
         it = 0
         while it < max_iter:
             it += 1
+            # the corral's affine minimiser: alpha = H^{-1} 1 / (1^T H^{-1} 1), H = R^T R
+            for i in range(n):  # R^T z = 1
+                s = 1.0
+                for t in range(i):
+                    s -= R[t, i] * z[t]
+                z[i] = s / R[i, i]
+            for i in range(n - 1, -1, -1):  # R a = z
+                s = z[i]
+                for t in range(i + 1, n):
+                    s -= R[i, t] * a[t]
+                a[i] = s / R[i, i]
             asum = 0.0
-            for s in range(m):
-                asum += a[s]
+            for i in range(n):
+                asum += a[i]
             minor = False
-            for s in range(m):
-                alpha[s] = a[s] / asum
-                if act[s] and alpha[s] <= 0.0:
+            for i in range(n):
+                alpha[i] = a[i] / asum
+                if not alpha[i] > 0.0:
                     minor = True
-            if not minor:
-                for s in range(m):
-                    lam[s] = alpha[s]
+            if minor:
+                # minor cycle: step towards alpha until a weight reaches zero; that point leaves
+                i_out = -1
+                rbest = np.inf
+                for i in range(n):
+                    if not alpha[i] > 0.0:
+                        ratio = lam[i] / max(lam[i] - alpha[i], 1e-300)
+                        if ratio < rbest:
+                            rbest = ratio
+                            i_out = i
+                if i_out < 0:  # alpha not finite: the corral degenerated
+                    failed = True
+                    break
+                theta = min(rbest, 1.0)
+                for i in range(n):
+                    lam[i] += theta * (alpha[i] - lam[i])
+                _drop(U, R, idx, lam, n, i_out)
+                n -= 1
+                continue
+            for i in range(n):
+                lam[i] = alpha[i]
             # major cycle: optimality test and entering point
             for t in range(d):
                 x[t] = 0.0
-            for s in range(m):
-                if lam[s] != 0.0:
-                    for t in range(d):
-                        x[t] += lam[s] * Ps[s, t]
+            for i in range(n):
+                li = lam[i]
+                c = idx[i]
+                for t in range(d):
+                    x[t] += li * PT[t, c]
             xP[:] = 0.0
             for t in range(d):
                 xt = x[t]
@@ -181,109 +245,99 @@ def _wolfe_batch(points, valid, tol, max_iter, out_w, out_res, out_ok, out_it): 
             xx = 0.0
             for t in range(d):
                 xx += x[t] * x[t]
-            xPj = xP[j]
-            gap = xx - xPj  # Frank-Wolfe gap of the best entering point
-            # optimal: no gap, or moving towards p_j could lower ||x||^2 by less than 1e-12 of
-            # itself (gap^2 / ||p_j - x||^2); adding such a point only degenerates the corral
-            step = (sq[j] + 1.0) - 1.0 - 2.0 * xPj + xx  # ||p_j - x||^2
-            optimal = (gap - 1e-10 * xx <= tol) or (gap * gap <= 1e-12 * xx * step)
-            if nact == m:  # a full corral (d + 1 points, or all k) with alpha > 0: x is optimal
-                optimal = True
-            if minor:
-                # minor cycle: step towards alpha until a weight reaches zero; that point leaves
-                s_out = -1
-                rbest = np.inf
-                for s in range(m):
-                    if act[s] and alpha[s] <= 0.0:
-                        ratio = lam[s] / max(lam[s] - alpha[s], 1e-300)
-                        if ratio < rbest:
-                            rbest = ratio
-                            s_out = s
-                theta = min(rbest, 1.0)
-                for s in range(m):
-                    lam[s] += theta * (alpha[s] - lam[s])
-                c_out = H[s_out, s_out]
-                if c_out <= 0.0:
-                    failed = True
-                    break
-                # drop slot s: H^{-1} <- H^{-1} - c c^T / c_s
-                for s in range(m):
-                    v[s] = H[s, s_out]
-                for s in range(m):
-                    f = v[s] / c_out
-                    for t in range(m):
-                        H[s, t] -= f * v[t]
-                vs = 0.0
-                for t in range(m):
-                    vs += v[t]
-                for s in range(m):
-                    a[s] -= v[s] * vs / c_out
-                act[s_out] = False
-                lam[s_out] = 0.0
-                for s in range(m):
-                    H[s_out, s] = 0.0
-                    H[s, s_out] = 0.0
-                a[s_out] = 0.0
-                nact -= 1
-                continue
-            if optimal:
+            nx = np.sqrt(xx)
+            gap = xx - xP[j]  # Frank-Wolfe gap of the best entering point
+            # ||x|| - r* <= gap / ||x||: certified to tol relatively, ABS_TOL absolutely; a full
+            # corral (d + 1 points, or all k) with alpha > 0 is optimal as it stands
+            if nx <= ABS_TOL or gap <= tol * xx + GAP_TOL or n == m:
                 done = True
                 break
-            # j enters at a free slot s: H^{-1} <- H^{-1} + (u - e_s)(u - e_s)^T / sigma
-            s_in = 0
-            while act[s_in]:
-                s_in += 1
-            for s in range(m):
-                if act[s]:
-                    e = 1.0
-                    for t in range(d):
-                        e += Ps[s, t] * PT[t, j]
-                    g[s] = e
-                else:
-                    g[s] = 0.0
-            sigma = sq[j] + 1.0
-            for s in range(m):
-                e = 0.0
-                for t in range(m):
-                    e += H[s, t] * g[t]
-                u[s] = e
-                sigma -= g[s] * e
-            u[s_in] -= 1.0
-            if sigma <= 1e-12:
-                # j lies (numerically) in the corral's affine hull, where <p, x> = <x, x>: a gap
-                # of the size of its distance from that hull is rounding, and x is optimal
-                failed = not (gap <= 10.0 * np.sqrt(max(sigma, 0.0)) + 1e-12)
-                done = True
-                break
-            us = 0.0
-            for t in range(m):
-                us += u[t]
-            for s in range(m):
-                f = u[s] / sigma
-                for t in range(m):
-                    H[s, t] += f * u[t]
-                a[s] += f * us
-            act[s_in] = True
-            slot[s_in] = j
+            # j enters: Gram-Schmidt of q_j against U (twice), the new column of R
             for t in range(d):
-                Ps[s_in, t] = PT[t, j]
-            nact += 1
+                e[t] = PT[t, j]
+            e[d] = 1.0
+            for i in range(n):
+                r[i] = 0.0
+            for _rep in range(2):
+                for i in range(n):
+                    s = 0.0
+                    for t in range(D):
+                        s += U[t, i] * e[t]
+                    r[i] += s
+                    for t in range(D):
+                        e[t] -= s * U[t, i]
+            rho = 0.0
+            for t in range(D):
+                rho += e[t] * e[t]
+            rho = np.sqrt(rho)
+            if rho <= RHO_MIN:
+                # j lies in the corral's affine hull (up to ~2 rho), where <p, x> = <x, x>: a gap
+                # of that size is rounding, and x is optimal to within it; anything larger
+                # means x lost precision
+                failed = not (gap <= tol * xx + GAP_TOL + 10.0 * rho * nx)
+                done = True
+                break
+            for t in range(D):
+                U[t, n] = e[t] / rho
+            for i in range(n):
+                R[i, n] = r[i]
+            R[n, n] = rho
+            idx[n] = j
+            lam[n] = 0.0
+            n += 1
         out_it[q] = it
         out_ok[q] = done and not failed
         # the weights on the corral, normalised, and the residual they give
         wsum = 0.0
-        for s in range(m):
-            if act[s]:
-                wsum += lam[s]
+        for i in range(n):
+            if lam[i] > 0.0:
+                wsum += lam[i]
         for t in range(d):
             x[t] = 0.0
-        for s in range(m):
-            if act[s]:
-                w = lam[s] / wsum
-                out_w[q, slot[s]] += w
+        for i in range(n):
+            if lam[i] > 0.0:
+                w = lam[i] / wsum
+                c = idx[i]
+                out_w[q, c] += w
                 for t in range(d):
-                    x[t] += w * Ps[s, t]
+                    x[t] += w * PT[t, c]
         xx = 0.0
         for t in range(d):
             xx += x[t] * x[t]
         out_res[q] = np.sqrt(xx) * scale
+
+
+@numba.njit(cache=True, nogil=True)
+def _drop(U, R, idx, lam, n, i):  # pragma: no cover
+    """Remove corral member i of n: shift the later columns of R (and idx, lam) left, restore
+    R's triangle by Givens rotations of rows (t, t + 1), applied to U's columns alike."""
+    for t in range(i, n - 1):
+        idx[t] = idx[t + 1]
+        lam[t] = lam[t + 1]
+        for s in range(n):
+            R[s, t] = R[s, t + 1]
+    for t in range(i, n - 1):
+        f = R[t, t]
+        g = R[t + 1, t]
+        h = np.sqrt(f * f + g * g)
+        if h > 0.0:
+            c = f / h
+            s = g / h
+            for u in range(t, n - 1):
+                r1 = R[t, u]
+                r2 = R[t + 1, u]
+                R[t, u] = c * r1 + s * r2
+                R[t + 1, u] = c * r2 - s * r1
+            for v in range(U.shape[0]):
+                u1 = U[v, t]
+                u2 = U[v, t + 1]
+                U[v, t] = c * u1 + s * u2
+                U[v, t + 1] = c * u2 - s * u1
+        R[t + 1, t] = 0.0
+    for s in range(n):
+        R[s, n - 1] = 0.0
+        R[n - 1, s] = 0.0
+    for v in range(U.shape[0]):
+        U[v, n - 1] = 0.0
+    lam[n - 1] = 0.0
+    idx[n - 1] = 0
