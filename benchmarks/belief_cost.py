@@ -1,19 +1,34 @@
 """Benchmark: the control step's cost for each ``--belief`` kind, in one process.
 
 Opens one AOC session per model of a corpus (the same corpus, its own index each), and times
-``Controller.decide`` on the same states, alternating the models step by step (so the machine's
-load drifts into every arm alike). Prints the median seconds per step of each, and of the
-belief pass alone (``model.beliefs`` of the K candidates).
+``Controller.decide`` on the same states with the same candidate actions, alternating the
+models step by step (so the machine's load drifts into every arm alike). The states are those
+of one rollout driven by the first model's decisions. Prints, per model, the mean, median and
+90th percentile seconds per step, the belief pass alone (``model.beliefs`` of the K
+candidates, median), and the step-2 problems that fell back to the reference QP (piqp +
+Caratheodory: ``Decomposition.fallbacks``) out of all problems solved. A rollout's cost is the
+mean step: fallbacks cluster on a few steps, which a median hides.
+
+``--old TREE`` adds, for every model, an arm whose step-2 solver is the older tree's
+``aoc_cli/decompose/minnorm.py`` (everything else this tree's code), on the same states and
+candidates in alternating order: the before/after of the residual QP in one process. ``differ``
+counts the steps whose chosen candidate differs between the two arms, ``d res`` is the
+largest change of a candidate's residual relative to the step's largest.
 
 Usage: python benchmarks/belief_cost.py --store bench/store --corpus pendulum-het-30000r-s0 \\
-           --models default,dynamics,critic,reward [--steps 60]
+           --models default,dynamics,critic,reward [--env pendulum-het] [--steps 60] \\
+           [--old ../aoc-old]
+(with --old, set NUMBA_CACHE_DIR to a directory of its own: the old module is compiled under
+another name.)
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import os
+import sys
 import time
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
@@ -24,10 +39,43 @@ from aoc_cli.threads import wait_passively  # noqa: E402
 
 wait_passively()  # OpenMP threads wait passively, as under the aoc command (aoc_cli/threads.py)
 
+import aoc_cli.decompose.engine as engine  # noqa: E402
 from aoc_cli.control import HistoryBuffer  # noqa: E402
 from aoc_cli.envs import make_env  # noqa: E402
 from aoc_cli.session import open_session  # noqa: E402
 from aoc_cli.store import Store  # noqa: E402
+
+
+def old_solver(tree: str):
+    """The older tree's ``min_norm_point`` (its minnorm.py imported under another name)."""
+    path = os.path.join(tree, "aoc_cli", "decompose", "minnorm.py")
+    spec = importlib.util.spec_from_file_location("old_minnorm", path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules["old_minnorm"] = module
+    spec.loader.exec_module(module)
+    return module.min_norm_point
+
+
+class Counted:
+    """Wraps the engine's step-2 function: problems solved and fallbacks, per arm."""
+
+    def __init__(self):
+        self.solve = engine._residual_weights
+        self.problems = 0
+        self.failed = 0
+
+    def __call__(self, B, Y, P, valid, reference, qp_tol):
+        weights, failed = self.solve(B, Y, P, valid, reference, qp_tol)
+        self.problems += len(Y)
+        self.failed += len(failed)
+        return weights, failed
+
+
+def _rel(a: np.ndarray, b: np.ndarray) -> float:
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    ok = np.isfinite(a) & np.isfinite(b)
+    big = max(float(np.abs(a[ok]).max(initial=0.0)), 1e-300)
+    return float(np.abs(a[ok] - b[ok]).max(initial=0.0) / big)
 
 
 def main() -> None:
@@ -35,30 +83,52 @@ def main() -> None:
     p.add_argument("--store", default="bench/store")
     p.add_argument("--corpus", default="pendulum-het-30000r-s0")
     p.add_argument("--models", default="default,dynamics,critic,reward")
+    p.add_argument("--env", default="pendulum-het", help="the task whose rollout gives the states")
     p.add_argument("--steps", type=int, default=60)
+    p.add_argument("--old", default=None, help="an older tree: its step-2 solver as a second arm")
     args = p.parse_args()
     corpus = Store.open(args.store).corpus(args.corpus)
     models = args.models.split(",")
     sessions = {m: open_session(corpus, m, "default") for m in models}  # each model its index
-    env = make_env("pendulum-het")
+    solvers = {"new": engine.min_norm_point}
+    if args.old:
+        solvers["old"] = old_solver(args.old)
+    counter = Counted()
+    engine._residual_weights = counter
+    arms = [(m, a) for m in models for a in solvers]
+    env = make_env(args.env)
     first = sessions[models[0]]
-    buf = HistoryBuffer(first.model.history_length, corpus.observation_dim, 1, False)
+    buf = HistoryBuffer(first.model.history_length, corpus.observation_dim,
+                        1 if corpus.discrete else corpus.action_dim, corpus.discrete)
     obs, _ = env.reset(seed=1)
-    step = {m: [] for m in models}
+    step = {x: [] for x in arms}
     belief = {m: [] for m in models}
+    falls = {x: [0, 0] for x in arms}
+    differ = {m: 0 for m in models}
+    dres = {m: 0.0 for m in models}
     for i in range(args.steps):
         h = buf.history()
-        order = models if i % 2 == 0 else models[::-1]
+        cand = first.controller.sample_candidates(np.asarray(obs, np.float32).reshape(-1), h)
         decided = {}
-        for m in order:
+        for m, a in (arms if i % 2 == 0 else arms[::-1]):
             s = sessions[m]
+            engine.min_norm_point = solvers[a]
+            counter.problems = counter.failed = 0
             t0 = time.perf_counter()
-            d = decided[m] = s.controller.decide(obs, h)
-            step[m].append(time.perf_counter() - t0)
+            decided[m, a] = s.controller.decide(obs, h, candidates=cand)
+            step[m, a].append(time.perf_counter() - t0)
+            falls[m, a][0] += counter.problems
+            falls[m, a][1] += counter.failed
+        engine.min_norm_point = solvers["new"]
+        for m in models:
             t0 = time.perf_counter()
-            s.model.beliefs(np.asarray(obs, np.float32)[None], d.candidates, h)
+            sessions[m].model.beliefs(np.asarray(obs, np.float32)[None], cand, h)
             belief[m].append(time.perf_counter() - t0)
-        action = decided[models[0]].action
+            if args.old:
+                a, b = decided[m, "old"], decided[m, "new"]
+                differ[m] += int(a.chosen != b.chosen)
+                dres[m] = max(dres[m], _rel(a.candidate_residuals, b.candidate_residuals))
+        action = decided[models[0], "new"].action
         nxt, r, term, trunc, _ = env.step(np.asarray(action, np.float32))
         buf.push(obs, action, r)
         obs = nxt
@@ -67,11 +137,18 @@ def main() -> None:
             obs, _ = env.reset()
     with open("/proc/loadavg") as f:
         load = f.read().split()[0]
-    for m in models:
-        print(json.dumps({"model": m, "belief": sessions[m].model.config.belief,
-                          "median_step_s": round(float(np.median(step[m])), 5),
-                          "median_belief_pass_s": round(float(np.median(belief[m])), 5),
-                          "steps": args.steps, "loadavg": load}))
+    for m, a in arms:
+        t = np.array(step[m, a][2:])  # the first steps load the scans' compiled code
+        row = {"model": m, "belief": sessions[m].model.config.belief, "arm": a,
+               "mean_step_s": round(float(t.mean()), 5),
+               "median_step_s": round(float(np.median(t)), 5),
+               "p90_step_s": round(float(np.quantile(t, 0.9)), 5),
+               "median_belief_pass_s": round(float(np.median(belief[m])), 5),
+               "problems": falls[m, a][0], "fallbacks": falls[m, a][1],
+               "steps": args.steps, "loadavg": load}
+        if args.old:
+            row.update(differ=differ[m], d_res=float(f"{dres[m]:.2e}"))
+        print(json.dumps(row), flush=True)
 
 
 if __name__ == "__main__":

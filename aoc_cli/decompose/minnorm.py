@@ -36,7 +36,8 @@ alpha = H_S^{-1} 1 / (1^T H_S^{-1} 1). The loop keeps a QR factorisation of the 
 [q_i]_{i in S} = U R (U (d + 1, |S|) orthonormal columns, R upper triangular, H_S = R^T R), and
 gets alpha by two triangular solves (R^T z = 1, R a = z):
 
-    add j:    Gram-Schmidt of q_j against U, twice (r = U^T q_j, e = q_j - U r, rho = ||e||):
+    add j:    Gram-Schmidt of q_j against U (r = U^T q_j, e = q_j - U r, rho = ||e||; a second
+              pass when the first cancelled more than half of ||q_j||^2):
               U <- [U, e / rho], R <- [[R, r], [0, rho]]
     drop i:   delete column i of R and restore its triangle by Givens rotations of rows
               (t, t + 1), t >= i, applied to U's columns alike
@@ -130,7 +131,7 @@ def _wolfe_batch(points, valid, tol, max_iter, out_w, out_res, out_ok, out_it): 
     PT = np.empty((d, k))  # transposed: <p_c, x> for all c vectorises over c
     sq = np.empty(k)
     xP = np.empty(k)
-    U = np.zeros((D, m))  # orthonormal basis of the lifted corral's span (columns)
+    Ut = np.zeros((m, D))  # rows: an orthonormal basis of the lifted corral's span (U^T)
     R = np.zeros((m, m))  # the lifted corral (as columns) = U R, R upper triangular
     lam = np.zeros(m)
     alpha = np.zeros(m)
@@ -161,8 +162,8 @@ def _wolfe_batch(points, valid, tol, max_iter, out_w, out_res, out_ok, out_it): 
             sq[c] = sq[c] / s2
             if sq[c] < sq[j0]:
                 j0 = c
-        # the corral {j0}: q_j0 = U[:, 0] R[0, 0]
-        U[:, :] = 0.0
+        # the corral {j0}: q_j0 = Ut[0] R[0, 0]
+        Ut[:, :] = 0.0
         R[:, :] = 0.0
         lam[:] = 0.0
         nrm = 0.0
@@ -170,8 +171,8 @@ def _wolfe_batch(points, valid, tol, max_iter, out_w, out_res, out_ok, out_it): 
             nrm += PT[t, j0] * PT[t, j0]
         nrm = np.sqrt(nrm + 1.0)
         for t in range(d):
-            U[t, 0] = PT[t, j0] / nrm
-        U[d, 0] = 1.0 / nrm
+            Ut[0, t] = PT[t, j0] / nrm
+        Ut[0, d] = 1.0 / nrm
         R[0, 0] = nrm
         idx[0] = j0
         lam[0] = 1.0
@@ -216,7 +217,7 @@ def _wolfe_batch(points, valid, tol, max_iter, out_w, out_res, out_ok, out_it): 
                 theta = min(rbest, 1.0)
                 for i in range(n):
                     lam[i] += theta * (alpha[i] - lam[i])
-                _drop(U, R, idx, lam, n, i_out)
+                _drop(Ut, R, idx, lam, n, i_out)
                 n -= 1
                 continue
             for i in range(n):
@@ -252,23 +253,28 @@ def _wolfe_batch(points, valid, tol, max_iter, out_w, out_res, out_ok, out_it): 
             if nx <= ABS_TOL or gap <= tol * xx + GAP_TOL or n == m:
                 done = True
                 break
-            # j enters: Gram-Schmidt of q_j against U (twice), the new column of R
+            # j enters: Gram-Schmidt of q_j against U, the new column of R; a second pass when
+            # the first cancelled more than half the norm (Daniel-Gragg-Kaufman-Stewart)
             for t in range(d):
                 e[t] = PT[t, j]
             e[d] = 1.0
+            before = sq[j] + 1.0  # ||q_j||^2
             for i in range(n):
                 r[i] = 0.0
             for _rep in range(2):
                 for i in range(n):
                     s = 0.0
                     for t in range(D):
-                        s += U[t, i] * e[t]
+                        s += Ut[i, t] * e[t]
                     r[i] += s
                     for t in range(D):
-                        e[t] -= s * U[t, i]
-            rho = 0.0
-            for t in range(D):
-                rho += e[t] * e[t]
+                        e[t] -= s * Ut[i, t]
+                rho = 0.0
+                for t in range(D):
+                    rho += e[t] * e[t]
+                if rho > 0.5 * before:
+                    break
+                before = rho
             rho = np.sqrt(rho)
             if rho <= RHO_MIN:
                 # j lies in the corral's affine hull (up to ~2 rho), where <p, x> = <x, x>: a gap
@@ -278,7 +284,7 @@ def _wolfe_batch(points, valid, tol, max_iter, out_w, out_res, out_ok, out_it): 
                 done = True
                 break
             for t in range(D):
-                U[t, n] = e[t] / rho
+                Ut[n, t] = e[t] / rho
             for i in range(n):
                 R[i, n] = r[i]
             R[n, n] = rho
@@ -308,9 +314,9 @@ def _wolfe_batch(points, valid, tol, max_iter, out_w, out_res, out_ok, out_it): 
 
 
 @numba.njit(cache=True, nogil=True)
-def _drop(U, R, idx, lam, n, i):  # pragma: no cover
+def _drop(Ut, R, idx, lam, n, i):  # pragma: no cover
     """Remove corral member i of n: shift the later columns of R (and idx, lam) left, restore
-    R's triangle by Givens rotations of rows (t, t + 1), applied to U's columns alike."""
+    R's triangle by Givens rotations of rows (t, t + 1), applied to U's columns (Ut's rows) alike."""
     for t in range(i, n - 1):
         idx[t] = idx[t + 1]
         lam[t] = lam[t + 1]
@@ -328,16 +334,16 @@ def _drop(U, R, idx, lam, n, i):  # pragma: no cover
                 r2 = R[t + 1, u]
                 R[t, u] = c * r1 + s * r2
                 R[t + 1, u] = c * r2 - s * r1
-            for v in range(U.shape[0]):
-                u1 = U[v, t]
-                u2 = U[v, t + 1]
-                U[v, t] = c * u1 + s * u2
-                U[v, t + 1] = c * u2 - s * u1
+            for v in range(Ut.shape[1]):
+                u1 = Ut[t, v]
+                u2 = Ut[t + 1, v]
+                Ut[t, v] = c * u1 + s * u2
+                Ut[t + 1, v] = c * u2 - s * u1
         R[t + 1, t] = 0.0
     for s in range(n):
         R[s, n - 1] = 0.0
         R[n - 1, s] = 0.0
-    for v in range(U.shape[0]):
-        U[v, n - 1] = 0.0
+    for v in range(Ut.shape[1]):
+        Ut[n - 1, v] = 0.0
     lam[n - 1] = 0.0
     idx[n - 1] = 0
