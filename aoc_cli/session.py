@@ -22,7 +22,7 @@ tag (the paper's adaptivity experiment) with no retraining: an episode rate of 4
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -30,9 +30,10 @@ import numpy as np
 
 from aoc_cli.control.config import ControllerConfig
 from aoc_cli.control.controller import Controller
-from aoc_cli.decompose import decompose, default_k, rarest_share
+from aoc_cli.decompose import decompose, default_k
 from aoc_cli.errors import AocError
 from aoc_cli.index import BeliefIndex
+from aoc_cli.index.strata import NEAREST, PER_ACTION, candidate_search
 from aoc_cli.progress import Progress
 from aoc_cli.rows import episode_multiplicity
 from aoc_cli.store import Corpus, atomic_dir, check_name, derived, writing_model
@@ -74,6 +75,22 @@ class CorpusIndex:
     values: np.ndarray | None
     index: BeliefIndex
     meta: dict
+    strata: np.ndarray | None = None
+    _search: object = field(default=None, init=False, repr=False)
+
+    @property
+    def candidates(self) -> str:
+        """Step 1's candidates (``index.json`` ``candidates``): "nearest", the k nearest rows;
+        "per_action", the k / n nearest rows of each of the n actions
+        (:mod:`aoc_cli.index.strata`). An index that recorded none: "nearest"."""
+        return self.meta.get("candidates") or NEAREST
+
+    @property
+    def search(self):
+        """The search step 1 uses: the index, or the index per action."""
+        if self._search is None:
+            self._search = candidate_search(self.index, self.candidates, self.strata)
+        return self._search
 
     @property
     def typical(self) -> TypicalResidual:
@@ -98,7 +115,7 @@ class CorpusIndex:
         """
         queries = np.asarray(queries, dtype=np.float32)  # the beliefs' precision; checked there
         return decompose(self.beliefs, queries, k=self.k if k is None else k,
-                         values=self.values, index=self.index, selection=selection)
+                         values=self.values, index=self.search, selection=selection)
 
     @property
     def k(self) -> int:
@@ -107,13 +124,21 @@ class CorpusIndex:
         return int(self.meta.get("k") or default_k(self.beliefs.shape[1]))
 
 
-def neighbours(corpus: Corpus, model) -> int:
-    """The default neighbours per query of ``model`` on ``corpus``: the paper's 2 (d_b + 1);
-    for an imitation model of discrete actions, enough for a full minimal subset of the
-    rarest action at its base rate (:func:`aoc_cli.decompose.default_k`)."""
-    if model.mode != "imitation" or not corpus.discrete or corpus.n_rows == 0:
-        return default_k(model.d_b)
-    return default_k(model.d_b, rarest_share(corpus.actions))
+def neighbours(corpus: Corpus, model) -> tuple[int, str]:
+    """The default neighbours per query of ``model`` on ``corpus`` and where they come from:
+    the paper's k = 2 (d_b + 1) nearest rows; for an imitation model of discrete actions,
+    the paper's 2 (d_b + 1) nearest rows *of each action* present (k = n 2 (d_b + 1),
+    :mod:`aoc_cli.index.strata`; docs/design.md, "Candidates of every action")."""
+    if not per_action(corpus, model):
+        return default_k(model.d_b), NEAREST
+    n = int(np.count_nonzero(np.bincount(np.asarray(corpus.actions, dtype=np.int64))))
+    return max(n, 1) * default_k(model.d_b), PER_ACTION
+
+
+def per_action(corpus: Corpus, model) -> bool:
+    """Whether an index of ``model`` on ``corpus`` takes its candidates per action: an
+    imitation model of discrete actions."""
+    return model.mode == "imitation" and bool(corpus.discrete) and corpus.n_rows > 0
 
 
 def load_model(corpus: Corpus, model_id: str | None) -> BeliefModel:
@@ -180,9 +205,10 @@ def build_index(corpus: Corpus, model_id: str | None = None, kind: str = "auto",
             "rows": int(index.size), "belief_dim": int(beliefs.shape[1]),
             "episode_rates": episode_rates, "seed": seed,
             "build_seconds": seconds, "built": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-            "k": neighbours(corpus, model),
         }
-        ci = CorpusIndex(index_id, model, beliefs, model.values, index, meta)
+        meta["k"], meta["candidates"] = neighbours(corpus, model)
+        ci = CorpusIndex(index_id, model, beliefs, model.values, index, meta,
+                         _strata(corpus, meta))
         meta["typical_residual"] = typical_residual(ci, seed)
         derived.write_index_meta(tmp, meta)
         if staged is not None:  # everything built: the beliefs go in first, then the index
@@ -225,7 +251,14 @@ def load_index(corpus: Corpus, model_id: str | None = None, index_id: str = "def
                        f"{corpus.name!r} or model {model.id!r}: rebuild it with `{hint}`")
     beliefs = derived.open_beliefs(corpus.models_dir / model.id, what, todo)
     index = derived.load_faiss(out / "index.faiss", beliefs, what, todo)
-    return CorpusIndex(index_id, model, beliefs, model.values, index, meta)
+    return CorpusIndex(index_id, model, beliefs, model.values, index, meta, _strata(corpus, meta))
+
+
+def _strata(corpus: Corpus, meta: dict) -> np.ndarray | None:
+    """(N,) the rows' actions when the index takes its candidates per action, else None."""
+    if meta.get("candidates") != PER_ACTION:
+        return None
+    return np.asarray(corpus.actions, dtype=np.int64)
 
 
 @dataclass

@@ -58,6 +58,24 @@ def with_defaults(config: BeliefConfig, given: dict) -> BeliefConfig:
                               for k, v in PAPER.items()})
 
 
+#: Imitation of discrete actions on a small corpus: the training loss's label smoothing
+#: when the user gives none (docs/design.md, "Candidates of every action").
+LABEL_SMOOTHING = 0.1
+
+
+def with_imitation_defaults(corpus, config: BeliefConfig, given: dict,
+                            paper: bool = False) -> BeliefConfig:
+    """``config`` with :data:`LABEL_SMOOTHING` when ``given`` has no ``label_smoothing``
+    (None), the model imitates discrete actions, the corpus is small (settings chosen by
+    validation: :func:`open_settings`'s rule) and ``paper`` is off; else the paper's 0 for a
+    smoothing left open. The value is saved in the model's config."""
+    if given.get("label_smoothing") is not None:
+        return replace(config, label_smoothing=float(given["label_smoothing"]))
+    small = not paper and config.belief == "value" and corpus.n_rows <= SELECT_MAX_ROWS
+    on = small and config.mode == "imitation" and bool(corpus.discrete)
+    return replace(config, label_smoothing=LABEL_SMOOTHING if on else 0.0)
+
+
 def why_no_search(corpus, config: BeliefConfig, given: dict, paper: bool) -> str | None:
     """Why open settings took the paper's values (None when nothing was open)."""
     left = [k for k in PAPER if given.get(k) is None]
@@ -75,13 +93,16 @@ def abc_validation(actions: np.ndarray, n_actions: int, k: int | None = None):
     """An ``inspect`` hook for :func:`aoc_cli.belief.train.train_model` (discrete imitation):
     decompose the validation rows' beliefs (float32, as the index holds them) over the
     training rows' beliefs and score the decisions as ``aoc evaluate`` does (the score of an
-    action = its weight in the minimal corpus subset; k as ``aoc index`` would choose it for
-    the training rows unless given). Returns ``val_abc_accuracy``, ``val_abc_auc``,
-    ``val_abc_k``. ``actions`` (N,) the corpus's discrete actions."""
+    action = its weight in the minimal corpus subset; the candidates and k as ``aoc index``
+    takes them for the training rows, the nearest rows of each action, unless k is given).
+    Returns ``val_abc_accuracy``, ``val_abc_auc``, ``val_abc_k``. ``actions`` (N,) the
+    corpus's discrete actions."""
     import torch
 
     from aoc_cli.control.scores import auc
-    from aoc_cli.decompose import decompose, default_k, rarest_share
+    from aoc_cli.decompose import decompose, default_k
+    from aoc_cli.index import BeliefIndex
+    from aoc_cli.index.strata import PerAction
 
     actions = np.asarray(actions, dtype=np.int64)
 
@@ -93,8 +114,9 @@ def abc_validation(actions: np.ndarray, n_actions: int, k: int | None = None):
                            for i in range(0, len(rows), 65536)]).cpu().numpy()
         n_tr = len(data.train_rows)
         a_tr, y = actions[data.train_rows], actions[data.val_rows]
-        kk = k if k is not None else default_k(b.shape[1], rarest_share(a_tr))
-        dec = decompose(b[:n_tr], b[n_tr:], k=kk)
+        search = PerAction(BeliefIndex.build(b[:n_tr], kind="flat"), a_tr)
+        kk = k if k is not None else len(search.masks) * default_k(b.shape[1])
+        dec = decompose(b[:n_tr], b[n_tr:], k=kk, index=search)
         scores = abc_scores(dec.rows, dec.weights, a_tr, n_actions)
         return {"val_abc_accuracy": float(np.mean(scores.argmax(1) == y)),
                 "val_abc_auc": auc(y, scores), "val_abc_k": int(min(kk, n_tr))}

@@ -77,6 +77,7 @@ def run_split(store, data, split: int, patients: int, seed: int = 0) -> list[dic
     given = {"history_length": None, "hidden": None, "weight_decay": None}
     config = select.with_defaults(BeliefConfig(mode="imitation", threads=1, seed=split),
                                   given).validate()
+    config = select.with_imitation_defaults(tr, config, {}).validate()
     prepared = prepare(tr, config, "default", True)
     started = time.perf_counter()
     metrics = select.select_and_train(tr, config, select.open_settings(tr, config, given),

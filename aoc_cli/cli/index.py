@@ -53,6 +53,7 @@ def register(app: typer.Typer) -> None:
         write_object({
             "corpus": corpus.name, "model": meta["model"], "index": meta["index_id"],
             "kind": meta["kind"], "rows": meta["rows"], "belief_dim": meta["belief_dim"],
+            "k": meta["k"], "candidates": meta["candidates"],
             "typical_residual": ci.typical_residual,
             "build_seconds": meta["build_seconds"],
         }, fmt, title=f"index {meta['index_id']} of {corpus.name}")

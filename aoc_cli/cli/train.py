@@ -62,12 +62,14 @@ def train(
     class_weight: str = typer.Option(_D.class_weight, "--class-weight",
                                      help="Imitation, discrete actions: none, or balanced "
                                           "(each action's loss weighted by its rarity)."),
-    label_smoothing: float = typer.Option(_D.label_smoothing, "--label-smoothing",
-                                          help="Imitation, discrete actions: label smoothing "
-                                               "of the training loss (0: none)."),
+    label_smoothing: Optional[float] = typer.Option(
+        None, "--label-smoothing", help="Imitation, discrete actions: label smoothing of the "
+                                        "training loss (0: none, the paper's; default: 0.1 "
+                                        "on corpora of up to 20,000 rows, else 0)."),
     paper: bool = typer.Option(False, "--paper", help="The paper's settings for everything "
                                                       "not given (L 4, 128 units, no weight "
-                                                      "decay): no selection."),
+                                                      "decay, no label smoothing): no "
+                                                      "selection."),
     epochs: int = typer.Option(_D.max_epochs, "--epochs", help="Maximum epochs (early stopping ends "
                                                      "sooner)."),
     batch_size: int = typer.Option(_D.batch_size, "--batch-size", help="Mini-batch rows."),
@@ -94,10 +96,12 @@ def train(
                           batch_size=batch_size, lr=lr, patience=patience,
                           val_fraction=val_fraction, seed=seed, threads=threads,
                           dropout=dropout, class_weight=class_weight,
-                          label_smoothing=label_smoothing)
+                          label_smoothing=label_smoothing or 0.0)
     given = {"history_length": history_length, "hidden": hidden, "weight_decay": weight_decay}
     config = select.with_defaults(config, given).validate()
     corpus = get_store().corpus(name)
+    config = select.with_imitation_defaults(
+        corpus, config, {"label_smoothing": label_smoothing}, paper).validate()
     from aoc_cli.store import check_name, writing_model
 
     with writing_model(corpus.path, check_name(model, "model")):  # one writer per model id
@@ -121,6 +125,9 @@ def train(
         message(f"ABC's own decisions on the validation episodes (k {metrics['val_abc_k']}): "
                 f"accuracy {metrics['val_abc_accuracy']:.3f}"
                 + ("" if auc is None else f", AUC {auc:.3f}"))
+    if label_smoothing is None and config.label_smoothing > 0:
+        message(f"label smoothing {config.label_smoothing:g} (the default for imitating "
+                "discrete actions on a small corpus; --label-smoothing 0 for the paper's)")
     warning = select.baseline_check(metrics)
     if warning:
         message(f"[yellow]warning:[/] {warning}")

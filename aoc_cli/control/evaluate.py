@@ -35,6 +35,7 @@ from aoc_cli.control.evaluate_inputs import (EXACT_MAX_ROWS, EvalContext, candid
                                              check_inputs, episode_rows, heterogeneity)
 from aoc_cli.decompose import decompose
 from aoc_cli.errors import AocError
+from aoc_cli.index.strata import candidate_search
 from aoc_cli.threads import one_thread
 
 BASELINES = ("knn", "bc")
@@ -127,8 +128,11 @@ def score_episodes(ctx: EvalContext, episodes) -> StepScores:
 
 
 def _decompose(ctx: EvalContext, beliefs: np.ndarray, query_episodes: np.ndarray):
-    index = ctx.search if not ctx.own else LeaveEpisodeOut(
-        ctx.search, ctx.corpus_episode, query_episodes, ctx.max_episode_length)
+    # step 1's candidates as the index takes them (the k nearest rows, or those of each
+    # action), of other episodes than the query's when the data are the corpus itself
+    index = ctx.step1 if not ctx.own else candidate_search(
+        LeaveEpisodeOut(ctx.search, ctx.corpus_episode, query_episodes,
+                        ctx.max_episode_length), ctx.index.candidates, ctx.index.strata)
     return decompose(ctx.index.beliefs, beliefs, k=ctx.k, values=ctx.index.values, index=index)
 
 
@@ -209,10 +213,9 @@ class LeaveEpisodeOut:
         self.n_rows, self.dim = index.n_rows, index.dim
 
     def search(self, queries, k, selection=None):
-        if selection is not None:
-            raise AocError("internal: leave-episode-out search takes no row selection")
+        """The k nearest rows of other episodes (within ``selection``, an (N,) bool mask)."""
         wide = min(int(k) + self.longest, self.index.n_rows)
-        dist, rows = self.index.search(queries, wide)
+        dist, rows = self.index.search(queries, wide, selection)
         own = (rows >= 0) & (self.row_episode[np.maximum(rows, 0)]
                              == self.query_episodes[:, None])
         keep = ~own & (rows >= 0)
@@ -259,6 +262,7 @@ def summarise(ctx: EvalContext, res: StepScores) -> dict:
     out["search"] = ctx.search.describe() if hasattr(ctx.search, "describe") \
         else f"the index ({ctx.index.index.kind}, exact)" if ctx.index.index.kind == "flat" \
         else f"the index ({ctx.index.index.kind})"
+    out["candidates"] = ctx.index.candidates
     out["baselines"] = base
     return out
 

@@ -9,6 +9,7 @@ import numpy as np
 
 from aoc_cli.control.controller import support_disagreement
 from aoc_cli.errors import AocError
+from aoc_cli.index.strata import candidate_search
 
 
 def check_inputs(corpus, data, mode: str, baselines, value_target: str | None) -> list[str]:
@@ -108,9 +109,21 @@ class BatchSearch:
         return f"ivf (nlist {self.nlist}, nprobe {self.index.nprobe})"
 
     def search(self, queries, k, selection=None):
+        """The k nearest rows found, within ``selection`` (an (N,) bool mask) when given: the
+        restricted search visits ``nprobe / (the selected share)`` lists (at most all), about
+        as many selected rows as the unrestricted search visits rows."""
+        params = None
         if selection is not None:
-            raise AocError("internal: the evaluation search takes no row selection")
-        dist, rows = self.index.search(np.ascontiguousarray(queries, dtype=np.float32), int(k))
+            import faiss
+
+            mask = np.ascontiguousarray(selection, dtype=bool)
+            bits = np.packbits(mask, bitorder="little")
+            share = max(float(mask.mean()), 1e-12)
+            params = faiss.SearchParametersIVF(
+                sel=faiss.IDSelectorBitmap(mask.size, faiss.swig_ptr(bits)),
+                nprobe=int(min(self.nlist, np.ceil(self.index.nprobe / share))))
+        dist, rows = self.index.search(np.ascontiguousarray(queries, dtype=np.float32), int(k),
+                                       params=params)
         dist = np.where(rows >= 0, np.sqrt(np.maximum(dist, 0.0)), np.inf)
         return dist.astype(np.float64), rows.astype(np.int64)
 
@@ -207,6 +220,8 @@ class EvalContext:
         self.index = self.session.index
         self.search = search_structure(self.index.index, self.index.beliefs, self.exact,
                                        self.seed)
+        # step 1 as the index takes its candidates (aoc_cli.index.strata), prepared once
+        self.step1 = candidate_search(self.search, self.index.candidates, self.index.strata)
         self.history_length = model.history_length
         self.k = self.config.k if self.config.k is not None else self.index.k
         self.discrete, self.n_actions = corpus.discrete, corpus.n_actions

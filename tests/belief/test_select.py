@@ -85,18 +85,43 @@ def test_no_better_than_majority_or_mean_is_said():
 
 
 def test_default_training_on_ward_beats_the_majority_clearly(aoc, ward):
+    # 30 epochs: with 8 or 15 the head already scores 0.96 on these held-out steps, but ABC's
+    # per-action decisions only 0.91-0.93 (measured; 0.967 at 30, the head's level)
     code, out, err = aoc("train", "ward", "--mode", "imitation", "--threads", "1", "--epochs",
-                         "8", "--format", "json")
+                         "30", "--format", "json")
     assert code == 0, err
     _check_abc_validation(ward, json.loads(out), err)
+    saved = json.loads((ward.corpus("ward").models_dir / "default" / "config.json").read_text())
+    assert saved["config"]["label_smoothing"] == select.LABEL_SMOOTHING == 0.1  # the default
+    assert "label smoothing 0.1" in err
     code, out, err = aoc("index", "ward", "--format", "json")
     assert code == 0, err
+    assert json.loads(out)["candidates"] == "per_action" and json.loads(out)["k"] == 84
     code, out, err = aoc("evaluate", "ward", "--data", "held", "--baselines", "none",
                          "--format", "json")
     assert code == 0, err
     s = json.loads(out)
     assert s["accuracy"] >= s["majority_accuracy"] + 0.03, s
     assert s["auc"] >= 0.85 and s["support_max"] <= 21
+
+
+def test_label_smoothing_default_only_where_it_was_measured():
+    from types import SimpleNamespace
+
+    from aoc_cli.belief.config import BeliefConfig
+
+    small = SimpleNamespace(n_rows=5000, discrete=True)
+    imit = BeliefConfig(mode="imitation")
+    assert select.with_imitation_defaults(small, imit, {}).label_smoothing == 0.1
+    assert select.with_imitation_defaults(small, imit, {"label_smoothing": 0.0}).label_smoothing == 0
+    assert select.with_imitation_defaults(small, imit, {"label_smoothing": 0.2}).label_smoothing == 0.2
+    assert select.with_imitation_defaults(small, imit, {}, paper=True).label_smoothing == 0
+    big = SimpleNamespace(n_rows=select.SELECT_MAX_ROWS + 1, discrete=True)
+    assert select.with_imitation_defaults(big, imit, {}).label_smoothing == 0
+    boxes = SimpleNamespace(n_rows=5000, discrete=False)
+    assert select.with_imitation_defaults(boxes, imit, {}).label_smoothing == 0
+    value = BeliefConfig(mode="value")
+    assert select.with_imitation_defaults(small, value, {}).label_smoothing == 0
 
 
 def test_abc_scores_are_each_actions_weight_in_the_subset():
@@ -170,6 +195,8 @@ def _check_abc_validation(ward, m, err):
     from aoc_cli.belief.data import prepare
     from aoc_cli.control.scores import auc
     from aoc_cli.decompose import decompose, default_k
+    from aoc_cli.index import BeliefIndex
+    from aoc_cli.index.strata import PerAction
 
     assert "ABC's own decisions on the validation episodes" in err
     corpus = ward.corpus("ward")
@@ -181,9 +208,11 @@ def _check_abc_validation(ward, m, err):
     b = model.beliefs(np.asarray(corpus.observations), None,
                       corpus.history(np.arange(corpus.n_rows), model.history_length))
     a_tr, y = acts[split.train_rows], acts[split.val_rows]
-    k = default_k(model.d_b, np.bincount(a_tr).min() / len(a_tr))
-    assert m["val_abc_k"] == k > default_k(model.d_b)  # ward's treatment is rare
-    dec = decompose(b[split.train_rows], b[split.val_rows], k=k)
+    # as `aoc index` takes them: the paper's 2 (d_b + 1) nearest rows of each action
+    k = 2 * default_k(model.d_b)
+    assert m["val_abc_k"] == k
+    search = PerAction(BeliefIndex.build(b[split.train_rows], kind="flat"), a_tr)
+    dec = decompose(b[split.train_rows], b[split.val_rows], k=k, index=search)
     scores = select.abc_scores(dec.rows, dec.weights, a_tr, 2)
     # the same network; beliefs through the saved model's float32 path (a row may flip)
     assert m["val_abc_accuracy"] == pytest.approx(np.mean(scores.argmax(1) == y), abs=0.01)

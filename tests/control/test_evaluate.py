@@ -69,12 +69,13 @@ def test_imitation_metrics_match_a_hand_computation(ward):
     # d_b = 4 and the imitation k here -- leaves the share undefined)
     assert summary["extrapolating_share"] == (
         pytest.approx(np.mean(r > 3 * typical), abs=1e-12) if typical else None)
-    # the imitation k: (d_b + 1) / the rarest action's share, within [2, 16] (d_b + 1)
-    share = np.bincount(corpus.actions).min() / corpus.n_rows
-    assert summary["k"] == session.index.k == min(max(10, int(np.ceil(5 / share))), 80)
+    # imitation: the paper's 2 (d_b + 1) nearest rows of each of the two actions
+    assert summary["k"] == session.index.k == 2 * 10
+    assert summary["candidates"] == session.index.meta["candidates"] == "per_action"
     assert session.index.meta["typical_residual"]["k"] == session.index.k  # measured alike
-    # a value model of the same corpus keeps the paper's k = 2 (d_b + 1)
-    assert open_session(corpus, "value", config=ControllerConfig()).index.k == 10
+    # a value model of the same corpus keeps the paper's k = 2 (d_b + 1) nearest rows
+    value = open_session(corpus, "value", config=ControllerConfig()).index
+    assert (value.k, value.candidates) == (10, "nearest")
     assert summary["residual"]["p50"] == pytest.approx(np.median(r), abs=1e-12)
     # every decision traced to at most d_b + 1 named rows, with the patient's own id
     assert summary["support_max"] <= 5
@@ -201,3 +202,32 @@ def test_audit_log_names_each_supporting_row_by_its_episode_id(ward, tmp_path):
     ep = corpus.episode_of(np.maximum(rows, 0))
     expect = np.where(rows >= 0, np.array(corpus.episode_ids, dtype=object)[ep], "")
     assert (rows >= 0).any() and np.array_equal(ids, expect.astype(str))
+
+
+def test_an_index_without_its_candidates_is_read_as_the_k_nearest_rows(ward, tmp_path):
+    """An index built before candidates were recorded (no ``candidates`` in index.json) is
+    searched as it was built: the k nearest rows it recorded, not per action."""
+    import shutil
+
+    from aoc_cli.store import derived
+    from aoc_cli.store.verify import read_json
+
+    root, _store = ward
+    copy = tmp_path / "store"
+    shutil.copytree(root, copy)
+    corpus = Store(copy).corpus("ward")
+    folder = corpus.models_dir / "default" / "index" / "default"
+    meta = read_json(folder / "index.json", "index", "rebuild")
+    old = {k: v for k, v in meta.items() if k not in ("candidates", "files", "sha256")}
+    old["k"] = 44  # what the earlier rule (d_b + 1) / the rarest share recorded here
+    derived.write_index_meta(folder, old)
+    session = open_session(corpus, config=ControllerConfig())
+    assert session.index.candidates == "nearest" and session.index.strata is None
+    assert session.index.search is session.index.index
+    summary, res = evaluate(session, Store(copy).corpus("held"), [])
+    assert summary["candidates"] == "nearest" and summary["k"] == 44
+    new = open_session(Store(root).corpus("ward"), config=ControllerConfig())
+    fresh, _ = evaluate(new, Store(root).corpus("held"), [])
+    assert fresh["candidates"] == "per_action" and fresh["k"] == 20
+    # per action, every decision's neighbourhood held both actions; the k nearest rows not
+    assert fresh["auc"] != summary["auc"]
