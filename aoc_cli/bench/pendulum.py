@@ -8,7 +8,8 @@
   models (the corpus covers the upright region; one training instead of two). A diagnostic
   row, ``aoc-normal-rows``, is AOC restricted to the evaluation system's rows (see ORACLE);
   ``aoc-dynamics`` is AOC with aoc's auxiliary dynamics head (see DYNAMICS); ``aoc-critic``
-  and ``aoc-reward`` are AOC with the reference code's beliefs (aoc_cli/bench/beliefs.py).
+  and ``aoc-reward`` are AOC with the reference code's beliefs, ``aoc-gamma0.9`` AOC with the
+  paper's value belief on the return-to-go at gamma 0.9 (aoc_cli/bench/beliefs.py).
 * ``epsilon`` (paper Table "epsilon controls the conservation"): AOC with epsilon in
   {0.3, 0.5, 0.9, 1.0} at the middle data size, on the scale's ablation tasks (the quick
   scale: random and upright start), with the paper's model and with the dynamics head.
@@ -29,7 +30,8 @@ from aoc_cli.bench.results import result_row
 from aoc_cli.decompose import default_k
 
 TASKS = ("pendulum-het", "pendulum-het-upright")
-METHODS = ["aoc", "aoc-dynamics", "aoc-critic", "aoc-reward", "aoc-normal-rows", "knn", "1nn",
+METHODS = ["aoc", "aoc-dynamics", "aoc-critic", "aoc-reward", "aoc-gamma0.9", "aoc-normal-rows",
+           "knn", "1nn",
            "knn-belief", "1nn-belief",
            "bc", "td3bc", "cql", "mpc", "zero", "random"]
 

@@ -56,7 +56,8 @@ def test_pendulum_het_tiny_covers_every_method_task_and_the_data(tmp_path, bench
     report = run_experiment("pendulum-het", "tiny", out=out, store=bench_store)
     rows, summary = _check_outputs(out, report)
     methods = {r["method"] for r in rows}
-    assert methods >= {"aoc", "aoc-dynamics", "aoc-critic", "aoc-reward", "aoc-normal-rows",
+    assert methods >= {"aoc", "aoc-dynamics", "aoc-critic", "aoc-reward", "aoc-gamma0.9",
+                       "aoc-normal-rows",
                        "knn", "1nn", "knn-belief",
                        "1nn-belief", "bc", "td3bc", "cql", "mpc", "zero", "random", "data"}
     # aoc-dynamics runs its own model, trained with the auxiliary head; aoc the paper's
@@ -69,6 +70,15 @@ def test_pendulum_het_tiny_covers_every_method_task_and_the_data(tmp_path, bench
     # the reference code's beliefs: each row its own model, trained on what its name says
     assert load_model(corpus, "critic").config.belief == "critic"
     assert load_model(corpus, "reward").config.belief == "reward"
+    # aoc-gamma0.9: the value belief on the return-to-go at gamma 0.9, whose index (the hull's
+    # values v^c) holds that return-to-go, not the default model's gamma 0.99 one
+    from aoc_cli.belief.targets import discounted_return_to_go
+    from aoc_cli.session import load_index
+    short = load_model(corpus, "value-gamma0.9")
+    assert (short.config.belief, short.config.gamma) == ("value", 0.9)
+    want = discounted_return_to_go(corpus.rewards, corpus.episode_starts, 0.9)
+    np.testing.assert_allclose(load_index(corpus, "value-gamma0.9").values, want, rtol=1e-12)
+    assert not np.allclose(load_index(corpus, "default").values, want)
     assert {r["task"] for r in rows} == {"pendulum-het", "pendulum-het-upright"}
     zero_upright = next(r for r in rows if r["method"] == "zero"
                         and r["task"] == "pendulum-het-upright")
