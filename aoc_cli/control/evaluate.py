@@ -35,7 +35,7 @@ from aoc_cli.control.evaluate_inputs import (EXACT_MAX_ROWS, EvalContext, candid
                                              check_inputs, episode_rows, heterogeneity)
 from aoc_cli.decompose import decompose
 from aoc_cli.errors import AocError
-from aoc_cli.index.strata import candidate_search
+from aoc_cli.index.strata import PerAction
 from aoc_cli.threads import one_thread
 
 BASELINES = ("knn", "bc")
@@ -130,9 +130,13 @@ def score_episodes(ctx: EvalContext, episodes) -> StepScores:
 def _decompose(ctx: EvalContext, beliefs: np.ndarray, query_episodes: np.ndarray):
     # step 1's candidates as the index takes them (the k nearest rows, or those of each
     # action), of other episodes than the query's when the data are the corpus itself
-    index = ctx.step1 if not ctx.own else candidate_search(
-        LeaveEpisodeOut(ctx.search, ctx.corpus_episode, query_episodes,
-                        ctx.max_episode_length), ctx.index.candidates, ctx.index.strata)
+    index = ctx.step1
+    if ctx.own:
+        def own_out(search, rows):
+            episode = ctx.corpus_episode if rows is None else ctx.corpus_episode[rows]
+            return LeaveEpisodeOut(search, episode, query_episodes, ctx.max_episode_length)
+
+        index = index.wrapped(own_out) if isinstance(index, PerAction) else own_out(index, None)
     return decompose(ctx.index.beliefs, beliefs, k=ctx.k, values=ctx.index.values, index=index)
 
 
@@ -259,7 +263,8 @@ def summarise(ctx: EvalContext, res: StepScores) -> dict:
     out["heterogeneity_share"] = float(np.mean(res.warning))
     out["support_max"] = int((res.support_rows >= 0).sum(1).max())
     out["k"] = int(ctx.k)
-    out["search"] = ctx.search.describe() if hasattr(ctx.search, "describe") \
+    out["search"] = ctx.step1.describe() if hasattr(ctx.step1, "describe") \
+        else ctx.search.describe() if hasattr(ctx.search, "describe") \
         else f"the index ({ctx.index.index.kind}, exact)" if ctx.index.index.kind == "flat" \
         else f"the index ({ctx.index.index.kind})"
     out["candidates"] = ctx.index.candidates

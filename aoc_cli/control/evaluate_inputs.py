@@ -128,6 +128,13 @@ class BatchSearch:
         return dist.astype(np.float64), rows.astype(np.int64)
 
 
+def _exact(vectors: np.ndarray):
+    """An exact (flat) index over ``vectors``, rows numbered 0..n-1."""
+    from aoc_cli.index import BeliefIndex
+
+    return BeliefIndex.build(np.ascontiguousarray(vectors, dtype=np.float32), kind="flat")
+
+
 def search_structure(index, vectors, exact: bool | None, seed: int = 0):
     """The session's own (exact) index, or a :class:`BatchSearch` for a large corpus."""
     if exact or (exact is None and len(vectors) <= EXACT_MAX_ROWS):
@@ -220,8 +227,16 @@ class EvalContext:
         self.index = self.session.index
         self.search = search_structure(self.index.index, self.index.beliefs, self.exact,
                                        self.seed)
-        # step 1 as the index takes its candidates (aoc_cli.index.strata), prepared once
-        self.step1 = candidate_search(self.search, self.index.candidates, self.index.strata)
+        # step 1 as the index takes its candidates (aoc_cli.index.strata), prepared once;
+        # per action with the run's IVF structure: one search per action (IVF above
+        # EXACT_MAX_ROWS rows of the action, else exact)
+        split = None
+        if isinstance(self.search, BatchSearch):
+            def split(rows, beliefs=self.index.beliefs, seed=self.seed):
+                vectors = np.take(beliefs, rows, axis=0)
+                return search_structure(None, vectors, None, seed) or _exact(vectors)
+        self.step1 = candidate_search(self.search, self.index.candidates, self.index.strata,
+                                      split)
         self.history_length = model.history_length
         self.k = self.config.k if self.config.k is not None else self.index.k
         self.discrete, self.n_actions = corpus.discrete, corpus.n_actions

@@ -197,6 +197,22 @@ class BeliefIndex:
         rows = pos if self._row_of is None else np.where(pos >= 0, self._row_of[np.maximum(pos, 0)], -1)
         return np.sqrt(np.maximum(dist, 0.0)), rows
 
+    def search_exact(self, queries: np.ndarray, k: int, selection) -> tuple[np.ndarray, np.ndarray]:
+        """``search``'s answer computed exactly among every selected position (each one read):
+        what a restricted search of an approximate index (IVF, HNSW) falls back to when it
+        found fewer than k rows, e.g. a stratum far from the query (aoc_cli.index.strata)."""
+        Y = _as_queries(queries, self.dim)
+        sel = self.select(selection)
+        positions = np.flatnonzero(sel.mask)
+        kk = min(int(k), len(positions))
+        dist = np.full((Y.shape[0], int(k)), np.inf)
+        pos = np.full((Y.shape[0], int(k)), -1, dtype=np.int64)
+        with single_threaded_blas():
+            d2, p = _exact_among(Y, self.vectors(positions), kk)
+        dist[:, :kk], pos[:, :kk] = d2, positions[p]
+        rows = pos if self._row_of is None else np.where(pos >= 0, self._row_of[np.maximum(pos, 0)], -1)
+        return np.sqrt(np.maximum(dist, 0.0)), rows
+
     def _direct(self, Y: np.ndarray, k: int, sel: Selection | None) -> tuple[np.ndarray, np.ndarray]:
         with faiss_threads(1 if Y.shape[0] < 8 else self.config.threads):
             D, I = self.index.search(Y, k, params=self._params(sel, k))

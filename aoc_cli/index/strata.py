@@ -28,16 +28,36 @@ class PerAction:
     (its discrete action). ``search(Y, k, selection)`` returns distances and rows (Q, S * per),
     per = max(1, k // S) over the S strata present, the nearest ``per`` of each stratum
     (within ``selection``), ascending by distance, -1 / inf padded where a stratum has fewer
-    rows."""
+    rows.
 
-    def __init__(self, search, strata: np.ndarray):
+    Each stratum is searched in ``search`` restricted to its rows (a row mask, exact for a
+    flat index's batches), or, with ``split`` (a function: corpus rows (n,) -> a search over
+    those rows alone, numbered 0..n-1), in a search of its own: an approximate structure
+    (IVF) restricted by a mask visits the lists near the query, where a far stratum has few
+    rows, and so returns fewer than asked; one built per stratum does not."""
+
+    def __init__(self, search, strata: np.ndarray, split=None):
         strata = np.asarray(strata, dtype=np.int64)
         if strata.shape != (search.n_rows,):
             raise AocError(f"internal: {strata.shape} strata for {search.n_rows} corpus rows")
         self.base, self.n_rows, self.dim = search, search.n_rows, search.dim
         self.masks = [strata == s for s in np.unique(strata)]
+        self.rows = [np.flatnonzero(m) for m in self.masks]
+        self.subs = None if split is None else [split(r) for r in self.rows]
         select = getattr(search, "select", None)  # a BeliefIndex prepares its masks once
-        self._prepared = [select(m) for m in self.masks] if select is not None else self.masks
+        self._prepared = [select(m) for m in self.masks] if select is not None and \
+            split is None else self.masks
+
+    def wrapped(self, wrap) -> "PerAction":
+        """The same strata over ``wrap(search, rows)`` of each search (rows None: the base
+        over every row; else a stratum's own search and its corpus rows)."""
+        out = object.__new__(PerAction)
+        out.__dict__.update(self.__dict__)
+        if self.subs is None:
+            out.base = wrap(self.base, None)
+        else:
+            out.subs = [wrap(sub, rows) for sub, rows in zip(self.subs, self.rows)]
+        return out
 
     def per(self, k: int) -> int:
         """Rows of each stratum for k neighbours."""
@@ -45,23 +65,35 @@ class PerAction:
 
     def search(self, queries, k: int, selection=None) -> tuple[np.ndarray, np.ndarray]:
         per = self.per(k)
+        sel = None
         if selection is not None:
             sel = np.asarray(selection)
             if sel.dtype != bool:
                 mask = np.zeros(self.n_rows, bool)
                 mask[sel.astype(np.int64)] = True
                 sel = mask
-            parts = [m & sel for m in self.masks]
-        else:
-            parts = self._prepared
         ds, rs = [], []
-        for m in parts:
-            count = int(m.count if hasattr(m, "count") else m.sum())
-            if count == 0:
-                continue
-            d, r = self.base.search(queries, min(per, count), m)
-            ds.append(d)
-            rs.append(r)
+        for i, rows in enumerate(self.rows):
+            if self.subs is not None:
+                part = None if sel is None else sel[rows]
+                count = len(rows) if part is None else int(part.sum())
+                if count:
+                    d, r = self.subs[i].search(queries, min(per, count), part)
+                    r = np.where(r >= 0, rows[np.maximum(r, 0)], -1)
+            else:
+                part = self._prepared[i] if sel is None else self.masks[i] & sel
+                count = len(rows) if sel is None else int(part.sum())
+                if count:
+                    d, r = self.base.search(queries, min(per, count), part)
+                    # an approximate index visits the lists / graph near the query, where a
+                    # far stratum may have fewer rows than asked: those queries exactly
+                    short = (r < 0).any(1)
+                    if short.any() and hasattr(self.base, "search_exact"):
+                        d[short], r[short] = self.base.search_exact(
+                            np.asarray(queries)[short], min(per, count), part)
+            if count:
+                ds.append(d)
+                rs.append(r)
         if not ds:
             raise AocError("the selection leaves no corpus rows in the index; select at least one row")
         d, r = np.concatenate(ds, axis=1), np.concatenate(rs, axis=1)
@@ -75,17 +107,18 @@ class PerAction:
 
     def describe(self) -> str:
         inner = self.base.describe() if hasattr(self.base, "describe") else "the index"
-        return f"the nearest rows of each of {len(self.masks)} actions ({inner})"
+        how = ", a search of each" if self.subs is not None else ""
+        return f"the nearest rows of each of {len(self.masks)} actions{how} ({inner})"
 
 
-def candidate_search(search, candidates: str | None, strata: np.ndarray | None):
+def candidate_search(search, candidates: str | None, strata: np.ndarray | None, split=None):
     """The search step 1 uses: ``search`` itself for the k nearest rows (``candidates``
     "nearest" or None, an index that recorded none), :class:`PerAction` over ``strata`` for
-    "per_action"."""
+    "per_action" (``split``: see there)."""
     if candidates in (None, NEAREST):
         return search
     if candidates == PER_ACTION:
         if strata is None:
             raise AocError("internal: per-action candidates need the rows' actions")
-        return PerAction(search, strata)
+        return PerAction(search, strata, split)
     raise AocError(f"unknown candidates {candidates!r} in the index: rebuild it with `aoc index`")

@@ -121,6 +121,14 @@ def test_own_corpus_leaves_each_episode_out_as_explain_does(ward):
                 # which the hull weights amplify (ill-conditioned vertices)
                 assert mine[row] == pytest.approx(w, abs=1e-4)
     assert agree >= len(picks) - 1
+    # the run's own structures (as above 20,000 corpus rows; here forced): one per action
+    # (exact for an action of at most 20,000 rows), each leaving the query's own episode out
+    ivf, res_ivf = evaluate(session, corpus, [], exact=False)
+    assert "each of 2 actions, a search of each (ivf" in ivf["search"]
+    sup_ep = corpus.episode_of(np.maximum(res_ivf.support_rows, 0))
+    assert not np.any((res_ivf.support_rows >= 0) & (sup_ep == res_ivf.episode[:, None]))
+    assert np.mean(res_ivf.decided == res.decided) > 0.97
+    assert np.all((res_ivf.support_rows >= 0).sum(1) <= 5)
 
 
 def test_leave_episode_out_search_drops_only_the_own_episode():

@@ -65,12 +65,19 @@ def test_selection_short_strata_and_the_evaluation_ivf():
     few[np.flatnonzero(actions == 1)[3:]] = 0
     _, rows = PerAction(index, few).search(queries, 16)
     assert rows.shape == (30, 11) and np.all((few[rows] == 1).sum(1) == 3)
-    # the evaluation's IVF structure takes the selection too (its rows: the corpus's)
-    ivf = BatchSearch(beliefs, seed=0)
-    _, rows_ivf = PerAction(ivf, actions).search(queries, 16)
+    # the evaluation's IVF structures: one per action (split), rows mapped back to the corpus's
+    split = PerAction(BatchSearch(beliefs, seed=0), actions,
+                      split=lambda rows: BatchSearch(beliefs[rows], seed=0))
+    _, rows_ivf = split.search(queries, 16)
     _, rows_flat = PerAction(index, actions).search(queries, 16)
     assert np.mean(np.sort(rows_ivf, 1) == np.sort(rows_flat, 1)) > 0.95
     assert np.all((actions[rows_ivf] == 1).sum(1) == 8)
+    _, rows_sel = split.search(queries, 16, keep)
+    assert np.all(keep[rows_sel]) and np.all((actions[rows_sel] == 1).sum(1) == 8)
+    # wrapped (as evaluate leaves the query's own episode out): each action's own search
+    seen = []
+    split.wrapped(lambda sub, rows: seen.append(len(rows)) or sub)
+    assert sorted(seen) == sorted(np.bincount(actions).tolist())
 
 
 def test_candidate_search_reads_the_index_record():
@@ -81,3 +88,17 @@ def test_candidate_search_reads_the_index_record():
     assert isinstance(candidate_search(index, "per_action", actions), PerAction)
     with pytest.raises(AocError, match="rebuild"):
         candidate_search(index, "sideways", actions)
+
+
+def test_an_approximate_index_finds_a_far_action_exactly():
+    """An IVF index restricted to a far action's rows visits lists near the query, where that
+    action has few rows: the per-action search completes those queries exactly (the far
+    action has over 4,096 rows, above which a restricted search is the index's own)."""
+    beliefs, actions = _corpus(60000, seed=5)
+    ivf = BeliefIndex.build(beliefs, kind="ivf", ivf_nlist=64, ivf_nprobe=1)
+    q = np.zeros((1, 6), np.float32)                   # deep in action 0's cluster
+    _, plain = ivf.search(q, 30, actions == 1)
+    assert (plain < 0).any()                            # the restricted IVF search comes up short
+    _, rows = PerAction(ivf, actions).search(q, 60)
+    assert np.array_equal(np.sort(rows[actions[rows] == 1]),
+                          _nearest_of(beliefs, q, actions == 1, 30)[0])
