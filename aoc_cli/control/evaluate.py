@@ -263,10 +263,10 @@ def summarise(ctx: EvalContext, res: StepScores) -> dict:
     out["heterogeneity_share"] = float(np.mean(res.warning))
     out["support_max"] = int((res.support_rows >= 0).sum(1).max())
     out["k"] = int(ctx.k)
-    out["search"] = ctx.step1.describe() if hasattr(ctx.step1, "describe") \
-        else ctx.search.describe() if hasattr(ctx.search, "describe") \
+    search = ctx.search.describe() if hasattr(ctx.search, "describe") \
         else f"the index ({ctx.index.index.kind}, exact)" if ctx.index.index.kind == "flat" \
         else f"the index ({ctx.index.index.kind})"
+    out["search"] = ctx.step1.describe(search) if isinstance(ctx.step1, PerAction) else search
     out["candidates"] = ctx.index.candidates
     out["baselines"] = base
     return out

@@ -105,10 +105,11 @@ class PerAction:
         gather = getattr(self.base, "row_beliefs", None)
         return None if gather is None else gather(rows)
 
-    def describe(self) -> str:
-        inner = self.base.describe() if hasattr(self.base, "describe") else "the index"
-        how = ", a search of each" if self.subs is not None else ""
-        return f"the nearest rows of each of {len(self.masks)} actions{how} ({inner})"
+    def describe(self, inner: str = "the index") -> str:
+        """What step 1 searches, ``inner`` the search over every row."""
+        if self.subs is not None:
+            inner = f"{inner}; a search of each"
+        return f"the nearest rows of each of {len(self.masks)} actions ({inner})"
 
 
 def candidate_search(search, candidates: str | None, strata: np.ndarray | None, split=None):

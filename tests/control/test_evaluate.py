@@ -124,7 +124,8 @@ def test_own_corpus_leaves_each_episode_out_as_explain_does(ward):
     # the run's own structures (as above 20,000 corpus rows; here forced): one per action
     # (exact for an action of at most 20,000 rows), each leaving the query's own episode out
     ivf, res_ivf = evaluate(session, corpus, [], exact=False)
-    assert "each of 2 actions, a search of each (ivf" in ivf["search"]
+    assert ivf["search"].startswith("the nearest rows of each of 2 actions (ivf (nlist")
+    assert ivf["search"].endswith("; a search of each)")
     sup_ep = corpus.episode_of(np.maximum(res_ivf.support_rows, 0))
     assert not np.any((res_ivf.support_rows >= 0) & (sup_ep == res_ivf.episode[:, None]))
     assert np.mean(res_ivf.decided == res.decided) > 0.97
