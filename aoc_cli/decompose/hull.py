@@ -27,13 +27,16 @@ The start. Optionally the lifted linear programme  min sum_c w_c ||b_c - y*||^2 
 sum w b = y*, w in the simplex, is first solved by the same pivots (entering column = most
 negative reduced cost): its vertex is the Delaunay simplex of the neighbours containing y*
 (docs/design.md), a good, local start. The exchange search then shrinks it until no single exchange
-helps or the budget is spent.
+helps or the budget is spent. The tableau is built and the final weights solved batched
+(numpy); the pivots run per problem in compiled code (numba), each problem stopping when it
+is done (a batched round cost the same whether one problem pivoted or all).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 
@@ -68,8 +71,8 @@ def minimal_subset(
     z = points - offset[:, None, :]  # neighbours relative to y*
     zt = z[todo] / np.sqrt(scale2[todo])[:, None, None]
     tab = _Tableau.build(zt, support[todo], candidate[todo], valid[todo])
-    pivots = _delaunay_start(tab, zt, d) if lp_start else 0
-    pivots += _exchange(tab, budget)
+    pivots = _pivot_rounds(tab.T, tab.lam, tab.slot_col, tab.in_slot, tab.eligible,
+                           (zt**2).sum(-1), 4 * (d + 1) + 16 if lp_start else 0, budget)
     new_w, good = _exact_weights(tab, zt)
     weights = weights.copy()
     support = support.copy()
@@ -117,73 +120,100 @@ class _Tableau:
         H = _lifted_gram(Z_S, in_slot)
         rhs = np.einsum("qsd,qkd->qsk", Z_S, zt) + in_slot[:, :, None]
         sol = _solve(H, np.concatenate([rhs, in_slot[:, :, None].astype(float)], axis=2))
-        T, lam = sol[:, :, :k], sol[:, :, k]
+        T, lam = np.ascontiguousarray(sol[:, :, :k]), np.ascontiguousarray(sol[:, :, k])
         fit = np.einsum("qsk,qsd->qkd", T, Z_S) - zt
         in_aff = (fit**2).sum(-1) + (T.sum(1) - 1.0) ** 2 <= 1e-14
         return cls(T, lam, np.where(in_slot, order, -1), in_slot, cand & in_aff & valid)
 
-    def ratio_test(self) -> tuple[np.ndarray, np.ndarray]:
-        """Leaving slot for every entering column, and its pivot element: (n, k) each."""
-        T = self.T
-        pos = (T > 1e-12) & self.in_slot[:, :, None]
-        ratio = np.where(pos, self.lam[:, :, None] / np.where(pos, T, 1.0), np.inf)
-        leave = np.argmin(ratio, axis=1)  # (n, k)
-        return leave, np.take_along_axis(T, leave[:, None, :], axis=1)[:, 0, :]
 
-    def pivot(self, mask: np.ndarray, enter: np.ndarray, leave: np.ndarray) -> None:
-        """Column enter[q] replaces slot leave[q] in every problem q of mask (n,) bool."""
-        T, lam = self.T, self.lam
-        rows = np.arange(mask.size)[mask]
-        c, i = enter[rows], leave[rows]
-        col = T[rows, :, c]  # (m, s_max)
-        piv = col[np.arange(rows.size), i]
-        t = lam[rows, i] / piv
-        lam[rows] -= t[:, None] * col
-        lam[rows, i] = t
-        prow = T[rows, i, :] / piv[:, None]
-        T[rows] -= col[:, :, None] * prow[:, None, :]
-        T[rows, i, :] = prow
-        old = self.slot_col[rows, i]
-        self.slot_col[rows, i] = c
-        self.eligible[rows, c] = False
-        self.eligible[rows, old] = True
+@numba.njit(cache=True, nogil=True)
+def _pivot_rounds(T, lam, slot_col, in_slot, eligible, sq, lp_rounds, budget):  # pragma: no cover
+    """Pivot every problem of the tableau (T (n, s_max, k), lam (n, s_max), slot_col, in_slot,
+    eligible; sq (n, k) the squared norms of the rescaled neighbours), in place, in compiled
+    code, each problem on its own (its pivots never depend on the others'):
 
+    1. the Delaunay start, at most lp_rounds pivots: the vertex of the lifted LP
+       min sum_c w_c ||b_c - y*||^2 (entering column = most negative reduced cost
+       ||z_c||^2 - sum_s ||z_s||^2 beta_sc), the Delaunay simplex of the neighbours containing y*;
+    2. the exchange, at most budget pivots: while some eligible column has a pivot element
+       |beta_ic| < 1 (it shrinks the volume by that factor), the smallest enters.
 
-def _delaunay_start(tab: _Tableau, zt: np.ndarray, d: int) -> int:
-    """Pivot to the vertex of the lifted LP  min sum_c w_c ||b_c - y*||^2  (entering column =
-    most negative reduced cost): the Delaunay simplex containing y*. Returns the pivots made."""
-    r = np.arange(zt.shape[0])
-    sq = (zt**2).sum(-1)
-    pivots = 0
-    for _ in range(4 * (d + 1) + 16):
-        cost_S = np.where(tab.in_slot, sq[r[:, None], np.maximum(tab.slot_col, 0)], 0.0)
-        reduced = sq - np.einsum("qs,qsk->qk", cost_S, tab.T)
-        leave, piv = tab.ratio_test()
-        reduced = np.where(tab.eligible & (piv > 1e-9), reduced, 0.0)
-        enter = np.argmin(reduced, axis=1)
-        go = reduced[r, enter] < -1e-12
-        if not go.any():
-            break
-        tab.pivot(go, enter, leave[r, enter])
-        pivots += 1
-    return pivots
-
-
-def _exchange(tab: _Tableau, budget: int) -> int:
-    """Exchange vertices while one shrinks the volume (the smallest factor |beta_ic| < 1), at
-    most budget rounds. Returns the pivots made."""
-    r = np.arange(tab.T.shape[0])
-    pivots = 0
-    for _ in range(budget):
-        leave, piv = tab.ratio_test()
-        factor = np.where(tab.eligible & (piv > 1e-9), piv, np.inf)
-        enter = np.argmin(factor, axis=1)
-        go = factor[r, enter] < 1.0 - 1e-9
-        if not go.any():
-            break
-        tab.pivot(go, enter, leave[r, enter])
-        pivots += 1
-    return pivots
+    The leaving slot of a column is the ratio test's  argmin_{beta_ic > 0} lam_i / beta_ic.
+    Returns the most pivots any problem made in phase 1 plus those of phase 2 (the rounds of
+    the batched numpy loops this replaced; their outputs are the same to the bit)."""
+    n, s_max, k = T.shape
+    leave = np.zeros(k, dtype=np.int64)
+    piv = np.zeros(k)
+    col = np.zeros(s_max)
+    prow = np.zeros(k)
+    most_lp = 0
+    most_ex = 0
+    for q in range(n):
+        for phase in range(2):
+            rounds = lp_rounds if phase == 0 else budget
+            made = 0
+            for _ in range(rounds):
+                # ratio test: the leaving slot of every entering column and its pivot element
+                for c in range(k):
+                    best = np.inf
+                    i_best = 0
+                    for s in range(s_max):
+                        if in_slot[q, s] and T[q, s, c] > 1e-12:
+                            ratio = lam[q, s] / T[q, s, c]
+                            if ratio < best:
+                                best = ratio
+                                i_best = s
+                    leave[c] = i_best
+                    piv[c] = T[q, i_best, c]
+                enter = 0
+                best = np.inf
+                if phase == 0:  # most negative reduced cost of the lifted LP
+                    for c in range(k):
+                        red = 0.0
+                        if eligible[q, c] and piv[c] > 1e-9:
+                            red = sq[q, c]
+                            for s in range(s_max):
+                                if in_slot[q, s]:
+                                    red -= sq[q, slot_col[q, s]] * T[q, s, c]
+                        if red < best:
+                            best = red
+                            enter = c
+                    if not best < -1e-12:
+                        break
+                else:  # the smallest volume factor |beta_ic| below 1
+                    for c in range(k):
+                        f = piv[c] if (eligible[q, c] and piv[c] > 1e-9) else np.inf
+                        if f < best:
+                            best = f
+                            enter = c
+                    if not best < 1.0 - 1e-9:
+                        break
+                # pivot: column enter replaces slot i
+                i = leave[enter]
+                for s in range(s_max):
+                    col[s] = T[q, s, enter]
+                p = col[i]
+                t = lam[q, i] / p
+                for s in range(s_max):
+                    lam[q, s] -= t * col[s]
+                lam[q, i] = t
+                for c in range(k):
+                    prow[c] = T[q, i, c] / p
+                for s in range(s_max):
+                    for c in range(k):
+                        T[q, s, c] -= col[s] * prow[c]
+                for c in range(k):
+                    T[q, i, c] = prow[c]
+                old = slot_col[q, i]
+                slot_col[q, i] = enter
+                eligible[q, enter] = False
+                eligible[q, old] = True
+                made += 1
+            if phase == 0:
+                most_lp = max(most_lp, made)
+            else:
+                most_ex = max(most_ex, made)
+    return most_lp + most_ex
 
 
 def _exact_weights(tab: _Tableau, zt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -38,3 +38,17 @@ def test_vertex_exchange_improves_on_the_plain_delaunay_hull():
     improved = volume_ratios(3, DecomposeConfig(), n_queries=120)
     assert np.median(plain) > 1.2  # the lifted-LP (Delaunay) vertex alone is not the smallest
     assert np.percentile(improved, 90) < np.percentile(plain, 90)
+
+
+def test_a_problems_subset_does_not_depend_on_the_batch():
+    """The pivots run per problem (compiled): a query decomposed alone gets the same rows and
+    weights, to the bit, as in a batch of 60 (where other problems pivot more or less)."""
+    rng = np.random.default_rng(4)
+    beliefs = rng.random((1500, 4))
+    queries = 0.1 + 0.8 * rng.random((60, 4))
+    batch = decompose(beliefs, queries)
+    assert batch.pivots > 0
+    for q in (0, 17, 59):
+        alone = decompose(beliefs, queries[q : q + 1])
+        np.testing.assert_array_equal(alone.rows[0], batch.rows[q])
+        np.testing.assert_array_equal(alone.weights[0], batch.weights[q])
