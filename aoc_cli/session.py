@@ -124,12 +124,19 @@ class CorpusIndex:
         return int(self.meta.get("k") or default_k(self.beliefs.shape[1]))
 
 
-def neighbours(corpus: Corpus, model) -> tuple[int, str]:
+def neighbours(corpus: Corpus, model, candidates: str = "auto") -> tuple[int, str]:
     """The default neighbours per query of ``model`` on ``corpus`` and where they come from:
     the paper's k = 2 (d_b + 1) nearest rows; for an imitation model of discrete actions,
     the paper's 2 (d_b + 1) nearest rows *of each action* present (k = n 2 (d_b + 1),
-    :mod:`aoc_cli.index.strata`; docs/design.md, "Candidates of every action")."""
-    if not per_action(corpus, model):
+    :mod:`aoc_cli.index.strata`; docs/design.md, "Candidates of every action").
+    ``candidates``: "auto" (that rule), "nearest" or "per_action" (discrete actions only)."""
+    if candidates not in ("auto", NEAREST, PER_ACTION):
+        raise AocError(f"unknown --candidates {candidates!r}: use auto, {NEAREST} or "
+                       f"{PER_ACTION}")
+    if candidates == PER_ACTION and not (corpus.discrete and corpus.n_rows > 0):
+        raise AocError(f"--candidates {PER_ACTION} needs discrete actions; corpus "
+                       f"{corpus.name!r} has continuous ones")
+    if candidates == NEAREST or (candidates == "auto" and not per_action(corpus, model)):
         return default_k(model.d_b), NEAREST
     n = int(np.count_nonzero(np.bincount(np.asarray(corpus.actions, dtype=np.int64))))
     return max(n, 1) * default_k(model.d_b), PER_ACTION
@@ -156,13 +163,14 @@ def build_index(corpus: Corpus, model_id: str | None = None, kind: str = "auto",
                 index_id: str = "default", episode_rates: dict | None = None,
                 seed: int = 0, progress: Progress | None = None, *,
                 resample: dict | None = None, subsample: dict | None = None,
-                **params) -> CorpusIndex:
+                candidates: str = "auto", **params) -> CorpusIndex:
     """Compute (or reuse) the beliefs of every row and build an index over them; ``progress``:
     the rows whose beliefs are computed (:mod:`aoc_cli.progress`).
 
     ``episode_rates`` ``{"TAG=VALUE": rate}`` derive an index that keeps or repeats whole
     episodes (:func:`aoc_cli.rows.episode_multiplicity`); ``resample`` and ``subsample``, the
-    older names, are merged into them.
+    older names, are merged into them. ``candidates``: step 1's, "auto", "nearest" or
+    "per_action" (:func:`neighbours`), recorded with its k in ``index.json``.
 
     Built in a temporary folder beside the index folder (new beliefs staged in it) and
     swapped in only when everything succeeded (:mod:`aoc_cli.store.derived`)."""
@@ -170,6 +178,7 @@ def build_index(corpus: Corpus, model_id: str | None = None, kind: str = "auto",
 
     episode_rates = {**(resample or {}), **(subsample or {}), **(episode_rates or {})}
     model = load_model(corpus, model_id)
+    model_k = neighbours(corpus, model, candidates)
     if episode_rates and index_id == "default":
         raise AocError("index_id must name a new index for a re-sampled or sub-sampled one "
                        "(the default index holds every row once)", "index_id")
@@ -206,7 +215,7 @@ def build_index(corpus: Corpus, model_id: str | None = None, kind: str = "auto",
             "episode_rates": episode_rates, "seed": seed,
             "build_seconds": seconds, "built": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         }
-        meta["k"], meta["candidates"] = neighbours(corpus, model)
+        meta["k"], meta["candidates"] = model_k
         ci = CorpusIndex(index_id, model, beliefs, model.values, index, meta,
                          _strata(corpus, meta))
         meta["typical_residual"] = typical_residual(ci, seed)

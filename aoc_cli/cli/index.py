@@ -32,6 +32,11 @@ def register(app: typer.Typer) -> None:
                                 "older scripts; same as --episode-rate).")] = None,
         seed: Annotated[int, typer.Option(
             "--seed", help="Seed of sub-sampling and of the typical-residual sample.")] = 0,
+        candidates: Annotated[str, typer.Option(
+            "--candidates",
+            help="Step 1's candidates: auto (the nearest rows of each action for an "
+                 "imitation model of discrete actions, else the k nearest rows), nearest "
+                 "(the paper's k = 2 (d_b + 1) nearest rows) or per_action.")] = "auto",
         fmt: FormatOption = None,
     ) -> None:
         """Compute every row's belief and build the index the controller searches."""
@@ -48,7 +53,8 @@ def register(app: typer.Typer) -> None:
                                "--episode-rate")
         with ProgressBar("index") as p:
             ci = build_index(corpus, model, kind=choice(kind), index_id=index_id,
-                             episode_rates={**rates_s, **rates}, seed=seed, progress=p)
+                             episode_rates={**rates_s, **rates}, seed=seed, progress=p,
+                             candidates=candidates)
         meta = ci.meta
         write_object({
             "corpus": corpus.name, "model": meta["model"], "index": meta["index_id"],

@@ -240,3 +240,33 @@ def test_an_index_without_its_candidates_is_read_as_the_k_nearest_rows(ward, tmp
     assert fresh["candidates"] == "per_action" and fresh["k"] == 20
     # per action, every decision's neighbourhood held both actions; the k nearest rows not
     assert fresh["auc"] != summary["auc"]
+
+
+def test_the_papers_candidates_stay_reachable_by_a_flag(ward, tmp_path):
+    """`aoc index --candidates nearest`: the paper's k = 2 (d_b + 1) nearest rows for an
+    imitation model; a bad value or per_action on continuous actions is one line, exit 2."""
+    import os
+    import shutil
+
+    root, _store = ward
+    copy = tmp_path / "store"
+    shutil.copytree(root, copy)
+    env = {"AOC_STORE": str(copy), "PATH": "/usr/bin:/bin", "OMP_NUM_THREADS": "1",
+           "PYTHONPATH": os.environ.get("PYTHONPATH", "")}
+    code, out, err = run_aoc("index", "ward", "--index", "paper", "--candidates", "nearest",
+                             "-f", "json", env=env)
+    assert code == 0, err
+    assert (json.loads(out)["k"], json.loads(out)["candidates"]) == (10, "nearest")
+    code, out, err = run_aoc("evaluate", "ward", "--data", "held", "--index", "paper",
+                             "--baselines", "none", "-f", "json", env=env)
+    assert code == 0, err
+    assert json.loads(out)["candidates"] == "nearest" and json.loads(out)["k"] == 10
+    code, out, err = run_aoc("index", "ward", "--index", "x", "--candidates", "sideways", env=env)
+    assert code == 2 and "unknown --candidates 'sideways'" in err
+    assert len(err.strip().splitlines()) == 1, err
+    Store(copy).write("boxes", collect("pendulum-het", episodes=2, seed=0)[0])
+    train_model(Store(copy).corpus("boxes"),
+                BeliefConfig(mode="imitation", history_length=0, hidden=16, belief_dim=3,
+                             max_epochs=1, threads=1), "default")
+    code, out, err = run_aoc("index", "boxes", "--candidates", "per_action", env=env)
+    assert code == 2 and "needs discrete actions" in err and len(err.strip().splitlines()) == 1
