@@ -16,7 +16,9 @@ times each (median reported, and every run), in one process per run:
   episode left out), baselines on;
 * ``imitation, own, exact``: the same with ``--exact`` (the index's exact search);
 * ``value, held out``: ``aoc evaluate ward100k --model value --data held`` (the logged action's
-  v_hat and the controller's choice over the 2 actions: 3 decompositions a step).
+  v_hat and the controller's choice over the 2 actions: 3 decompositions a step);
+* ``held-nearest``, ``own-nearest``: the imitation cases with the paper's k nearest rows
+  (an index built with ``--candidates nearest``) instead of the nearest rows of each action.
 """
 
 from __future__ import annotations
@@ -51,7 +53,11 @@ def aoc(store: Path, *args: str) -> tuple[float, str, float]:
 
 
 def build(store: Path, patients: int) -> None:
+    nearest = store / "ward100k" / "models" / "default" / "index" / "nearest"
     if (store / "ward100k" / "models" / "value" / "index").is_dir():
+        if not nearest.is_dir():  # a store built before the candidates of every action
+            aoc(store, "index", "ward100k", "--index", "nearest", "--candidates", "nearest",
+                "-f", "json")
         return
     aoc(store, "collect", "ward", "--name", "ward100k", "--episodes", str(patients),
         "--overwrite", "-f", "json")
@@ -62,6 +68,7 @@ def build(store: Path, patients: int) -> None:
         aoc(store, "train", "ward100k", "--model", model, *extra, "--paper", "--epochs", "4",
             "--threads", "1", "--overwrite", "-f", "json")
         aoc(store, "index", "ward100k", "--model", model, "-f", "json")
+    aoc(store, "index", "ward100k", "--index", "nearest", "--candidates", "nearest", "-f", "json")
 
 
 def main() -> None:
@@ -70,7 +77,8 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--store", type=Path, default=ROOT / "bench" / "evaluate-store")
     ap.add_argument("--cases", default="held,own,value,exact",
-                    help="comma-separated: held, own, exact, value (in this order of output)")
+                    help="comma-separated: held, own, exact, value, held-nearest, own-nearest "
+                         "(run interleaved, each --repeats times)")
     args = ap.parse_args()
     args.store.mkdir(parents=True, exist_ok=True)
     build(args.store, args.patients)
@@ -81,23 +89,32 @@ def main() -> None:
                                       "held"]),
         "exact": ("imitation, own, exact", ["evaluate", "ward100k", "--data", "ward100k",
                                             "--exact"]),
+        # the paper's k nearest rows instead of the nearest rows of each action (the default)
+        "held-nearest": ("imitation, held out, k nearest", ["evaluate", "ward100k", "--data",
+                                                            "held", "--index", "nearest"]),
+        "own-nearest": ("imitation, own, k nearest", ["evaluate", "ward100k", "--data",
+                                                      "ward100k", "--index", "nearest"]),
     }
     cases = dict(known[c.strip()] for c in args.cases.split(","))
     with open("/proc/loadavg") as fh:
         print(f"load before: {fh.read().split()[:3]}")
-    for name, argv in cases.items():
-        runs = []
-        for _ in range(args.repeats):
+    results = {name: [] for name in cases}
+    for _ in range(args.repeats):  # the cases interleaved, so a load change hits them alike
+        for name, argv in cases.items():
             seconds, out, cpu = aoc(args.store, *argv, "-f", "json")
             summary = json.loads(out)
-            runs.append((seconds, summary["steps"], summary["seconds"], cpu))
+            results[name].append((seconds, summary["steps"], summary["seconds"], cpu,
+                                  summary.get("accuracy"), summary.get("auc")))
+    for name, runs in results.items():
         whole = statistics.median(r[1] / r[0] for r in runs)
         per_cpu = statistics.median(r[1] / r[3] for r in runs)
         inner = statistics.median(r[1] / r[2] for r in runs)
         print(f"{name}: {runs[0][1]} steps; whole process {whole:.0f} steps/s wall (runs "
               + ", ".join(f"{r[0]:.1f} s" for r in runs) + f"), {per_cpu:.0f} steps per CPU "
               "second (runs " + ", ".join(f"{r[3]:.1f}" for r in runs)
-              + f"); inside evaluate() {inner:.0f} steps/s wall", flush=True)
+              + f"); inside evaluate() {inner:.0f} steps/s wall"
+              + ("" if runs[0][4] is None else
+                 f"; accuracy {runs[0][4]:.4f}, AUC {runs[0][5]:.4f}"), flush=True)
     with open("/proc/loadavg") as fh:
         print(f"load after: {fh.read().split()[:3]}")
 
