@@ -17,8 +17,8 @@ times each (median reported, and every run), in one process per run:
 * ``imitation, own, exact``: the same with ``--exact`` (the index's exact search);
 * ``value, held out``: ``aoc evaluate ward100k --model value --data held`` (the logged action's
   v_hat and the controller's choice over the 2 actions: 3 decompositions a step);
-* ``held-nearest``, ``own-nearest``: the imitation cases with the paper's k nearest rows
-  (an index built with ``--candidates nearest``) instead of the nearest rows of each action.
+* ``held-per-action``, ``own-per-action``: the imitation cases with the nearest rows of each
+  action (an index built with ``--candidates per_action``, the default up to 20,000 rows).
 """
 
 from __future__ import annotations
@@ -53,11 +53,11 @@ def aoc(store: Path, *args: str) -> tuple[float, str, float]:
 
 
 def build(store: Path, patients: int) -> None:
-    nearest = store / "ward100k" / "models" / "default" / "index" / "nearest"
+    per_action = store / "ward100k" / "models" / "default" / "index" / "per-action"
     if (store / "ward100k" / "models" / "value" / "index").is_dir():
-        if not nearest.is_dir():  # a store built before the candidates of every action
-            aoc(store, "index", "ward100k", "--index", "nearest", "--candidates", "nearest",
-                "-f", "json")
+        if not per_action.is_dir():  # a store built before the candidates of every action
+            aoc(store, "index", "ward100k", "--index", "per-action", "--candidates",
+                "per_action", "-f", "json")
         return
     aoc(store, "collect", "ward", "--name", "ward100k", "--episodes", str(patients),
         "--overwrite", "-f", "json")
@@ -68,7 +68,8 @@ def build(store: Path, patients: int) -> None:
         aoc(store, "train", "ward100k", "--model", model, *extra, "--paper", "--epochs", "4",
             "--threads", "1", "--overwrite", "-f", "json")
         aoc(store, "index", "ward100k", "--model", model, "-f", "json")
-    aoc(store, "index", "ward100k", "--index", "nearest", "--candidates", "nearest", "-f", "json")
+    aoc(store, "index", "ward100k", "--index", "per-action", "--candidates", "per_action",
+        "-f", "json")
 
 
 def main() -> None:
@@ -77,7 +78,8 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--store", type=Path, default=ROOT / "bench" / "evaluate-store")
     ap.add_argument("--cases", default="held,own,value,exact",
-                    help="comma-separated: held, own, exact, value, held-nearest, own-nearest "
+                    help="comma-separated: held, own, exact, value, held-per-action, "
+                         "own-per-action "
                          "(run interleaved, each --repeats times)")
     args = ap.parse_args()
     args.store.mkdir(parents=True, exist_ok=True)
@@ -89,11 +91,13 @@ def main() -> None:
                                       "held"]),
         "exact": ("imitation, own, exact", ["evaluate", "ward100k", "--data", "ward100k",
                                             "--exact"]),
-        # the paper's k nearest rows instead of the nearest rows of each action (the default)
-        "held-nearest": ("imitation, held out, k nearest", ["evaluate", "ward100k", "--data",
-                                                            "held", "--index", "nearest"]),
-        "own-nearest": ("imitation, own, k nearest", ["evaluate", "ward100k", "--data",
-                                                      "ward100k", "--index", "nearest"]),
+        # the nearest rows of each action (the default up to 20,000 rows) instead of the
+        # (d_b + 1) / the rarest share nearest rows (the default above)
+        "held-per-action": ("imitation, held out, per action",
+                            ["evaluate", "ward100k", "--data", "held", "--index", "per-action"]),
+        "own-per-action": ("imitation, own, per action",
+                           ["evaluate", "ward100k", "--data", "ward100k", "--index",
+                            "per-action"]),
     }
     cases = dict(known[c.strip()] for c in args.cases.split(","))
     with open("/proc/loadavg") as fh:

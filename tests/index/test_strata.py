@@ -102,3 +102,20 @@ def test_an_approximate_index_finds_a_far_action_exactly():
     _, rows = PerAction(ivf, actions).search(q, 60)
     assert np.array_equal(np.sort(rows[actions[rows] == 1]),
                           _nearest_of(beliefs, q, actions == 1, 30)[0])
+
+
+def test_the_index_rule_per_action_on_small_logs_only():
+    from types import SimpleNamespace
+
+    from aoc_cli.session import SMALL_MAX_ROWS, neighbours
+
+    def corpus(n):
+        acts = (np.arange(n) % 10 == 0).astype(np.int64)        # the rare action: 10%
+        return SimpleNamespace(n_rows=n, discrete=True, actions=acts, name="c")
+
+    imitation, value = SimpleNamespace(mode="imitation", d_b=20), SimpleNamespace(mode="value", d_b=20)
+    assert neighbours(corpus(5000), imitation) == (84, "per_action")
+    assert neighbours(corpus(SMALL_MAX_ROWS + 10), imitation) == (210, "nearest")  # 21 / 0.1
+    assert neighbours(corpus(SMALL_MAX_ROWS + 10), imitation, "per_action") == (84, "per_action")
+    assert neighbours(corpus(5000), imitation, "nearest") == (42, "nearest")
+    assert neighbours(corpus(5000), value) == (42, "nearest")
