@@ -35,8 +35,9 @@ def register(app: typer.Typer) -> None:
         candidates: Annotated[str, typer.Option(
             "--candidates",
             help="Step 1's candidates: auto (the nearest rows of each action for an "
-                 "imitation model of discrete actions, else the k nearest rows), nearest "
-                 "(the paper's k = 2 (d_b + 1) nearest rows) or per_action.")] = "auto",
+                 "imitation model of discrete actions on up to 20,000 rows, else the k "
+                 "nearest rows), nearest (the paper's k = 2 (d_b + 1) nearest rows) or "
+                 "per_action.")] = "auto",
         fmt: FormatOption = None,
     ) -> None:
         """Compute every row's belief and build the index the controller searches."""
