@@ -59,7 +59,8 @@ def main() -> None:
                "system_share": round(between_share(v, sys_codes), 6)}
         for policy in args.policies.split(","):
             rows = pol_codes == pol_labels.index(policy)
-            out[f"action_r2 {policy}"] = round(float(np.corrcoef(v[rows], error[rows])[0, 1] ** 2), 3)
+            r = np.corrcoef(v[rows], error[rows])[0, 1]
+            out[f"action_r2 {policy}"] = round(float(r ** 2), 3)
         print(json.dumps(out), flush=True)
 
 
