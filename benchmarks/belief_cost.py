@@ -5,15 +5,21 @@ Opens one AOC session per model of a corpus (the same corpus, its own index each
 models step by step (so the machine's load drifts into every arm alike). The states are those
 of one rollout driven by the first model's decisions. Prints, per model, the mean, median and
 90th percentile seconds per step, the belief pass alone (``model.beliefs`` of the K
-candidates, median), and the step-2 problems that fell back to the reference QP (piqp +
-Caratheodory: ``Decomposition.fallbacks``) out of all problems solved. A rollout's cost is the
+candidates, median), the step-2 problems that fell back to the reference QP (piqp +
+Caratheodory: ``Decomposition.fallbacks``) out of all problems solved, and ``step3``, the share
+of the problems whose minimal subset step 3 searches by pivots (y* inside the neighbours' hull
+or on a face that other neighbours share: the rest keep step 2's support; counted in this
+tree's ``hull.py`` only, so 0 in an ``--old`` arm). A rollout's cost is the
 mean step: fallbacks cluster on a few steps, which a median hides.
 
-``--old TREE`` adds, for every model, an arm whose step-2 solver is the older tree's
-``aoc_cli/decompose/minnorm.py`` (everything else this tree's code), on the same states and
-candidates in alternating order: the before/after of the residual QP in one process. ``differ``
-counts the steps whose chosen candidate differs between the two arms, ``d res`` is the
-largest change of a candidate's residual relative to the step's largest.
+``--old TREE`` adds, for every model, an arm whose steps 2 and 3 are the older tree's
+(``aoc_cli/decompose/minnorm.py``'s residual QP and ``hull.py``'s minimal subset; everything
+else this tree's code), on the same states and candidates in alternating order: the
+before/after of the decomposition in one process. ``differ`` counts the steps whose chosen
+candidate differs between the two arms, ``d_res`` is the largest change of a candidate's
+residual (absolute, in belief units) and ``new_above`` the candidates whose residual in this
+tree exceeds the old arm's by more than 1e-9 (the new one is certified optimal, so it should
+be 0: where they differ, the old arm's reference-QP answer was the less precise).
 
 Usage: python benchmarks/belief_cost.py --store bench/store --corpus pendulum-het-30000r-s0 \\
            --models default,dynamics,critic,reward [--env pendulum-het] [--steps 60] \\
@@ -40,42 +46,49 @@ from aoc_cli.threads import wait_passively  # noqa: E402
 wait_passively()  # OpenMP threads wait passively, as under the aoc command (aoc_cli/threads.py)
 
 import aoc_cli.decompose.engine as engine  # noqa: E402
+import aoc_cli.decompose.hull as hull  # noqa: E402
 from aoc_cli.control import HistoryBuffer  # noqa: E402
 from aoc_cli.envs import make_env  # noqa: E402
 from aoc_cli.session import open_session  # noqa: E402
 from aoc_cli.store import Store  # noqa: E402
 
 
-def old_solver(tree: str):
-    """The older tree's ``min_norm_point`` (its minnorm.py imported under another name)."""
-    path = os.path.join(tree, "aoc_cli", "decompose", "minnorm.py")
-    spec = importlib.util.spec_from_file_location("old_minnorm", path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["old_minnorm"] = module
-    spec.loader.exec_module(module)
-    return module.min_norm_point
+def old_steps(tree: str) -> dict:
+    """The older tree's steps 2 and 3: ``min_norm_point`` and ``minimal_subset`` (its minnorm.py
+    and hull.py imported under other names)."""
+    out = {}
+    for name, fn in (("minnorm", "min_norm_point"), ("hull", "minimal_subset")):
+        path = os.path.join(tree, "aoc_cli", "decompose", name + ".py")
+        spec = importlib.util.spec_from_file_location("old_" + name, path)
+        module = importlib.util.module_from_spec(spec)
+        sys.modules["old_" + name] = module
+        spec.loader.exec_module(module)
+        out[fn] = getattr(module, fn)
+    return out
 
 
 class Counted:
-    """Wraps the engine's step-2 function: problems solved and fallbacks, per arm."""
+    """Wraps the engine's step-2 function (problems solved and fallbacks) and step 3's tableau
+    (the problems it pivots), per arm."""
 
     def __init__(self):
         self.solve = engine._residual_weights
         self.problems = 0
         self.failed = 0
+        self.step3 = 0
+        build = hull._Tableau.build.__func__
+
+        def counted(cls, zt, *rest):
+            self.step3 += zt.shape[0]
+            return build(cls, zt, *rest)
+
+        hull._Tableau.build = classmethod(counted)
 
     def __call__(self, B, Y, P, valid, reference, qp_tol):
         weights, failed = self.solve(B, Y, P, valid, reference, qp_tol)
         self.problems += len(Y)
         self.failed += len(failed)
         return weights, failed
-
-
-def _rel(a: np.ndarray, b: np.ndarray) -> float:
-    a, b = np.asarray(a, float), np.asarray(b, float)
-    ok = np.isfinite(a) & np.isfinite(b)
-    big = max(float(np.abs(a[ok]).max(initial=0.0)), 1e-300)
-    return float(np.abs(a[ok] - b[ok]).max(initial=0.0) / big)
 
 
 def main() -> None:
@@ -90,9 +103,10 @@ def main() -> None:
     corpus = Store.open(args.store).corpus(args.corpus)
     models = args.models.split(",")
     sessions = {m: open_session(corpus, m, "default") for m in models}  # each model its index
-    solvers = {"new": engine.min_norm_point}
+    solvers = {"new": {"min_norm_point": engine.min_norm_point,
+                       "minimal_subset": engine.minimal_subset}}
     if args.old:
-        solvers["old"] = old_solver(args.old)
+        solvers["old"] = old_steps(args.old)
     counter = Counted()
     engine._residual_weights = counter
     arms = [(m, a) for m in models for a in solvers]
@@ -104,22 +118,27 @@ def main() -> None:
     step = {x: [] for x in arms}
     belief = {m: [] for m in models}
     falls = {x: [0, 0] for x in arms}
+    inside = {x: 0 for x in arms}  # problems step 3 pivots (this tree's hull.py only)
     differ = {m: 0 for m in models}
     dres = {m: 0.0 for m in models}
+    above = {m: 0 for m in models}
     for i in range(args.steps):
         h = buf.history()
         cand = first.controller.sample_candidates(np.asarray(obs, np.float32).reshape(-1), h)
         decided = {}
         for m, a in (arms if i % 2 == 0 else arms[::-1]):
             s = sessions[m]
-            engine.min_norm_point = solvers[a]
-            counter.problems = counter.failed = 0
+            for fn, f in solvers[a].items():
+                setattr(engine, fn, f)
+            counter.problems = counter.failed = counter.step3 = 0
             t0 = time.perf_counter()
             decided[m, a] = s.controller.decide(obs, h, candidates=cand)
             step[m, a].append(time.perf_counter() - t0)
             falls[m, a][0] += counter.problems
             falls[m, a][1] += counter.failed
-        engine.min_norm_point = solvers["new"]
+            inside[m, a] += counter.step3
+        for fn, f in solvers["new"].items():
+            setattr(engine, fn, f)
         for m in models:
             t0 = time.perf_counter()
             sessions[m].model.beliefs(np.asarray(obs, np.float32)[None], cand, h)
@@ -127,7 +146,9 @@ def main() -> None:
             if args.old:
                 a, b = decided[m, "old"], decided[m, "new"]
                 differ[m] += int(a.chosen != b.chosen)
-                dres[m] = max(dres[m], _rel(a.candidate_residuals, b.candidate_residuals))
+                ro, rn = np.asarray(a.candidate_residuals), np.asarray(b.candidate_residuals)
+                dres[m] = max(dres[m], float(np.abs(ro - rn).max()))
+                above[m] += int((rn > ro + 1e-9).sum())
         action = decided[models[0], "new"].action
         nxt, r, term, trunc, _ = env.step(np.asarray(action, np.float32))
         buf.push(obs, action, r)
@@ -145,9 +166,10 @@ def main() -> None:
                "p90_step_s": round(float(np.quantile(t, 0.9)), 5),
                "median_belief_pass_s": round(float(np.median(belief[m])), 5),
                "problems": falls[m, a][0], "fallbacks": falls[m, a][1],
+               "step3": round(inside[m, a] / max(falls[m, a][0], 1), 3),
                "steps": args.steps, "loadavg": load}
         if args.old:
-            row.update(differ=differ[m], d_res=float(f"{dres[m]:.2e}"))
+            row.update(differ=differ[m], d_res=float(f"{dres[m]:.2e}"), new_above=above[m])
         print(json.dumps(row), flush=True)
 
 
