@@ -316,7 +316,8 @@ def _wolfe_batch(points, valid, tol, max_iter, out_w, out_res, out_ok, out_it): 
 @numba.njit(cache=True, nogil=True)
 def _drop(Ut, R, idx, lam, n, i):  # pragma: no cover
     """Remove corral member i of n: shift the later columns of R (and idx, lam) left, restore
-    R's triangle by Givens rotations of rows (t, t + 1), applied to U's columns (Ut's rows) alike."""
+    R's triangle by Givens rotations of rows (t, t + 1), applied to U's columns (Ut's rows)
+    alike."""
     for t in range(i, n - 1):
         idx[t] = idx[t + 1]
         lam[t] = lam[t + 1]
