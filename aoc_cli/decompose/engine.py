@@ -76,6 +76,10 @@ class Decomposition:
 
 #: The most neighbours :func:`default_k` asks for, as a multiple of d_b + 1.
 MAX_K_FACTOR = 16
+#: A full minimal subset (d + 1 rows) sets the residual to 0 only when step 2's residual is at
+#: most this share of the neighbourhood's radius (the compiled loop certifies in-hull points to
+#: minnorm.ABS_TOL = 3e-8 of it).
+FULL_TOL = 1e-6
 
 
 def default_k(d_b: int, rarest_share: float | None = None) -> int:
@@ -165,7 +169,11 @@ def _decompose(beliefs, Y, k, values, index, reference, selection, config) -> De
     weights, support, pivots = minimal_subset(
         P, valid, weights, offset, lp_start=config.lp_start, budget=config.exchange_budget
     )
-    full = support.sum(1) == d + 1  # d + 1 affinely independent points: y* = y, r = 0
+    # d + 1 affinely independent points hold y* in their simplex's interior, so y* = y and r = 0
+    # when step 2 is exact; only where step 2's residual is already at its certified precision
+    # (a fallback QP stopped inside the hull would otherwise zero an outside query's residual)
+    sq = np.where(valid, np.einsum("qkd,qkd->qk", P, P), 0.0)
+    full = (support.sum(1) == d + 1) & (residual <= FULL_TOL * np.sqrt(sq.max(1)))
     residual[full] = 0.0
     offset[full] = 0.0
 

@@ -324,3 +324,26 @@ def test_float32_beliefs_on_a_relu_surface_need_no_fallback(rank):
         scale = float(np.linalg.norm(B - queries[q], axis=1).max())
         assert fast.residual[q] <= slow.residual[q] + 1e-6 * slow.residual[q] + 1e-7 * scale
     check_subset(fast, beliefs.astype(np.float64), queries.astype(np.float64))
+
+
+def test_a_full_subset_zeroes_only_a_residual_at_rounding_level(monkeypatch):
+    # A step 2 that stops inside the hull (as a fallback QP can) for a query outside it: step 3
+    # then finds d + 1 rows around y*, which alone would mean y* = y and r = 0. The residual
+    # stays the distance from y to y* (the old rule zeroed it: an outside query read as inside).
+    import aoc_cli.decompose.engine as engine
+
+    beliefs = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    query = np.array([[0.6, 0.6]])  # outside the triangle (x + y > 1), r* = 0.1 * sqrt(2)
+
+    def inside(B, Y, P, valid, reference, qp_tol):
+        return np.where(valid, 1.0 / valid.sum(1, keepdims=True), 0.0), np.arange(len(Y))
+
+    monkeypatch.setattr(engine, "_residual_weights", inside)
+    result = decompose(beliefs, query, k=3, values=np.zeros(3))
+    np.testing.assert_allclose(result.projection, [[1 / 3, 1 / 3]], atol=1e-12)
+    np.testing.assert_allclose(result.residual, [np.hypot(0.6 - 1 / 3, 0.6 - 1 / 3)], rtol=1e-12)
+    monkeypatch.undo()
+    exact = decompose(beliefs, query, k=3, values=np.zeros(3))
+    np.testing.assert_allclose(exact.residual, [0.1 * np.sqrt(2)], rtol=1e-9)
+    inner = decompose(beliefs, np.array([[0.2, 0.2]]), k=3, values=np.zeros(3))
+    assert inner.residual[0] == 0.0 and (inner.rows[0] >= 0).sum() == 3
