@@ -88,7 +88,8 @@ def default_k(d_b: int, rarest_share: float | None = None) -> int:
     hold its rarest action), at least (d_b + 1) / rarest_share, so that a neighbourhood at the
     corpus's base rates holds a full minimal subset's worth (d_b + 1) of rows of every action,
     and at most 16 (d_b + 1). Balanced binary actions give the paper's k; ward's treatment
-    (11% of rows, d_b = 20) gives 191 (docs/design.md, "Neighbours in imitation mode")."""
+    (11% of rows, d_b = 20) gives 191. Imitation logs of up to 20,000 rows take the nearest
+    rows of each action instead (docs/design.md, "Candidates of every action")."""
     d1 = int(d_b) + 1
     k = 2 * d1
     if rarest_share is not None and rarest_share > 0:
