@@ -86,6 +86,15 @@ class BeliefKind(str, Enum):
     dynamics = "dynamics"
 
 
+class StepCandidates(str, Enum):
+    """``aoc index --candidates``: where step 1 takes its candidate rows
+    (:func:`aoc_cli.session.neighbours`)."""
+
+    auto = "auto"
+    nearest = "nearest"
+    per_action = "per_action"
+
+
 def choice(value: Enum | str | None) -> str | None:
     """The plain string of an enum choice (None stays None)."""
     return value.value if isinstance(value, Enum) else value

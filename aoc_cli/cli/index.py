@@ -6,8 +6,8 @@ from typing import Annotated, List, Optional
 
 import typer
 
-from aoc_cli.cli.common import (CorpusArgument, FormatOption, IndexKind, ModelOption, choice,
-                                get_store, parse_rates)
+from aoc_cli.cli.common import (CorpusArgument, FormatOption, IndexKind, ModelOption,
+                                StepCandidates, choice, get_store, parse_rates)
 from aoc_cli.report import ProgressBar, write_object
 
 
@@ -32,12 +32,12 @@ def register(app: typer.Typer) -> None:
                                 "older scripts; same as --episode-rate).")] = None,
         seed: Annotated[int, typer.Option(
             "--seed", help="Seed of sub-sampling and of the typical-residual sample.")] = 0,
-        candidates: Annotated[str, typer.Option(
-            "--candidates",
+        candidates: Annotated[StepCandidates, typer.Option(
+            "--candidates", case_sensitive=False,
             help="Step 1's candidates: auto (the nearest rows of each action for an "
                  "imitation model of discrete actions on up to 20,000 rows, else the k "
                  "nearest rows), nearest (the paper's k = 2 (d_b + 1) nearest rows) or "
-                 "per_action.")] = "auto",
+                 "per_action.")] = StepCandidates.auto,
         fmt: FormatOption = None,
     ) -> None:
         """Compute every row's belief and build the index the controller searches."""
@@ -55,7 +55,7 @@ def register(app: typer.Typer) -> None:
         with ProgressBar("index") as p:
             ci = build_index(corpus, model, kind=choice(kind), index_id=index_id,
                              episode_rates={**rates_s, **rates}, seed=seed, progress=p,
-                             candidates=candidates)
+                             candidates=choice(candidates))
         meta = ci.meta
         write_object({
             "corpus": corpus.name, "model": meta["model"], "index": meta["index_id"],
