@@ -42,7 +42,8 @@ def test_vertex_exchange_improves_on_the_plain_delaunay_hull():
 
 def test_a_problems_subset_does_not_depend_on_the_batch():
     """The pivots run per problem (compiled): a query decomposed alone gets the same rows and
-    weights, to the bit, as in a batch of 60 (where other problems pivot more or less)."""
+    weights as in a batch of 60 (where other problems pivot more or less). The weights to a few
+    ulp: the batch's numpy steps may take other vectorised loops than a single query's."""
     rng = np.random.default_rng(4)
     beliefs = rng.random((1500, 4))
     queries = 0.1 + 0.8 * rng.random((60, 4))
@@ -51,4 +52,4 @@ def test_a_problems_subset_does_not_depend_on_the_batch():
     for q in (0, 17, 59):
         alone = decompose(beliefs, queries[q : q + 1])
         np.testing.assert_array_equal(alone.rows[0], batch.rows[q])
-        np.testing.assert_array_equal(alone.weights[0], batch.weights[q])
+        np.testing.assert_allclose(alone.weights[0], batch.weights[q], rtol=1e-13, atol=1e-15)
