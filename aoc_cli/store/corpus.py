@@ -241,16 +241,21 @@ def gather_history(
     return History(obs, act, rew, mask)
 
 
+def _float_rows(values, what: str) -> np.ndarray:
+    """(N, d) floating rows of ``what`` (a vector is one column; integers become float32)."""
+    arr = np.asarray(values)
+    if arr.ndim == 1:
+        arr = arr[:, None]
+    if arr.ndim != 2:
+        raise AocError(f"{what} must be (rows, dims), got shape {arr.shape}")
+    if not np.issubdtype(arr.dtype, np.floating):
+        arr = arr.astype(np.float32)
+    return arr
+
+
 def _observation_array(observations) -> np.ndarray:
     """(N, d_o) observations, floating (integers become float32)."""
-    obs = np.asarray(observations)
-    if obs.ndim == 1:
-        obs = obs[:, None]
-    if obs.ndim != 2:
-        raise AocError(f"observations must be (rows, dims), got shape {obs.shape}")
-    if not np.issubdtype(obs.dtype, np.floating):
-        obs = obs.astype(np.float32)
-    return obs
+    return _float_rows(observations, "observations")
 
 
 def _action_array(actions, discrete: bool) -> np.ndarray:
@@ -266,10 +271,4 @@ def _action_array(actions, discrete: bool) -> np.ndarray:
                 bad = int(np.flatnonzero(~np.isfinite(act) | (act != np.round(act)))[0])
                 raise AocError(f"discrete action of row {bad} is not an integer: {act[bad]}")
         return act.astype(np.int64)
-    if act.ndim == 1:
-        act = act[:, None]
-    if act.ndim != 2:
-        raise AocError(f"actions must be (rows, dims), got shape {act.shape}")
-    if not np.issubdtype(act.dtype, np.floating):
-        act = act.astype(np.float32)
-    return act
+    return _float_rows(act, "actions")
