@@ -173,12 +173,13 @@ def _decompose(beliefs, Y, k, values, index, reference, selection, config) -> De
     # d + 1 affinely independent points hold y* in their simplex's interior, so y* = y and r = 0
     # when step 2 is exact; only where step 2's residual is already at its certified precision
     # (a fallback QP stopped inside the hull would otherwise zero an outside query's residual)
-    sq = np.where(valid, np.einsum("qkd,qkd->qk", P, P), 0.0)
-    full = (support.sum(1) == d + 1) & (residual <= FULL_TOL * np.sqrt(sq.max(1)))
+    sq = np.einsum("qkd,qkd->qk", P, P)  # (Q, k) squared distances ||b_c - y||^2
+    radius = np.sqrt(np.where(valid, sq, 0.0).max(1))
+    full = (support.sum(1) == d + 1) & (residual <= FULL_TOL * radius)
     residual[full] = 0.0
     offset[full] = 0.0
 
-    rows, w_out, dist, used = _subset_columns(weights, neighbours, P, min(d + 1, k))
+    rows, w_out, dist, used = _subset_columns(weights, neighbours, sq, min(d + 1, k))
 
     # 4. value estimate: v_hat = sum_c w_c v_c over the subset
     # as v_0 + sum_c w_c (v_c - v_0), v_0 the heaviest row's value: equal row values give that
@@ -227,17 +228,17 @@ def _residual_weights(B: np.ndarray, Y: np.ndarray, P: np.ndarray, valid: np.nda
     return weights, failed
 
 
-def _subset_columns(weights: np.ndarray, neighbours: np.ndarray, P: np.ndarray, m: int):
+def _subset_columns(weights: np.ndarray, neighbours: np.ndarray, sq: np.ndarray, m: int):
     """The minimal subset as m columns by decreasing weight: rows (Q, m) (-1 padded),
     weights (Q, m) normalised to sum 1, distances ||b_c - y|| (Q, m) (nan padded), and the
-    (Q, m) bool of the columns used."""
+    (Q, m) bool of the columns used; sq (Q, k): the squared distances of all neighbours."""
     order = np.argsort(-weights, axis=1, kind="stable")[:, :m]
     w_out = np.take_along_axis(weights, order, axis=1)
     used = w_out > 0
     rows = np.where(used, np.take_along_axis(neighbours, order, axis=1), -1)
     w_out = np.where(used, w_out, 0.0)
     w_out /= w_out.sum(1, keepdims=True)
-    dist = np.sqrt(np.take_along_axis(np.einsum("qkd,qkd->qk", P, P), order, axis=1))
+    dist = np.sqrt(np.take_along_axis(sq, order, axis=1))
     dist = np.where(used, dist, np.nan)
     return rows, w_out, dist, used
 
