@@ -23,7 +23,7 @@ from aoc_cli.decompose.minnorm import min_norm_point
 from aoc_cli.decompose.reference import caratheodory, lifted_nnls_weights, reference_weights
 from aoc_cli.errors import AocError
 from aoc_cli.index import BeliefIndex
-from aoc_cli.index.belief_index import check_queries
+from aoc_cli.index.faiss_kinds import check_queries
 from aoc_cli.index.threads import single_threaded_blas
 
 

@@ -4,7 +4,8 @@ Entries of the FAISS index are *positions*; `row_of[position]` is the corpus row
 stands for. A base index has one position per row (row_of = identity); a derived index built by
 `resample` / `subsample` repeats or drops rows (a row rate of 4 = four copies of the row, 0.5 = a
 seeded random half of the positions), so the same code answers "the k nearest rows of the re-weighted corpus"
-(the paper's adaptivity experiment) with no retraining. Every answer is in corpus rows.
+(the paper's adaptivity experiment) with no retraining. Every answer is in corpus rows. The
+FAISS structure of each kind and the input checks are in faiss_kinds.py.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import numpy as np
 from aoc_cli.errors import AocError
 from aoc_cli.index.config import IndexConfig
 from aoc_cli.index.cells import CellData, cells_search
+from aoc_cli.index.faiss_kinds import ADD_CHUNK, as_beliefs, as_queries, kind_of, new_faiss, storage_view
 from aoc_cli.index.pooled import exact_among as _exact_among, pooled_search
 from aoc_cli.index.threads import faiss_threads, single_threaded_blas
 from aoc_cli.store.atomic import atomic_path, write_json, write_npy
@@ -63,7 +65,7 @@ class BeliefIndex:
         self.n_rows = int(n_rows)
         self._row_of = None if row_of is None else np.asarray(row_of, dtype=np.int64)
         self.beliefs = beliefs
-        self._store = _storage_view(index, kind)
+        self._store = storage_view(index, kind)
         self._cells: CellData | None = None  # built on the first batched search (flat, IVF)
 
     # ---------------------------------------------------------------- building
@@ -73,13 +75,13 @@ class BeliefIndex:
         config = config or IndexConfig()
         if overrides:
             config = IndexConfig.from_dict({**asdict(config), **overrides})
-        beliefs = _as_beliefs(beliefs)
+        beliefs = as_beliefs(beliefs)
         n_rows = beliefs.shape[0]
         if n_rows == 0:
             raise AocError("the corpus has no beliefs to index; compute beliefs for a non-empty corpus first")
         kind = config.resolved_kind(n_rows)
         with faiss_threads(config.threads):
-            index = _new_faiss(kind, beliefs, config)
+            index = new_faiss(kind, beliefs, config)
             # IVF chunk by chunk: FAISS's temporaries (assignments, distances) stay the
             # chunk's size, a memory-mapped belief array is read once in order, and the lists
             # are the same
@@ -174,7 +176,7 @@ class BeliefIndex:
         that answer is certified (see IndexConfig.pool_factor), the rest by groups and then
         query by query (pooled.py); a single query by FAISS (approximate for IVF and HNSW).
         """
-        Y = _as_queries(queries, self.dim)
+        Y = as_queries(queries, self.dim)
         if k < 1:
             raise AocError(f"k must be at least 1 (got {k}); ask for one or more neighbours")
         sel = None if selection is None else self.select(selection)
@@ -201,7 +203,7 @@ class BeliefIndex:
         """``search``'s answer computed exactly among every selected position (each one read):
         what a restricted search of an approximate index (IVF, HNSW) falls back to when it
         found fewer than k rows, e.g. a stratum far from the query (aoc_cli.index.strata)."""
-        Y = _as_queries(queries, self.dim)
+        Y = as_queries(queries, self.dim)
         sel = self.select(selection)
         positions = np.flatnonzero(sel.mask)
         kk = min(int(k), len(positions))
@@ -277,7 +279,7 @@ class BeliefIndex:
                 index = faiss.clone_index(self.index)
                 index.reset()  # keeps the trained coarse quantiser: no re-training
             else:
-                index = _new_faiss(self.kind, vectors, self.config)
+                index = new_faiss(self.kind, vectors, self.config)
             index.add(vectors)
         row_of = self.row_of[positions]
         return BeliefIndex(index, self.config, self.kind, self.n_rows, row_of, self.beliefs)
@@ -322,89 +324,14 @@ class BeliefIndex:
         meta_path = Path(f"{path}.json")
         meta = json.loads(meta_path.read_text()) if meta_path.exists() else {}
         config = IndexConfig.from_dict(meta.get("config", {}))
-        kind = meta.get("kind") or _kind_of(index)
+        kind = meta.get("kind") or kind_of(index)
         rows_path = Path(f"{path}.rows.npy")
         row_of = np.load(rows_path) if meta.get("derived") and rows_path.exists() else None
         n_rows = int(meta.get("n_rows", index.ntotal))
         if beliefs is not None:
-            beliefs = _as_beliefs(beliefs)
+            beliefs = as_beliefs(beliefs)
             if beliefs.shape != (n_rows, index.d):
                 raise AocError(
                     f"beliefs have shape {beliefs.shape} but the index was built on ({n_rows}, {index.d}); rebuild the index"
                 )
         return cls(index, config, kind, n_rows, row_of, beliefs)
-
-
-# -------------------------------------------------------------------- helpers
-#: Rows added to a FAISS index at once.
-ADD_CHUNK = 1 << 20
-
-
-def _new_faiss(kind: str, train: np.ndarray, config: IndexConfig) -> faiss.Index:
-    d = train.shape[1]
-    if kind == "flat":
-        return faiss.IndexFlatL2(d)
-    if kind == "hnsw":
-        index = faiss.IndexHNSWFlat(d, config.hnsw_m)
-        index.hnsw.efConstruction = config.hnsw_ef_construction
-        index.hnsw.efSearch = config.hnsw_ef_search
-        return index
-    if kind == "ivf":
-        nlist = config.nlist(train.shape[0])
-        index = faiss.IndexIVFFlat(faiss.IndexFlatL2(d), d, nlist)
-        index.cp.seed = config.seed
-        n_train = min(train.shape[0], max(config.ivf_train_max, 40 * nlist))
-        rng = np.random.default_rng(config.seed)
-        pick = np.sort(rng.choice(train.shape[0], size=n_train, replace=False))
-        index.train(np.ascontiguousarray(train[pick]))
-        index.nprobe = config.ivf_nprobe
-        return index
-    raise AocError(f"unknown index kind {kind!r}; use flat, hnsw, ivf or auto")
-
-
-def _storage_view(index: faiss.Index, kind: str) -> np.ndarray | None:
-    """Zero-copy (ntotal, d) view of the vectors of a flat or HNSW-flat index."""
-    flat = None
-    if isinstance(index, faiss.IndexFlat):
-        flat = index
-    elif isinstance(index, faiss.IndexHNSW):
-        storage = faiss.downcast_index(index.storage)
-        flat = storage if isinstance(storage, faiss.IndexFlat) else None
-    if flat is None or flat.ntotal == 0:
-        return None
-    return faiss.rev_swig_ptr(flat.get_xb(), flat.ntotal * flat.d).reshape(flat.ntotal, flat.d)
-
-
-def _kind_of(index: faiss.Index) -> str:
-    if isinstance(index, faiss.IndexHNSW):
-        return "hnsw"
-    if isinstance(index, faiss.IndexIVF):
-        return "ivf"
-    return "flat"
-
-
-def _as_beliefs(beliefs) -> np.ndarray:
-    arr = np.asarray(beliefs)
-    if arr.ndim != 2:
-        raise AocError(f"beliefs must be an (N, d) array; got shape {arr.shape}")
-    if arr.dtype != np.float32 or not arr.flags.c_contiguous:
-        arr = np.ascontiguousarray(arr, dtype=np.float32)
-    return arr
-
-
-def check_queries(queries, dim: int) -> np.ndarray:
-    """Query beliefs as a finite (Q, dim) float64 array (one (dim,) query becomes (1, dim));
-    anything else is an AocError. The index and the decomposition engine both check with it."""
-    Y = np.asarray(queries, dtype=np.float64)
-    if Y.ndim == 1 and Y.shape[0] == dim:
-        Y = Y[None, :]
-    if Y.ndim != 2 or Y.shape[1] != dim:
-        raise AocError(f"queries must have shape (Q, {dim}) to match the corpus beliefs; got "
-                       f"{np.shape(queries)}")
-    if not np.isfinite(Y).all():
-        raise AocError("queries contain NaN or infinite values; check the belief model's inputs")
-    return Y
-
-
-def _as_queries(queries, dim: int) -> np.ndarray:
-    return np.ascontiguousarray(check_queries(queries, dim), dtype=np.float32)
