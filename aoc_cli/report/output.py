@@ -157,7 +157,8 @@ def message(text: str) -> None:
 def progress(transient: bool = False) -> Progress:
     """A rich progress bar on stderr: ``with progress() as p: t = p.add_task("...", total=n)``.
 
-    Shown when stderr is a terminal (or ``AOC_PROGRESS=1``); silent in pipes and tests.
+    Shown when stderr is a terminal (or ``AOC_PROGRESS=1``); silent in pipes and tests, and
+    with ``AOC_PROGRESS=0`` (as ``scripts/transcripts.py`` runs commands).
     """
     return Progress(
         TextColumn("[progress.description]{task.description}"),
@@ -167,7 +168,8 @@ def progress(transient: bool = False) -> Progress:
         TimeRemainingColumn(),
         console=console,
         transient=transient,
-        disable=not console.is_terminal and not _force_progress(),
+        disable=_progress_setting() == "0"
+        or (not console.is_terminal and _progress_setting() != "1"),
     )
 
 
@@ -197,7 +199,8 @@ class ProgressBar:
         self._bars.update(self._task, **changes)
 
 
-def _force_progress() -> bool:
+def _progress_setting() -> str:
+    """``AOC_PROGRESS``: "1" shows progress bars even in a pipe, "0" never shows them."""
     import os
 
-    return os.environ.get("AOC_PROGRESS", "") == "1"
+    return os.environ.get("AOC_PROGRESS", "")
