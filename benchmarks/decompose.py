@@ -14,6 +14,10 @@ y_i = base + A a_i with a_i uniform in [-1, 1]^2 and A a random (20, 2) matrix o
                 queries (so faster than one candidate at a time): distances to every belief,
                 top-100, softmax weights fitted by 1000 Adam steps (lr 0.05)
   speed-up      paper ms / ms per batch
+  no-ix ms      median of the same decompositions without an index (`decompose(beliefs, q)`:
+                the index-free exact search, aoc_cli/index/exact.py), timed batch by batch
+                interleaved with the indexed calls
+  ratio         no-ix ms / ms per batch (both from this run)
   mem x         memory of the beliefs + index + querying, in units of the belief array:
                 (belief array + peak resident growth while building and querying) / belief array
 
@@ -153,7 +157,8 @@ def run(n: int, args) -> dict:
     batches = control_steps(beliefs, args.batches, 100, args.spread, seed=args.seed + 1)
 
     decompose(beliefs, batches[0], k=K, values=values, index=index)  # warm-up
-    times, cpu, fallbacks, full = [], [], 0, 0
+    decompose(beliefs, batches[0], k=K, values=values)  # warm-up (compiles the exact search)
+    times, cpu, plain, fallbacks, full = [], [], [], 0, 0
     results = []
     for _ in range(args.repeats):
         for queries in batches:
@@ -163,6 +168,10 @@ def run(n: int, args) -> dict:
             cpu.append(time.process_time() - c)
             fallbacks += res.fallbacks
             results.append(res)
+            if not args.no_plain:
+                t = time.perf_counter()
+                decompose(beliefs, queries, k=K, values=values)
+                plain.append(time.perf_counter() - t)
     full = float(np.mean([(r.residual == 0).mean() for r in results]))
     support = float(np.mean([(r.rows >= 0).sum(1).mean() for r in results]))
     peak = rss_mb("VmHWM")
@@ -198,6 +207,7 @@ def run(n: int, args) -> dict:
         paper_ms=paper_s * 1e3,
         speedup=paper_s * 1e3 / ms,
         mem_ratio=mem_ratio,
+        plain_ms=float(np.median(plain) * 1e3) if plain else float("nan"),
         inside=full,
         support=support,
         fallbacks=fallbacks,
@@ -216,6 +226,7 @@ def main(argv=None) -> int:
     parser.add_argument("--threads", type=int, default=2, help="FAISS / torch threads")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--nprobe", type=int, default=0, help="IVF lists visited (0: IndexConfig default)")
+    parser.add_argument("--no-plain", action="store_true", help="skip the timing without an index")
     parser.add_argument("--cache", default="", help="folder to keep generated beliefs and built indexes in")
     args = parser.parse_args(argv)
     faiss.omp_set_num_threads(args.threads)
@@ -224,6 +235,7 @@ def main(argv=None) -> int:
     header = (
         f"{'rows':>10} {'kind':>5} {'build s':>8} {'ms/batch':>9} {'p90 ms':>7} {'cpu ms':>7} {'recall':>7} {'min rec':>7}"
         f" {'paper ms':>9} {'speed-up':>9} {'mem x':>6} {'inside':>6} {'supp':>5} {'fallb':>5}"
+        f" {'no-ix ms':>8} {'ratio':>5}"
     )
     print(header)
     for size in args.sizes.split(","):
@@ -231,7 +243,8 @@ def main(argv=None) -> int:
         print(
             f"{r['rows']:>10} {r['kind']:>5} {r['build_s']:>8.1f} {r['ms']:>9.2f} {r['p90_ms']:>7.2f} {r['cpu_ms']:>7.2f}"
             f" {r['recall']:>7.4f} {r['min_recall']:>7.3f} {r['paper_ms']:>9.0f} {r['speedup']:>9.0f}"
-            f" {r['mem_ratio']:>6.2f} {r['inside']:>6.2f} {r['support']:>5.1f} {r['fallbacks']:>5}",
+            f" {r['mem_ratio']:>6.2f} {r['inside']:>6.2f} {r['support']:>5.1f} {r['fallbacks']:>5}"
+            f" {r['plain_ms']:>8.2f} {r['plain_ms'] / r['ms']:>5.2f}",
             flush=True,
         )
     return 0

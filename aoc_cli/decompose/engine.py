@@ -23,6 +23,7 @@ from aoc_cli.decompose.minnorm import min_norm_point
 from aoc_cli.decompose.reference import caratheodory, lifted_nnls_weights, reference_weights
 from aoc_cli.errors import AocError
 from aoc_cli.index import BeliefIndex
+from aoc_cli.index.exact import nearest_rows
 from aoc_cli.index.faiss_kinds import check_queries
 from aoc_cli.index.threads import single_threaded_blas
 
@@ -120,6 +121,14 @@ def decompose(
     beliefs: (N, d_b) corpus beliefs; queries: (Q, d_b); k: neighbours (default 2(d_b + 1));
     values: (N,) row values v; index: a BeliefIndex over `beliefs` (default: exact search);
     reference: step 2 by the reference QP; selection: restrict to a row mask / row ids.
+
+    Without ``index`` step 1 is an exact search that builds nothing (aoc_cli/index/exact.py:
+    one pass over the beliefs, O(N d_b) a call), with the same neighbours as an exact ("flat")
+    index. A caller that decomposes many batches against the same corpus should keep a
+    ``BeliefIndex.build(beliefs)`` and pass it as ``index``: its cell structure, built on its
+    first batch, skips most rows, and an approximate kind ("ivf", "hnsw") reads a fraction of
+    them; the float32 beliefs it keeps are also reused (a float64 ``beliefs`` array is
+    otherwise converted on every call). docs/benchmarks.md "decompose without an index".
     """
     config = config or DecomposeConfig()
     beliefs, Y, values = _check_inputs(beliefs, queries, values)
@@ -129,9 +138,7 @@ def decompose(
     if k < 1:
         raise AocError(f"k must be at least 1 (got {k}); use the default 2(d+1) or a positive number")
     k = min(k, n_rows)
-    if index is None:
-        index = BeliefIndex.build(beliefs, kind="flat")
-    elif index.n_rows != n_rows or index.dim != d:
+    if index is not None and (index.n_rows != n_rows or index.dim != d):
         raise AocError(
             f"the index covers ({index.n_rows}, {index.dim}) beliefs, not ({n_rows}, {d}); rebuild the index"
         )
@@ -149,8 +156,12 @@ def _decompose(beliefs, Y, k, values, index, reference, selection, config) -> De
             None if values is None else np.zeros(0), np.zeros((0, k), np.int64),
         )
 
-    # 1. neighbours: the k nearest corpus beliefs of every query
-    _, neighbours = index.search(Y, k, selection)
+    # 1. neighbours: the k nearest corpus beliefs of every query (exact, nothing built, when
+    # there is no index)
+    if index is None:
+        _, neighbours = nearest_rows(beliefs, Y, k, selection)
+    else:
+        _, neighbours = index.search(Y, k, selection)
     valid = neighbours >= 0
     # float32 beliefs (as an index stores them) are read from the index's own rows where it
     # keeps them in memory: the same values, and a memory-mapped array's pages stay out
