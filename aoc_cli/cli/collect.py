@@ -22,7 +22,7 @@ def register(app: typer.Typer) -> None:
     def collect_cmd(
         task: Optional[str] = typer.Argument(
             None, help="Built-in task: pendulum-het, pendulum-het-upright, maze, two-gates, "
-                       "lunar (see --list)."),
+                       "lunar, ward, icu-sepsis, icu-sepsis-terminate (see --list)."),
         steps: Annotated[Optional[int], typer.Option(
             "--steps", help="Rows to collect (default: the task's, see --list).")] = None,
         episodes: EpisodesOption = None,
@@ -32,6 +32,9 @@ def register(app: typer.Typer) -> None:
             "mix", "--behaviour", help="mix: the task's behaviour policies; replay "
                                        "(pendulum-het, pendulum-het-upright, lunar): an agent "
                                        "that starts random and improves, as a replay buffer."),
+        policy: Optional[str] = typer.Option(
+            None, "--policy", help="icu-sepsis: the behaviour to log, clinicians (default) or "
+                                   "random."),
         overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing corpus."),
         list_tasks: bool = typer.Option(False, "--list", help="List the tasks and their defaults."),
         csv_dir: Optional[str] = typer.Option(
@@ -60,6 +63,12 @@ def register(app: typer.Typer) -> None:
         if behaviour not in t.behaviours:
             raise AocError(f"--behaviour {behaviour!r}: task {task!r} has "
                            f"{', '.join(t.behaviours)}")
+        if policy is not None and not t.extra.get("choose_policy"):
+            raise AocError(f"--policy: task {task!r} logs its own mix of policies "
+                           f"({', '.join(t.policies)}); --policy is for icu-sepsis")
+        if policy is not None and policy not in t.policies:
+            raise AocError(f"--policy {policy!r}: task {task!r} has "
+                           f"{' or '.join(t.policies)}")
         if name is None:
             raise AocError(f"give the corpus name: aoc collect {task} --name NAME")
         for flag, value in (("--steps", steps), ("--episodes", episodes),
@@ -91,28 +100,29 @@ def register(app: typer.Typer) -> None:
                                "--overwrite to replace it, or choose another --name")
             if workers is None and ray_address is None:
                 corpus, summary = _collect(store, t, task, name, steps, episodes, seed,
-                                           overwrite, behaviour)
+                                           overwrite, behaviour, policy)
             else:
                 corpus, summary = _collect_chunks(store, task, name, steps, episodes, seed,
                                                   overwrite, behaviour, workers, ray_address,
-                                                  chunk)
+                                                  chunk, policy)
         message(f"wrote corpus {name!r}: {corpus.n_rows} rows, {corpus.n_episodes} episodes "
                 f"of {task} (seed {seed}, hash {corpus.hash}) to {corpus.path}")
         write_records(summary, fmt, title=f"behaviour policies of {name}")
 
 
-def _collect(store, t, task, name, steps, episodes, seed, overwrite, behaviour="mix"):
+def _collect(store, t, task, name, steps, episodes, seed, overwrite, behaviour="mix",
+             policy=None):
     """Run the task's policies and write the corpus: (corpus, per-policy summary)."""
     from aoc_cli.envs import collect
 
     with ProgressBar(f"collect {t.name}") as bar:
         data, summary = collect(task, steps=steps, episodes=episodes, seed=seed,
-                                progress=bar, behaviour=behaviour)
+                                progress=bar, behaviour=behaviour, policy=policy)
     return store.write(name, data, overwrite=overwrite), summary
 
 
 def _collect_chunks(store, task, name, steps, episodes, seed, overwrite, behaviour, workers,
-                    address, chunk):
+                    address, chunk, policy=None):
     """Independently seeded chunks as Ray tasks (aoc_cli.envs.chunked): (corpus, summary)."""
     from aoc_cli.envs.chunked import CHUNK_EPISODES, CHUNK_STEPS, collect_chunked
 
@@ -120,5 +130,5 @@ def _collect_chunks(store, task, name, steps, episodes, seed, overwrite, behavio
         data, summary = collect_chunked(
             task, steps, episodes, seed, workers=workers, address=address,
             chunk_steps=chunk or CHUNK_STEPS, chunk_episodes=chunk or CHUNK_EPISODES,
-            progress=bar, behaviour=behaviour)
+            progress=bar, behaviour=behaviour, policy=policy)
     return store.write(name, data, overwrite=overwrite), summary

@@ -31,16 +31,20 @@ _IDS = {
     "aoc/Maze-v0": ("aoc_cli.envs.maze:MazeEnv", 100, {"world": "maze"}),
     "aoc/TwoGates-v0": ("aoc_cli.envs.maze:MazeEnv", 32, {"world": "two-gates"}),
     "aoc/Ward-v0": ("aoc_cli.envs.ward:WardEnv", 12, {}),
+    "aoc/ICUSepsis-v0": ("aoc_cli.envs.icu_sepsis:make_sepsis_env", 500, {"strategy": "mean"}),
+    "aoc/ICUSepsisTerminate-v0": ("aoc_cli.envs.icu_sepsis:make_sepsis_env", 500,
+                                  {"strategy": "terminate"}),
 }
 for _id, (_entry, _steps, _kwargs) in _IDS.items():
     if _id not in gymnasium.registry:
         gymnasium.register(id=_id, entry_point=_entry, max_episode_steps=_steps,
                            kwargs=_kwargs)
 
-from aoc_cli.envs import lunar, maze, pendulum_het, ward  # noqa: E402  (after registration)
+from aoc_cli.envs import icu_sepsis, lunar, maze, pendulum_het, ward  # noqa: E402  (after reg.)
 
 #: name -> Task, in the order ``aoc collect --list`` shows them.
-TASKS: dict[str, Task] = {t.name: t for mod in (pendulum_het, maze, lunar, ward)
+TASKS: dict[str, Task] = {t.name: t for mod in (pendulum_het, maze, lunar, ward,
+                                                      icu_sepsis)
                          for t in mod.TASKS}
 
 
@@ -68,13 +72,15 @@ def make_env(name_or_gym_id: str, **kw) -> gymnasium.Env:
 
 
 def collect(task: str, steps: int | None = None, episodes: int | None = None, seed: int = 0,
-            progress: Progress | None = None,
-            behaviour: str = "mix") -> tuple[CorpusData, list[dict]]:
+            progress: Progress | None = None, behaviour: str = "mix",
+            policy: str | None = None) -> tuple[CorpusData, list[dict]]:
     """Run ``task``'s behaviour mix for exactly ``steps`` rows (or ``episodes`` episodes; neither:
     the task's default) and return the corpus data and a per-policy summary (episodes, rows,
     mean/std return, success rate where defined). Same seed, same arrays, bit for bit.
     ``behaviour="replay"`` (pendulum-het, pendulum-het-upright, lunar): the data of an agent
     that starts random and improves (aoc_cli/envs/replay.py).
+
+    ``policy`` (icu-sepsis): the one behaviour policy to log (default the task's first).
 
     ``progress(done, total)`` is called as rows (or episodes) are collected.
     """
@@ -83,6 +89,14 @@ def collect(task: str, steps: int | None = None, episodes: int | None = None, se
         raise AocError(f"task {task!r} has no behaviour {behaviour!r}: use "
                        f"{', '.join(t.behaviours)}")
     extra = {} if behaviour == "mix" else {"behaviour": behaviour}
+    if policy is not None:
+        if not t.extra.get("choose_policy"):
+            raise AocError(f"task {task!r} logs its own mix of policies: --policy is for "
+                           "tasks with one behaviour at a time (icu-sepsis)")
+        if policy not in t.policies:
+            raise AocError(f"task {task!r} has no policy {policy!r}: use "
+                           f"{' or '.join(t.policies)}")
+        extra["policy"] = policy
     data, summary = t.collect_fn(steps=steps, episodes=episodes, seed=int(seed),
                                  progress=progress, **extra)
     return data.validate(), summary

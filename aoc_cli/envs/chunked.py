@@ -39,17 +39,21 @@ def plan(task, steps: int | None, episodes: int | None, chunk_steps: int = CHUNK
     return [{key: min(size, total - a)} for a in range(0, total, size)]
 
 
-def _collect_chunk(task: str, seed: int, i: int, part: dict, behaviour: str = "mix"):
+def _collect_chunk(task: str, seed: int, i: int, part: dict, behaviour: str = "mix",
+                   policy: str | None = None):
     from aoc_cli.envs import collect
 
-    data, summary = collect(task, seed=chunk_seed(seed, i), behaviour=behaviour, **part)
+    data, summary = collect(task, seed=chunk_seed(seed, i), behaviour=behaviour, policy=policy,
+                            **part)
+    if data.episode_ids is not None:  # unique across chunks: the chunk's index in front
+        data.episode_ids = [f"c{i}-{e}" for e in data.episode_ids]
     return data, [{"chunk": i, "seed": chunk_seed(seed, i), **rec} for rec in summary]
 
 
 def collect_chunked(task: str, steps: int | None = None, episodes: int | None = None,
                     seed: int = 0, workers: int | None = None, address: str | None = None,
                     chunk_steps: int = CHUNK_STEPS, chunk_episodes: int = CHUNK_EPISODES,
-                    progress=None, behaviour: str = "mix"):
+                    progress=None, behaviour: str = "mix", policy: str | None = None):
     """(CorpusData, summary): the chunks' episodes in chunk order and each chunk's per-policy
     summary (with its ``chunk`` and ``seed``); ``progress(done_chunks, chunks)``."""
     from aoc_cli.envs import get_task
@@ -59,7 +63,7 @@ def collect_chunked(task: str, steps: int | None = None, episodes: int | None = 
     results = [None] * len(parts)
     if workers is None and address is None:
         for i, part in enumerate(parts):
-            results[i] = _collect_chunk(task, seed, i, part, behaviour)
+            results[i] = _collect_chunk(task, seed, i, part, behaviour, policy)
             if progress is not None:
                 progress(i + 1, len(parts))
     else:
@@ -67,7 +71,8 @@ def collect_chunked(task: str, steps: int | None = None, episodes: int | None = 
 
         ray = start_ray(workers, address)
         remote = ray.remote(num_cpus=1, max_retries=1)(_collect_chunk)
-        refs = {remote.remote(task, seed, i, part, behaviour): i for i, part in enumerate(parts)}
+        refs = {remote.remote(task, seed, i, part, behaviour, policy): i
+                for i, part in enumerate(parts)}
         pending = list(refs)
         while pending:
             finished, pending = ray.wait(pending, num_returns=1)

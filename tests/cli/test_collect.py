@@ -35,7 +35,7 @@ def test_list_shows_every_task_with_its_defaults(aoc, store):
     assert code == 0, err
     rows = {r["name"]: r for r in json.loads(out)}
     assert list(rows) == ["pendulum-het", "pendulum-het-upright", "maze", "two-gates", "lunar",
-                          "ward"]
+                          "ward", "icu-sepsis", "icu-sepsis-terminate"]
     assert rows["maze"]["default_episodes"] == 1000 and rows["maze"]["horizon"] == 100
     assert rows["pendulum-het"]["default_steps"] == 100000
     assert rows["two-gates"]["policies"] == "lower-gate, upper-gate"
@@ -52,6 +52,11 @@ def test_bad_input_is_one_line_and_exit_2(aoc, store):
         (["collect", "lunar", "--steps", "-3", "--name", "x"], "--steps must be a positive"),
         (["collect", "maze", "--name", "../x"], "invalid corpus name"),
         (["collect", "maze"], "--name NAME"),
+        (["collect", "icu-sepsis", "--episodes", "0", "--name", "x"],
+         "--episodes must be a positive"),
+        (["collect", "icu-sepsis", "--policy", "surgeons", "--name", "x"],
+         "--policy 'surgeons'"),
+        (["collect", "maze", "--policy", "random", "--name", "x"], "--policy is for icu-sepsis"),
     ]
     for args, needle in cases:
         code, out, err = aoc(*args)
