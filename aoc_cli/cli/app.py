@@ -33,7 +33,7 @@ from aoc_cli.errors import AocError  # noqa: E402
 
 #: Command modules in the order of the data flow.
 COMMANDS = ["ingest", "collect", "train", "index", "explain", "evaluate", "rollout", "bench",
-            "info", "verify"]
+            "info", "verify", "export"]
 
 app = typer.Typer(
     name="aoc",

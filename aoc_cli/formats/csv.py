@@ -23,6 +23,9 @@ static per-episode features (``--static FILE``, one row per id) is joined onto e
 appended to the observation: numeric columns as they are, text columns one-hot (``sex=F``,
 ``sex=M``); the names are recorded in the observation space's ``names`` and ``static``.
 Remaining numeric columns are kept as corpus columns (usable as value targets).
+
+A CSV of ``aoc export`` is read back exactly with the mapping beside it
+(:mod:`aoc_cli.formats.csv_exported`).
 """
 
 from __future__ import annotations
@@ -40,11 +43,13 @@ import numpy as np
 
 from aoc_cli.errors import AocError, warn
 from aoc_cli.formats.common import ReadOptions, action_space_of, encode_labels
+from aoc_cli.formats.csv_exported import exported_mapping, restore_exported
+from aoc_cli.formats.spec import parse_spec
 from aoc_cli.store import CorpusData, box_space
 
 CHUNK_LINES = 50_000
 MAPPING_KEYS = {"id", "time", "observations", "actions", "reward", "terminal", "tags",
-                "discrete_actions", "static_id"}
+                "discrete_actions", "static_id", "static", "aoc"}
 
 
 def read_table(path: Path, progress=None) -> tuple[list[str], dict[str, np.ndarray]]:
@@ -205,8 +210,8 @@ def _roles(path: Path, header: list[str], options: ReadOptions) -> Roles:
                       "action column", path)
     reward_col = None
     if not options.reward_free:
-        reward_col = options.reward_column or m.get("reward") or (
-            "reward" if "reward" in header else None)
+        reward_col = options.reward_column or (m["reward"] if "reward" in m else (
+            "reward" if "reward" in header else None))  # a mapping's null: no reward
         if reward_col is not None and reward_col not in header:
             raise AocError(f"{path}: no reward column {reward_col!r}: name it with "
                            "--reward-column or pass --reward-free")
@@ -292,6 +297,7 @@ def _tags(path: Path, cols: dict, roles: Roles, eps: Episodes, static_tags: dict
 def read_csv(path: Path, options: ReadOptions) -> CorpusData:
     """Read a CSV log (and ``options.static``) into a corpus."""
     path = Path(path)
+    options = exported_mapping(path, options)
     header, cols = read_table(path, options.progress)
     roles = _roles(path, header, options)
     n = len(next(iter(cols.values()))) if cols else 0
@@ -327,7 +333,7 @@ def read_csv(path: Path, options: ReadOptions) -> CorpusData:
     obs_space = box_space(observations.shape[1], names=obs_names)
     if static_names:
         obs_space["static"] = static_names
-    return CorpusData(
+    data = CorpusData(
         observations=observations, actions=actions,
         rewards=numeric(cols[roles.reward], roles.reward, path)[eps.order]
         if roles.reward else None,
@@ -340,6 +346,9 @@ def read_csv(path: Path, options: ReadOptions) -> CorpusData:
                           "observations": roles.observations, "actions": roles.actions,
                           "reward": roles.reward, "terminal": roles.terminal}},
     )
+    spec = parse_spec(_mapping(options).get("aoc"), options.columns_file)
+    return data if spec is None else restore_exported(data, spec, path)
+
 
 
 def _read_static(path: Path, id_col: str, episode_keys: np.ndarray, episode_ids: list[str],

@@ -5,6 +5,10 @@
 Episodes end at ``terminals | timeouts``; a trailing episode with neither is kept, marked
 truncated; timeouts become truncations. 1-d numeric ``infos/<key>`` arrays become corpus
 columns ``<key>``; ``--tag-column KEY`` takes a top-level or ``infos/`` array as a tag.
+
+A file written by ``aoc export --to d4rl`` (:mod:`aoc_cli.formats.export_d4rl`) also holds
+``metadata/aoc`` and ``metadata/episode_starts``: it is read back as the corpus that was
+exported (:func:`aoc_cli.formats.spec.restore`).
 """
 
 from __future__ import annotations
@@ -15,7 +19,8 @@ import h5py
 import numpy as np
 
 from aoc_cli.errors import AocError
-from aoc_cli.formats.common import ReadOptions, from_flat, open_h5
+from aoc_cli.formats.common import ReadOptions, encode_labels, from_flat, open_h5
+from aoc_cli.formats.spec import parse_spec, restore
 from aoc_cli.store import CorpusData
 
 STANDARD = ("observations", "actions", "rewards", "terminals", "timeouts", "next_observations")
@@ -29,6 +34,8 @@ def read_d4rl(path: Path, options: ReadOptions) -> CorpusData:
         if missing:
             raise AocError(f"{path} is not a D4RL-style file: it has no {', '.join(missing)} "
                            f"(top-level keys: {', '.join(sorted(f.keys())) or 'none'})")
+        if isinstance(f.get("metadata/aoc"), h5py.Dataset):
+            return _read_exported(f, path, options)
         get = {k: (f[k][()] if isinstance(f.get(k), h5py.Dataset) else None)
                for k in ("observations", "actions", "rewards", "terminals", "timeouts")}
         n = len(get["observations"])
@@ -49,6 +56,44 @@ def read_d4rl(path: Path, options: ReadOptions) -> CorpusData:
         source["attrs"] = attrs
     return from_flat(get["observations"], get["actions"], get["rewards"], get["terminals"],
                      get["timeouts"], source, options, extra=extra)
+
+
+def _read_exported(f: h5py.File, path: Path, options: ReadOptions) -> CorpusData:
+    """A file of ``aoc export --to d4rl``: the arrays as written, episodes from
+    ``metadata/episode_starts``, tags and columns from ``infos/`` as the spec lists them."""
+    spec = parse_spec(f["metadata/aoc"][()], path)
+    starts = f.get("metadata/episode_starts")
+    if not isinstance(starts, h5py.Dataset):
+        raise AocError(f"{path}: metadata/aoc without metadata/episode_starts; re-export it")
+    get = {k: (f[k][()] if isinstance(f.get(k), h5py.Dataset) else None)
+           for k in ("observations", "actions", "rewards", "terminals", "timeouts")}
+    n = len(get["observations"])
+    tags = {}
+    for key in list(spec["tags"]) + list(options.tag_columns):
+        if not isinstance(f.get(f"infos/{key}"), h5py.Dataset):
+            raise AocError(f"{path}: no infos/{key} (a tag of the export metadata or "
+                           "--tag-column); re-export it")
+        if key in spec["tags"]:
+            tags[key] = (f[f"infos/{key}"][()], spec["tags"][key])
+        else:
+            tags[key] = encode_labels(f[f"infos/{key}"][()])
+    columns = {}
+    for key in spec["columns"]:
+        if not isinstance(f.get(f"infos/{key}"), h5py.Dataset):
+            raise AocError(f"{path}: no infos/{key} (a column of the export metadata); "
+                           "re-export it")
+        columns[key] = f[f"infos/{key}"][()]
+    missing = [k for k in ("terminals", "timeouts") if get[k] is None]
+    if missing:
+        raise AocError(f"{path}: no {', '.join(missing)} beside metadata/aoc; re-export it")
+    data = CorpusData(
+        observations=get["observations"], actions=get["actions"], rewards=get["rewards"],
+        terminals=np.asarray(get["terminals"], bool).reshape(n),
+        truncations=np.asarray(get["timeouts"], bool).reshape(n),
+        episode_starts=starts[()], observation_space=spec["observation_space"],
+        action_space=spec["action_space"], tags=tags, columns=columns,
+        source={"format": "d4rl", "path": str(Path(path).resolve())})
+    return restore(data, spec, path)
 
 
 def _plain(value):

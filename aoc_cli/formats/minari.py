@@ -12,10 +12,15 @@ Observations: Box spaces are flattened; Dict spaces are flattened key by key in 
 order (nested dicts depth first, Tuple spaces in index order), the order stated in the
 observation space's ``keys`` and ``names``; Discrete observations are one column holding the
 integer. Actions: Box (flattened) or Discrete (stored as ``a - start``).
+
+A dataset written by ``aoc export --to minari`` (:mod:`aoc_cli.formats.export_minari`) holds
+the export spec in ``metadata.json`` (key ``aoc``) and its tags and columns as infos: it is
+read back as the corpus that was exported (:func:`aoc_cli.formats.spec.restore`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 from pathlib import Path
@@ -24,6 +29,7 @@ import numpy as np
 
 from aoc_cli.errors import AocError
 from aoc_cli.formats.common import ReadOptions, encode_labels
+from aoc_cli.formats.spec import parse_spec, restore
 from aoc_cli.progress import tracked
 from aoc_cli.store import CorpusData, box_space, discrete_space, episode_starts_from_lengths
 
@@ -57,6 +63,12 @@ def read_minari(path: str | os.PathLike, options: ReadOptions) -> CorpusData:
                        f"and metadata.json, or a dataset id under {datasets_root()} "
                        "(set MINARI_DATASETS_PATH)")
     meta, dataset = _open(folder)
+    spec = parse_spec(meta.get("aoc"), folder)
+    own = options
+    if spec is not None:  # the exported tags and columns are infos
+        named = list(spec["tags"]) + list(spec["columns"])
+        options = dataclasses.replace(options, tag_columns=named + [
+            c for c in options.tag_columns if c not in named])
     flatten, obs_names, keys = _flattener(dataset.observation_space)
     to_action, action_space = _action_reader(dataset.action_space)
     eps = _read_episodes(dataset, folder, options, flatten, to_action)
@@ -74,20 +86,28 @@ def read_minari(path: str | os.PathLike, options: ReadOptions) -> CorpusData:
         obs_space_json.update(low=low, high=high)
     if keys:
         obs_space_json["keys"] = keys
-    return CorpusData(
+    data = CorpusData(
         observations=observations, actions=joined("act"), rewards=joined("rew"),
         terminals=joined("term"), truncations=joined("trunc"),
         episode_starts=episode_starts_from_lengths(np.asarray(eps["lengths"], np.int64)[keep]),
         observation_space=obs_space_json,
         action_space=action_space,
         tags={c: encode_labels(np.concatenate([v[i] for i in keep]))
-              for c, v in eps["tags"].items()},
+              for c, v in eps["tags"].items()} if spec is None else {},
         episode_ids=[eps["ids"][i] for i in keep],
         source={"format": "minari", "path": str(folder.resolve()),
                 "dataset_id": meta.get("dataset_id"),
                 "algorithm_name": meta.get("algorithm_name"),
                 "minari_version": meta.get("minari_version")},
     )
+    if spec is None:
+        return data
+    infos = {c: np.concatenate([v[i] for i in keep]) for c, v in eps["tags"].items()}
+    data.tags = {k: (infos[k], spec["tags"][k]) for k in spec["tags"]}
+    data.tags.update({k: encode_labels(infos[k]) for k in own.tag_columns
+                      if k not in spec["tags"]})
+    data.columns = {k: infos[k] for k in spec["columns"]}
+    return restore(data, spec, folder)
 
 
 def _open(folder: Path):

@@ -1,0 +1,50 @@
+"""``aoc export NAME --to minari|d4rl|csv --out PATH``: a corpus out again, for the tools
+beside aoc (:func:`aoc_cli.formats.export`)."""
+
+from __future__ import annotations
+
+from enum import Enum
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from aoc_cli.cli.common import (CorpusArgument, ExcludeOption, FormatOption, OverwriteOption,
+                                SelectOption, choice, get_store, parse_selection)
+
+
+class ExportFormat(str, Enum):
+    """``--to``: the format written."""
+
+    minari = "minari"
+    d4rl = "d4rl"
+    csv = "csv"
+
+
+def register(app: typer.Typer) -> None:
+    @app.command("export")
+    def export(
+        name: CorpusArgument,
+        to: ExportFormat = typer.Option(..., "--to", case_sensitive=False,
+                                        help="Format: a Minari dataset folder, a D4RL-style "
+                                             "HDF5 file, or CSV (one row per step)."),
+        out: Path = typer.Option(..., "--out", help="Where to write (outside the store)."),
+        select: SelectOption = None,
+        exclude: ExcludeOption = None,
+        static: Optional[Path] = typer.Option(
+            None, "--static", help="CSV: write the per-patient covariates (of a corpus read "
+                                   "with --static) to this file, one row per id."),
+        overwrite: OverwriteOption = False,
+        fmt: FormatOption = None,
+    ) -> None:
+        """Write corpus NAME as Minari, D4RL HDF5 or CSV; `aoc ingest` reads it back exactly."""
+        from aoc_cli.formats import export as run_export
+        from aoc_cli.report.output import ProgressBar, resolve_format, write_object
+
+        fmt = resolve_format(fmt)
+        with ProgressBar(f"export {name}") as bar:
+            result = run_export(name, choice(to), out, store=get_store(),
+                                select=parse_selection(select, "--select"),
+                                exclude=parse_selection(exclude, "--exclude"),
+                                overwrite=overwrite, static=static, progress=bar)
+        write_object(result.summary(), fmt, title=f"exported {name}")
