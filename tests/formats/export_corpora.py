@@ -39,8 +39,7 @@ def labelled() -> CorpusData:
     terminals[starts[1] - 1] = True
     truncations[starts[2] - 1] = True
     terminals[starts[4] - 1] = True  # episode 2 ends with neither flag
-    space = discrete_space(4, names=["dose"])
-    space["labels"] = ["none", "low", "mid", "high"]
+    space = discrete_space(4, names=["none", "low", "mid", "high"])  # one label an action
     return CorpusData(
         observations=rng.standard_normal((n, 3)).astype(np.float32),
         actions=rng.integers(0, 3, n), rewards=None, terminals=terminals,

@@ -76,7 +76,7 @@ def test_csv_export_reads_back_as_the_same_corpus(corpora, name):
 def test_the_test_corpora_hold_what_round_trips_lose_first(corpora):
     store, _ = corpora
     lab = store.corpus("labelled")
-    assert lab.action_space["labels"] == ["none", "low", "mid", "high"] and not lab.has_rewards
+    assert lab.action_space["names"] == ["none", "low", "mid", "high"] and not lab.has_rewards
     assert lab.episode_ids == ["z9", "a1", "m5", "b2"]
     assert store.corpus("appended").manifest["tags"]["site"] == ["north", "east"]
     assert np.isnan(store.corpus("appended").column("score")).sum() == 120
