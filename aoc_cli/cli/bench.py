@@ -49,8 +49,8 @@ def register(app: typer.Typer) -> None:
         fmt: FormatOption = None,
     ) -> None:
         """Run an experiment end to end; write results.csv, summary.md/json and PNGs."""
-        from aoc_cli.bench import ORDER, expected_seconds, run_experiment
-        from aoc_cli.bench.runner import SIZED, check
+        from aoc_cli.experiments import ORDER, expected_seconds, run_experiment
+        from aoc_cli.experiments.runner import SIZED, check
 
         fmt = resolve_format(fmt)
         if out is not None:
@@ -61,7 +61,7 @@ def register(app: typer.Typer) -> None:
         if quick and tiny:
             raise AocError("give --quick or --tiny, not both")
         scale = "tiny" if tiny else "quick" if quick else "full"
-        if experiment == "ward":  # imitation on a log: splits, not rollouts (bench/ward.py)
+        if experiment == "ward":  # imitation on a log: splits, not rollouts (experiments/ward.py)
             _ward(out, bench_store, scale, seeds, fmt)
             return
         chosen = [m.strip() for m in methods.split(",") if m.strip()] if methods else None
@@ -99,7 +99,7 @@ def register(app: typer.Typer) -> None:
 
 
 def _ward(out, bench_store, scale, splits, fmt) -> None:
-    from aoc_cli.bench.ward import run_ward
+    from aoc_cli.experiments.ward import run_ward
 
     if splits is not None and splits < 1:
         raise AocError(f"--seeds (random patient splits) must be >= 1, got {splits}")

@@ -46,7 +46,7 @@ def evaluate_on_ray(store_root, name: str, data: str, model: str | None, index_i
                     workers: int | None = None, address: str | None = None,
                     chunk_steps: int = CHUNK_STEPS, progress=None):
     """(summary, StepScores) of ``aoc evaluate`` with the chunks on Ray (module docstring)."""
-    from aoc_cli.bench.distributed import start_ray
+    from aoc_cli.experiments.distributed import start_ray
 
     started = time.perf_counter()
     spec = {"store": str(store_root), "name": name, "data": data, "model": model,

@@ -10,7 +10,7 @@ a serial ``aoc collect`` with the same seed (that is one chunk with seed ``s`` i
 chunk ends its last episode where its rows end (a truncated episode), as a serial collect does
 at the end of its budget.
 
-The chunks run as Ray tasks (:mod:`aoc_cli.bench.distributed` starts or joins Ray) or, with
+The chunks run as Ray tasks (:mod:`aoc_cli.experiments.distributed` starts or joins Ray) or, with
 ``workers=None`` and no address, one after the other here.
 """
 
@@ -67,7 +67,7 @@ def collect_chunked(task: str, steps: int | None = None, episodes: int | None = 
             if progress is not None:
                 progress(i + 1, len(parts))
     else:
-        from aoc_cli.bench.distributed import start_ray
+        from aoc_cli.experiments.distributed import start_ray
 
         ray = start_ray(workers, address)
         remote = ray.remote(num_cpus=1, max_retries=1)(_collect_chunk)

@@ -31,7 +31,7 @@ def pendulum(tmp_path_factory):
 
 @pytest.fixture
 def session(pendulum):
-    from aoc_cli.bench.common import session as make_session
+    from aoc_cli.experiments.common import session as make_session
     from aoc_cli.envs import make_env
 
     _root, corpus = pendulum

@@ -91,7 +91,7 @@ def test_nearest_neighbour_control_is_the_argmax_over_the_same_candidates(sessio
 
 
 def test_neighbours_honour_the_row_selection(pendulum):
-    from aoc_cli.bench.common import session as make_session
+    from aoc_cli.experiments.common import session as make_session
     from aoc_cli.control import ControllerConfig
     from aoc_cli.session import open_session
     from aoc_cli.envs import make_env
@@ -147,7 +147,7 @@ def test_bc_acts_as_the_imitation_model_predicts(session):
 
 
 def test_bc_without_an_imitation_model_says_how_to_train_one(pendulum, tmp_path):
-    from aoc_cli.bench.common import session as make_session
+    from aoc_cli.experiments.common import session as make_session
     from aoc_cli.envs import make_env
 
     _root, corpus = pendulum

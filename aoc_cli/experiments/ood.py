@@ -26,10 +26,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from aoc_cli.bench.cells import Cell, Plan
-from aoc_cli.bench.common import Context, belief_config, make_task_env, session
-from aoc_cli.bench.methods import row_values
-from aoc_cli.bench.results import result_row
+from aoc_cli.experiments.cells import Cell, Plan
+from aoc_cli.experiments.common import Context, belief_config, make_task_env, session
+from aoc_cli.experiments.methods import row_values
+from aoc_cli.experiments.results import result_row
 from aoc_cli.control.monitor import flags_against
 from aoc_cli.control.run import session_reference_band
 

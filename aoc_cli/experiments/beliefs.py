@@ -18,7 +18,7 @@ values its model was trained on: the return-to-go at gamma 0.9).
 
 from __future__ import annotations
 
-from aoc_cli.bench.common import belief_config, session
+from aoc_cli.experiments.common import belief_config, session
 
 #: bench row -> the model id it runs with.
 BELIEF_ROWS = {"aoc-dynamics": "dynamics", "aoc-critic": "critic", "aoc-reward": "reward",

@@ -13,11 +13,11 @@ from pathlib import Path
 import pytest
 import ray
 
-from aoc_cli.bench.cells import Cell, Plan, execute
-from aoc_cli.bench.common import Context
-from aoc_cli.bench.methods import Budget, Runner
-from aoc_cli.bench.prepare import Artefacts
-from aoc_cli.bench.results import result_row
+from aoc_cli.experiments.cells import Cell, Plan, execute
+from aoc_cli.experiments.common import Context
+from aoc_cli.experiments.methods import Budget, Runner
+from aoc_cli.experiments.prepare import Artefacts
+from aoc_cli.experiments.results import result_row
 
 #: Runs the CLI in a fresh interpreter and reports whether Ray was imported.
 PROBE = ("import sys\nfrom aoc_cli.cli.app import main\ntry:\n    main(sys.argv[1:])\n"

@@ -9,7 +9,7 @@
   row, ``aoc-normal-rows``, is AOC restricted to the evaluation system's rows (see ORACLE);
   ``aoc-dynamics`` is AOC with aoc's auxiliary dynamics head (see DYNAMICS); ``aoc-critic``
   and ``aoc-reward`` are AOC with the reference code's beliefs, ``aoc-gamma0.9`` AOC with the
-  paper's value belief on the return-to-go at gamma 0.9 (aoc_cli/bench/beliefs.py).
+  paper's value belief on the return-to-go at gamma 0.9 (aoc_cli/experiments/beliefs.py).
 * ``epsilon`` (paper Table "epsilon controls the conservation"): AOC with epsilon in
   {0.3, 0.5, 0.9, 1.0} at the middle data size, on the scale's ablation tasks (the quick
   scale: random and upright start), with the paper's model and with the dynamics head.
@@ -21,12 +21,12 @@ The paper's pendulum figures are for the upright start; they are shown beside bo
 
 from __future__ import annotations
 
-from aoc_cli.bench import paper
-from aoc_cli.bench.beliefs import BELIEF_ROWS, belief_session, prepare_beliefs
-from aoc_cli.bench.cells import Cell, Plan
-from aoc_cli.bench.common import Context, belief_config, make_task_env, session
-from aoc_cli.bench.methods import DATA, data_values, row_values
-from aoc_cli.bench.results import result_row
+from aoc_cli.experiments import paper
+from aoc_cli.experiments.beliefs import BELIEF_ROWS, belief_session, prepare_beliefs
+from aoc_cli.experiments.cells import Cell, Plan
+from aoc_cli.experiments.common import Context, belief_config, make_task_env, session
+from aoc_cli.experiments.methods import DATA, data_values, row_values
+from aoc_cli.experiments.results import result_row
 from aoc_cli.decompose import default_k
 
 TASKS = ("pendulum-het", "pendulum-het-upright")

@@ -19,7 +19,7 @@ from __future__ import annotations
 import logging
 import os
 
-from aoc_cli.bench.cells import Cell, CellResult, failed_result, run_cell
+from aoc_cli.experiments.cells import Cell, CellResult, failed_result, run_cell
 from aoc_cli.errors import AocError
 
 #: Environment of every worker: one thread per task for the OpenMP/BLAS pools, passive waits.
@@ -62,9 +62,9 @@ def _threads() -> None:
 
 def worker_context(spec: dict):
     """The Context of a worker: the run's settings, this worker's own artefacts and runner."""
-    from aoc_cli.bench.common import Context
-    from aoc_cli.bench.methods import Budget, Runner
-    from aoc_cli.bench.prepare import Artefacts
+    from aoc_cli.experiments.common import Context
+    from aoc_cli.experiments.methods import Budget, Runner
+    from aoc_cli.experiments.prepare import Artefacts
 
     lines: list[str] = []
     runner = _RUNNERS.get(repr(spec["budget"]))

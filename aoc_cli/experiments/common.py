@@ -5,8 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from aoc_cli.bench.methods import Runner
-from aoc_cli.bench.prepare import Artefacts
+from aoc_cli.experiments.methods import Runner
+from aoc_cli.experiments.prepare import Artefacts
 from aoc_cli.control.rollout import action_space_of
 
 SCALES = ("tiny", "quick", "full")

@@ -1,11 +1,11 @@
 """`aoc bench`: run an experiment end to end and write its tables and plots.
 
->>> from aoc_cli.bench import run_experiment
+>>> from aoc_cli.experiments import run_experiment
 >>> report = run_experiment("two-gates", scale="quick", out="bench/two-gates")  # doctest: +SKIP
 
 Outputs in ``out``: results.csv, summary.json, summary.md and PNG plots (see
-:mod:`aoc_cli.bench.results`). Artefacts (corpora, models, indexes) go to the bench store and
-are reused across runs and experiments (:mod:`aoc_cli.bench.prepare`).
+:mod:`aoc_cli.experiments.results`). Artefacts (corpora, models, indexes) go to the bench store and
+are reused across runs and experiments (:mod:`aoc_cli.experiments.prepare`).
 """
 
 from __future__ import annotations
@@ -14,12 +14,12 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from aoc_cli.bench import lunar, maze, ood, paper, pendulum, plots
-from aoc_cli.bench.cells import execute
-from aoc_cli.bench.common import SCALES, Context
-from aoc_cli.bench.methods import Budget, Runner
-from aoc_cli.bench.prepare import Artefacts
-from aoc_cli.bench.results import summarize_rows, summary_markdown, write_outputs
+from aoc_cli.experiments import lunar, maze, ood, paper, pendulum, plots
+from aoc_cli.experiments.cells import execute
+from aoc_cli.experiments.common import SCALES, Context
+from aoc_cli.experiments.methods import Budget, Runner
+from aoc_cli.experiments.prepare import Artefacts
+from aoc_cli.experiments.results import summarize_rows, summary_markdown, write_outputs
 from aoc_cli.errors import AocError
 
 RETURN = [("return_mean", "return"), ("success_rate", "success")]
@@ -138,7 +138,7 @@ def run_experiment(name: str, scale: str = "full", seeds: int | None = None,
     """Run experiment ``name`` at ``scale`` (tiny | quick | full); write and return its report:
     ``{"experiment", "out", "rows", "summary", "plots", "built", "seconds"}``.
 
-    Its cells (:mod:`aoc_cli.bench.cells`) run here one after the other, or as Ray tasks with
+    Its cells (:mod:`aoc_cli.experiments.cells`) run here one after the other, or as Ray tasks with
     ``workers`` (a local Ray with that many CPUs) or ``address`` (an existing cluster; also
     ``$RAY_ADDRESS`` when ``workers`` is given); the rows are the same. Finished cells are
     kept in ``out/cells/`` and taken by a re-run with the same settings and code.

@@ -19,11 +19,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from aoc_cli.bench import paper
-from aoc_cli.bench.cells import Cell, Plan
-from aoc_cli.bench.common import Context, belief_config, make_task_env, session
-from aoc_cli.bench.methods import row_values
-from aoc_cli.bench.results import result_row
+from aoc_cli.experiments import paper
+from aoc_cli.experiments.cells import Cell, Plan
+from aoc_cli.experiments.common import Context, belief_config, make_task_env, session
+from aoc_cli.experiments.methods import row_values
+from aoc_cli.experiments.results import result_row
 
 RATES = (4.0, 3.0, 2.0, 1.0, 0.75, 0.5, 0.25)
 EPSILONS = (0.1, 0.3, 0.5, 0.7)

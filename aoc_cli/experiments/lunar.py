@@ -8,12 +8,12 @@ gymnasium's heuristic lander with action noise of std 0, 0.25, 0.5 and 1 (see
 
 from __future__ import annotations
 
-from aoc_cli.bench import paper
-from aoc_cli.bench.beliefs import BELIEF_ROWS, belief_session, prepare_beliefs
-from aoc_cli.bench.cells import Cell, Plan
-from aoc_cli.bench.common import Context, belief_config, make_task_env, session
-from aoc_cli.bench.methods import DATA, data_values, row_values
-from aoc_cli.bench.results import result_row
+from aoc_cli.experiments import paper
+from aoc_cli.experiments.beliefs import BELIEF_ROWS, belief_session, prepare_beliefs
+from aoc_cli.experiments.cells import Cell, Plan
+from aoc_cli.experiments.common import Context, belief_config, make_task_env, session
+from aoc_cli.experiments.methods import DATA, data_values, row_values
+from aoc_cli.experiments.results import result_row
 
 METHODS = ["aoc", "aoc-dynamics", "aoc-critic", "aoc-reward", "knn", "1nn", "knn-belief", "1nn-belief", "bc", "td3bc", "cql", "mpc",
            "zero", "random"]

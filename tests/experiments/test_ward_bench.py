@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from aoc_cli.bench.ward import history_features, summarise
+from aoc_cli.experiments.ward import history_features, summarise
 
 
 def test_history_features_are_the_previous_steps_of_the_same_stay():

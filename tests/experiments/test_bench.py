@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from aoc_cli.bench import EXPERIMENTS, run_experiment
-from aoc_cli.bench.results import METRICS, read_csv
+from aoc_cli.experiments import EXPERIMENTS, run_experiment
+from aoc_cli.experiments.results import METRICS, read_csv
 
 
 @pytest.fixture(scope="module")
@@ -169,7 +169,7 @@ def test_a_second_run_reuses_the_stored_artefacts(tmp_path, bench_store):
 
 def test_residual_cap_reaches_every_aoc_session_and_is_recorded(tmp_path, bench_store,
                                                                   monkeypatch):
-    from aoc_cli.bench import maze
+    from aoc_cli.experiments import maze
     from aoc_cli.errors import AocError
 
     with pytest.raises(AocError, match="residual-cap"):
@@ -196,9 +196,9 @@ def test_residual_cap_reaches_every_aoc_session_and_is_recorded(tmp_path, bench_
 def test_pi1_copies_fill_the_nearest_entries_of_the_start_moves(bench_store):
     """maze-adapt's mechanism, measured: x2 copies of pi1 crowd the k nearest entries of both
     first moves (fewer distinct rows), while v_hat stays a weighted mean of row values."""
-    from aoc_cli.bench.common import belief_config, session
-    from aoc_cli.bench.maze import SCALES, start_probe
-    from aoc_cli.bench.prepare import Artefacts
+    from aoc_cli.experiments.common import belief_config, session
+    from aoc_cli.experiments.maze import SCALES, start_probe
+    from aoc_cli.experiments.prepare import Artefacts
     from aoc_cli.envs import make_env
 
     art = Artefacts(bench_store)
@@ -218,7 +218,7 @@ def test_pi1_copies_fill_the_nearest_entries_of_the_start_moves(bench_store):
 
 
 def test_the_gate_of_a_path_is_where_it_crosses_x_8():
-    from aoc_cli.bench.maze import gate_of
+    from aoc_cli.experiments.maze import gate_of
 
     assert gate_of(np.array([[0, 0], [7.5, 15], [8.5, 15.2], [16, 0]])) == "upper"
     assert gate_of(np.array([[0, 0], [7.6, 7.9], [8.4, 8.1]])) == "lower"
@@ -230,11 +230,11 @@ def test_the_gate_of_a_path_is_where_it_crosses_x_8():
 def test_aoc_is_more_conservative_with_a_small_epsilon_on_two_gates(tmp_path):
     """A real effect (the paper's two-gates table): epsilon 0.1 keeps AOC on the data and
     reaches the goal; epsilon 0.7 lets it extrapolate into the wall."""
-    from aoc_cli.bench import maze
-    from aoc_cli.bench.cells import execute
-    from aoc_cli.bench.common import Context
-    from aoc_cli.bench.methods import Runner
-    from aoc_cli.bench.prepare import Artefacts
+    from aoc_cli.experiments import maze
+    from aoc_cli.experiments.cells import execute
+    from aoc_cli.experiments.common import Context
+    from aoc_cli.experiments.methods import Runner
+    from aoc_cli.experiments.prepare import Artefacts
 
     scale = {"episodes_data": 200, "episodes": 6, "epochs": 12, "patience": 4,
              "epsilons": (0.1, 0.7)}
@@ -272,7 +272,7 @@ def test_bench_cli_prints_the_summary_and_rejects_bad_input(aoc, tmp_path):
 
 
 def test_a_stored_corpus_of_an_earlier_behaviour_mix_is_collected_again(tmp_path):
-    from aoc_cli.bench.prepare import Artefacts, corpus_name
+    from aoc_cli.experiments.prepare import Artefacts, corpus_name
     from aoc_cli.envs import TASKS, collect
     from aoc_cli.store import Store
 
@@ -291,8 +291,8 @@ def test_a_stored_corpus_of_an_earlier_behaviour_mix_is_collected_again(tmp_path
 
 
 def test_bench_replay_data_is_its_own_corpus(tmp_path):
-    from aoc_cli.bench.prepare import Artefacts
-    from aoc_cli.bench.runner import check
+    from aoc_cli.experiments.prepare import Artefacts
+    from aoc_cli.experiments.runner import check
     from aoc_cli.errors import AocError
 
     art = Artefacts(tmp_path / "store", behaviour="replay")

@@ -1,5 +1,5 @@
 """A bench run as independent cells: one (task, method, setting, seed) each, run in order on
-this machine or as Ray tasks (:mod:`aoc_cli.bench.distributed`), and kept when finished.
+this machine or as Ray tasks (:mod:`aoc_cli.experiments.distributed`), and kept when finished.
 
 An experiment is a :class:`Plan`: ``cells(ctx, scale)`` lists its cells in the order of its
 rows; ``prepare(ctx, scale, prep)`` builds (or finds in the bench store) the artefacts a group
@@ -25,7 +25,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Callable
 
-from aoc_cli.bench.results import result_row
+from aoc_cli.experiments.results import result_row
 from aoc_cli.report import to_jsonable
 from aoc_cli.store import atomic_path
 
@@ -175,7 +175,7 @@ def execute(plan: Plan, ctx, scale: dict, workers: int | None = None,
             results[cell.key] = run_cell(plan, ctx, scale, cell)
             save_cell(ctx.out, cell, results[cell.key], sig)
     else:
-        from aoc_cli.bench.distributed import run_on_ray
+        from aoc_cli.experiments.distributed import run_on_ray
 
         def done(cell, result):
             results[cell.key] = result
