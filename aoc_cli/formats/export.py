@@ -146,7 +146,8 @@ def export(name: str, fmt: str, out: str | os.PathLike, *, store: Store | None =
     data = corpus.load()
     if mask is not None:
         data = select_rows(data, mask)
-    spec = describe(data, name, fmt)
+    # a whole corpus is what its manifest's content hash was computed from
+    spec = describe(data, name, fmt, content_hash=corpus.hash if mask is None else None)
     writer = {"minari": export_minari.write_minari, "d4rl": export_d4rl.write_d4rl,
               "csv": export_csv.write_csv}[fmt]
     kwargs = {"static": Path(static)} if static is not None else {}

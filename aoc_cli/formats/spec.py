@@ -44,15 +44,17 @@ def unflagged_ends(data: CorpusData) -> list[int]:
     return np.flatnonzero(~flagged).astype(int).tolist()
 
 
-def describe(data: CorpusData, corpus: str, fmt: str) -> dict:
-    """The export spec of ``data`` (exported from corpus ``corpus`` to format ``fmt``)."""
+def describe(data: CorpusData, corpus: str, fmt: str, content_hash: str | None = None) -> dict:
+    """The export spec of ``data`` (exported from corpus ``corpus`` to format ``fmt``);
+    ``content_hash``: the data's, when known (a whole stored corpus: its manifest's), else
+    computed."""
     return {
         "version": SPEC_VERSION,
         "corpus": corpus,
         "format": fmt,
         "rows": data.n_rows,
         "episodes": data.n_episodes,
-        "content_hash": content_hash_of(data),
+        "content_hash": content_hash or content_hash_of(data),
         "observation_space": data.observation_space,
         "action_space": data.action_space,
         "observations_dtype": np.asarray(data.observations).dtype.str,
