@@ -2,7 +2,9 @@
 
 Columns: ``id`` (the episode's own id, e.g. the patient, else its index), ``t`` (the step
 within the episode), the observations and actions under their names (the spaces' ``names``,
-else ``obs_<i>`` / ``act_<i>``; a discrete action is its integer), ``reward`` (absent for a
+else ``obs_<i>`` / ``act_<i>``; a discrete action is its integer, and when the action space
+names each action (``names``, one an action: labels such as ``fluids=2,vaso=0``) the column is
+``action`` with its label beside it in ``action_label``), ``reward`` (absent for a
 reward-free corpus), ``terminal`` and ``truncated`` (0/1), each tag as its label and each
 numeric column (empty where NaN). ``.tsv`` is tab-separated; ``.gz`` is gzip-compressed.
 
@@ -166,7 +168,10 @@ def write_csv(data: CorpusData, spec: dict, out: Path, progress: Progress | None
         obs_names, obs_index, static_cols = _split_static(data, obs_names, static)
     discrete = data.discrete
     actions = np.asarray(data.actions)
-    act_names = _names(data.action_space, 1 if discrete else actions.shape[1], "act")
+    labels = list(data.action_space.get("names") or []) if discrete else []
+    labelled = discrete and len(labels) == int(data.action_space["n"]) > 1
+    act_names = ["action"] if labelled else \
+        _names(data.action_space, 1 if discrete else actions.shape[1], "act")
     obs_names, act_names = _header(obs_names, act_names, data)
     lengths = np.diff(data.episode_starts)
     episode_text = np.array(ids if ids is not None else [str(i) for i in range(len(lengths))],
@@ -178,6 +183,10 @@ def write_csv(data: CorpusData, spec: dict, out: Path, progress: Progress | None
     cols += [(n, float_text(obs[:, j])) for n, j in zip(obs_names, obs_index)]
     if discrete:
         cols.append((act_names[0], actions.astype(np.int64).astype(str)))
+        label_col = f"{act_names[0]}_label"
+        if labelled and label_col not in {c for c, _ in cols} | set(data.tags) | \
+                set(data.columns) | set(RESERVED):  # read back as text: not a corpus column
+            cols.append((label_col, np.array(labels, dtype=object)[actions].astype(str)))
     else:
         cols += [(n, float_text(actions[:, j])) for j, n in enumerate(act_names)]
     if data.rewards is not None:

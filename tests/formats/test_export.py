@@ -199,3 +199,17 @@ def read_options(act):
     from aoc_cli.formats import ReadOptions
 
     return ReadOptions(obs_columns=["x", "y"], act_columns=act.split(","))
+
+
+def test_csv_labelled_discrete_actions_are_written_as_codes_with_their_labels(corpora):
+    store, root = corpora
+    back, out = round_trip(store, root, "labelled", "csv")
+    header, *rows = out.read_text().splitlines()
+    header = header.split(",")
+    c = store.corpus("labelled")
+    assert header[:2] == ["id", "t"] and "reward" not in header
+    codes = [int(r.split(",")[header.index("action")]) for r in rows]
+    text = [r.split(",")[header.index("action_label")] for r in rows]
+    assert codes == c.actions.tolist()
+    assert text == [c.action_space["names"][a] for a in c.actions]
+    assert "action_label" not in back.manifest["columns"]
