@@ -213,3 +213,43 @@ def test_csv_labelled_discrete_actions_are_written_as_codes_with_their_labels(co
     assert codes == c.actions.tolist()
     assert text == [c.action_space["names"][a] for a in c.actions]
     assert "action_label" not in back.manifest["columns"]
+
+
+def test_minari_export_never_touches_the_users_minari_folder(corpora, monkeypatch, tmp_path):
+    import os
+
+    store, _ = corpora
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    monkeypatch.delenv("MINARI_DATASETS_PATH", raising=False)
+    (tmp_path / "home").mkdir()
+    export("maze", "minari", tmp_path / "out" / "maze-v0", store=store)
+    assert not (tmp_path / "home" / ".minari").exists()
+    assert "MINARI_DATASETS_PATH" not in os.environ
+    assert sorted(os.listdir(tmp_path / "out")) == ["maze-v0"]
+    assert sorted(os.listdir(tmp_path / "out" / "maze-v0")) == ["data"]
+
+
+@pytest.mark.parametrize("fmt", ["d4rl", "minari"])
+def test_an_export_that_fails_midway_leaves_nothing_and_the_old_file_intact(
+        corpora, monkeypatch, tmp_path, fmt):
+    import os
+
+    import minari.dataset.minari_storage as storage
+
+    store, _ = corpora
+    out = tmp_path / ("m.hdf5" if fmt == "d4rl" else "m-v0")
+    export("maze", fmt, out, store=store)
+    before = sorted(p.name for p in out.rglob("*")) if out.is_dir() else out.read_bytes()
+
+    def fail(*args, **kwargs):
+        raise OSError("disk full")
+
+    if fmt == "d4rl":
+        monkeypatch.setattr(h5py.Group, "create_dataset", fail)
+    else:
+        monkeypatch.setattr(storage.MinariStorage, "update_metadata", fail)
+    with pytest.raises(OSError, match="disk full"):
+        export("lunar", fmt, out, store=store, overwrite=True)
+    assert os.listdir(tmp_path) == [out.name]
+    after = sorted(p.name for p in out.rglob("*")) if out.is_dir() else out.read_bytes()
+    assert after == before
