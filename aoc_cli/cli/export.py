@@ -11,6 +11,7 @@ import typer
 
 from aoc_cli.cli.common import (CorpusArgument, ExcludeOption, FormatOption, OverwriteOption,
                                 SelectOption, choice, get_store, parse_selection)
+from aoc_cli.errors import AocError
 
 
 class ExportFormat(str, Enum):
@@ -19,6 +20,19 @@ class ExportFormat(str, Enum):
     minari = "minari"
     d4rl = "d4rl"
     csv = "csv"
+
+
+def parse_rows(text: Optional[str]) -> Optional[tuple[int, int]]:
+    """``"100:200"`` -> (100, 200); a malformed range is an AocError."""
+    if text is None:
+        return None
+    start, sep, end = text.partition(":")
+    try:
+        if not sep:
+            raise ValueError
+        return int(start), int(end)
+    except ValueError:
+        raise AocError(f"--rows expects START:END (e.g. 0:1000), got {text!r}") from None
 
 
 def register(app: typer.Typer) -> None:
@@ -31,6 +45,8 @@ def register(app: typer.Typer) -> None:
         out: Path = typer.Option(..., "--out", help="Where to write (outside the store)."),
         select: SelectOption = None,
         exclude: ExcludeOption = None,
+        rows: Optional[str] = typer.Option(
+            None, "--rows", help="START:END: only corpus rows START to END - 1."),
         static: Optional[Path] = typer.Option(
             None, "--static", help="CSV: write the per-patient covariates (of a corpus read "
                                    "with --static) to this file, one row per id."),
@@ -46,5 +62,6 @@ def register(app: typer.Typer) -> None:
             result = run_export(name, choice(to), out, store=get_store(),
                                 select=parse_selection(select, "--select"),
                                 exclude=parse_selection(exclude, "--exclude"),
+                                rows=parse_rows(rows),
                                 overwrite=overwrite, static=static, progress=bar)
         write_object(result.summary(), fmt, title=f"exported {name}")

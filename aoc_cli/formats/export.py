@@ -120,11 +120,13 @@ def check_target(path: Path, store: Store, overwrite: bool, *, folder: bool = Fa
 
 def export(name: str, fmt: str, out: str | os.PathLike, *, store: Store | None = None,
            select: dict[str, list[str]] | None = None,
-           exclude: dict[str, list[str]] | None = None, overwrite: bool = False,
+           exclude: dict[str, list[str]] | None = None,
+           rows: tuple[int, int] | None = None, overwrite: bool = False,
            static: str | os.PathLike | None = None,
            progress: Progress | None = None) -> ExportResult:
     """Write corpus ``name`` (the rows of ``select`` / ``exclude``, tag selections as
-    :func:`aoc_cli.rows.row_selection` takes them) as ``fmt`` to ``out``. ``static`` (CSV
+    :func:`aoc_cli.rows.row_selection` takes them, within the row range ``rows`` = (start,
+    end), end excluded) as ``fmt`` to ``out``. ``static`` (CSV
     only): also write the per-patient covariates of a corpus read with ``--static`` to this
     file, one row per episode id, and leave them out of the step rows."""
     from aoc_cli.formats import export_csv, export_d4rl, export_minari
@@ -142,7 +144,10 @@ def export(name: str, fmt: str, out: str | os.PathLike, *, store: Store | None =
     targets = [out] if fmt != "csv" else export_csv.targets(out, static)
     for target in targets:
         check_target(target, store, overwrite, folder=fmt == "minari")
-    mask = row_selection(corpus, select, exclude)
+    if rows is not None and not (0 <= rows[0] < rows[1]):
+        raise AocError(f"rows must be START:END with 0 <= START < END, got {rows[0]}:{rows[1]}",
+                       param="rows")
+    mask = row_selection(corpus, select, exclude, row_range=rows)
     data = corpus.load()
     if mask is not None:
         data = select_rows(data, mask)

@@ -83,6 +83,8 @@ def test_overwrite_replaces_an_earlier_minari_export(aoc_inproc, maze, tmp_path)
     (["--to", "d4rl", "--static", "s.csv"], "--static writes CSV covariates"),
     (["--to", "csv", "--select", "policy=nope"], "has no value 'nope'"),
     (["--to", "csv", "--select", "policy"], "--select expects TAG=VALUE"),
+    (["--to", "csv", "--rows", "5"], "--rows expects START:END"),
+    (["--to", "csv", "--rows", "9:3"], "--rows must be START:END with 0 <= START < END"),
 ])
 def test_bad_input_is_one_line_and_exit_2(aoc_inproc, maze, tmp_path, args, text):
     code, out, err = aoc_inproc("export", "m", "--out", str(tmp_path / "x.csv"), *args)
@@ -106,3 +108,16 @@ def test_csv_export_of_a_selection_reads_back_with_its_rows(aoc_inproc, maze, tm
     keep = codes == labels.index("pi2")
     np.testing.assert_array_equal(back.observations, maze.observations[keep])
     assert back.manifest["tags"] == maze.manifest["tags"]
+
+
+def test_rows_exports_a_row_range_cutting_episodes_where_it_ends(aoc_inproc, maze, tmp_path):
+    out = tmp_path / "part.hdf5"
+    code, stdout, _ = aoc_inproc("export", "m", "--to", "d4rl", "--out", str(out), "--rows",
+                                 "5:40", "-f", "json")
+    assert code == 0 and json.loads(stdout)["rows"] == 35
+    assert aoc_inproc("ingest", str(out), "--name", "part", "-f", "json")[0] == 0
+    back = Store(maze.path.parent).corpus("part")
+    np.testing.assert_array_equal(back.observations, maze.observations[5:40])
+    # the last exported row ends its episode: terminal as it was, else truncated there
+    last = back.read("terminals")[-1] or back.read("truncations")[-1]
+    assert last and back.episode_starts[0] == 0
