@@ -19,6 +19,7 @@ knn-belief
 bc         behaviour cloning: the imitation-mode model ``bc`` (same history encoder)
 td3bc      TD3+BC from d3rlpy (``pip install -e .[bench]``)
 cql        CQL from d3rlpy (``pip install -e .[bench]``)
+bcq        BCQ from d3rlpy (discrete BCQ for discrete actions; ``pip install -e .[bench]``)
 mpc        MPPI (pytorch-mppi) over a learned dynamics model (``pip install -e .[bench]``)
 ========== ===========================================================================
 """
@@ -40,10 +41,11 @@ BASELINES = {
     "bc": "behaviour cloning (imitation-mode model 'bc')",
     "td3bc": "TD3+BC (d3rlpy)",
     "cql": "CQL (d3rlpy)",
+    "bcq": "BCQ (d3rlpy)",
     "mpc": "MPPI over a learned dynamics model (pytorch-mppi)",
 }
 #: Baselines that need the optional ``bench`` extra.
-EXTRA = {"td3bc": "d3rlpy", "cql": "d3rlpy", "mpc": "pytorch_mppi"}
+EXTRA = {"td3bc": "d3rlpy", "cql": "d3rlpy", "bcq": "d3rlpy", "mpc": "pytorch_mppi"}
 
 
 def make_baseline(name: str, session, env=None, seed: int = 0, **options):
@@ -71,7 +73,7 @@ def make_baseline(name: str, session, env=None, seed: int = 0, **options):
         from aoc_cli.baselines.bc import BehaviourCloning
 
         return BehaviourCloning(session, env, seed, **options)
-    if name in ("td3bc", "cql"):
+    if name in ("td3bc", "cql", "bcq"):
         from aoc_cli.baselines.offline_rl import OfflineRLPolicy
 
         return OfflineRLPolicy(name, session, env, seed, **options)

@@ -1,4 +1,4 @@
-"""Black-box offline RL from d3rlpy (the ``bench`` extra): TD3+BC and CQL.
+"""Black-box offline RL from d3rlpy (the ``bench`` extra): TD3+BC, CQL and BCQ.
 
 The paper's "model-free RL" baseline is TD3 with a recurrent context encoder. aoc uses the
 offline-RL algorithms of d3rlpy 2.8 rather than a home-made copy:
@@ -9,7 +9,10 @@ offline-RL algorithms of d3rlpy 2.8 rather than a home-made copy:
   ``lambda = alpha / mean|Q|`` with alpha = 2.5;
 * CQL (Kumar et al. 2020), ``d3rlpy.algos.CQLConfig`` (``DiscreteCQLConfig`` for discrete
   actions): soft actor-critic whose critic is pushed down on out-of-data actions,
-  ``min_Q  alpha E_s[ log sum_a exp Q(s, a) - E_{a ~ D} Q(s, a) ] + TD error``.
+  ``min_Q  alpha E_s[ log sum_a exp Q(s, a) - E_{a ~ D} Q(s, a) ] + TD error``;
+* BCQ (Fujimoto et al. 2019), ``d3rlpy.algos.DiscreteBCQConfig`` for discrete actions (Q
+  learning restricted to the actions an imitation head gives at least ``tau`` times the
+  likeliest one's probability), ``BCQConfig`` for continuous ones.
 
 The agents' state is the same context AOC sees: the standardised observation and the flattened,
 standardised history of the previous L transitions (see :mod:`aoc_cli.baselines.features`), so
@@ -28,7 +31,7 @@ from aoc_cli.baselines.features import RawFeatures
 from aoc_cli.errors import AocError
 from aoc_cli.threads import thread_limits
 
-ALGOS = ("td3bc", "cql")
+ALGOS = ("td3bc", "cql", "bcq")
 
 
 @dataclass
@@ -100,7 +103,7 @@ def train_agent(algo: str, corpus, history_length: int, config: OfflineRLConfig,
 
     quiet_d3rlpy()
     if algo not in ALGOS:
-        raise AocError(f"unknown offline RL algorithm {algo!r}: use {' or '.join(ALGOS)}")
+        raise AocError(f"unknown offline RL algorithm {algo!r}: use {', '.join(ALGOS)}")
     if algo == "td3bc" and corpus.discrete:
         raise AocError("td3bc needs continuous actions; use the cql baseline for a discrete "
                        "action space")
@@ -121,6 +124,9 @@ def _fit_agent(d3rlpy, algo: str, corpus, history_length: int, config: OfflineRL
             maximum=np.asarray(high, np.float32).reshape(-1))
     if algo == "td3bc":
         agent = d3rlpy.algos.TD3PlusBCConfig(**common).create(device="cpu:0")
+    elif algo == "bcq":
+        bcq = d3rlpy.algos.DiscreteBCQConfig if corpus.discrete else d3rlpy.algos.BCQConfig
+        agent = bcq(**common).create(device="cpu:0")
     elif corpus.discrete:
         agent = d3rlpy.algos.DiscreteCQLConfig(**common).create(device="cpu:0")
     else:

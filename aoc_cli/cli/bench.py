@@ -22,8 +22,10 @@ def register(app: typer.Typer) -> None:
     @app.command("bench")
     def bench_command(
         experiment: str = typer.Argument(
-            ..., help="pendulum-het, epsilon, k, maze-adapt, two-gates, lunar, ood, all, or "
-                      "ward (ABC against BC, kNN and the majority on held-out patients)."),
+            ..., help="pendulum-het, epsilon, k, maze-adapt, two-gates, lunar, ood, all, "
+                      "ward (ABC against BC, kNN and the majority on held-out patients), or "
+                      "icu-sepsis, icu-sepsis-terminate (AOC against BC, kNN, CQL, BCQ on "
+                      "clinicians' logs, valued exactly)."),
         quick: bool = typer.Option(False, "--quick", help="A reduced run (<= 15 min each)."),
         tiny: bool = typer.Option(False, "--tiny", help="A smoke-test run (seconds; no effect "
                                                         "to read from it)."),
@@ -37,7 +39,8 @@ def register(app: typer.Typer) -> None:
         residual_cap: ResidualCapOption = None,
         sizes: Optional[str] = typer.Option(
             None, "--sizes", help="pendulum-het, lunar: comma-separated rows per corpus "
-                                  "instead of the scale's (e.g. 100000, the paper's Low-Data)."),
+                                  "instead of the scale's (e.g. 100000, the paper's Low-Data); "
+                                  "icu-sepsis: episodes per log (e.g. 1000,10000)."),
         behaviour: str = typer.Option(
             "mix", "--behaviour", help="pendulum-het, lunar: mix (the task's behaviour "
                                        "policies) or replay (an agent that starts random and "
@@ -63,6 +66,9 @@ def register(app: typer.Typer) -> None:
         scale = "tiny" if tiny else "quick" if quick else "full"
         if experiment == "ward":  # imitation on a log: splits, not rollouts (experiments/ward.py)
             _ward(out, bench_store, scale, seeds, fmt)
+            return
+        if experiment in ("icu-sepsis", "icu-sepsis-terminate"):  # exact values (bench/sepsis.py)
+            _sepsis(experiment, out, bench_store, scale, seeds, methods, sizes, fmt)
             return
         chosen = [m.strip() for m in methods.split(",") if m.strip()] if methods else None
         row_counts = _sizes(sizes)
@@ -109,6 +115,18 @@ def _ward(out, bench_store, scale, splits, fmt) -> None:
     message(f"ward: wrote {report['out']}/results.csv, summary.md, summary.json and ward.png "
             f"in {_duration(report['seconds'])}")
     write_records(report["summary"], fmt, title=f"aoc bench ward ({scale})")
+
+
+def _sepsis(task, out, bench_store, scale, seeds, methods, sizes, fmt) -> None:
+    from aoc_cli.experiments.sepsis import run_sepsis
+
+    chosen = [m.strip() for m in methods.split(",") if m.strip()] if methods else None
+    with ProgressBar(f"bench {task}") as bar:
+        report = run_sepsis(out or Path("bench") / task, bench_store, scale, seeds, chosen,
+                            _sizes(sizes), task, log=message, progress=bar)
+    message(f"{task}: wrote {report['out']}/results.csv, summary.md and summary.json in "
+            f"{_duration(report['seconds'])}")
+    write_records(report["summary"], fmt, title=f"aoc bench {task} ({scale})")
 
 
 def _sizes(text: str | None) -> list[int] | None:

@@ -51,6 +51,7 @@ class PolicyName(str, Enum):
     bc = "bc"
     td3bc = "td3bc"
     cql = "cql"
+    bcq = "bcq"
     mpc = "mpc"
 
 

@@ -27,7 +27,7 @@ def test_the_d3rlpy_dataset_keeps_the_corpus_episodes_and_context(pendulum):
                                rtol=1e-6)
 
 
-@pytest.mark.parametrize("algo", ["td3bc", "cql"])
+@pytest.mark.parametrize("algo", ["td3bc", "cql", "bcq"])
 def test_offline_rl_agents_train_and_act_inside_the_box(session, algo):
     from aoc_cli.baselines.offline_rl import OfflineRLConfig
 
