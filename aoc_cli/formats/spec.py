@@ -82,10 +82,10 @@ def parse_spec(value, where) -> dict | None:
                        "the corpus") from None
     keys = ("rows", "episodes", "observation_space", "action_space", "observations_dtype",
             "actions_dtype", "has_rewards", "tags", "columns")
-    if not isinstance(spec, dict) or any(k not in spec for k in keys):
-        raise AocError(f"{where}: the aoc export metadata lacks "
-                       f"{', '.join(k for k in keys if not isinstance(spec, dict) or k not in spec)}"
-                       "; re-export the corpus")
+    missing = [k for k in keys if not isinstance(spec, dict) or k not in spec]
+    if missing:
+        raise AocError(f"{where}: the aoc export metadata lacks {', '.join(missing)}; "
+                       "re-export the corpus")
     if spec.get("version", SPEC_VERSION) > SPEC_VERSION:
         raise AocError(f"{where} was exported by a newer aoc (export spec version "
                        f"{spec['version']}): upgrade aoc to read it exactly")
