@@ -2,9 +2,10 @@
 
 For each log size (episodes of the clinicians' policy, ``aoc collect icu-sepsis``) and seed:
 
-* **aoc** -- AOC as a user gets it: trained as ``aoc train NAME`` trains with no flags (the
-  settings it chooses itself from the log), ``aoc index``, and the controller with the task's
-  own settings (``ControllerConfig.for_task``);
+* **aoc** -- AOC as a user gets it: ``aoc train NAME`` and ``aoc index NAME`` with no flags
+  (run as commands: the settings it takes from the task or chooses from the log), and the
+  controller with the task's own settings (``ControllerConfig.for_task``, as ``aoc rollout
+  --env icu-sepsis``);
 * **knn** -- nearest-neighbour Q on the raw (observation, action) features, k = d_b + 1, with
   AOC's row values (the ``knn`` baseline of ``aoc rollout``);
 * **cql**, **bcq** -- d3rlpy's DiscreteCQL and DiscreteBCQ on the same features and rewards;
@@ -62,24 +63,30 @@ def references(tables) -> dict[str, dict]:
     return out
 
 
-def train_aoc(corpus, seed: int = 0, threads: int = 1, progress=None) -> dict:
-    """Train AOC's model ``default`` as ``aoc train NAME`` does with no flags (the settings it
-    chooses from the log); the training metrics."""
-    from aoc_cli.belief import select
-    from aoc_cli.belief.config import BeliefConfig
-    from aoc_cli.belief.data import prepare
-    from aoc_cli.belief.train import train_model
+def aoc_command(store_root: Path, *args: str) -> dict:
+    """Run ``aoc ARGS --format json`` on the store at ``store_root`` in a child process (the
+    command a user types, so its defaults are exactly theirs); its JSON output. A failure ->
+    AocError with the command's own message."""
+    import os
+    import subprocess
+    import sys
 
-    given = {"history_length": None, "hidden": None, "weight_decay": None}
-    config = select.with_defaults(BeliefConfig(seed=seed, threads=threads), given).validate()
-    config = select.with_imitation_defaults(corpus, config, {}).validate()
-    prepared = prepare(corpus, config, "default", True)
-    open_names = select.open_settings(corpus, config, given)
-    if open_names:
-        return select.select_and_train(corpus, config, open_names, "default", True, prepared,
-                                       progress)
-    return train_model(corpus, config, "default", overwrite=True, progress=progress,
-                       prepared=prepared)
+    env = {**os.environ, "AOC_STORE": str(store_root), "AOC_PROGRESS": "0"}
+    proc = subprocess.run([sys.executable, "-c", "from aoc_cli.cli.app import main; main()",
+                           *args, "--format", "json"], capture_output=True, text=True, env=env)
+    if proc.returncode != 0:
+        last = (proc.stderr.strip().splitlines() or ["no message"])[-1]
+        raise AocError(f"`aoc {' '.join(args)}` failed: {last}")
+    return json.loads(proc.stdout)
+
+
+def train_aoc(store_root: Path, name: str, seed: int = 0) -> dict:
+    """AOC as a user gets it: ``aoc train NAME --seed S`` with no other flag (the settings it
+    takes from the task or chooses from the log) and ``aoc index NAME``; the training
+    metrics."""
+    metrics = aoc_command(store_root, "train", name, "--seed", str(seed), "--overwrite")
+    aoc_command(store_root, "index", name)
+    return metrics
 
 
 def _support(decisions: list) -> dict:
@@ -95,7 +102,7 @@ def run_size(store, task: str, episodes: int, seed: int, cfg: dict, methods: lis
     from aoc_cli.baselines.offline_rl import OfflineRLConfig
     from aoc_cli.control import ControllerConfig
     from aoc_cli.envs import collect, make_env
-    from aoc_cli.session import build_index, open_session
+    from aoc_cli.session import open_session
 
     name = f"{task}-{episodes}-s{seed}"
     data, _summary = collect(task, episodes=episodes, seed=seed)
@@ -118,8 +125,7 @@ def run_size(store, task: str, episodes: int, seed: int, cfg: dict, methods: lis
     session, L, env = None, 0, make_env(task)
     if needs_session:
         started = time.perf_counter()
-        metrics = train_aoc(corpus, seed=seed)
-        build_index(corpus, "default")
+        metrics = train_aoc(store.root, name, seed=seed)
         session = open_session(corpus, "default", config=ControllerConfig.for_task(task))
         L = session.history_length
         train_seconds = time.perf_counter() - started
