@@ -1,6 +1,7 @@
 """``aoc verify [NAME...]``: recompute every checksum the store recorded; one row per file
 (``ok`` / ``damaged`` / ``missing`` / ``unrecorded``), exit 2 when anything is damaged or
-missing. The work is in :mod:`aoc_cli.store.verify`."""
+missing. First it clears the temporaries of dead writers anywhere in the store and orphaned
+lock files, one ``cleared`` row each. The work is in :mod:`aoc_cli.store.verify`."""
 
 from __future__ import annotations
 
@@ -22,13 +23,14 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Check every file of the store against the checksums recorded when it was written."""
         from aoc_cli.report.output import message, progress, write_records
-        from aoc_cli.store.verify import corpora_to_verify, verify_corpus
+        from aoc_cli.store.verify import cleared_rows, corpora_to_verify, verify_corpus
 
         store = get_store()
         chosen = corpora_to_verify(store, list(names or []))
+        cleared = cleared_rows(store)
         if not chosen:
             message(f"no corpora in {store.root}: nothing to verify")
-        rows = []
+        rows = list(cleared)
         with progress(transient=True) as bar:
             task = bar.add_task("verify", total=len(chosen))
             for name in chosen:
@@ -39,9 +41,12 @@ def register(app: typer.Typer) -> None:
                       title=f"aoc verify ({store.root})")
         bad = [r for r in rows if r["status"] in ("damaged", "missing")]
         if bad:
-            raise AocError(f"{len(bad)} of {len(rows)} files damaged or missing, first "
+            raise AocError(f"{len(bad)} of {len(rows) - len(cleared)} files damaged or missing, first "
                            f"{bad[0]['corpus']}/{bad[0]['file']} ({bad[0]['detail']}): "
                            "re-ingest or re-collect a damaged corpus with --overwrite, "
                            "re-train a damaged model with --overwrite, re-run `aoc index` "
                            "for damaged beliefs or an index")
-        message(f"verified {len(rows)} files of {len(chosen)} corpora: all intact")
+        if cleared:
+            message(f"cleared {len(cleared)} leftovers of dead writers")
+        message(f"verified {len(rows) - len(cleared)} files of {len(chosen)} corpora: all "
+                "intact")

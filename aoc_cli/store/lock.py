@@ -13,6 +13,12 @@ at once with one line naming the pid that holds the lock, and nothing is written
 records its pid in the lock file. The kernel releases a lock when its process dies (also on
 kill -9), so a dead writer never leaves a corpus locked. Locks are re-entrant within a process
 (``aoc ingest`` holds the lock it takes again in :meth:`Store.write`).
+
+A lock file whose corpus (or model) does not exist when its last holder lets go (a refused
+ingest, a failed first train) is removed by that holder, under an exclusive lock; whoever
+takes a lock checks afterwards that the file it locked is still the one at the path, and
+starts again if it was removed meanwhile. Taking a corpus lock also clears the temporaries of
+dead writers anywhere in the store (:mod:`aoc_cli.store.sweep`).
 """
 
 from __future__ import annotations
@@ -22,7 +28,7 @@ import fcntl
 import os
 import time
 from pathlib import Path
-from typing import Iterator
+from typing import Callable, Iterator
 
 from aoc_cli.errors import AocError
 
@@ -70,8 +76,13 @@ def _busy(path: Path, what: str) -> AocError:
 
 
 @contextlib.contextmanager
-def file_lock(path: str | os.PathLike, what: str, shared: bool = False) -> Iterator[None]:
-    """Hold an flock on ``path`` (created if missing); AocError at once when it is held."""
+def file_lock(path: str | os.PathLike, what: str, shared: bool = False,
+              keep: Callable[[], bool] | None = None) -> Iterator[bool]:
+    """Hold an flock on ``path`` (created if missing); AocError at once when it is held.
+
+    Yields True when this call took the lock, False when the process already held it.
+    ``keep``: asked when the lock is let go; False removes the lock file (what it guards does
+    not exist), unless another process holds it too."""
     path = Path(path)
     key = str(path.absolute())
     held = _HELD.get(key)
@@ -81,33 +92,71 @@ def file_lock(path: str | os.PathLike, what: str, shared: bool = False) -> Itera
                                "first")
         held[2] += 1
         try:
-            yield
+            yield False
         finally:
             held[2] -= 1
         return
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
-    except OSError as err:
-        raise AocError(f"cannot write to the store: creating the lock file {path} failed "
-                       f"({err.strerror}); is the store folder writable?") from None
-    try:
-        fcntl.flock(fd, (fcntl.LOCK_SH if shared else fcntl.LOCK_EX) | fcntl.LOCK_NB)
-    except BlockingIOError:
-        os.close(fd)
-        raise _busy(path, what) from None
+    fd = _take(path, what, shared)
     try:
         if not shared:
             os.ftruncate(fd, 0)
         os.lseek(fd, 0, os.SEEK_END)
         os.write(fd, f"{os.getpid()}\n".encode())
         _HELD[key] = [fd, not shared, 1]
-        yield
+        yield True
     finally:
         _HELD.pop(key, None)
+        if keep is not None:
+            with contextlib.suppress(Exception):
+                if not keep():
+                    remove_locked(fd, path, exclusive=not shared)
         with contextlib.suppress(OSError):
             fcntl.flock(fd, fcntl.LOCK_UN)
         os.close(fd)
+
+
+def _take(path: Path, what: str, shared: bool) -> int:
+    """Open and flock ``path``; the fd of a lock on the file that is at the path now."""
+    for _ in range(100):
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+        except OSError as err:
+            raise AocError(f"cannot write to the store: creating the lock file {path} failed "
+                           f"({err.strerror}); is the store folder writable?") from None
+        try:
+            fcntl.flock(fd, (fcntl.LOCK_SH if shared else fcntl.LOCK_EX) | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            raise _busy(path, what) from None
+        if _same_file(fd, path):
+            return fd
+        os.close(fd)  # removed (and perhaps re-created) by a holder letting go: again
+    raise AocError(f"cannot take the lock {path}: it keeps being removed; run this again")
+
+
+def _same_file(fd: int, path: Path) -> bool:
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        return False
+    own = os.fstat(fd)
+    return (own.st_dev, own.st_ino) == (st.st_dev, st.st_ino)
+
+
+def remove_locked(fd: int, path: Path, exclusive: bool) -> bool:
+    """Remove the lock file ``path`` locked through ``fd`` when no other process holds it
+    (a shared lock is first made exclusive, without waiting). True when removed."""
+    if not exclusive:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            return False
+    if not _same_file(fd, path):
+        return False
+    with contextlib.suppress(FileNotFoundError):
+        os.unlink(path)
+    return True
 
 
 def corpus_lock_path(root: Path, name: str) -> Path:
@@ -116,17 +165,32 @@ def corpus_lock_path(root: Path, name: str) -> Path:
 
 @contextlib.contextmanager
 def writing_corpus(root: str | os.PathLike, name: str, shared: bool = False) -> Iterator[None]:
-    """The corpus lock: exclusive for ingest/collect, shared for train/index."""
-    with file_lock(corpus_lock_path(Path(root), name), f"corpus {name!r}", shared=shared):
+    """The corpus lock: exclusive for ingest/collect, shared for train/index. Its file goes
+    when the corpus does not exist as the lock is let go; taking it clears the temporaries of
+    dead writers anywhere in the store."""
+    root = Path(root)
+    with file_lock(corpus_lock_path(root, name), f"corpus {name!r}", shared=shared,
+                   keep=lambda: (root / name).exists()) as taken:
+        if taken:
+            from aoc_cli.store.sweep import clear_dead
+
+            with contextlib.suppress(OSError):
+                clear_dead(root)
         yield
 
 
 @contextlib.contextmanager
 def writing_model(corpus_path: str | os.PathLike, model_id: str) -> Iterator[None]:
-    """What train and index of one model hold: the corpus lock shared, the model's exclusive."""
+    """What train and index of one model hold: the corpus lock shared, the model's exclusive
+    (its file goes when the model does not exist as it is let go)."""
     corpus_path = Path(corpus_path)
     root, name = corpus_path.parent, corpus_path.name
     with writing_corpus(root, name, shared=True), \
-            file_lock(root / f".{name}.model-{model_id}.lock",
-                      f"model {model_id!r} of corpus {name!r}"):
+            file_lock(model_lock_path(root, name, model_id),
+                      f"model {model_id!r} of corpus {name!r}",
+                      keep=lambda: (corpus_path / "models" / model_id).exists()):
         yield
+
+
+def model_lock_path(root: Path, name: str, model_id: str) -> Path:
+    return Path(root) / f".{name}.model-{model_id}.lock"

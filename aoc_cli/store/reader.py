@@ -104,7 +104,27 @@ class Corpus:
         """Recompute the content hash from the columns (read anyway by train and index, and
         cached) and refuse a corpus whose data changed since it was written."""
         if self.content_hash() != self.hash:
-            raise self.damaged("its arrays no longer match the manifest's content hash")
+            changed = self.changed_arrays()
+            which = f" (changed: {', '.join(changed)})" if changed else ""
+            raise self.damaged(f"its arrays no longer match the manifest's content hash{which}")
+
+    def changed_arrays(self) -> list[str] | None:
+        """The arrays of corpus.h5 whose checksum differs from the one the manifest records
+        (``arrays``), or that cannot be read; None for a corpus written without them."""
+        from aoc_cli.store.atomic import array_checksum
+
+        recorded = self.manifest.get("arrays")
+        if not isinstance(recorded, dict):
+            return None
+        changed = []
+        for key, crc in recorded.items():
+            try:
+                same = array_checksum(self.read(key)) == crc
+            except Exception:  # noqa: BLE001 - an unreadable array is a changed one
+                same = False
+            if not same:
+                changed.append(key)
+        return changed
 
     def content_hash(self) -> str:
         """The content hash of the arrays as stored now (reads every hashed column)."""

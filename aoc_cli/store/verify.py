@@ -3,8 +3,9 @@ artefact is opened and in full by ``aoc verify``.
 
 What is recorded when written:
 
-* ``manifest.json``: the content hash of the arrays, ``files`` (size + SHA-256 of
-  ``corpus.h5``) and its own seal (``sha256`` of its other keys);
+* ``manifest.json``: the content hash of the arrays, a CRC-32 per array (``arrays``: the
+  content row names the changed ones), ``files`` (size + SHA-256 of ``corpus.h5``) and its
+  own seal (``sha256`` of its other keys);
 * ``models/<id>/config.json``: ``files`` (weights.pt, values.npy, metrics.csv), sealed;
 * ``models/<id>/beliefs.json``: ``files`` (beliefs.npy), sealed;
 * ``models/<id>/index/<index_id>/index.json``: ``files`` (index.faiss, its .json and row
@@ -12,7 +13,7 @@ What is recorded when written:
 
 :func:`verify_store` recomputes every one of them and the corpus content hash: one row per
 file, ``ok`` / ``damaged`` / ``missing`` (``unrecorded``: written by an older aoc, no checksum
-to compare with).
+to compare with). :func:`cleared_rows` clears what dead writers left (``cleared`` rows).
 """
 
 from __future__ import annotations
@@ -142,9 +143,19 @@ def _content_row(store, name: str) -> dict:
 
     try:
         corpus = Corpus(store.path(name))
-        same = corpus.content_hash() == corpus.hash
+        failed = None
+        try:
+            same = corpus.content_hash() == corpus.hash
+        except AocError as err:
+            same, failed = False, str(err).split(": ", 1)[-1][:160]
         detail = "the arrays hash to the manifest's content_hash" if same else \
-            "the arrays no longer hash to the manifest's content_hash"
+            failed or "the arrays no longer hash to the manifest's content_hash"
+        if not same:
+            changed = corpus.changed_arrays()
+            if changed:
+                detail += f"; changed: {', '.join(changed)}"
+            elif changed is None:
+                detail += " (no checksum per array: written by an older aoc)"
         status = "ok" if same else "damaged"
     except AocError as err:
         status, detail = "damaged", str(err).split(": ", 1)[-1][:160]
@@ -189,6 +200,20 @@ def corpora_to_verify(store, names: list[str] | None = None) -> list[str]:
             known = ", ".join(store.names()) or "none"
             raise AocError(f"no corpus {name!r} in store {store.root} (known: {known})")
     return list(names)
+
+
+def cleared_rows(store) -> list[dict]:
+    """Clear what dead writers left in the store (:func:`aoc_cli.store.sweep.clear_dead`) and
+    return one ``cleared`` row per removed temporary or lock file."""
+    from aoc_cli.store.sweep import clear_dead
+
+    rows = []
+    for r in clear_dead(store.root):
+        detail = (f"temporary of a dead writer (pid {r['pid']}), removed" if r["what"] ==
+                  "temporary" else "lock file of a corpus or model that does not exist, removed")
+        rows.append({"corpus": r["corpus"], "file": r["path"], "status": "cleared",
+                     "detail": detail})
+    return rows
 
 
 def verify_store(store, names: list[str] | None = None) -> list[dict]:

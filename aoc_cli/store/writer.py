@@ -1,9 +1,10 @@
 """Writing a corpus: validate, then build ``corpus.h5`` + ``manifest.json`` in a temporary
 folder beside the corpus folder and rename it into place, under the corpus's writer lock.
 
-The manifest records the content hash of the arrays (:func:`content_hash`), the size and
-SHA-256 of ``corpus.h5`` (``files``) and is sealed with the SHA-256 of its own content, so
-``aoc verify`` can tell a changed byte anywhere.
+The manifest records the content hash of the arrays (:func:`content_hash`), a CRC-32 of each of
+them (``arrays``, so that a changed array is named), the size and SHA-256 of ``corpus.h5``
+(``files``) and is sealed with the SHA-256 of its own content, so ``aoc verify`` can tell a
+changed byte anywhere.
 """
 
 from __future__ import annotations
@@ -16,7 +17,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from aoc_cli.store.atomic import atomic_dir, file_record, hash_arrays, seal, write_json
+from aoc_cli.store.atomic import array_checksum, atomic_dir, file_record, hash_arrays, seal, \
+    write_json
 from aoc_cli.store.corpus import CorpusData, episode_starts_from_lengths
 from aoc_cli.store.lock import writing_corpus
 from aoc_cli.store.reader import SCHEMA_VERSION, Corpus
@@ -50,10 +52,12 @@ def write_corpus(root: Path, name: str, data: CorpusData, *, overwrite: bool = F
         with atomic_dir(store.path(name)) as tmp:
             digest = _write_h5(tmp / "corpus.h5", data,
                                FLOAT_OPTS if float_opts is None else float_opts)
+            arrays = {key: array_checksum(arr) for key, arr in hashed_arrays(data).items()}
             if keep_models is not None and keep_models.is_dir():
                 shutil.copytree(keep_models, tmp / "models")
             files = {"corpus.h5": file_record(tmp / "corpus.h5")}
-            write_json(tmp / "manifest.json", _manifest(name, data, digest, sources, files))
+            write_json(tmp / "manifest.json",
+                       _manifest(name, data, digest, sources, files, arrays))
         return store.corpus(name)
 
 
@@ -150,6 +154,19 @@ def _write_h5(path: Path, data: CorpusData, float_opts: dict) -> str:
                         {k: c for k, (c, _labels) in data.tags.items()}, data.columns)
 
 
+def hashed_arrays(data: CorpusData) -> dict[str, np.ndarray]:
+    """The arrays the content hash covers, by their key in corpus.h5 (what ``arrays`` of the
+    manifest records a checksum of)."""
+    out = {"observations": data.observations, "actions": data.actions}
+    if data.rewards is not None:
+        out["rewards"] = data.rewards
+    out.update(terminals=data.terminals, truncations=data.truncations,
+               episode_starts=data.episode_starts)
+    out.update({f"tags/{k}": c for k, (c, _labels) in sorted(data.tags.items())})
+    out.update({f"columns/{k}": data.columns[k] for k in sorted(data.columns)})
+    return out
+
+
 def content_hash(observations, actions, rewards, terminals, truncations, episode_starts,
                  tags: dict, columns: dict) -> str:
     """The corpus content hash: SHA-256 (128 bits) of the arrays in a fixed order (tag codes
@@ -161,7 +178,7 @@ def content_hash(observations, actions, rewards, terminals, truncations, episode
 
 
 def _manifest(name: str, data: CorpusData, digest: str, sources: list[dict],
-              files: dict) -> dict:
+              files: dict, arrays: dict) -> dict:
     return seal({
         "schema_version": SCHEMA_VERSION,
         "name": name,
@@ -174,6 +191,7 @@ def _manifest(name: str, data: CorpusData, digest: str, sources: list[dict],
         "tags": {k: labels for k, (_c, labels) in data.tags.items()},
         "columns": sorted(data.columns),
         "content_hash": digest,
+        "arrays": arrays,
         "sources": sources,
         "files": files,
     })

@@ -16,7 +16,7 @@ from tests.formats.sources import flat_arrays, write_csv, write_d4rl
 
 def snapshot(root):
     """Every file under the store with its content hash (and every folder, incl. temporaries);
-    not the writer lock files ``.NAME.lock`` (a pid, no data; never removed)."""
+    not the writer lock files ``.NAME.lock`` (a pid, no data; those of existing corpora stay)."""
     out = {}
     if not os.path.exists(root):
         return out

@@ -91,9 +91,14 @@ def test_changed_rewards_are_found_by_verify_train_and_index(store, aoc):
     code, rows, _ = verify_rows(aoc, "m")
     assert code == 2 and rows["corpus.h5"] == "damaged" and rows["corpus.h5 (content)"] == \
         "damaged"
+    # the damaged array is named (a CRC-32 per array in the manifest), and only it
+    out = aoc("verify", "m", "-f", "json")[1]
+    content = next(r for r in json.loads(out) if r["file"] == "corpus.h5 (content)")
+    assert content["detail"].endswith("changed: rewards"), content
     before = snapshot(store)
     one_line_error(*aoc("train", "m", "--model", "other", "--epochs", "1"),
-                   r"corpus 'm' is damaged: its arrays no longer match.*aoc verify m")
+                   r"corpus 'm' is damaged: its arrays no longer match.*\(changed: rewards\).*"
+                   r"aoc verify m")
     one_line_error(*aoc("index", "m", "--index-id", "again"),
                    r"corpus 'm' is damaged: its arrays no longer match.*aoc verify m")
     assert snapshot(store) == before

@@ -155,3 +155,16 @@ def test_jsonl_queries_that_are_not_numbers(tmp_path):
     obs, hist, _a, _c = parse_query('{"observation": [1, 2], "history": [[1, 2, 3, 4, 5]]}',
                                     1, corpus, 2)
     assert obs.shape == (2,) and hist.mask.sum() == 1
+
+
+def test_refused_ingests_leave_no_lock_files(store, aoc, tmp_path):
+    """Nine bad inputs into a store holding a corpus: `ls -a` shows only that corpus's lock."""
+    good = write_csv(tmp_path / "good.csv", ["episode", "t", "obs_0", "act_0"],
+                     [[e, t, 0.1 * t, 1.0] for e in range(3) for t in range(5)])
+    code, _, err = aoc("ingest", str(good), "--name", "kept")
+    assert code == 0, err
+    bad = tmp_path / "bad.csv"
+    bad.write_text("episode,t,obs_0,act_0\n1,0,0.5,zz\n1,1,0.5,\n")
+    for i in range(9):
+        one_line_error(*aoc("ingest", str(bad), "--name", f"x{i}", "--format", "csv"))
+    assert sorted(p.name for p in store.iterdir()) == [".kept.lock", "kept"]

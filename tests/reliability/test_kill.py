@@ -92,3 +92,37 @@ def test_a_live_writers_temporary_is_left_alone(corpus, tmp_path):
         proc.wait()
     time.sleep(0.05)
     assert remove_stale(store / "c") and temporaries(store) == []
+
+
+def killed_ingest(store, source) -> tuple[int, list[str]]:
+    """kill -9 an append to corpus c mid-write: (its pid, the temporaries it left)."""
+    proc = start_slow_ingest(store, source)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(timeout=30)
+    left = temporaries(store)
+    assert left and all(name.startswith(f".c.p{proc.pid}.") for name in left)
+    return proc.pid, left
+
+
+def test_a_write_of_another_corpus_clears_a_killed_writers_temporaries(corpus):
+    store, source = corpus
+    killed_ingest(store, source)
+    other = spawn("ingest", str(source), "--name", "d", store=store)
+    assert other.wait(timeout=120) == 0, other.stderr.read()
+    assert temporaries(store) == []
+    assert rows_of(store, "c") == 400 and rows_of(store, "d") == 400
+
+
+def test_verify_clears_and_lists_a_killed_writers_temporaries(corpus):
+    import json
+
+    store, source = corpus
+    pid, left = killed_ingest(store, source)
+    check = spawn("verify", "-f", "json", store=store)
+    out, err = check.communicate(timeout=120)
+    assert check.returncode == 0, err
+    cleared = [r for r in json.loads(out) if r["status"] == "cleared"]
+    assert sorted(r["file"] for r in cleared) == left
+    assert all(r["corpus"] == "c" and f"pid {pid}" in r["detail"] for r in cleared)
+    assert temporaries(store) == []
+    assert f"cleared {len(left)} leftovers of dead writers" in err
