@@ -23,7 +23,7 @@ BELIEFS = ("value", "critic", "reward", "dynamics")
 #: The dynamics weight ``--belief dynamics`` implies when none is given.
 DEFAULT_DYNAMICS_WEIGHT = 1.0
 #: Value targets computed from the rewards; any other name is a numeric corpus column.
-REWARD_TARGETS = ("return", "mean-return", "reward")
+REWARD_TARGETS = ("return", "mean-return", "reward", "fqe")
 
 
 @dataclass

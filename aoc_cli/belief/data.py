@@ -54,13 +54,16 @@ class TrainingData:
     val_rows: np.ndarray
 
 
-def prepare(corpus, config: BeliefConfig, model_id: str, overwrite: bool) -> TrainingData:
-    """Check the request (config, model id, value target, split) and compute the targets."""
+def prepare(corpus, config: BeliefConfig, model_id: str, overwrite: bool,
+            progress=None) -> TrainingData:
+    """Check the request (config, model id, value target, split) and compute the targets;
+    ``progress`` follows a target that takes a while (``fqe``'s backups)."""
     config.validate()
     if model_dir(corpus, model_id).exists() and not overwrite:
         raise AocError(f"model {model_id!r} of corpus {corpus.name!r} already exists: pass "
                        "--overwrite to replace it, or choose another --model")
-    values = value_targets(corpus, config.value, config.gamma) if config.mode == "value" else None
+    values = (value_targets(corpus, config.value, config.gamma, progress=progress)
+              if config.mode == "value" else None)
     train_eps, val_eps = split_episodes(corpus.n_episodes, config.val_fraction, config.seed)
     starts = corpus.episode_starts
     return TrainingData(values, train_eps, val_eps, episode_rows(starts, train_eps),

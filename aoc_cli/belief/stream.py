@@ -169,6 +169,8 @@ def block_value_targets(corpus, cols: Columns, ranges, value: str, gamma: float)
     """(N,) float64 value targets computed block by block (whole episodes each): the same
     numbers as :func:`aoc_cli.belief.targets.value_targets`, which needs the whole rewards
     column and several (N,) float64 temporaries at once."""
+    if value == "fqe":  # bootstrapped through the whole log: computed on all of it at once
+        return value_targets(corpus, value, gamma)
     out = np.empty(cols.n_rows, dtype=np.float64)
     key = "rewards" if value in ("return", "mean-return", "reward") else f"columns/{value}"
     try:

@@ -6,6 +6,9 @@
   is no bootstrapping from a value estimate, so no model enters the target.
 * ``mean-return``: the mean of the remaining rewards ``(1 / (T_e - t)) sum_{k = t}^{T_e - 1} r_k``.
 * ``reward``: the immediate reward ``r_t``.
+* ``fqe``: the logged behaviour's action value ``Q(o_t, a_t)`` by fitted Q evaluation with
+  SARSA targets ``r_t + gamma Q(o_{t+1}, a_{t+1})`` (bootstrapped through the log's own next
+  steps; :mod:`aoc_cli.belief.fqe`).
 * any other name: a numeric per-row column of the corpus, used as is.
 """
 
@@ -67,8 +70,9 @@ def mean_remaining_reward(rewards: np.ndarray, episode_starts: np.ndarray) -> np
     return discounted_return_to_go(rewards, starts, 1.0) / remaining
 
 
-def value_targets(corpus, value: str, gamma: float) -> np.ndarray:
-    """(N,) float64 value target v of every row of ``corpus`` (see the module docstring)."""
+def value_targets(corpus, value: str, gamma: float, progress=None) -> np.ndarray:
+    """(N,) float64 value target v of every row of ``corpus`` (see the module docstring);
+    ``progress`` (:mod:`aoc_cli.progress`) follows ``fqe``'s backups."""
     if value in REWARD_TARGETS:
         if not corpus.has_rewards:
             raise AocError(
@@ -78,6 +82,13 @@ def value_targets(corpus, value: str, gamma: float) -> np.ndarray:
         rewards = corpus.rewards
         if value == "reward":
             v = np.asarray(rewards, dtype=np.float64).copy()
+        elif value == "fqe":
+            from aoc_cli.belief.fqe import fitted_q_values
+
+            v = fitted_q_values(corpus.observations, corpus.actions, rewards,
+                                corpus.episode_starts, gamma,
+                                n_actions=corpus.n_actions if corpus.discrete else None,
+                                progress=progress)
         elif value == "mean-return":
             v = mean_remaining_reward(rewards, corpus.episode_starts)
         else:
@@ -87,8 +98,8 @@ def value_targets(corpus, value: str, gamma: float) -> np.ndarray:
         if value not in columns:
             known = ", ".join(columns) or "none"
             raise AocError(
-                f"unknown --value {value!r}: use return, mean-return, reward or a numeric column "
-                f"of corpus {corpus.name!r} (columns: {known})"
+                f"unknown --value {value!r}: use return, mean-return, reward, fqe or a numeric "
+                f"column of corpus {corpus.name!r} (columns: {known})"
             )
         v = np.asarray(corpus.column(value), dtype=np.float64).copy()
     bad = ~np.isfinite(v)
@@ -103,7 +114,14 @@ def value_targets(corpus, value: str, gamma: float) -> np.ndarray:
 def value_spec(value: str, gamma: float) -> dict:
     """How v was computed, as recorded in the model's config.json."""
     spec: dict = {"target": value}
-    if value == "return":
+    if value == "fqe":
+        from aoc_cli.belief.fqe import FQEConfig
+
+        spec["gamma"] = gamma
+        spec["definition"] = ("the logged behaviour's Q(o, a) by fitted Q evaluation "
+                              "(SARSA targets through the log's next steps)")
+        spec["fqe"] = FQEConfig().to_dict()
+    elif value == "return":
         spec["gamma"] = gamma
         spec["definition"] = ("discounted return-to-go within the logged episode, "
                               "no bootstrapping at truncated ends")

@@ -129,6 +129,11 @@ ResidualCapOption = Annotated[Optional[float], typer.Option(
     "--residual-cap", help="Also drop candidates whose residual exceeds this many times the "
                            "corpus's typical p90 residual (default: no cap).")]
 
+MinSupportOption = Annotated[Optional[float], typer.Option(
+    "--min-support", help="Value mode: also drop candidates whose value is backed by fewer than "
+                          "this many distinct episodes (the support shown by aoc explain; "
+                          "default: the task's setting, else no minimum).")]
+
 CandidatesOption = Annotated[Optional[int], typer.Option(
     "--candidates", "-K", help="Candidate actions per step (default: the task's, else 100).")]
 

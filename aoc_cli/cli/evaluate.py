@@ -11,7 +11,7 @@ from typing import Annotated, Optional
 import typer
 
 from aoc_cli.cli.common import (CandidatesOption, CorpusArgument, EpsilonOption,
-                                FormatOption, IndexOption, KOption, ModelOption,
+                                FormatOption, IndexOption, KOption, MinSupportOption, ModelOption,
                                 RayAddressOption, WorkersOption, get_store)
 from aoc_cli.errors import AocError
 from aoc_cli.report import resolve_format, write_object, write_records
@@ -40,6 +40,7 @@ def register(app: typer.Typer) -> None:
         candidates: CandidatesOption = None,
         epsilon: EpsilonOption = None,
         k: KOption = None,
+        min_support: MinSupportOption = None,
         exact: Annotated[Optional[bool], typer.Option(
             "--exact/--ivf", help="Search the index exactly for every step, or an IVF structure "
                                   "built for the run (default: exact up to 20,000 corpus rows, "
@@ -65,7 +66,8 @@ def register(app: typer.Typer) -> None:
         corpus = store.corpus(name)
         held_out = corpus if data == name else store.corpus(data)
         config = ControllerConfig.for_task(_collected_task(corpus), candidates=candidates,
-                                           epsilon=epsilon, k=k, residual_cap=None)
+                                           epsilon=epsilon, k=k, residual_cap=None,
+                                           min_support=min_support)
         session = open_session(corpus, model, index_id, config, seed=seed)
         with ProgressBar(f"evaluate {name} on {data}", held_out.n_rows,
                          transient=True) as on_progress:

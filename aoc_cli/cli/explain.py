@@ -9,8 +9,8 @@ from typing import Annotated, List, Optional
 import typer
 
 from aoc_cli.cli.common import (CandidatesOption, CorpusArgument, EpsilonOption, FormatOption,
-                                IndexOption, KOption, ModelOption, ResidualCapOption,
-                                get_store)
+                                IndexOption, KOption, MinSupportOption, ModelOption,
+                                ResidualCapOption, get_store)
 from aoc_cli.errors import AocError
 from aoc_cli.report import resolve_format, write_object, write_records
 
@@ -39,6 +39,7 @@ def register(app: typer.Typer) -> None:
         candidates: CandidatesOption = None,
         epsilon: EpsilonOption = None,
         k: KOption = None,
+        min_support: MinSupportOption = None,
         residual_cap: ResidualCapOption = None,
         seed: Annotated[int, typer.Option("--seed", help="Seed of the candidates.")] = 0,
         fmt: FormatOption = None,
@@ -55,7 +56,8 @@ def register(app: typer.Typer) -> None:
         store = get_store()
         corpus = store.corpus(name)
         config = ControllerConfig.for_task(_collected_task(corpus), candidates=candidates,
-                                           epsilon=epsilon, k=k, residual_cap=residual_cap)
+                                           epsilon=epsilon, k=k, residual_cap=residual_cap,
+                                           min_support=min_support)
         opened = dict(model_id=model, index_id=index_id, config=config, seed=seed)
         if data is not None:
             source = corpus if data == name else store.corpus(data)
@@ -148,7 +150,7 @@ def _read_lines(source: str) -> list[tuple[int, str]]:
 def _flat(rec: dict) -> list[dict]:
     """One row per supporting example, with the decision's figures repeated (for CSV)."""
     base = {k: rec.get(k) for k in ("query", "role", "data", "episode", "step", "action",
-                                     "value", "residual") if k in rec}
+                                     "value", "residual", "support_episodes") if k in rec}
     rows = []
     for s in rec["support"]:
         row = dict(base)
@@ -173,7 +175,8 @@ def _print(records: list[dict], fmt: str) -> None:
         for rec in records:
             typical = rec.get("typical_residual")
             head = {"action": rec["action"], "value (v_hat)": rec["value"],
-                    "residual": rec["residual"]}
+                    "residual": rec["residual"],
+                    "support (episodes)": rec.get("support_episodes")}
             if typical:
                 head["typical residual"] = typical
                 head["residual / typical"] = rec["residual"] / typical if typical else None
@@ -197,7 +200,8 @@ def _print(records: list[dict], fmt: str) -> None:
                      **({"episode_id": s["episode_id"]} if s.get("episode_id") is not None
                         else {}),
                      "step": s["step"], **s["tags"], "action": s["action"], "value": s["value"],
-                     "weight": s["weight"], "distance": s["distance"]} for s in rec["support"]]
+                     "weight": s["weight"], "distance": s["distance"],
+                     "episodes here": s.get("episodes_here")} for s in rec["support"]]
             write_records(rows, "table", title="minimal corpus subset")
             for w in rec["warnings"]:
                 console.print(f"[yellow]warning:[/] {w}")

@@ -9,7 +9,7 @@ import typer
 
 from aoc_cli.cli.common import (CandidatesOption, CorpusArgument, EpisodesOption,
                                 EpsilonOption, ExcludeOption, FormatOption, IndexOption,
-                                KOption, ModelOption, PolicyName, PolicyOption,
+                                KOption, MinSupportOption, ModelOption, PolicyName, PolicyOption,
                                 ResidualCapOption, SamplerName, SamplerOption, SelectOption,
                                 choice, get_store, parse_selection)
 from aoc_cli.errors import AocError
@@ -33,6 +33,7 @@ def register(app: typer.Typer) -> None:
         candidates: CandidatesOption = None,
         epsilon: EpsilonOption = None,
         k: KOption = None,
+        min_support: MinSupportOption = None,
         residual_cap: ResidualCapOption = None,
         sampler: SamplerOption = SamplerName.uniform,
         select: SelectOption = None,
@@ -63,7 +64,8 @@ def register(app: typer.Typer) -> None:
         _check_arguments(store, episodes, noise_std, audit, plot)
         corpus = store.corpus(name)
         config = ControllerConfig.for_task(env, candidates=candidates, epsilon=epsilon, k=k,
-                                           sampler=sampler, residual_cap=residual_cap)
+                                           sampler=sampler, residual_cap=residual_cap,
+                                           min_support=min_support)
         environment = make_env(env)
         selection = row_selection(corpus, parse_selection(select, "--select"),
                                   parse_selection(exclude, "--exclude"))

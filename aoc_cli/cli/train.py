@@ -38,8 +38,10 @@ def train(
                                                 "behaviour-cloning term (0: plain TD3)."),
     value: str = typer.Option(_D.value, "--value",
                               help="Value target: return (discounted return-to-go), "
-                                   "mean-return, reward, or a numeric corpus column."),
-    gamma: float = typer.Option(_D.gamma, "--gamma", help="Discount of --value return."),
+                                   "mean-return, reward, fqe (the behaviour's Q by fitted Q "
+                                   "evaluation, bootstrapped through the log), or a numeric "
+                                   "corpus column."),
+    gamma: float = typer.Option(_D.gamma, "--gamma", help="Discount of --value return and fqe."),
     history_length: Optional[int] = typer.Option(
         None, "--history-length", help="Previous transitions of the episode the GRU reads "
                                        "(0: no history; default: chosen by validation among "
@@ -147,7 +149,11 @@ def _train(corpus, config: BeliefConfig, model: str, overwrite: bool, open_names
     """Check the inputs (and the corpus's content hash), then train with a progress bar;
     with ``open_names``, choose those settings by validation first (aoc_cli.belief.select)."""
     name = corpus.name
-    prepared = prepare(corpus, config, model, overwrite)
+    if config.mode == "value" and config.value == "fqe":
+        with ProgressBar(f"fitted Q evaluation of {name}", 1, transient=True) as bar:
+            prepared = prepare(corpus, config, model, overwrite, progress=bar)
+    else:
+        prepared = prepare(corpus, config, model, overwrite)
     corpus.verify_content()  # the columns prepare read are cached: hashing reads nothing again
     from aoc_cli.belief.train import train_model  # imports torch: only once the input is good
 

@@ -23,7 +23,10 @@ class ControllerConfig:
 
     :math:`r_{90}` the 90th percentile of the residuals of held-out corpus rows decomposed
     against the other rows (``index.json`` ``typical_residual.p90``); when no candidate has
-    :math:`r \le \tau`, the smallest-residual candidate is kept. In imitation mode (ABC) there are no candidates: the decision is the weighted
+    :math:`r \le \tau`, the smallest-residual candidate is kept. With ``min_support`` m, a
+    candidate must also be backed by at least m distinct episodes (its support, the effective
+    number of episodes behind its v_hat; :mod:`aoc_cli.control.support`). In imitation mode
+    (ABC) there are no candidates: the decision is the weighted
     action of the minimal corpus subset of :math:`b(o_t, h_t)`.
     """
 
@@ -34,6 +37,10 @@ class ControllerConfig:
     residual_cap: float | None = None
     """c: also drop candidates whose residual exceeds c x the corpus's typical p90 residual
     (None: no cap; ignored for an index built without ``typical_residual``)."""
+    min_support: float | None = None
+    """m: also drop candidates whose value is backed by fewer than m distinct episodes (the
+    support, :mod:`aoc_cli.control.support`); none has m: the best supported of those that
+    pass the residual filter. None: no minimum (the paper's rule)."""
     k: int | None = None
     """Nearest corpus beliefs per query; None = the index's (``index.json`` ``k``): 2 (d_b + 1),
     or for an imitation model of discrete actions (d_b + 1) / the rarest action's share,
@@ -75,6 +82,9 @@ class ControllerConfig:
             raise AocError(f"candidates must be >= 1, got {self.candidates}", "candidates")
         if self.residual_cap is not None and not self.residual_cap > 0:
             raise AocError(f"residual_cap must be > 0, got {self.residual_cap}", "residual_cap")
+        if self.min_support is not None and not self.min_support >= 1:
+            raise AocError(f"min_support must be >= 1 episode, got {self.min_support}",
+                           "min_support")
         if self.k is not None and self.k < 1:
             raise AocError(f"k must be >= 1, got {self.k}", "k")
         if self.sampler not in ("uniform", "bc"):

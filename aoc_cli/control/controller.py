@@ -8,7 +8,8 @@ One step, top to bottom:
 3. one batched decomposition against the corpus beliefs: corpus residual, minimal corpus
    subset and value estimate ``v_hat = sum_c w^c v^c`` for every candidate;
 4. keep the candidates whose residual is within the epsilon-quantile of the K residuals
-   (and, with ``residual_cap`` c, within c x the corpus's typical p90 residual);
+   (and, with ``residual_cap`` c, within c x the corpus's typical p90 residual; with
+   ``min_support`` m, backed by at least m distinct episodes: aoc_cli/control/support.py);
 5. the argmax of ``v_hat`` among them (ties: the smaller residual).
 
 In imitation mode (ABC) the belief is ``b(o_t, h_t)`` and the decision is the weighted action
@@ -22,6 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from aoc_cli.control.config import ControllerConfig
+from aoc_cli.control.support import row_episodes, support_episodes, support_filter
 from aoc_cli.errors import AocError
 from aoc_cli.store import History
 from aoc_cli.threads import one_thread
@@ -35,6 +37,9 @@ class Decision:
     the minimal corpus subset, ``support_weights`` (m,), ``support_distances`` (m,) belief
     distances to the query. ``candidates`` (K, d_a) or (K,), with ``candidate_residuals``,
     ``candidate_values`` (K,) and ``passed`` (K,) bool (empty in imitation mode).
+    ``support``: the effective number of distinct episodes behind the decision's value
+    (:mod:`aoc_cli.control.support`), ``candidate_support`` (K,) each candidate's,
+    ``support_counts`` (m,) the distinct episodes at each supporting row's belief.
     """
 
     action: np.ndarray
@@ -50,6 +55,9 @@ class Decision:
     chosen: int
     threshold: float
     warnings: list[str] = field(default_factory=list)
+    support: float = float("nan")
+    candidate_support: np.ndarray = field(default_factory=lambda: np.empty(0))
+    support_counts: np.ndarray = field(default_factory=lambda: np.empty(0, np.int64))
 
 
 def action_bounds(action_space: dict, actions: np.ndarray | None = None):
@@ -103,6 +111,7 @@ class Controller:
             self.span = np.maximum(self.high - self.low, 1e-12)
         values = index.values
         self.value_std = float(np.std(values)) if values is not None and len(values) else 1.0
+        self.row_episode = row_episodes(corpus.episode_starts)
 
     # -- candidates ------------------------------------------------------------------------
     def sample_candidates(self, observation: np.ndarray, history: History) -> np.ndarray:
@@ -148,8 +157,10 @@ class Controller:
             dec = self.index.decompose(beliefs, k=self.config.k, selection=self._rows(selection))
         residual = np.asarray(dec.residual, dtype=np.float64)
         value = np.asarray(dec.value, dtype=np.float64)
+        support, counts = self.support(dec)
         if choose:
             threshold, passed = self.candidate_filter(residual)
+            passed = support_filter(passed, support, self.config.min_support)
             order = np.lexsort((residual, -value))  # by value desc, then residual asc
             chosen = int(next(i for i in order if passed[i]))
         else:
@@ -167,9 +178,18 @@ class Controller:
             passed=passed,
             chosen=chosen,
             threshold=threshold,
+            support=float(support[chosen]),
+            candidate_support=support,
+            support_counts=_trim(counts[chosen], dec.rows[chosen]),
         )
         decision.warnings = self.heterogeneity(decision)
         return decision
+
+    def support(self, dec) -> tuple[np.ndarray, np.ndarray]:
+        """(Q,) the effective number of distinct episodes behind each of ``dec``'s values and
+        (Q, m) the episodes at each vertex (:func:`aoc_cli.control.support.support_episodes`)."""
+        return support_episodes(self.index.beliefs, dec.rows, dec.weights, dec.neighbours,
+                                self.row_episode)
 
     def candidate_filter(self, residual: np.ndarray) -> tuple[float, np.ndarray]:
         """(threshold, passed (K,) bool): residual <= min(q_epsilon, c x typical p90).
@@ -212,13 +232,15 @@ class Controller:
         else:
             action = (weights[:, None] * actions).sum(axis=0)
         value = None if dec.value is None else float(dec.value[0])
+        support, counts = self.support(dec)
         decision = Decision(
             action=action, value=value, residual=float(dec.residual[0]),
             support_rows=rows, support_weights=weights,
             support_distances=_trim(dec.distance[0], dec.rows[0]),
             candidates=np.empty((0,)), candidate_residuals=np.empty(0),
             candidate_values=np.empty(0), passed=np.empty(0, bool), chosen=-1,
-            threshold=float("nan"),
+            threshold=float("nan"), support=float(support[0]),
+            support_counts=_trim(counts[0], dec.rows[0]),
         )
         decision.warnings = self.heterogeneity(decision)
         return decision

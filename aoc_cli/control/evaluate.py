@@ -12,7 +12,8 @@ For a chunk of whole episodes of the held-out corpus (S steps):
    its own row;
 4. the decision: imitation, the weighted action of the minimal corpus subset (its weights per
    action are the scores); value, the controller's rule (epsilon-quantile filter on the
-   residuals, then the best v_hat) over the candidates;
+   residuals, with ``min_support`` the support filter, then the best v_hat) over the
+   candidates;
 5. baselines on the same steps: ``knn`` (the k = d_b + 1 nearest corpus rows on standardised
    inputs, own episode left out likewise) and ``bc`` (the model's own head: the black box ABC
    explains).
@@ -33,6 +34,7 @@ import numpy as np
 from aoc_cli.control import scores as sc
 from aoc_cli.control.evaluate_inputs import (EXACT_MAX_ROWS, EvalContext, candidate_beliefs,
                                              check_inputs, episode_rows, heterogeneity)
+from aoc_cli.control.support import support_episodes, support_filter
 from aoc_cli.decompose import decompose
 from aoc_cli.errors import AocError
 from aoc_cli.index.strata import PerAction
@@ -185,6 +187,10 @@ def _value(ctx, rows, ep, obs, hist, logged) -> StepScores:
     val = dec.value.reshape(s, kk)
     thr = np.quantile(res, cfg.epsilon, axis=1, keepdims=True)
     passed = res <= thr + 1e-12 * np.maximum(1.0, thr)
+    if cfg.min_support is not None:  # the episodes behind each value (control/support.py)
+        support, _ = support_episodes(ctx.index.beliefs, dec.rows, dec.weights, dec.neighbours,
+                                      ctx.corpus_episode)
+        passed = support_filter(passed, support.reshape(s, kk), cfg.min_support)
     key = np.where(passed, val, -np.inf)
     best = key.max(1, keepdims=True)
     # ties on v_hat: the smaller residual

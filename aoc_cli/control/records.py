@@ -36,6 +36,7 @@ def decision_record(decision: Decision, corpus, index, step: int | None = None,
     ids = episode_ids(corpus)
     actions = corpus.actions[rows] if len(rows) else np.empty(0)
     values = index.values[rows] if index.values is not None and len(rows) else None
+    counts = decision.support_counts
     support = []
     for j, row in enumerate(rows):
         support.append({
@@ -48,6 +49,7 @@ def decision_record(decision: Decision, corpus, index, step: int | None = None,
             "value": None if values is None else float(values[j]),
             "weight": float(decision.support_weights[j]),
             "distance": float(decision.support_distances[j]),
+            "episodes_here": int(counts[j]) if j < len(counts) else None,
         })
     support.sort(key=lambda s: -s["weight"])
     record = {
@@ -57,6 +59,7 @@ def decision_record(decision: Decision, corpus, index, step: int | None = None,
         "value": decision.value,
         "residual": decision.residual,
         "typical_residual": typical_residual,
+        "support_episodes": None if not np.isfinite(decision.support) else decision.support,
         "support": support,
         "warnings": list(decision.warnings),
     }
