@@ -32,6 +32,10 @@ from aoc_cli.errors import AocError
 from aoc_cli.threads import thread_limits
 
 ALGOS = ("td3bc", "cql", "bcq")
+#: The discrete agents' settings where d3rlpy's defaults are Atari's (learning rate 6.25e-5, the
+#: target network copied every 8,000 steps): with a bench budget of 5,000-20,000 steps the
+#: target would be copied 0-2 times, too few to carry a return through episodes of ~10 steps.
+DISCRETE = {"learning_rate": 3e-4, "target_update_interval": 1000}
 
 
 @dataclass
@@ -124,11 +128,12 @@ def _fit_agent(d3rlpy, algo: str, corpus, history_length: int, config: OfflineRL
             maximum=np.asarray(high, np.float32).reshape(-1))
     if algo == "td3bc":
         agent = d3rlpy.algos.TD3PlusBCConfig(**common).create(device="cpu:0")
-    elif algo == "bcq":
-        bcq = d3rlpy.algos.DiscreteBCQConfig if corpus.discrete else d3rlpy.algos.BCQConfig
-        agent = bcq(**common).create(device="cpu:0")
+    elif algo == "bcq" and not corpus.discrete:
+        agent = d3rlpy.algos.BCQConfig(**common).create(device="cpu:0")
     elif corpus.discrete:
-        agent = d3rlpy.algos.DiscreteCQLConfig(**common).create(device="cpu:0")
+        discrete = d3rlpy.algos.DiscreteBCQConfig if algo == "bcq" else \
+            d3rlpy.algos.DiscreteCQLConfig
+        agent = discrete(**common, **DISCRETE).create(device="cpu:0")
     else:
         agent = d3rlpy.algos.CQLConfig(**common).create(device="cpu:0")
 

@@ -39,8 +39,8 @@ from aoc_cli.experiments import sepsis_policies as sp
 from aoc_cli.errors import AocError
 
 SCALES = {
-    "full": {"sizes": (1000, 10000, 50000), "cql_steps": 20000, "mc_episodes": 1000},
-    "quick": {"sizes": (1000, 5000), "cql_steps": 5000, "mc_episodes": 300},
+    "full": {"sizes": (1000, 10000, 50000), "cql_steps": 10000, "mc_episodes": 1000},
+    "quick": {"sizes": (1000, 5000), "cql_steps": 3000, "mc_episodes": 300},
     "tiny": {"sizes": (200,), "cql_steps": 200, "mc_episodes": 10},
 }
 LEARNT = ("aoc", "knn", "cql", "bcq", "bc", "tabular")
