@@ -158,6 +158,15 @@ SelectOption = Annotated[Optional[List[str]], typer.Option(
 ExcludeOption = Annotated[Optional[List[str]], typer.Option(
     "--exclude", help="No rows with TAG=VALUE[,VALUE] (repeatable).")]
 
+WithoutOption = Annotated[Optional[List[str]], typer.Option(
+    "--without", help="What if the corpus had no rows with TAG=VALUE[,VALUE] (repeatable): "
+                      "decide again without them (a row mask, no retraining) and report what "
+                      "changes.")]
+
+WithoutEpisodesOption = Annotated[Optional[str], typer.Option(
+    "--without-episodes", help="What if the corpus had not had these episodes: their ids "
+                               "(e.g. patient ids) or numbers, comma-separated.")]
+
 OverwriteOption = Annotated[bool, typer.Option("--overwrite", help="Replace an existing one.")]
 
 WorkersOption = Annotated[Optional[int], typer.Option(
@@ -196,6 +205,19 @@ def parse_selection(items: list[str] | None, flag: str) -> dict[str, list[str]]:
         tag, values = _split(item, "=", flag, "TAG=VALUE[,VALUE...]")
         out.setdefault(tag, []).extend(v.strip() for v in values.split(",") if v.strip())
     return out
+
+
+def parse_removal(corpus, without: list[str] | None, without_episodes: str | None):
+    """``--without`` / ``--without-episodes`` -> :class:`aoc_cli.control.whatif.Removal` or
+    None."""
+    from aoc_cli.control.whatif import removal
+
+    episodes = None
+    if without_episodes is not None:
+        episodes = [x.strip() for x in without_episodes.split(",") if x.strip()]
+        if not episodes:
+            raise AocError("--without-episodes expects ID[,ID...], got an empty list")
+    return removal(corpus, parse_selection(without, "--without"), episodes)
 
 
 def parse_rates(items: list[str] | None, flag: str) -> dict[str, float]:

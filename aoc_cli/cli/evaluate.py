@@ -12,7 +12,8 @@ import typer
 
 from aoc_cli.cli.common import (CandidatesOption, CorpusArgument, EpsilonOption,
                                 FormatOption, IndexOption, KOption, MinSupportOption, ModelOption,
-                                RayAddressOption, WorkersOption, get_store)
+                                RayAddressOption, WithoutEpisodesOption, WithoutOption,
+                                WorkersOption, get_store, parse_removal)
 from aoc_cli.errors import AocError
 from aoc_cli.report import resolve_format, write_object, write_records
 
@@ -50,6 +51,8 @@ def register(app: typer.Typer) -> None:
             "--seed", help="Seed of the candidates (value mode, continuous actions).")] = 0,
         workers: WorkersOption = None,
         ray_address: RayAddressOption = None,
+        without: WithoutOption = None,
+        without_episodes: WithoutEpisodesOption = None,
         fmt: FormatOption = None,
     ) -> None:
         """Decide every logged step of a held-out corpus in batches and score the decisions
@@ -68,6 +71,9 @@ def register(app: typer.Typer) -> None:
         config = ControllerConfig.for_task(_collected_task(corpus), candidates=candidates,
                                            epsilon=epsilon, k=k, residual_cap=None,
                                            min_support=min_support)
+        removal = parse_removal(corpus, without, without_episodes)
+        if removal is not None and (workers is not None or ray_address is not None):
+            raise AocError("--without runs in one process: drop --workers / --ray-address")
         session = open_session(corpus, model, index_id, config, seed=seed)
         with ProgressBar(f"evaluate {name} on {data}", held_out.n_rows,
                          transient=True) as on_progress:
@@ -83,6 +89,8 @@ def register(app: typer.Typer) -> None:
                                                index_id, config, names, seed=seed, exact=exact,
                                                workers=workers, address=ray_address,
                                                progress=on_progress)
+        if removal is not None:
+            summary["what_if"] = _what_if(session, held_out, names, seed, exact, removal, res)
         if steps_file is not None:
             from aoc_cli.store import atomic_path
 
@@ -91,6 +99,20 @@ def register(app: typer.Typer) -> None:
                     for rec in step_records(session, held_out, res):
                         fh.write(json.dumps(rec) + "\n")
         _print(summary, fmt)
+
+
+def _what_if(session, held_out, names, seed, exact, removal, before) -> dict:
+    """The same steps decided again without ``removal``'s rows, and what changed."""
+    from aoc_cli.control.evaluate import evaluate
+    from aoc_cli.control.whatif import what_if_steps
+    from aoc_cli.report.output import ProgressBar
+
+    keep = removal.keep(None)
+    with ProgressBar(f"without {removal.label}", held_out.n_rows,
+                     transient=True) as on_progress:
+        summary, after = evaluate(session, held_out, [], seed=seed, progress=on_progress,
+                                  exact=exact, selection=keep)
+    return what_if_steps(before, after, removal, session.corpus, summary)
 
 
 def _method_rows(summary: dict) -> list[dict]:
@@ -125,6 +147,20 @@ def _print(summary: dict, fmt: str) -> None:
     head["typical residual"] = res["typical"]
     write_object(head, "table", title=f"aoc evaluate {summary['corpus']} on {summary['data']}")
     write_records(rows, "table", columns=present, title="decisions against the log")
+    if "what_if" in summary:
+        w = summary["what_if"]
+        head = {"without": f"{w['without']['label']} ({w['without']['rows']} rows, "
+                           f"{w['without']['episodes']} episodes)",
+                "steps": w["steps"], "decisions flipped": w["flipped"],
+                "flip share": w["flip_share"],
+                "steps whose subset lost a row": w["support_removed_steps"],
+                "residual change (mean)": w["residual_change"]["mean"]}
+        for key in ("value_change", "score_change"):
+            if key in w:
+                head[key.replace("_", " ") + " (mean / mean abs)"] = \
+                    f"{w[key]['mean']:.4g} / {w[key]['mean_abs']:.4g}"
+        head.update({f"{k} after": v for k, v in w["after"].items()})
+        write_object(head, "table", title="what if")
     if "confusion" in summary:
         n = len(summary["confusion"])
         write_records([{"logged": i, **{f"decided {j}": summary["confusion"][i][j]

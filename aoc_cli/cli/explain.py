@@ -10,7 +10,8 @@ import typer
 
 from aoc_cli.cli.common import (CandidatesOption, CorpusArgument, EpsilonOption, FormatOption,
                                 IndexOption, KOption, MinSupportOption, ModelOption,
-                                ResidualCapOption, get_store)
+                                ResidualCapOption, WithoutEpisodesOption, WithoutOption,
+                                get_store, parse_removal)
 from aoc_cli.errors import AocError
 from aoc_cli.report import resolve_format, write_object, write_records
 
@@ -42,6 +43,8 @@ def register(app: typer.Typer) -> None:
         min_support: MinSupportOption = None,
         residual_cap: ResidualCapOption = None,
         seed: Annotated[int, typer.Option("--seed", help="Seed of the candidates.")] = 0,
+        without: WithoutOption = None,
+        without_episodes: WithoutEpisodesOption = None,
         fmt: FormatOption = None,
     ) -> None:
         """Explain decisions: from JSONL queries, a recorded step of an audit log, or a logged
@@ -59,29 +62,33 @@ def register(app: typer.Typer) -> None:
                                            epsilon=epsilon, k=k, residual_cap=residual_cap,
                                            min_support=min_support)
         opened = dict(model_id=model, index_id=index_id, config=config, seed=seed)
+        removal = parse_removal(corpus, without, without_episodes)
         if data is not None:
             source = corpus if data == name else store.corpus(data)
-            records = _logged_step(corpus, source, episode, step, opened)
+            records = _logged_step(corpus, source, episode, step, opened, removal)
         elif audit is not None:
-            records = _recorded_step(corpus, audit, episode, step, opened)
+            records = _recorded_step(corpus, audit, episode, step, opened, removal)
         else:
-            records = _queries(corpus, input, compare, opened)
+            records = _queries(corpus, input, compare, opened, removal)
         _print(records, fmt)
 
 
-def _logged_step(corpus, source, episode: int, step: int, opened: dict) -> list[dict]:
+def _logged_step(corpus, source, episode: int, step: int, opened: dict,
+                 removal) -> list[dict]:
     """``--data``: the decision at a logged step of ``source`` and what supports the logged
     action there."""
     from aoc_cli.control import explain_logged_step
     from aoc_cli.session import open_session
 
-    return explain_logged_step(open_session(corpus, **opened), source, episode, step)
+    return explain_logged_step(open_session(corpus, **opened), source, episode, step,
+                               removal=removal)
 
 
-def _recorded_step(corpus, audit: Path, episode: int, step: int, opened: dict) -> list[dict]:
+def _recorded_step(corpus, audit: Path, episode: int, step: int, opened: dict,
+                   removal) -> list[dict]:
     """``--audit``: a recorded decision replayed with its recorded inputs and settings."""
-    from aoc_cli.control import (ControllerConfig, decision_record, read_audit_step,
-                                 replay_decision)
+    from aoc_cli.control import ControllerConfig, read_audit_step, replay_decision
+    from aoc_cli.control.explain import explain_decisions
     from aoc_cli.session import open_session
 
     recorded = read_audit_step(audit, episode, step)
@@ -91,15 +98,15 @@ def _recorded_step(corpus, audit: Path, episode: int, step: int, opened: dict) -
     session = open_session(corpus, meta.get("model", opened["model_id"]),
                            meta.get("index", opened["index_id"]), config, seed=opened["seed"])
     decision = replay_decision(session, recorded)
-    rec = decision_record(decision, corpus, session.index, step=step,
-                          observation=recorded["observation"],
-                          typical_residual=session.index.typical_residual)
+    rec, = explain_decisions(session, recorded["observation"], recorded["history"],
+                             [decision], removal=removal, step=step)
     rec["episode"] = episode
     rec["recorded_action"] = recorded["action"].tolist()
     return [rec]
 
 
-def _queries(corpus, source: str, compare: list[str] | None, opened: dict) -> list[dict]:
+def _queries(corpus, source: str, compare: list[str] | None, opened: dict,
+             removal) -> list[dict]:
     """``--input``: JSONL queries, each its own decision or the given actions compared."""
     from aoc_cli.control import explain_query, parse_query
     from aoc_cli.session import open_session
@@ -114,7 +121,7 @@ def _queries(corpus, source: str, compare: list[str] | None, opened: dict) -> li
         obs, hist, action, q_compare = parse_query(line, lineno, corpus,
                                                    session.model.history_length)
         for rec in explain_query(session, obs, hist, action,
-                                 compare=parsed_compare or q_compare):
+                                 compare=parsed_compare or q_compare, removal=removal):
             rec["query"] = lineno
             records.append(rec)
     return records
@@ -151,6 +158,8 @@ def _flat(rec: dict) -> list[dict]:
     """One row per supporting example, with the decision's figures repeated (for CSV)."""
     base = {k: rec.get(k) for k in ("query", "role", "data", "episode", "step", "action",
                                      "value", "residual", "support_episodes") if k in rec}
+    if "what_if" in rec:
+        base.update({f"what_if_{k}": rec["what_if"][k] for k in ("action", "value", "residual")})
     rows = []
     for s in rec["support"]:
         row = dict(base)
@@ -196,12 +205,30 @@ def _print(records: list[dict], fmt: str) -> None:
                  + f", step {rec['step']})"
                  if "episode" in rec else "")
             write_object(head, "table", title=title)
-            rows = [{"row": s["row"], "episode": s["episode"],
-                     **({"episode_id": s["episode_id"]} if s.get("episode_id") is not None
-                        else {}),
-                     "step": s["step"], **s["tags"], "action": s["action"], "value": s["value"],
-                     "weight": s["weight"], "distance": s["distance"],
-                     "episodes here": s.get("episodes_here")} for s in rec["support"]]
-            write_records(rows, "table", title="minimal corpus subset")
+            write_records(_support_rows(rec["support"]), "table", title="minimal corpus subset")
             for w in rec["warnings"]:
                 console.print(f"[yellow]warning:[/] {w}")
+            if "what_if" in rec:
+                _print_what_if(rec["what_if"])
+
+
+def _support_rows(support: list[dict]) -> list[dict]:
+    return [{"row": s["row"], "episode": s["episode"],
+             **({"episode_id": s["episode_id"]} if s.get("episode_id") is not None else {}),
+             "step": s["step"], **s["tags"], "action": s["action"], "value": s["value"],
+             "weight": s["weight"], "distance": s["distance"],
+             "episodes here": s.get("episodes_here")} for s in support]
+
+
+def _print_what_if(w: dict) -> None:
+    """The what-if of one decision as two tables: the decision again, its new subset."""
+    head = {"without": f"{w['without']['label']} ({w['without']['rows']} rows, "
+                       f"{w['without']['episodes']} episodes)",
+            "action": w["action"], "action changed": w["action_changed"],
+            "value (v_hat)": w["value"], "value change": w["value_change"],
+            "residual": w["residual"], "residual change": w["residual_change"],
+            "supporting rows removed": len(w["support_removed"]),
+            "unchanged": w["unchanged"]}
+    write_object(head, "table", title="what if")
+    write_records(_support_rows(w["support"]), "table",
+                  title="minimal corpus subset without them")

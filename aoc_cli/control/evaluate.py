@@ -51,7 +51,8 @@ class StepScores:
 
     ``row`` held-out rows; ``episode``, ``step``; ``logged`` (S,) int or (S, d_a);
     ``decided`` likewise; ``scores`` (S, n) action weights (discrete imitation) or None;
-    ``v_hat`` / ``target`` (S,) value mode; ``residual`` (S,) of the decision; ``warning``
+    ``v_hat`` / ``target`` (S,) value mode (v_hat of the logged action), ``decided_value``
+    (S,) v_hat of the decision; ``residual`` (S,) of the decision; ``warning``
     (S,) bool heterogeneity; ``support_rows``/``support_weights`` (S, m) (-1 / 0 padded);
     ``baselines`` name -> {"decided", "scores" or "v_hat"} arrays on the same steps.
     """
@@ -69,6 +70,7 @@ class StepScores:
     v_hat: np.ndarray | None = None
     target: np.ndarray | None = None
     baselines: dict = field(default_factory=dict)
+    decided_value: np.ndarray | None = None
 
 
 def merge(parts: list[StepScores]) -> StepScores:
@@ -86,14 +88,17 @@ def merge(parts: list[StepScores]) -> StepScores:
 
     base = {}
     for name in parts[0].baselines:
-        base[name] = {k: np.concatenate([p.baselines[name][k] for p in parts])
+        # a value-mode kNN of continuous actions decides nothing: its "decided" is None
+        base[name] = {k: None if parts[0].baselines[name][k] is None
+                      else np.concatenate([p.baselines[name][k] for p in parts])
                       for k in parts[0].baselines[name]}
     return StepScores(
         row=cat("row"), episode=cat("episode"), step=cat("step"), logged=cat("logged"),
         decided=cat("decided"), residual=cat("residual"), warning=cat("warning"),
         support_rows=np.concatenate([pad(p.support_rows, -1) for p in parts]),
         support_weights=np.concatenate([pad(p.support_weights, 0.0) for p in parts]),
-        scores=cat("scores"), v_hat=cat("v_hat"), target=cat("target"), baselines=base)
+        scores=cat("scores"), v_hat=cat("v_hat"), target=cat("target"), baselines=base,
+        decided_value=cat("decided_value"))
 
 
 def chunks(ctx: EvalContext, max_steps: int = CHUNK_STEPS) -> list[np.ndarray]:
@@ -139,7 +144,8 @@ def _decompose(ctx: EvalContext, beliefs: np.ndarray, query_episodes: np.ndarray
             return LeaveEpisodeOut(search, episode, query_episodes, ctx.max_episode_length)
 
         index = index.wrapped(own_out) if isinstance(index, PerAction) else own_out(index, None)
-    return decompose(ctx.index.beliefs, beliefs, k=ctx.k, values=ctx.index.values, index=index)
+    return decompose(ctx.index.beliefs, beliefs, k=ctx.k, values=ctx.index.values, index=index,
+                     selection=ctx.selection)
 
 
 def _imitate(ctx, rows, ep, obs, hist, logged) -> StepScores:
@@ -200,7 +206,7 @@ def _value(ctx, rows, ep, obs, hist, logged) -> StepScores:
     out = StepScores(rows, ep, rows - ctx.data_starts[ep], logged, decided,
                      dec.residual[pick], heterogeneity(ctx, dec.rows[pick], dec.weights[pick]),
                      dec.rows[pick], dec.weights[pick], v_hat=dec_l.value,
-                     target=ctx.data_values[rows])
+                     target=ctx.data_values[rows], decided_value=dec.value[pick])
     if "bc" in ctx.baselines:
         head_l = b_logged.astype(np.float64) @ ctx.head.weight.T + ctx.head.bias
         head_c = (b_c.astype(np.float64) @ ctx.head.weight.T + ctx.head.bias).reshape(s, kk)
@@ -279,16 +285,18 @@ def summarise(ctx: EvalContext, res: StepScores) -> dict:
 
 
 def evaluate(session, data, baselines=BASELINES, seed: int = 0, progress=None,
-             chunk_steps: int = CHUNK_STEPS, exact: bool | None = None
-             ) -> tuple[dict, StepScores]:
+             chunk_steps: int = CHUNK_STEPS, exact: bool | None = None,
+             selection: np.ndarray | None = None) -> tuple[dict, StepScores]:
     """Score every step of corpus ``data`` with ``session`` (its corpus, model, index and
     controller settings); ``progress(done_steps, total_steps)``. ``exact``: search the
     session's own index (True), an IVF structure built for the run (False), or the index up
-    to :data:`EXACT_MAX_ROWS` corpus rows and IVF beyond (None). Returns (summary, steps).
+    to :data:`EXACT_MAX_ROWS` corpus rows and IVF beyond (None). ``selection``: an (N,) bool
+    mask of the corpus rows the decisions may use (None: every row; the baselines always use
+    every row). Returns (summary, steps).
     Runs with one thread in torch, FAISS and BLAS (:func:`aoc_cli.threads.one_thread`)."""
     started = time.perf_counter()
     with one_thread():
-        ctx = EvalContext.build(session, data, baselines, seed, exact)
+        ctx = EvalContext.build(session, data, baselines, seed, exact, selection)
         parts, done = [], 0
         for group in chunks(ctx, chunk_steps):
             part = score_episodes(ctx, group)

@@ -209,14 +209,17 @@ class EvalContext:
     baselines: list
     seed: int
     exact: bool | None = None
+    selection: np.ndarray | None = None
 
     @classmethod
     def build(cls, session, data, baselines, seed: int = 0,
-              exact: bool | None = None) -> "EvalContext":
+              exact: bool | None = None,
+              selection: np.ndarray | None = None) -> "EvalContext":
         model = session.model
         value_target = (model.meta.get("value") or {}).get("target")
         names = check_inputs(session.corpus, data, model.mode, baselines, value_target)
-        ctx = cls(session, data, data.hash == session.corpus.hash, names, int(seed), exact)
+        ctx = cls(session, data, data.hash == session.corpus.hash, names, int(seed), exact,
+                  selection)
         ctx._prepare()
         return ctx
 

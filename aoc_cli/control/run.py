@@ -63,33 +63,31 @@ def rollout(session: Session | ModelFreeSession, env, episodes: int, seed: int =
 
 def explain_query(session: Session, observation, history, action=None,
                   compare: list | None = None,
-                  selection: np.ndarray | None = None) -> list[dict]:
+                  selection: np.ndarray | None = None, removal=None) -> list[dict]:
     """Records for a query: the controller's own choice (no action), one given action, or
     several actions side by side (``compare``); ``selection`` an (N,) bool row mask instead
-    of the controller's own."""
-    typical = session.index.typical_residual
+    of the controller's own; ``removal`` (:func:`aoc_cli.control.whatif.removal`): each also
+    re-decided without those rows (the record's ``what_if``)."""
+    from aoc_cli.control.explain import explain_decisions
+
     ctl = session.controller
     if compare:
-        out = []
-        for a in compare:
-            d = ctl.evaluate(observation, history, _as_candidates(session.corpus, [a]),
-                             choose=False, selection=selection)
-            out.append(decision_record(d, session.corpus, session.index, observation=observation,
-                                       typical_residual=typical))
-        return out
-    if action is not None:
+        decisions = [ctl.evaluate(observation, history, _as_candidates(session.corpus, [a]),
+                                  choose=False, selection=selection) for a in compare]
+    elif action is not None:
         if session.model.mode == "imitation":
             raise AocError("an imitation-mode model explains its own decision; drop \"action\"")
-        d = ctl.evaluate(observation, history, _as_candidates(session.corpus, [action]),
-                         choose=False, selection=selection)
+        decisions = [ctl.evaluate(observation, history,
+                                  _as_candidates(session.corpus, [action]), choose=False,
+                                  selection=selection)]
     else:
-        d = ctl.decide(observation, history, selection=selection)
-    return [decision_record(d, session.corpus, session.index, observation=observation,
-                            typical_residual=typical)]
+        decisions = [ctl.decide(observation, history, selection=selection)]
+    return explain_decisions(session, observation, history, decisions, selection=selection,
+                             removal=removal)
 
 
 def explain_logged_step(session: Session, data, episode: int, step: int,
-                        leave_episode_out: bool = True) -> list[dict]:
+                        leave_episode_out: bool = True, removal=None) -> list[dict]:
     """What the controller decides at step ``step`` of episode ``episode`` of corpus ``data``
     (the session's own corpus, or held-out episodes of the same spaces), from that step's
     logged observation and history, and what supports the action that was logged there.
@@ -97,7 +95,8 @@ def explain_logged_step(session: Session, data, episode: int, step: int,
     are left out of the decompositions (else the logged action is explained by its own row).
 
     Returns [decision record (``logged_action`` added), the logged action's record] in value
-    mode; the decision record alone in imitation mode (it explains only its own choice)."""
+    mode; the decision record alone in imitation mode (it explains only its own choice).
+    ``removal``: as in :func:`explain_query`."""
     corpus = session.corpus
     same = data.hash == corpus.hash
     if not same:
@@ -119,10 +118,11 @@ def explain_logged_step(session: Session, data, episode: int, step: int,
     if same and leave_episode_out:
         selection = np.ones(corpus.n_rows, bool) if own is None else own.copy()
         selection[start:end] = False
-    records = explain_query(session, observation, history, selection=selection)
+    records = explain_query(session, observation, history, selection=selection,
+                            removal=removal)
     if session.model.mode == "value":
         records += explain_query(session, observation, history, action=logged,
-                                 selection=selection)
+                                 selection=selection, removal=removal)
     records[0]["logged_action"] = logged
     from aoc_cli.control.records import episode_ids
 

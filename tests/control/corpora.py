@@ -59,3 +59,23 @@ def corridor_store(root) -> Store:
                                      patience=5, history_length=2), "default")
     build_index(corpus)
     return store
+
+
+#: Tag values and episode ids that are markup: pages must show them as text, never run them.
+HOSTILE_TAGS = ["<script>alert(1)</script>", '" onload="alert(2)', "c3"]
+
+
+def hostile_corridor_store(root) -> Store:
+    """The corridor corpus with a ``clinician`` tag and episode ids that are markup
+    (:data:`HOSTILE_TAGS`, ``<img src=x onerror=alert(3)>``), its imitation model and index."""
+    data = corridor_data()
+    episodes, length = data.n_episodes, 12
+    data.tags = {"clinician": (np.repeat(np.arange(episodes) % 3, length), HOSTILE_TAGS)}
+    data.episode_ids = [f"<img src=x onerror=alert(3)>{e}" if e % 2 else f"p{e:02d}"
+                        for e in range(episodes)]
+    store = Store(root)
+    corpus = store.write("corridor", data)
+    train_model(corpus, BeliefConfig(mode="imitation", seed=0, threads=1, max_epochs=30,
+                                     patience=5, history_length=2), "default")
+    build_index(corpus)
+    return store
