@@ -50,9 +50,12 @@ def rebuilt(session, keep: np.ndarray) -> Controller:
     strata = None if ci.strata is None else ci.strata[keep]
     sub_ci = CorpusIndex(ci.index_id, ci.model, beliefs, values, sub_index, dict(ci.meta),
                          strata)
+    episode = corpus.episode_of(np.flatnonzero(keep))
+    starts = np.concatenate([[0], np.flatnonzero(np.diff(episode)) + 1, [len(episode)]])
     sub_corpus = SimpleNamespace(
         name=corpus.name, actions=np.asarray(corpus.actions)[keep], discrete=corpus.discrete,
-        n_actions=corpus.n_actions, action_space=corpus.action_space, n_rows=int(keep.sum()))
+        n_actions=corpus.n_actions, action_space=corpus.action_space, n_rows=int(keep.sum()),
+        episode_starts=starts.astype(np.int64))
     return Controller(sub_corpus, sub_ci, session.controller.config)
 
 
