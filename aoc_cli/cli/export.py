@@ -12,6 +12,8 @@ import typer
 from aoc_cli.cli.common import (CorpusArgument, ExcludeOption, FormatOption, OverwriteOption,
                                 SelectOption, choice, get_store, parse_selection)
 from aoc_cli.errors import AocError
+from aoc_cli.formats import export as run_export
+from aoc_cli.report.output import ProgressBar, resolve_format, write_object
 
 
 class ExportFormat(str, Enum):
@@ -54,9 +56,6 @@ def register(app: typer.Typer) -> None:
         fmt: FormatOption = None,
     ) -> None:
         """Write corpus NAME as Minari, D4RL HDF5 or CSV; `aoc ingest` reads it back exactly."""
-        from aoc_cli.formats import export as run_export
-        from aoc_cli.report.output import ProgressBar, resolve_format, write_object
-
         fmt = resolve_format(fmt)
         with ProgressBar(f"export {name}") as bar:
             result = run_export(name, choice(to), out, store=get_store(),

@@ -17,6 +17,7 @@ import numpy as np
 
 from aoc_cli.errors import AocError
 from aoc_cli.formats.common import ReadOptions
+from aoc_cli.formats.export_csv import mapping_path
 from aoc_cli.formats.spec import restore, take_episodes
 from aoc_cli.store import CorpusData
 
@@ -24,8 +25,6 @@ from aoc_cli.store import CorpusData
 def exported_mapping(path: Path, options: ReadOptions) -> ReadOptions:
     """``options`` with the mapping ``aoc export`` wrote beside ``path`` (when there is one
     holding an export spec and no --columns or role flag is given), and its static file."""
-    from aoc_cli.formats.export_csv import mapping_path
-
     flags = (options.columns_file, options.obs_columns, options.act_columns,
              options.reward_column, options.id_column, options.time_column,
              options.terminal_column)

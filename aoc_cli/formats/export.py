@@ -24,7 +24,11 @@ from pathlib import Path
 import numpy as np
 
 from aoc_cli.errors import AocError
+from aoc_cli.formats import export_csv, export_d4rl, export_minari
+from aoc_cli.formats.minari import data_folder
+from aoc_cli.formats.spec import describe
 from aoc_cli.progress import Progress
+from aoc_cli.rows import row_selection
 from aoc_cli.store import CorpusData, Store, episode_starts_from_lengths
 
 EXPORT_FORMATS = ("minari", "d4rl", "csv")
@@ -93,8 +97,6 @@ def select_rows(data: CorpusData, mask: np.ndarray) -> CorpusData:
 def check_target(path: Path, store: Store, overwrite: bool, *, folder: bool = False) -> None:
     """Refuse a target inside the store, an existing path without ``overwrite``, a file where
     a folder goes (and the reverse), and a folder to replace that is not a Minari dataset."""
-    from aoc_cli.formats.minari import data_folder
-
     target = Path(os.path.abspath(path))
     root = Path(os.path.abspath(store.root))
     for p in (target, target.resolve()):
@@ -129,10 +131,6 @@ def export(name: str, fmt: str, out: str | os.PathLike, *, store: Store | None =
     end), end excluded) as ``fmt`` to ``out``. ``static`` (CSV
     only): also write the per-patient covariates of a corpus read with ``--static`` to this
     file, one row per episode id, and leave them out of the step rows."""
-    from aoc_cli.formats import export_csv, export_d4rl, export_minari
-    from aoc_cli.formats.spec import describe
-    from aoc_cli.rows import row_selection
-
     t0 = time.perf_counter()
     if fmt not in EXPORT_FORMATS:
         raise AocError(f"unknown export format {fmt!r}: use --to {'|'.join(EXPORT_FORMATS)}")

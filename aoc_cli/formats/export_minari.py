@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from aoc_cli.errors import AocError
+from aoc_cli.formats.minari import datasets_root
 from aoc_cli.progress import Progress
 from aoc_cli.store import CorpusData, atomic_dir
 
@@ -59,8 +60,6 @@ def dataset_id(out: Path, corpus: str) -> str:
     """The Minari id of a dataset written to ``out``: its path below the local datasets root
     when it is under it (loadable by that id), else its folder name when it reads
     ``name-vN``, else ``<corpus>-v0``."""
-    from aoc_cli.formats.minari import datasets_root
-
     root = Path(os.path.abspath(datasets_root()))
     target = Path(os.path.abspath(out))
     if root in target.parents:
@@ -76,7 +75,7 @@ def dataset_id(out: Path, corpus: str) -> str:
 
 def spaces(spec: dict, observations: np.ndarray, actions: np.ndarray):
     """(observation space, action space) as gymnasium spaces."""
-    from gymnasium import spaces as gs
+    from gymnasium import spaces as gs  # here: gymnasium takes ~0.2 s to import, Minari only
 
     def bounds(space, dim):
         low = np.array([-np.inf if x is None else x for x in space.get("low") or
@@ -124,6 +123,7 @@ def _buffers(data: CorpusData, episodes, buffer_type):
 def write_minari(data: CorpusData, spec: dict, out: Path,
                  progress: Progress | None = None) -> list[Path]:
     """Write ``data`` (with its export ``spec``) as the Minari dataset folder ``out``."""
+    # here, not at the top: minari's writer imports in ~0.4 s, and only this format needs it
     import minari
     from minari.data_collector import EpisodeBuffer
 

@@ -22,6 +22,7 @@ import numpy as np
 
 from aoc_cli.errors import AocError, warn
 from aoc_cli.store import CorpusData, episode_starts_from_lengths
+from aoc_cli.store.writer import content_hash
 
 SPEC_KEY = "aoc"
 SPEC_VERSION = 1
@@ -29,8 +30,6 @@ SPEC_VERSION = 1
 
 def content_hash_of(data: CorpusData) -> str:
     """The store's content hash of in-memory corpus data (as ``manifest.json`` records it)."""
-    from aoc_cli.store.writer import content_hash
-
     return content_hash(data.observations, data.actions, data.rewards, data.terminals,
                         data.truncations, data.episode_starts,
                         {k: c for k, (c, _labels) in data.tags.items()}, data.columns)
