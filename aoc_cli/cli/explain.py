@@ -208,8 +208,21 @@ def _print(records: list[dict], fmt: str) -> None:
             write_records(_support_rows(rec["support"]), "table", title="minimal corpus subset")
             for w in rec["warnings"]:
                 console.print(f"[yellow]warning:[/] {w}")
+            if rec.get("contrast"):
+                _print_contrast(rec["contrast"])
             if "what_if" in rec:
                 _print_what_if(rec["what_if"])
+
+
+def _print_contrast(c: dict) -> None:
+    """The best action not chosen: its figures, why it lost, its own supporting rows."""
+    head = {"action": c["action"], "value (v_hat)": c["value"], "residual": c["residual"],
+            "why it lost": c["why"]["text"]}
+    if "score" in c:
+        head["score"] = c["score"]
+    write_object(head, "table", title="contrast: the best action not chosen")
+    if c["support"]:
+        write_records(_support_rows(c["support"]), "table", title="its supporting rows")
 
 
 def _support_rows(support: list[dict]) -> list[dict]:

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from aoc_cli.control.contrast import contrast_record
 from aoc_cli.control.controller import Decision
 from aoc_cli.control.records import decision_record
 from aoc_cli.control.whatif import Removal, redecide, what_if_record
@@ -25,14 +26,18 @@ if TYPE_CHECKING:
 def explain_decisions(session: Session, observation: np.ndarray, history: History,
                       decisions: list[Decision], selection: np.ndarray | None = None,
                       removal: Removal | None = None, step: int | None = None) -> list[dict]:
-    """One record per decision of the query (``observation`` (d_o,), ``history`` one row);
-    ``selection`` the (N,) bool row mask the decisions were made with (None: the
-    controller's own); ``removal``: also re-decide without those rows (``what_if``)."""
+    """One record per decision of the query (``observation`` (d_o,), ``history`` one row),
+    each with its ``contrast`` (the best action not chosen, or None); ``selection`` the (N,)
+    bool row mask the decisions were made with (None: the controller's own); ``removal``:
+    also re-decide without those rows (``what_if``)."""
     corpus, index = session.corpus, session.index
     typical = index.typical_residual
     ctl = session.controller
     records = [decision_record(d, corpus, index, step=step, observation=observation,
                                typical_residual=typical) for d in decisions]
+    for d, rec in zip(decisions, records):
+        rec["contrast"] = contrast_record(ctl, observation, history, d, corpus, index,
+                                          selection, typical)
     if removal is not None:
         keep = removal.keep(ctl.selection if selection is None else selection)
         for d, rec in zip(decisions, records):
