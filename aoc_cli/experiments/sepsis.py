@@ -30,13 +30,25 @@ from __future__ import annotations
 
 import csv
 import json
+import os
+import subprocess
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from aoc_cli.experiments import sepsis_policies as sp
+from aoc_cli.baselines import make_baseline
+from aoc_cli.baselines.offline_rl import OfflineRLConfig
+from aoc_cli.control import ControllerConfig
+from aoc_cli.envs import collect, make_env
+from aoc_cli.envs.icu_sepsis import STRATEGIES
+from aoc_cli.envs.icu_sepsis import tables as sepsis_tables
+from aoc_cli.envs.tabular import greedy
 from aoc_cli.errors import AocError
+from aoc_cli.experiments import sepsis_policies as sp
+from aoc_cli.session import open_session
+from aoc_cli.store import Store, atomic_path
 
 SCALES = {
     "full": {"sizes": (1000, 10000, 50000), "cql_steps": 10000, "mc_episodes": 1000},
@@ -51,8 +63,6 @@ TASKS = ("icu-sepsis", "icu-sepsis-terminate")
 
 def references(tables) -> dict[str, dict]:
     """The reference policies' exact values (and state policies where deterministic)."""
-    from aoc_cli.envs.tabular import greedy
-
     mdp = tables.mdp
     one_step = greedy(mdp.q_values(tables.clinicians), tables.clinicians > 0)
     _v, optimal = mdp.optimal()
@@ -67,10 +77,6 @@ def aoc_command(store_root: Path, *args: str) -> dict:
     """Run ``aoc ARGS --format json`` on the store at ``store_root`` in a child process (the
     command a user types, so its defaults are exactly theirs); its JSON output. A failure ->
     AocError with the command's own message."""
-    import os
-    import subprocess
-    import sys
-
     env = {**os.environ, "AOC_STORE": str(store_root), "AOC_PROGRESS": "0"}
     proc = subprocess.run([sys.executable, "-c", "from aoc_cli.cli.app import main; main()",
                            *args, "--format", "json"], capture_output=True, text=True, env=env)
@@ -98,12 +104,6 @@ def _support(decisions: list) -> dict:
 def run_size(store, task: str, episodes: int, seed: int, cfg: dict, methods: list[str],
              tables, refs: dict, log=None) -> list[dict]:
     """One log: every learnt method's value (exact or Monte-Carlo) on it."""
-    from aoc_cli.baselines import make_baseline
-    from aoc_cli.baselines.offline_rl import OfflineRLConfig
-    from aoc_cli.control import ControllerConfig
-    from aoc_cli.envs import collect, make_env
-    from aoc_cli.session import open_session
-
     name = f"{task}-{episodes}-s{seed}"
     data, _summary = collect(task, episodes=episodes, seed=seed)
     corpus = store.write(name, data, overwrite=True)
@@ -209,9 +209,6 @@ def run_sepsis(out: Path, bench_store: Path, scale: str = "full", seeds: int | N
                methods: list[str] | None = None, sizes: list[int] | None = None,
                task: str = "icu-sepsis", log=None, progress=None) -> dict:
     """Run every size and seed, write the outputs; the report."""
-    from aoc_cli.envs.icu_sepsis import STRATEGIES, tables as sepsis_tables
-    from aoc_cli.store import Store, atomic_path
-
     if task not in TASKS:
         raise AocError(f"unknown icu-sepsis task {task!r}: use {' or '.join(TASKS)}")
     if scale not in SCALES:

@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from aoc_cli.control import rollout
+from aoc_cli.control.rollout import HistoryBuffer
 from aoc_cli.envs.icu_sepsis import STATE_DEATH, STATE_SURVIVAL, SepsisTables
 from aoc_cli.envs.tabular import TabularMDP, greedy
 
@@ -33,8 +35,6 @@ N_STATES = 716
 
 def empty_history(length: int, observation_dim: int):
     """A one-row History of ``length`` steps with nothing in it (an episode's first step)."""
-    from aoc_cli.control.rollout import HistoryBuffer
-
     return HistoryBuffer(length, observation_dim, 1, True).history()
 
 
@@ -114,8 +114,6 @@ def tabular_policy(states, actions, rewards, terminals, starts,
 def monte_carlo(policy_decide, session, env, episodes: int, seed: int) -> dict:
     """The survival of ``policy_decide`` (a decide(observation, history) callable or None for
     the session's controller) over ``episodes`` rollouts: value and its 95% normal interval."""
-    from aoc_cli.control import rollout
-
     class _P:
         def decide(self, observation, history):
             return policy_decide(observation, history)

@@ -101,3 +101,24 @@ def test_cli_bad_method_is_one_line_exit_2(aoc, tmp_path):
     code, _out, err = aoc("bench", "icu-sepsis", "--tiny", "--methods", "aoc,nope",
                           "--out", str(tmp_path / "o"), "--bench-store", str(tmp_path / "s"))
     assert code == 2 and len(err.strip().splitlines()) == 1 and "unknown nope" in err
+
+
+def test_monte_carlo_of_a_policy_that_reads_a_history_covers_its_exact_value(tmp_path, tables):
+    """The modal-action policy rolled out in the package's environment: the 95% interval of
+    400 episodes holds its exact value (0.787)."""
+    from aoc_cli.session import model_free_session
+    from aoc_cli.envs import collect, make_env
+    from aoc_cli.store import Store
+
+    data, _ = collect("icu-sepsis", episodes=20, seed=0)
+    session = model_free_session(Store(tmp_path).write("log", data))
+    modal = tables.modal()
+    lookup = {tables.observations[s].astype(np.float32).tobytes(): s for s in range(sp.LIVE)}
+
+    def decide(observation, history):
+        return int(modal[lookup[np.asarray(observation, np.float32).tobytes()]])
+
+    result = sp.monte_carlo(decide, session, make_env("icu-sepsis"), 400, seed=5)
+    assert result["kind"] == "monte-carlo" and result["episodes"] == 400
+    assert result["low"] <= tables.mdp.value(modal) <= result["high"]
+    assert result["high"] - result["low"] < 0.1
