@@ -163,7 +163,9 @@ def _flat(rec: dict) -> list[dict]:
     rows = []
     for s in rec["support"]:
         row = dict(base)
-        row.update({f"support_{k}": v for k, v in s.items() if k != "tags"})
+        row.update({f"support_{k}": v for k, v in s.items() if k not in ("tags", "attribution")})
+        if "attribution" in s:
+            row["support_projection"] = s["attribution"]["projection"]
         row.update({f"tag_{k}": v for k, v in s["tags"].items()})
         rows.append(row)
     return rows
