@@ -89,7 +89,9 @@ def _recorded_step(corpus, audit: Path, episode: int, step: int, opened: dict,
     """``--audit``: a recorded decision replayed with its recorded inputs and settings."""
     from aoc_cli.control import ControllerConfig, read_audit_step, replay_decision
     from aoc_cli.control.explain import explain_decisions
+    from aoc_cli.control.records import label_of
     from aoc_cli.session import open_session
+    from aoc_cli.store import action_labels
 
     recorded = read_audit_step(audit, episode, step)
     meta = recorded["meta"]
@@ -102,6 +104,8 @@ def _recorded_step(corpus, audit: Path, episode: int, step: int, opened: dict,
                              [decision], removal=removal, step=step)
     rec["episode"] = episode
     rec["recorded_action"] = recorded["action"].tolist()
+    rec.update(label_of(action_labels(corpus.action_space), recorded["action"],
+                        "recorded_action_label"))
     return [rec]
 
 
@@ -157,7 +161,8 @@ def _read_lines(source: str) -> list[tuple[int, str]]:
 def _flat(rec: dict) -> list[dict]:
     """One row per supporting example, with the decision's figures repeated (for CSV)."""
     base = {k: rec.get(k) for k in ("query", "role", "data", "episode", "step", "action",
-                                     "value", "residual", "support_episodes") if k in rec}
+                                     "action_label", "value", "residual", "support_episodes")
+            if k in rec}
     if "what_if" in rec:
         base.update({f"what_if_{k}": rec["what_if"][k] for k in ("action", "value", "residual")})
     rows = []
@@ -185,8 +190,9 @@ def _print(records: list[dict], fmt: str) -> None:
 
         for rec in records:
             typical = rec.get("typical_residual")
-            head = {"action": rec["action"], "value (v_hat)": rec["value"],
-                    "residual": rec["residual"],
+            head = {"action": rec["action"], **({"action label": rec["action_label"]}
+                                                  if "action_label" in rec else {}),
+                    "value (v_hat)": rec["value"], "residual": rec["residual"],
                     "support (episodes)": rec.get("support_episodes")}
             if typical:
                 head["typical residual"] = typical
@@ -195,10 +201,11 @@ def _print(records: list[dict], fmt: str) -> None:
                 c = rec["candidates"]
                 head["candidates passed"] = f"{c['passed']} of {c['count']}"
                 head["best rejected v_hat"] = c["best_rejected_value"]
-            if "recorded_action" in rec:
-                head["recorded action"] = rec["recorded_action"]
-            if "logged_action" in rec:
-                head["logged action"] = rec["logged_action"]
+            for key in ("recorded_action", "logged_action"):
+                if key in rec:
+                    head[key.replace("_", " ")] = rec[key]
+                if f"{key}_label" in rec:
+                    head[f"{key.replace('_', ' ')} label"] = rec[f"{key}_label"]
             where = f"{rec['data']} " if "data" in rec else ""
             title = rec.get("role", "decision") + \
                 (f" (query {rec['query']})" if "query" in rec else "") + \
@@ -230,8 +237,9 @@ def _print_contrast(c: dict) -> None:
 def _support_rows(support: list[dict]) -> list[dict]:
     return [{"row": s["row"], "episode": s["episode"],
              **({"episode_id": s["episode_id"]} if s.get("episode_id") is not None else {}),
-             "step": s["step"], **s["tags"], "action": s["action"], "value": s["value"],
-             "weight": s["weight"], "distance": s["distance"],
+             "step": s["step"], **s["tags"], "action": s["action"],
+             **({"action label": s["action_label"]} if "action_label" in s else {}),
+             "value": s["value"], "weight": s["weight"], "distance": s["distance"],
              "episodes here": s.get("episodes_here")} for s in support]
 
 

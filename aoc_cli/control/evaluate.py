@@ -313,12 +313,15 @@ def evaluate(session, data, baselines=BASELINES, seed: int = 0, progress=None,
 
 def step_records(ctx_or_session, data, res: StepScores):
     """One JSON-ready record per scored step (for ``--steps FILE.jsonl``): episode, its id,
-    step, logged action, decision, scores, residual, warning, supporting rows with their
-    episodes and ids."""
+    step, logged action, decision (with their labels, ``logged_label`` / ``decision_label``,
+    when the corpus's actions are labelled), scores, residual, warning, supporting rows with
+    their episodes and ids."""
     corpus = ctx_or_session.corpus
-    from aoc_cli.control.records import episode_ids
+    from aoc_cli.control.records import episode_ids, label_of
+    from aoc_cli.store import action_labels
 
     data_ids, corpus_ids = episode_ids(data), episode_ids(corpus)
+    labels = action_labels(corpus.action_space)
     sup_ep = corpus.episode_of(np.maximum(res.support_rows, 0))
     for i in range(len(res.row)):
         keep = res.support_rows[i] >= 0
@@ -326,7 +329,9 @@ def step_records(ctx_or_session, data, res: StepScores):
                "episode_id": None if data_ids is None else data_ids[res.episode[i]],
                "step": int(res.step[i]), "row": int(res.row[i]),
                "logged": np.asarray(res.logged[i]).tolist(),
-               "decision": np.asarray(res.decided[i]).tolist()}
+               **label_of(labels, res.logged[i], "logged_label"),
+               "decision": np.asarray(res.decided[i]).tolist(),
+               **label_of(labels, res.decided[i], "decision_label")}
         if res.scores is not None:
             rec["scores"] = res.scores[i].tolist()
         if res.v_hat is not None:
@@ -341,6 +346,7 @@ def step_records(ctx_or_session, data, res: StepScores):
                                              res.support_weights[i][keep])]
         for name, b in res.baselines.items():
             rec[f"{name}_decision"] = np.asarray(b["decided"][i]).tolist()
+            rec.update(label_of(labels, b["decided"][i], f"{name}_decision_label"))
         yield rec
 
 

@@ -16,7 +16,7 @@ import numpy as np
 
 from aoc_cli.control.controller import Decision
 from aoc_cli.errors import AocError
-from aoc_cli.store import History, atomic_path
+from aoc_cli.store import History, action_labels, atomic_path
 
 
 def episode_ids(corpus) -> list[str] | None:
@@ -35,6 +35,7 @@ def decision_record(decision: Decision, corpus, index, step: int | None = None,
     tags = corpus.tag_labels_of(rows) if len(rows) else {}
     ids = episode_ids(corpus)
     actions = corpus.actions[rows] if len(rows) else np.empty(0)
+    labels = action_labels(corpus.action_space)
     values = index.values[rows] if index.values is not None and len(rows) else None
     counts = decision.support_counts
     support = []
@@ -46,6 +47,7 @@ def decision_record(decision: Decision, corpus, index, step: int | None = None,
             "step": int(timesteps[j]),
             "tags": {name: labels[j] for name, labels in tags.items()},
             "action": np.asarray(actions[j]).tolist(),
+            **label_of(labels, actions[j]),
             "value": None if values is None else float(values[j]),
             "weight": float(decision.support_weights[j]),
             "distance": float(decision.support_distances[j]),
@@ -56,6 +58,7 @@ def decision_record(decision: Decision, corpus, index, step: int | None = None,
         "step": step,
         "observation": None if observation is None else np.asarray(observation).tolist(),
         "action": np.asarray(decision.action).tolist(),
+        **label_of(labels, decision.action),
         "value": decision.value,
         "residual": decision.residual,
         "typical_residual": typical_residual,
@@ -77,6 +80,15 @@ def decision_record(decision: Decision, corpus, index, step: int | None = None,
             if rejected.any() else None,
         }
     return record
+
+
+def label_of(labels: list[str] | None, action, key: str = "action_label") -> dict:
+    """``{key: the action's label}`` for a corpus whose discrete actions are labelled
+    (:func:`aoc_cli.store.action_labels`), else ``{}``."""
+    if labels is None:
+        return {}
+    code = int(np.asarray(action).reshape(-1)[0])
+    return {key: labels[code] if 0 <= code < len(labels) else None}
 
 
 def write_audit(path, episodes: list, meta: dict, corpus=None) -> None:

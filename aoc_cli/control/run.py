@@ -124,7 +124,11 @@ def explain_logged_step(session: Session, data, episode: int, step: int,
         records += explain_query(session, observation, history, action=logged,
                                  selection=selection, removal=removal)
     records[0]["logged_action"] = logged
-    from aoc_cli.control.records import episode_ids
+    from aoc_cli.control.records import episode_ids, label_of
+    from aoc_cli.store import action_labels
+
+    records[0].update(label_of(action_labels(corpus.action_space), logged,
+                               "logged_action_label"))
 
     ids = episode_ids(data)
     for rec, role in zip(records, ("decision", "logged action")):

@@ -21,8 +21,10 @@ Rows are ordered by episode id and time whatever the file's order (ids numerical
 are all numbers; times as numbers or ISO dates). The episode ids are kept. A second CSV of
 static per-episode features (``--static FILE``, one row per id) is joined onto every step and
 appended to the observation: numeric columns as they are, text columns one-hot (``sex=F``,
-``sex=M``); the names are recorded in the observation space's ``names`` and ``static``.
-Remaining numeric columns are kept as corpus columns (usable as value targets).
+``sex=M``); the names are recorded in the observation space's ``names`` and ``static``
+(:mod:`aoc_cli.formats.static`). Action columns holding text (``oxygen``, ``none``) are
+discrete actions whose labels are kept (:mod:`aoc_cli.formats.text_actions`). Remaining numeric
+columns are kept as corpus columns (usable as value targets).
 
 A CSV of ``aoc export`` is read back exactly with the mapping beside it
 (:mod:`aoc_cli.formats.csv_exported`).
@@ -43,6 +45,7 @@ import numpy as np
 
 from aoc_cli.errors import AocError, warn
 from aoc_cli.formats.common import ReadOptions, action_space_of, encode_labels
+from aoc_cli.formats.text_actions import text_actions
 from aoc_cli.formats.csv_exported import exported_mapping, restore_exported
 from aoc_cli.formats.spec import parse_spec
 from aoc_cli.store import CorpusData, box_space
@@ -311,7 +314,9 @@ def read_csv(path: Path, options: ReadOptions) -> CorpusData:
         if roles.id is None:
             raise AocError("--static needs an episode id column to join on: name it with "
                            "--id-column")
-        static_names, static_feats, static_tags = _read_static(
+        from aoc_cli.formats.static import read_static  # it reads with this module's helpers
+
+        static_names, static_feats, static_tags = read_static(
             Path(options.static), roles.static_id, eps.keys, eps.ids,
             bool(np.issubdtype(np.asarray(eps.keys).dtype, np.number)), roles.tags)
     obs_names = list(roles.observations) + static_names
@@ -322,8 +327,11 @@ def read_csv(path: Path, options: ReadOptions) -> CorpusData:
     if static_feats is not None:
         parts.append(np.repeat(static_feats, np.diff(eps.starts), axis=0))
     observations = np.concatenate(parts, axis=1)
-    act_raw = np.stack([numeric(cols[c], c, path)[eps.order] for c in roles.actions], axis=1)
-    actions, act_space = action_space_of(act_raw, roles.discrete, names=roles.actions)
+    labelled = text_actions(path, cols, roles.actions, eps.order)  # treatments as text
+    if labelled is None:
+        act_raw = np.stack([numeric(cols[c], c, path)[eps.order] for c in roles.actions], 1)
+        labelled = action_space_of(act_raw, roles.discrete, names=roles.actions)
+    actions, act_space = labelled
     terminals, truncations = _flags(path, cols, roles, eps, n)
     tags = _tags(path, cols, roles, eps, static_tags, options.static is not None)
     used = set(roles.observations) | set(roles.actions) | set(roles.tags) | {
@@ -348,53 +356,6 @@ def read_csv(path: Path, options: ReadOptions) -> CorpusData:
     )
     spec = parse_spec(_mapping(options).get("aoc"), options.columns_file)
     return data if spec is None else restore_exported(data, spec, path)
-
-
-
-def _read_static(path: Path, id_col: str, episode_keys: np.ndarray, episode_ids: list[str],
-                 numeric_ids: bool, tag_cols: list[str]):
-    """Static per-episode features, one row per id -> (names, (E, d_s) float, tag values)."""
-    header, cols = read_table(path)
-    if id_col not in header:
-        raise AocError(f"--static {path} has no id column {id_col!r} (columns: "
-                       f"{', '.join(header)}): name it as in the main file")
-    keys = numeric(cols[id_col], id_col, path) if numeric_ids else np.char.strip(cols[id_col])
-    uniq, counts = np.unique(keys, return_counts=True)
-    if np.any(counts > 1):
-        raise AocError(f"--static {path} has several rows for id {str(uniq[counts > 1][0])!r}: "
-                       "give one row per episode")
-    order = np.argsort(keys, kind="stable")
-    pos = np.searchsorted(keys[order], episode_keys)
-    pos = np.minimum(pos, len(keys) - 1)
-    found = keys[order][pos] == episode_keys
-    if not found.all():
-        missing = episode_ids[int(np.flatnonzero(~found)[0])]
-        raise AocError(f"--static {path} has no row for episode id {missing!r}: add one")
-    rows = order[pos]
-    unused = len(keys) - len(np.unique(rows))
-    if unused:
-        extra = sorted(set(range(len(keys))) - set(rows.tolist()))
-        warn(f"--static {path}: {unused} ids have no rows in the series (first: "
-             f"{str(np.char.strip(cols[id_col])[extra[0]])!r}); their static rows are not "
-             "used")
-    names: list[str] = []
-    feats: list[np.ndarray] = []
-    tags: dict[str, np.ndarray] = {}
-    for c in header:
-        if c == id_col:
-            continue
-        values = cols[c][rows]
-        if c in tag_cols:
-            tags[c] = np.char.strip(values)
-        elif _is_numeric(values):
-            names.append(c)
-            feats.append(numeric(values, c, path))
-        else:  # levels from the whole file, so they do not depend on which ids are present
-            for level in sorted(set(np.char.strip(cols[c]).tolist())):
-                names.append(f"{c}={level}")
-                feats.append((np.char.strip(values) == level).astype(np.float64))
-    feats_arr = np.stack(feats, axis=1) if feats else np.zeros((len(rows), 0))
-    return names, feats_arr, tags
 
 
 __all__ = ["read_csv", "read_table", "numeric"]

@@ -18,6 +18,7 @@ from aoc_cli.store.atomic import (
 )
 from aoc_cli.store.corpus import (
     CorpusData,
+    action_labels,
     History,
     box_space,
     discrete_space,
@@ -38,6 +39,7 @@ def open_corpus(name: str, store=None) -> Corpus:
 
 __all__ = [
     "Corpus",
+    "action_labels",
     "CorpusData",
     "History",
     "Store",

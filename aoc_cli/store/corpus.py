@@ -40,6 +40,15 @@ def discrete_space(n: int, names: list[str] | None = None) -> dict:
     return space
 
 
+def action_labels(space: dict) -> list[str] | None:
+    """The label of each discrete action (``names`` holding one entry per action, n > 1: a
+    treatment logged as text, icu-sepsis's ``fluids=2,vaso=0``), else None (``names`` of a
+    single entry is the action column's name)."""
+    names = space.get("names") if space.get("type") == "discrete" else None
+    n = int(space.get("n", 0) or 0)
+    return [str(x) for x in names] if names and n > 1 and len(names) == n else None
+
+
 def episode_starts_from_lengths(lengths) -> np.ndarray:
     """Episode lengths (E,) -> offsets (E + 1,)."""
     return np.concatenate([[0], np.cumsum(np.asarray(lengths, dtype=np.int64))]).astype(np.int64)

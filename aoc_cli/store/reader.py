@@ -21,7 +21,7 @@ import numpy as np
 
 from aoc_cli.errors import AocError
 from aoc_cli.store.atomic import seal_status
-from aoc_cli.store.corpus import CorpusData, History, gather_history
+from aoc_cli.store.corpus import CorpusData, History, action_labels, gather_history
 
 SCHEMA_VERSION = 1
 #: Columns up to this many bytes are read into memory once; larger ones are sliced from disk.
@@ -183,8 +183,9 @@ class Corpus:
         return self.path / "models"
 
     def check_same_spaces(self, data: CorpusData) -> None:
-        def shape(space):
-            return (space.get("type"), tuple(space.get("shape", ())), space.get("n"))
+        def shape(space):  # labelled actions may differ in labels: appending merges them
+            n = "labelled" if action_labels(space) is not None else space.get("n")
+            return (space.get("type"), tuple(space.get("shape", ())), n)
 
         if shape(self.observation_space) != shape(data.observation_space) or \
                 shape(self.action_space) != shape(data.action_space) or \

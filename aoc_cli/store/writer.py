@@ -19,7 +19,7 @@ import numpy as np
 
 from aoc_cli.store.atomic import array_checksum, atomic_dir, file_record, hash_arrays, seal, \
     write_json
-from aoc_cli.store.corpus import CorpusData, episode_starts_from_lengths
+from aoc_cli.store.corpus import CorpusData, action_labels, episode_starts_from_lengths
 from aoc_cli.store.lock import writing_corpus
 from aoc_cli.store.reader import SCHEMA_VERSION, Corpus
 
@@ -62,7 +62,8 @@ def write_corpus(root: Path, name: str, data: CorpusData, *, overwrite: bool = F
 
 
 def concat(a: CorpusData, b: CorpusData) -> CorpusData:
-    """Episodes of ``a`` then ``b`` (same spaces); tags merged by label."""
+    """Episodes of ``a`` then ``b`` (same spaces); tags merged by label, and labelled discrete
+    actions likewise (``a``'s codes kept, ``b``'s new labels numbered after them)."""
     tags = {}
     for key in sorted(set(a.tags) | set(b.tags)):
         labels: list[str] = []
@@ -86,16 +87,22 @@ def concat(a: CorpusData, b: CorpusData) -> CorpusData:
         ids = (a.episode_ids or [f"{i}" for i in range(a.n_episodes)]) + \
               (b.episode_ids or [f"{a.n_episodes + i}" for i in range(b.n_episodes)])
     obs_dtype = np.result_type(a.observations.dtype, b.observations.dtype)
+    actions_b, action_space = b.actions, a.action_space
+    labels_a, labels_b = action_labels(a.action_space), action_labels(b.action_space)
+    if labels_a is not None and labels_b is not None:  # labelled actions: a's codes kept
+        labels = labels_a + [x for x in labels_b if x not in labels_a]
+        actions_b = np.array([labels.index(x) for x in labels_b], np.int64)[b.actions]
+        action_space = {**a.action_space, "n": len(labels), "names": labels}
     return CorpusData(
         observations=np.concatenate([a.observations, b.observations]).astype(obs_dtype),
-        actions=np.concatenate([a.actions, b.actions]),
+        actions=np.concatenate([a.actions, actions_b]),
         rewards=None if a.rewards is None else np.concatenate([a.rewards, b.rewards]),
         terminals=np.concatenate([a.terminals, b.terminals]),
         truncations=np.concatenate([a.truncations, b.truncations]),
         episode_starts=episode_starts_from_lengths(
             np.concatenate([np.diff(a.episode_starts), np.diff(b.episode_starts)])),
         observation_space=a.observation_space,
-        action_space=a.action_space,
+        action_space=action_space,
         tags=tags,
         columns=columns,
         episode_ids=ids,

@@ -1,0 +1,60 @@
+"""Static per-episode covariates of a CSV log (``--static FILE``, one row per episode id),
+joined onto every step of the series and appended to its observation: numeric columns as they
+are, text columns one-hot (``sex=F``, ``sex=M``, levels from the whole file), tag columns kept
+as text for the series' tags.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from aoc_cli.errors import AocError, warn
+from aoc_cli.formats.csv import _is_numeric, numeric, read_table
+
+
+def read_static(path: Path, id_col: str, episode_keys: np.ndarray, episode_ids: list[str],
+                 numeric_ids: bool, tag_cols: list[str]):
+    """Static per-episode features, one row per id -> (names, (E, d_s) float, tag values)."""
+    header, cols = read_table(path)
+    if id_col not in header:
+        raise AocError(f"--static {path} has no id column {id_col!r} (columns: "
+                       f"{', '.join(header)}): name it as in the main file")
+    keys = numeric(cols[id_col], id_col, path) if numeric_ids else np.char.strip(cols[id_col])
+    uniq, counts = np.unique(keys, return_counts=True)
+    if np.any(counts > 1):
+        raise AocError(f"--static {path} has several rows for id {str(uniq[counts > 1][0])!r}: "
+                       "give one row per episode")
+    order = np.argsort(keys, kind="stable")
+    pos = np.searchsorted(keys[order], episode_keys)
+    pos = np.minimum(pos, len(keys) - 1)
+    found = keys[order][pos] == episode_keys
+    if not found.all():
+        missing = episode_ids[int(np.flatnonzero(~found)[0])]
+        raise AocError(f"--static {path} has no row for episode id {missing!r}: add one")
+    rows = order[pos]
+    unused = len(keys) - len(np.unique(rows))
+    if unused:
+        extra = sorted(set(range(len(keys))) - set(rows.tolist()))
+        warn(f"--static {path}: {unused} ids have no rows in the series (first: "
+             f"{str(np.char.strip(cols[id_col])[extra[0]])!r}); their static rows are not "
+             "used")
+    names: list[str] = []
+    feats: list[np.ndarray] = []
+    tags: dict[str, np.ndarray] = {}
+    for c in header:
+        if c == id_col:
+            continue
+        values = cols[c][rows]
+        if c in tag_cols:
+            tags[c] = np.char.strip(values)
+        elif _is_numeric(values):
+            names.append(c)
+            feats.append(numeric(values, c, path))
+        else:  # levels from the whole file, so they do not depend on which ids are present
+            for level in sorted(set(np.char.strip(cols[c]).tolist())):
+                names.append(f"{c}={level}")
+                feats.append((np.char.strip(values) == level).astype(np.float64))
+    feats_arr = np.stack(feats, axis=1) if feats else np.zeros((len(rows), 0))
+    return names, feats_arr, tags
