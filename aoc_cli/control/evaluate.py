@@ -34,10 +34,12 @@ import numpy as np
 from aoc_cli.control import scores as sc
 from aoc_cli.control.evaluate_inputs import (EXACT_MAX_ROWS, EvalContext, candidate_beliefs,
                                              check_inputs, episode_rows, heterogeneity)
+from aoc_cli.control.records import label_of
 from aoc_cli.control.support import support_episodes, support_filter
 from aoc_cli.decompose import decompose
 from aoc_cli.errors import AocError
 from aoc_cli.index.strata import PerAction
+from aoc_cli.store import action_labels
 from aoc_cli.threads import one_thread
 
 BASELINES = ("knn", "bc")
@@ -317,8 +319,7 @@ def step_records(ctx_or_session, data, res: StepScores):
     when the corpus's actions are labelled), scores, residual, warning, supporting rows with
     their episodes and ids."""
     corpus = ctx_or_session.corpus
-    from aoc_cli.control.records import episode_ids, label_of
-    from aoc_cli.store import action_labels
+    from aoc_cli.control.records import episode_ids
 
     data_ids, corpus_ids = episode_ids(data), episode_ids(corpus)
     labels = action_labels(corpus.action_space)

@@ -12,11 +12,12 @@ import numpy as np
 from aoc_cli.control.config import ControllerConfig
 from aoc_cli.control.controller import Decision
 from aoc_cli.control.monitor import OODMonitor
-from aoc_cli.control.records import decision_record, write_audit
+from aoc_cli.control.records import decision_record, label_of, write_audit
 from aoc_cli.control.rollout import (EpisodeResult, Policy, check_same_spaces, check_spaces,
                                      run_episode, summarize)
 from aoc_cli.errors import AocError
 from aoc_cli.progress import Progress
+from aoc_cli.store import action_labels
 from aoc_cli.threads import thread_limits
 
 if TYPE_CHECKING:
@@ -124,8 +125,7 @@ def explain_logged_step(session: Session, data, episode: int, step: int,
         records += explain_query(session, observation, history, action=logged,
                                  selection=selection, removal=removal)
     records[0]["logged_action"] = logged
-    from aoc_cli.control.records import episode_ids, label_of
-    from aoc_cli.store import action_labels
+    from aoc_cli.control.records import episode_ids
 
     records[0].update(label_of(action_labels(corpus.action_space), logged,
                                "logged_action_label"))

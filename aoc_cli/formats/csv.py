@@ -32,12 +32,8 @@ A CSV of ``aoc export`` is read back exactly with the mapping beside it
 
 from __future__ import annotations
 
-import csv
 import fnmatch
-import gzip
-import io
 import json
-import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -48,99 +44,17 @@ from aoc_cli.formats.common import ReadOptions, action_space_of, encode_labels
 from aoc_cli.formats.text_actions import text_actions
 from aoc_cli.formats.csv_exported import exported_mapping, restore_exported
 from aoc_cli.formats.spec import parse_spec
+from aoc_cli.formats.static import read_static
+from aoc_cli.formats.table import is_numeric, numeric, read_table
 from aoc_cli.store import CorpusData, box_space
 
-CHUNK_LINES = 50_000
 MAPPING_KEYS = {"id", "time", "observations", "actions", "reward", "terminal", "tags",
                 "discrete_actions", "static_id", "static", "aoc"}
 
 
-def read_table(path: Path, progress=None) -> tuple[list[str], dict[str, np.ndarray]]:
-    """A CSV (``.tsv``: tab-separated; ``.gz``: gzip) -> (header, column name -> (N,) str).
-
-    Quoted fields may span lines (free-text notes exported from a spreadsheet); blank lines
-    are skipped.
-    """
-    text = _read_text(path)
-    delimiter = "\t" if ".tsv" in path.suffixes else ","
-    try:
-        return _parse(path, text, delimiter, progress)
-    except csv.Error as err:
-        raise AocError(f"cannot read {path} as CSV ({err}): fix the file") from None
-
-
-def _read_text(path: Path) -> str:
-    """The text of a file (gunzipped for ``.gz``); unreadable or empty is one AocError."""
-    opener = gzip.open if path.suffix == ".gz" else open
-    try:
-        with opener(path, "rt", encoding="utf-8-sig", newline="") as fh:
-            text = fh.read()
-    except (OSError, UnicodeDecodeError, EOFError, zlib.error) as err:
-        raise AocError(f"cannot read {path} as UTF-8 text ({type(err).__name__}: {err}); "
-                       "a .gz file must be gzip-compressed CSV") from None
-    if not text.strip():
-        raise AocError(f"{path} is empty: expected a header line and one row per step")
-    return text
-
-
-def _parse(path: Path, text: str, delimiter: str, progress):
-    reader = csv.reader(io.StringIO(text), delimiter=delimiter)
-    header = [h.strip() for h in next(reader)]
-    if "" in header:
-        raise AocError(f"{path}: header column {header.index('') + 1} has no name: name it")
-    if len(set(header)) != len(header):
-        dup = sorted({h for h in header if header.count(h) > 1})
-        raise AocError(f"{path} repeats column names {dup}: rename them")
-    rows: list[list[str]] = []
-    # progress in physical lines (a quoted field may span several); no bar for a small file
-    lines, label = text.count("\n") + 1, f"reading {path.name}"
-    if lines <= CHUNK_LINES:
-        progress = None
-    for r in reader:
-        if not r or (len(r) == 1 and not r[0].strip()):
-            continue  # a blank line
-        if len(r) != len(header):
-            raise AocError(f"{path}: data row {len(rows) + 1} (line {reader.line_num}) has "
-                           f"{len(r)} fields, the header has {len(header)}: fix the file")
-        rows.append(r)
-        if progress is not None and len(rows) % CHUNK_LINES == 0:
-            progress(min(reader.line_num, lines), lines, label)
-    if progress is not None:
-        progress(lines, lines, label)
-    if not rows:
-        return header, {h: np.array([], dtype=str) for h in header}
-    cols = [np.array(c, dtype=str) for c in zip(*rows)]
-    return header, dict(zip(header, cols))
-
-
-def numeric(values: np.ndarray, name: str, path: Path) -> np.ndarray:
-    """(N,) strings -> float64; empty cells are NaN; anything else that is not a number is
-    an AocError naming the row."""
-    stripped = np.char.strip(values)
-    stripped = np.where(stripped == "", "nan", stripped)
-    try:
-        return stripped.astype(np.float64)
-    except ValueError:
-        for i, v in enumerate(stripped):
-            try:
-                float(v)
-            except ValueError:
-                raise AocError(f"{path}: column {name!r}, data row {i + 1} holds "
-                               f"{str(v)!r}, not a number") from None
-    raise AssertionError("unreachable")
-
-
-def _is_numeric(values: np.ndarray) -> bool:
-    try:
-        np.where(np.char.strip(values) == "", "nan", np.char.strip(values)).astype(np.float64)
-        return True
-    except ValueError:
-        return False
-
-
 def _sort_key(values: np.ndarray, name: str, path: Path, dates: bool) -> np.ndarray:
     """Numbers if every value is a number, else (time only) ISO dates, else (ids) the text."""
-    if _is_numeric(values):
+    if is_numeric(values):
         return numeric(values, name, path)
     if dates:
         try:
@@ -314,8 +228,6 @@ def read_csv(path: Path, options: ReadOptions) -> CorpusData:
         if roles.id is None:
             raise AocError("--static needs an episode id column to join on: name it with "
                            "--id-column")
-        from aoc_cli.formats.static import read_static  # it reads with this module's helpers
-
         static_names, static_feats, static_tags = read_static(
             Path(options.static), roles.static_id, eps.keys, eps.ids,
             bool(np.issubdtype(np.asarray(eps.keys).dtype, np.number)), roles.tags)
@@ -337,7 +249,7 @@ def read_csv(path: Path, options: ReadOptions) -> CorpusData:
     used = set(roles.observations) | set(roles.actions) | set(roles.tags) | {
         roles.id, roles.time, roles.reward, roles.terminal}
     columns = {c: numeric(cols[c], c, path)[eps.order] for c in header
-               if c not in used and _is_numeric(cols[c])}
+               if c not in used and is_numeric(cols[c])}
     obs_space = box_space(observations.shape[1], names=obs_names)
     if static_names:
         obs_space["static"] = static_names

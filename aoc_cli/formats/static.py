@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from aoc_cli.errors import AocError, warn
-from aoc_cli.formats.csv import _is_numeric, numeric, read_table
+from aoc_cli.formats.table import is_numeric, numeric, read_table
 
 
 def read_static(path: Path, id_col: str, episode_keys: np.ndarray, episode_ids: list[str],
@@ -49,7 +49,7 @@ def read_static(path: Path, id_col: str, episode_keys: np.ndarray, episode_ids: 
         values = cols[c][rows]
         if c in tag_cols:
             tags[c] = np.char.strip(values)
-        elif _is_numeric(values):
+        elif is_numeric(values):
             names.append(c)
             feats.append(numeric(values, c, path))
         else:  # levels from the whole file, so they do not depend on which ids are present

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from aoc_cli.errors import AocError
+from aoc_cli.formats.table import is_numeric
 from aoc_cli.store import discrete_space
 
 
@@ -32,22 +33,12 @@ def _numbers(cells: np.ndarray) -> np.ndarray:
     return out
 
 
-def is_text(cells: np.ndarray) -> bool:
-    """Whether an action column holds labels: some non-empty cell is not a number."""
-    stripped = np.char.strip(np.asarray(cells, dtype=str))
-    try:
-        np.where(stripped == "", "nan", stripped).astype(np.float64)
-        return False
-    except ValueError:
-        return True
-
-
 def text_actions(path: Path, cols: dict[str, np.ndarray], names: list[str],
                  order: np.ndarray) -> tuple[np.ndarray, dict] | None:
     """The discrete actions (N,) int64 and their labelled space when one of the action columns
     ``names`` holds text, else None (the numeric reading applies). ``order``: the file row of
     each corpus row."""
-    if not any(is_text(cols[c]) for c in names):
+    if all(is_numeric(cols[c]) for c in names):
         return None
     parts = []
     for c in names:

@@ -22,6 +22,8 @@ from typing import Iterator
 
 import numpy as np
 
+from aoc_cli.store.lockfiles import pid_alive
+
 #: Temporaries of an older aoc carry no pid: removed when older than this many seconds.
 LEGACY_STALE_SECONDS = 3600
 
@@ -34,8 +36,6 @@ def remove_stale(path: str | os.PathLike) -> list[Path]:
     """Remove the temporaries of ``path`` (``.<name>.*.tmp*``, ``.<name>.*.old``) left by
     writers that died: those recording a pid that is not alive, and pid-less ones (an older
     aoc) untouched for an hour. Returns what was removed."""
-    from aoc_cli.store.lock import pid_alive
-
     path = Path(path)
     folder = path.parent
     if not folder.is_dir():

@@ -31,22 +31,11 @@ from pathlib import Path
 from typing import Callable, Iterator
 
 from aoc_cli.errors import AocError
+from aoc_cli.store.lockfiles import pid_alive, remove_locked, same_file
+from aoc_cli.store.sweep import clear_dead
 
 #: path -> [fd, exclusive, depth] of the locks this process holds.
 _HELD: dict[str, list] = {}
-
-
-def pid_alive(pid: int) -> bool:
-    """True when a process with this pid exists (one we may not signal counts too)."""
-    if pid <= 0:
-        return False
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
 
 
 def _holders(path: Path) -> list[int]:
@@ -129,34 +118,10 @@ def _take(path: Path, what: str, shared: bool) -> int:
         except BlockingIOError:
             os.close(fd)
             raise _busy(path, what) from None
-        if _same_file(fd, path):
+        if same_file(fd, path):
             return fd
         os.close(fd)  # removed (and perhaps re-created) by a holder letting go: again
     raise AocError(f"cannot take the lock {path}: it keeps being removed; run this again")
-
-
-def _same_file(fd: int, path: Path) -> bool:
-    try:
-        st = os.stat(path)
-    except FileNotFoundError:
-        return False
-    own = os.fstat(fd)
-    return (own.st_dev, own.st_ino) == (st.st_dev, st.st_ino)
-
-
-def remove_locked(fd: int, path: Path, exclusive: bool) -> bool:
-    """Remove the lock file ``path`` locked through ``fd`` when no other process holds it
-    (a shared lock is first made exclusive, without waiting). True when removed."""
-    if not exclusive:
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            return False
-    if not _same_file(fd, path):
-        return False
-    with contextlib.suppress(FileNotFoundError):
-        os.unlink(path)
-    return True
 
 
 def corpus_lock_path(root: Path, name: str) -> Path:
@@ -172,8 +137,6 @@ def writing_corpus(root: str | os.PathLike, name: str, shared: bool = False) -> 
     with file_lock(corpus_lock_path(root, name), f"corpus {name!r}", shared=shared,
                    keep=lambda: (root / name).exists()) as taken:
         if taken:
-            from aoc_cli.store.sweep import clear_dead
-
             with contextlib.suppress(OSError):
                 clear_dead(root)
         yield

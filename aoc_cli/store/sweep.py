@@ -22,7 +22,7 @@ import re
 import shutil
 from pathlib import Path
 
-from aoc_cli.store.lock import pid_alive, remove_locked
+from aoc_cli.store.lockfiles import pid_alive, remove_locked
 
 #: A temporary that records its writer's pid: ``.<name>.p<pid>.<random>.tmp[suffix]`` / ``.old``.
 TEMPORARY = re.compile(r"^\.(.+)\.p(\d+)\.[A-Za-z0-9_]+\.(tmp.*|old)$")

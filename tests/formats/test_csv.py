@@ -136,7 +136,7 @@ def test_a_row_with_too_many_fields_names_its_line(tmp_path):
 
 
 def test_reading_reports_progress_in_lines_up_to_the_whole_file(tmp_path, monkeypatch):
-    import aoc_cli.formats.csv as csv_module
+    import aoc_cli.formats.table as csv_module
 
     monkeypatch.setattr(csv_module, "CHUNK_LINES", 2)
     path = tmp_path / "p.csv"

@@ -79,7 +79,7 @@ def test_a_lock_file_removed_while_taking_it_is_taken_afresh(tmp_path, monkeypat
     with writing_corpus(tmp_path, "n"):
         assert calls == [tmp_path / ".n.lock"] * 2  # opened again
         held = lock_module._HELD[str((tmp_path / ".n.lock").absolute())][0]
-        assert lock_module._same_file(held, tmp_path / ".n.lock")
+        assert lock_module.same_file(held, tmp_path / ".n.lock")
     assert not (tmp_path / ".n.lock").exists()
 
 
