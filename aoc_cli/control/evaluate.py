@@ -12,8 +12,8 @@ For a chunk of whole episodes of the held-out corpus (S steps):
    its own row;
 4. the decision: imitation, the weighted action of the minimal corpus subset (its weights per
    action are the scores); value, the controller's rule (epsilon-quantile filter on the
-   residuals, with ``min_support`` the support filter, then the best v_hat) over the
-   candidates;
+   residuals, capped by ``residual_cap`` x the typical p90 residual when set, with
+   ``min_support`` the support filter, then the best v_hat) over the candidates;
 5. baselines on the same steps: ``knn`` (the k = d_b + 1 nearest corpus rows on standardised
    inputs, own episode left out likewise) and ``bc`` (the model's own head: the black box ABC
    explains).
@@ -194,6 +194,11 @@ def _value(ctx, rows, ep, obs, hist, logged) -> StepScores:
     res = dec.residual.reshape(s, kk)
     val = dec.value.reshape(s, kk)
     thr = np.quantile(res, cfg.epsilon, axis=1, keepdims=True)
+    p90 = ctx.index.typical.p90
+    if cfg.residual_cap is not None and p90 is not None:  # as Controller.candidate_filter
+        thr = np.minimum(thr, float(cfg.residual_cap) * float(p90))
+        none = ~(res <= thr + 1e-12 * np.maximum(1.0, thr)).any(1, keepdims=True)
+        thr = np.where(none, res.min(1, keepdims=True), thr)
     passed = res <= thr + 1e-12 * np.maximum(1.0, thr)
     if cfg.min_support is not None:  # the episodes behind each value (control/support.py)
         support, _ = support_episodes(ctx.index.beliefs, dec.rows, dec.weights, dec.neighbours,

@@ -270,3 +270,25 @@ def test_the_papers_candidates_stay_reachable_by_a_flag(ward, tmp_path):
                              max_epochs=1, threads=1), "default")
     code, out, err = run_aoc("index", "boxes", "--candidates", "per_action", env=env)
     assert code == 2 and "needs discrete actions" in err and len(err.strip().splitlines()) == 1
+
+
+# (ward's two actions, epsilon 1 so both pass the quantile: a minimum no candidate meets keeps
+# the better supported one, a tiny cap the smaller residual; both change decisions here)
+@pytest.mark.parametrize("settings", [{"min_support": 1000.0}, {"residual_cap": 1e-3},
+                                      {"residual_cap": 1e-3, "min_support": 1000.0}])
+def test_value_decisions_in_batches_apply_the_support_and_cap_rules_as_decide_does(ward,
+                                                                                  settings):
+    _root, store = ward
+    corpus, held = store.corpus("ward"), store.corpus("held")
+    session = open_session(corpus, "value", config=ControllerConfig(epsilon=1.0, **settings))
+    plain = open_session(corpus, "value", config=ControllerConfig(epsilon=1.0)).controller
+    _summary, res = evaluate(session, held, [])
+    changed = 0
+    for i in range(0, held.n_rows, 11):
+        h = held.history([i], session.model.history_length)
+        one = session.controller.decide(held.observations[i], h)
+        changed += int(one.action) != int(plain.decide(held.observations[i], h).action)
+        close = np.sort(one.candidate_values[one.passed])
+        assert int(one.action) == int(res.decided[i]) or \
+            (len(close) > 1 and close[-1] - close[-2] < 1e-6)
+    assert changed > 0, "the rule never changed a decision: the test checks nothing"
