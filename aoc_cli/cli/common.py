@@ -134,6 +134,11 @@ MinSupportOption = Annotated[Optional[float], typer.Option(
                           "this many distinct episodes (the support shown by aoc explain; "
                           "default: the task's setting, else no minimum).")]
 
+SupportPenaltyOption = Annotated[Optional[float], typer.Option(
+    "--support-penalty", help="Value mode: rank candidates by v_hat - Z x the corpus values' std "
+                              "/ sqrt(support), a value shrunk by how many episodes back it "
+                              "(default: the task's setting, else v_hat).")]
+
 CandidatesOption = Annotated[Optional[int], typer.Option(
     "--candidates", "-K", help="Candidate actions per step (default: the task's, else 100).")]
 

@@ -12,8 +12,8 @@ import typer
 
 from aoc_cli.cli.common import (CandidatesOption, CorpusArgument, EpsilonOption,
                                 FormatOption, IndexOption, KOption, MinSupportOption, ModelOption,
-                                RayAddressOption, WithoutEpisodesOption, WithoutOption,
-                                WorkersOption, get_store, parse_removal)
+                                RayAddressOption, SupportPenaltyOption, WithoutEpisodesOption,
+                                WithoutOption, WorkersOption, get_store, parse_removal)
 from aoc_cli.errors import AocError
 from aoc_cli.report import resolve_format, write_object, write_records
 
@@ -42,6 +42,7 @@ def register(app: typer.Typer) -> None:
         epsilon: EpsilonOption = None,
         k: KOption = None,
         min_support: MinSupportOption = None,
+        support_penalty: SupportPenaltyOption = None,
         exact: Annotated[Optional[bool], typer.Option(
             "--exact/--ivf", help="Search the index exactly for every step, or an IVF structure "
                                   "built for the run (default: exact up to 20,000 corpus rows, "
@@ -70,7 +71,8 @@ def register(app: typer.Typer) -> None:
         held_out = corpus if data == name else store.corpus(data)
         config = ControllerConfig.for_task(_collected_task(corpus), candidates=candidates,
                                            epsilon=epsilon, k=k, residual_cap=None,
-                                           min_support=min_support)
+                                           min_support=min_support,
+                                           support_penalty=support_penalty)
         removal = parse_removal(corpus, without, without_episodes)
         if removal is not None and (workers is not None or ray_address is not None):
             raise AocError("--without runs in one process: drop --workers / --ray-address")

@@ -10,8 +10,9 @@ import typer
 
 from aoc_cli.cli.common import (CandidatesOption, CorpusArgument, EpsilonOption, FormatOption,
                                 IndexOption, KOption, MinSupportOption, ModelOption,
-                                ResidualCapOption, WithoutEpisodesOption, WithoutOption,
-                                get_store, parse_removal)
+                                ResidualCapOption, SupportPenaltyOption,
+                                WithoutEpisodesOption, WithoutOption, get_store,
+                                parse_removal)
 from aoc_cli.errors import AocError
 from aoc_cli.report import resolve_format, write_object, write_records
 
@@ -41,6 +42,7 @@ def register(app: typer.Typer) -> None:
         epsilon: EpsilonOption = None,
         k: KOption = None,
         min_support: MinSupportOption = None,
+        support_penalty: SupportPenaltyOption = None,
         residual_cap: ResidualCapOption = None,
         seed: Annotated[int, typer.Option("--seed", help="Seed of the candidates.")] = 0,
         without: WithoutOption = None,
@@ -60,7 +62,8 @@ def register(app: typer.Typer) -> None:
         corpus = store.corpus(name)
         config = ControllerConfig.for_task(_collected_task(corpus), candidates=candidates,
                                            epsilon=epsilon, k=k, residual_cap=residual_cap,
-                                           min_support=min_support)
+                                           min_support=min_support,
+                                           support_penalty=support_penalty)
         opened = dict(model_id=model, index_id=index_id, config=config, seed=seed)
         removal = parse_removal(corpus, without, without_episodes)
         if data is not None:

@@ -11,7 +11,7 @@ from aoc_cli.cli.common import (CandidatesOption, CorpusArgument, EpisodesOption
                                 EpsilonOption, ExcludeOption, FormatOption, IndexOption,
                                 KOption, MinSupportOption, ModelOption, PolicyName, PolicyOption,
                                 ResidualCapOption, SamplerName, SamplerOption, SelectOption,
-                                choice, get_store, parse_selection)
+                                SupportPenaltyOption, choice, get_store, parse_selection)
 from aoc_cli.errors import AocError
 from aoc_cli.report import (ProgressBar, message, resolve_format, write_object,
                             write_records)
@@ -34,6 +34,7 @@ def register(app: typer.Typer) -> None:
         epsilon: EpsilonOption = None,
         k: KOption = None,
         min_support: MinSupportOption = None,
+        support_penalty: SupportPenaltyOption = None,
         residual_cap: ResidualCapOption = None,
         sampler: SamplerOption = SamplerName.uniform,
         select: SelectOption = None,
@@ -65,7 +66,8 @@ def register(app: typer.Typer) -> None:
         corpus = store.corpus(name)
         config = ControllerConfig.for_task(env, candidates=candidates, epsilon=epsilon, k=k,
                                            sampler=sampler, residual_cap=residual_cap,
-                                           min_support=min_support)
+                                           min_support=min_support,
+                                           support_penalty=support_penalty)
         environment = make_env(env)
         selection = row_selection(corpus, parse_selection(select, "--select"),
                                   parse_selection(exclude, "--exclude"))

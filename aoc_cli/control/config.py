@@ -25,7 +25,8 @@ class ControllerConfig:
     against the other rows (``index.json`` ``typical_residual.p90``); when no candidate has
     :math:`r \le \tau`, the smallest-residual candidate is kept. With ``min_support`` m, a
     candidate must also be backed by at least m distinct episodes (its support, the effective
-    number of episodes behind its v_hat; :mod:`aoc_cli.control.support`). In imitation mode
+    number of episodes behind its v_hat; :mod:`aoc_cli.control.support`); with
+    ``support_penalty`` z the argmax is of v_hat - z sigma_v / sqrt(support). In imitation mode
     (ABC) there are no candidates: the decision is the weighted
     action of the minimal corpus subset of :math:`b(o_t, h_t)`.
     """
@@ -41,6 +42,9 @@ class ControllerConfig:
     """m: also drop candidates whose value is backed by fewer than m distinct episodes (the
     support, :mod:`aoc_cli.control.support`); none has m: the best supported of those that
     pass the residual filter. None: no minimum (the paper's rule)."""
+    support_penalty: float | None = None
+    """z: rank the candidates that pass by v_hat - z sigma_v / sqrt(support) (sigma_v the std
+    of the corpus values; aoc_cli.control.support.penalised) instead of v_hat. None: v_hat."""
     k: int | None = None
     """Nearest corpus beliefs per query; None = the index's (``index.json`` ``k``): 2 (d_b + 1),
     or for an imitation model of discrete actions (d_b + 1) / the rarest action's share,
@@ -85,6 +89,9 @@ class ControllerConfig:
         if self.min_support is not None and not self.min_support >= 1:
             raise AocError(f"min_support must be >= 1 episode, got {self.min_support}",
                            "min_support")
+        if self.support_penalty is not None and not self.support_penalty >= 0:
+            raise AocError(f"support_penalty must be >= 0, got {self.support_penalty}",
+                           "support_penalty")
         if self.k is not None and self.k < 1:
             raise AocError(f"k must be >= 1, got {self.k}", "k")
         if self.sampler not in ("uniform", "bc"):

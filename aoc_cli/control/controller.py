@@ -10,7 +10,8 @@ One step, top to bottom:
 4. keep the candidates whose residual is within the epsilon-quantile of the K residuals
    (and, with ``residual_cap`` c, within c x the corpus's typical p90 residual; with
    ``min_support`` m, backed by at least m distinct episodes: aoc_cli/control/support.py);
-5. the argmax of ``v_hat`` among them (ties: the smaller residual).
+5. the argmax of ``v_hat`` among them (ties: the smaller residual); with ``support_penalty``
+   z, of ``v_hat - z sigma_v / sqrt(support)``.
 
 In imitation mode (ABC) the belief is ``b(o_t, h_t)`` and the decision is the weighted action
 of its minimal corpus subset: the weighted mean (continuous) or the weight-argmax (discrete).
@@ -23,7 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from aoc_cli.control.config import ControllerConfig
-from aoc_cli.control.support import row_episodes, support_episodes, support_filter
+from aoc_cli.control.support import penalised, row_episodes, support_episodes, support_filter
 from aoc_cli.errors import AocError
 from aoc_cli.store import History
 from aoc_cli.threads import one_thread
@@ -161,7 +162,8 @@ class Controller:
         if choose:
             threshold, passed = self.candidate_filter(residual)
             passed = support_filter(passed, support, self.config.min_support)
-            order = np.lexsort((residual, -value))  # by value desc, then residual asc
+            key = penalised(value, support, self.config.support_penalty, self.value_std)
+            order = np.lexsort((residual, -key))  # by value (key) desc, then residual asc
             chosen = int(next(i for i in order if passed[i]))
         else:
             threshold, passed, chosen = float("nan"), np.ones(n, bool), 0

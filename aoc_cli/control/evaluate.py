@@ -13,7 +13,8 @@ For a chunk of whole episodes of the held-out corpus (S steps):
 4. the decision: imitation, the weighted action of the minimal corpus subset (its weights per
    action are the scores); value, the controller's rule (epsilon-quantile filter on the
    residuals, capped by ``residual_cap`` x the typical p90 residual when set, with
-   ``min_support`` the support filter, then the best v_hat) over the candidates;
+   ``min_support`` the support filter, then the best v_hat, or with ``support_penalty`` the
+   best penalised v_hat) over the candidates;
 5. baselines on the same steps: ``knn`` (the k = d_b + 1 nearest corpus rows on standardised
    inputs, own episode left out likewise) and ``bc`` (the model's own head: the black box ABC
    explains).
@@ -35,7 +36,7 @@ from aoc_cli.control import scores as sc
 from aoc_cli.control.evaluate_inputs import (EXACT_MAX_ROWS, EvalContext, candidate_beliefs,
                                              check_inputs, episode_rows, heterogeneity)
 from aoc_cli.control.records import label_of
-from aoc_cli.control.support import support_episodes, support_filter
+from aoc_cli.control.support import penalised, support_episodes, support_filter
 from aoc_cli.decompose import decompose
 from aoc_cli.errors import AocError
 from aoc_cli.index.strata import PerAction
@@ -200,11 +201,15 @@ def _value(ctx, rows, ep, obs, hist, logged) -> StepScores:
         none = ~(res <= thr + 1e-12 * np.maximum(1.0, thr)).any(1, keepdims=True)
         thr = np.where(none, res.min(1, keepdims=True), thr)
     passed = res <= thr + 1e-12 * np.maximum(1.0, thr)
-    if cfg.min_support is not None:  # the episodes behind each value (control/support.py)
+    rank = val
+    if cfg.min_support is not None or cfg.support_penalty is not None:
+        # the episodes behind each value (control/support.py)
         support, _ = support_episodes(ctx.index.beliefs, dec.rows, dec.weights, dec.neighbours,
                                       ctx.corpus_episode)
-        passed = support_filter(passed, support.reshape(s, kk), cfg.min_support)
-    key = np.where(passed, val, -np.inf)
+        support = support.reshape(s, kk)
+        passed = support_filter(passed, support, cfg.min_support)
+        rank = penalised(val, support, cfg.support_penalty, ctx.value_std)
+    key = np.where(passed, rank, -np.inf)
     best = key.max(1, keepdims=True)
     # ties on v_hat: the smaller residual
     chosen = np.where(key == best, res, np.inf).argmin(1)

@@ -16,9 +16,13 @@ over n_c episodes: one vertex backed by n episodes gives n; d_b + 1 distinct row
 weight give d_b + 1; a hull of rows seen once gives at most d_b + 1. It is bounded by k, the
 rows searched (2 (d_b + 1) by default).
 
-With ``min_support`` m the controller keeps the candidates whose residual passes the epsilon
-filter *and* whose support is at least m; when none has m, the best supported of those that
-pass the residual filter (:func:`support_filter`).
+Two rules use it, both opt-in. With ``min_support`` m the controller keeps the candidates
+whose residual passes the epsilon filter *and* whose support is at least m; when none has m,
+the best supported of those that pass the residual filter (:func:`support_filter`). With
+``support_penalty`` z it ranks the candidates that pass by a value shrunk by how many episodes
+back it (:func:`penalised`), a lower bound in the corpus's own value scale::
+
+    v_hat(a) - z sigma_v / sqrt(support(a)),     sigma_v = std of the corpus values v^c
 """
 
 from __future__ import annotations
@@ -97,3 +101,12 @@ def support_filter(passed: np.ndarray, support: np.ndarray, min_support: float |
     fallback = passed & (support >= best)
     none = ~enough.any(-1, keepdims=True)
     return np.where(none, fallback, enough)
+
+
+def penalised(values: np.ndarray, support: np.ndarray, penalty: float | None,
+              value_std: float) -> np.ndarray:
+    """The ranking key ``v_hat - z sigma_v / sqrt(support)`` (support below 1 counts as 1);
+    ``penalty`` None: the values unchanged."""
+    if penalty is None:
+        return values
+    return values - float(penalty) * float(value_std) / np.sqrt(np.maximum(support, 1.0))

@@ -339,6 +339,13 @@ def _trajectory(observations: np.ndarray) -> np.ndarray:
     return np.stack([np.arange(len(obs), dtype=float), obs[:, -1]], axis=1)
 
 
+#: AOC's settings on these tasks (docs/design.md, "Support"; docs/results.md, "icu-sepsis"):
+#: states repeat exactly, so a logged (state, action) decomposes with residual 0 and the cap
+#: (1% of the typical p90 residual) keeps the candidates the corpus holds; of those, the best
+#: by v_hat shrunk by the episodes behind it (v_hat - 5 sigma_v / sqrt(support)).
+CONTROLLER = {"residual_cap": 0.01, "support_penalty": 5.0}
+
+
 def _task(name: str, gym_id: str, strategy: str, description: str) -> Task:
     return Task(
         name=name, gym_id=gym_id, description=description, horizon=MAX_STEPS,
@@ -348,6 +355,7 @@ def _task(name: str, gym_id: str, strategy: str, description: str) -> Task:
                                           name),
         plot_fn=_plot, trajectory_fn=_trajectory, default_episodes=DEFAULT_EPISODES,
         extra={"strategy": strategy, "choose_policy": True},
+        controller=dict(CONTROLLER),
     )
 
 

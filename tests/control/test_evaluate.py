@@ -273,9 +273,11 @@ def test_the_papers_candidates_stay_reachable_by_a_flag(ward, tmp_path):
 
 
 # (ward's two actions, epsilon 1 so both pass the quantile: a minimum no candidate meets keeps
-# the better supported one, a tiny cap the smaller residual; both change decisions here)
+# the better supported one, a tiny cap the smaller residual, a large penalty the better
+# supported one; each changes decisions here)
 @pytest.mark.parametrize("settings", [{"min_support": 1000.0}, {"residual_cap": 1e-3},
-                                      {"residual_cap": 1e-3, "min_support": 1000.0}])
+                                      {"residual_cap": 1e-3, "min_support": 1000.0},
+                                      {"support_penalty": 100.0}])
 def test_value_decisions_in_batches_apply_the_support_and_cap_rules_as_decide_does(ward,
                                                                                   settings):
     _root, store = ward

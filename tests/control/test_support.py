@@ -5,7 +5,7 @@ import pytest
 
 from aoc_cli.belief import BeliefConfig, train_model
 from aoc_cli.control import ControllerConfig
-from aoc_cli.control.support import row_episodes, support_episodes, support_filter
+from aoc_cli.control.support import penalised, row_episodes, support_episodes, support_filter
 from aoc_cli.decompose import decompose
 from aoc_cli.errors import AocError
 from aoc_cli.session import build_index, open_session
@@ -59,9 +59,19 @@ def test_support_filter_keeps_supported_candidates_else_the_best_supported():
     np.testing.assert_array_equal(support_filter(passed, support, None), passed)
 
 
+def test_the_penalty_shrinks_values_by_the_episodes_behind_them():
+    values, support = np.array([0.9, 0.7, 0.5]), np.array([1.0, 25.0, 0.5])
+    # 0.9 - 2 x 0.1 / 1, 0.7 - 2 x 0.1 / 5, and a support under 1 counted as 1
+    np.testing.assert_allclose(penalised(values, support, 2.0, 0.1), [0.7, 0.66, 0.3],
+                               rtol=1e-12)
+    assert penalised(values, support, None, 0.1) is values
+
+
 def test_min_support_must_be_at_least_one_episode():
     with pytest.raises(AocError, match="min_support"):
         ControllerConfig(min_support=0.5).check()
+    with pytest.raises(AocError, match="support_penalty"):
+        ControllerConfig(support_penalty=-1.0).check()
 
 
 def lucky_arm_data() -> CorpusData:
@@ -103,3 +113,17 @@ def test_min_support_passes_over_an_action_tried_by_one_patient(lucky):
     d = ruled.decide(obs, history)
     assert int(d.action) == 2 and d.value == pytest.approx(0.6)
     assert d.support == pytest.approx(20.0, rel=1e-6) and d.support_counts[0] == 20
+
+
+def test_the_support_penalty_prefers_the_well_tried_action_to_the_lucky_one(lucky):
+    history = History(np.zeros((1, 0, 2), np.float32), np.zeros((1, 0), np.int64),
+                      np.zeros((1, 0), np.float32), np.zeros((1, 0), bool))
+    obs = np.ones(2, np.float32)
+    # corpus values' std 0.0801: 1 - z 0.0801 / 1 against 0.6 - z 0.0801 / sqrt(20) (and 0.5 -
+    # z 0.0801 / sqrt(30)); z = 1 keeps the lucky action (0.920 > 0.582), z = 10 does not
+    # (0.199 < 0.421)
+    mild = open_session(lucky, config=ControllerConfig(epsilon=1.0, support_penalty=1.0))
+    assert int(mild.controller.decide(obs, history).action) == 1
+    strict = open_session(lucky, config=ControllerConfig(epsilon=1.0, support_penalty=10.0))
+    d = strict.controller.decide(obs, history)
+    assert int(d.action) == 2 and d.value == pytest.approx(0.6)  # the record keeps v_hat
