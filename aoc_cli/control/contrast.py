@@ -5,7 +5,7 @@ Value mode (AOC): every candidate has its own decomposition. The contrast is the
 the highest v_hat other than the chosen one (ties: the smaller residual); it lost either to the
 filter (its residual above the epsilon threshold, or fewer supporting episodes than
 ``--min-support``) or, having passed, by a lower v_hat (or an equal v_hat and a larger
-residual). Its record is :func:`aoc_cli.control.decision_record` of that candidate explained
+residual; with ``--support-penalty``, a lower penalised v_hat). Its record is :func:`aoc_cli.control.decision_record` of that candidate explained
 alone (as ``aoc explain --compare`` gives), with v_hat and residual as the decision compared
 them, and the key ``why``.
 
@@ -21,6 +21,7 @@ import numpy as np
 
 from aoc_cli.control.controller import Controller, Decision
 from aoc_cli.control.records import decision_record
+from aoc_cli.control.support import penalised
 from aoc_cli.store import History
 
 
@@ -66,6 +67,14 @@ def _why_value(d: Decision, j: int, controller: Controller) -> dict:
             out["reason"] = "filtered by min support"
             out["text"] = (f"backed by {float(d.candidate_support[j]):.2g} episodes, fewer "
                            f"than --min-support {controller.config.min_support}")
+    elif controller.config.support_penalty is not None:
+        key = penalised(d.candidate_values, d.candidate_support,
+                        controller.config.support_penalty, controller.value_std)
+        out["reason"] = "lower penalised v_hat"
+        out["text"] = (f"its v_hat {v:.4g} shrunk by its {float(d.candidate_support[j]):.3g} "
+                       f"episodes is {float(key[j]):.4g}, below the chosen action's "
+                       f"{float(key[d.chosen]):.4g} (--support-penalty "
+                       f"{controller.config.support_penalty:g})")
     elif v < chosen_v:
         out["reason"] = "lower v_hat"
         out["text"] = f"its v_hat {v:.4g} is below the chosen action's {chosen_v:.4g}"

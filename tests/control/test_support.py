@@ -127,3 +127,17 @@ def test_the_support_penalty_prefers_the_well_tried_action_to_the_lucky_one(luck
     strict = open_session(lucky, config=ControllerConfig(epsilon=1.0, support_penalty=10.0))
     d = strict.controller.decide(obs, history)
     assert int(d.action) == 2 and d.value == pytest.approx(0.6)  # the record keeps v_hat
+
+
+def test_the_contrast_says_the_lucky_action_lost_to_the_penalty(lucky):
+    from aoc_cli.control.contrast import contrast_record
+
+    history = History(np.zeros((1, 0, 2), np.float32), np.zeros((1, 0), np.int64),
+                      np.zeros((1, 0), np.float32), np.zeros((1, 0), bool))
+    obs = np.ones(2, np.float32)
+    session = open_session(lucky, config=ControllerConfig(epsilon=1.0, support_penalty=10.0))
+    d = session.controller.decide(obs, history)
+    rec = contrast_record(session.controller, obs, history, d, lucky, session.index)
+    assert rec["candidate"] == 1 and rec["passed"]
+    assert rec["why"]["reason"] == "lower penalised v_hat"
+    assert rec["support_episodes"] == pytest.approx(1.0, rel=1e-6)
