@@ -47,18 +47,35 @@ def register(app: typer.Typer) -> None:
         seed: Annotated[int, typer.Option("--seed", help="Seed of the candidates.")] = 0,
         without: WithoutOption = None,
         without_episodes: WithoutEpisodesOption = None,
+        html: Annotated[Optional[Path], typer.Option(
+            "--html", help="Also write a decision page to this HTML file (self-contained: "
+                           "the decision in words, a card per supporting row with its "
+                           "history, the best action not chosen; with --audit or --steps an "
+                           "overview of the episode's decisions).")] = None,
+        steps_file: Annotated[Optional[Path], typer.Option(
+            "--steps", help="An `aoc evaluate --steps` file: write its overview page to "
+                            "--html.")] = None,
         fmt: FormatOption = None,
     ) -> None:
         """Explain decisions: from JSONL queries, a recorded step of an audit log, or a logged
         step of a corpus."""
+        from aoc_cli.cli.explain_page import check_html, steps_overview, write_html
         from aoc_cli.control import ControllerConfig
 
         fmt = resolve_format(fmt)
+        store = get_store()
+        if html is not None:
+            check_html(html, store.root)
+        if steps_file is not None:
+            if html is None or any(x is not None for x in (input, audit, data)):
+                raise AocError("--steps FILE writes an overview page: give --html FILE and "
+                               "none of --input, --audit, --data")
+            steps_overview(store.corpus(name), steps_file, html, model, index_id)
+            return
         if sum(x is not None for x in (input, audit, data)) != 1:
             raise AocError("give one of --input FILE|- (JSONL queries), --audit FILE --episode E "
                            "--step T (a recorded decision) or --data CORPUS --episode E --step T "
                            "(a logged step)")
-        store = get_store()
         corpus = store.corpus(name)
         config = ControllerConfig.for_task(_collected_task(corpus), candidates=candidates,
                                            epsilon=epsilon, k=k, residual_cap=residual_cap,
@@ -66,13 +83,17 @@ def register(app: typer.Typer) -> None:
                                            support_penalty=support_penalty)
         opened = dict(model_id=model, index_id=index_id, config=config, seed=seed)
         removal = parse_removal(corpus, without, without_episodes)
+        session = None
         if data is not None:
             source = corpus if data == name else store.corpus(data)
             records = _logged_step(corpus, source, episode, step, opened, removal)
         elif audit is not None:
-            records = _recorded_step(corpus, audit, episode, step, opened, removal)
+            records, session = _recorded_step(corpus, audit, episode, step, opened, removal)
         else:
             records = _queries(corpus, input, compare, opened, removal)
+        if html is not None:
+            write_html(html, records, corpus, session=session, audit=audit, episode=episode,
+                       step=step)
         _print(records, fmt)
 
 
@@ -88,8 +109,9 @@ def _logged_step(corpus, source, episode: int, step: int, opened: dict,
 
 
 def _recorded_step(corpus, audit: Path, episode: int, step: int, opened: dict,
-                   removal) -> list[dict]:
-    """``--audit``: a recorded decision replayed with its recorded inputs and settings."""
+                   removal) -> tuple[list[dict], object]:
+    """``--audit``: a recorded decision replayed with its recorded inputs and settings;
+    (records, the session)."""
     from aoc_cli.control import ControllerConfig, read_audit_step, replay_decision
     from aoc_cli.control.explain import explain_decisions
     from aoc_cli.control.records import label_of
@@ -109,7 +131,7 @@ def _recorded_step(corpus, audit: Path, episode: int, step: int, opened: dict,
     rec["recorded_action"] = recorded["action"].tolist()
     rec.update(label_of(action_labels(corpus.action_space), recorded["action"],
                         "recorded_action_label"))
-    return [rec]
+    return [rec], session
 
 
 def _queries(corpus, source: str, compare: list[str] | None, opened: dict,

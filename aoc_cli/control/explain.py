@@ -43,6 +43,7 @@ def explain_decisions(session: Session, observation: np.ndarray, history: Histor
                                           selection, typical)
         if attribution:
             attribute(session, observation, history, d, rec)
+            rec["query_history"] = _query_history(history)
     if removal is not None:
         keep = removal.keep(ctl.selection if selection is None else selection)
         for d, rec in zip(decisions, records):
@@ -85,3 +86,26 @@ def attribute(session: Session, observation: np.ndarray, history: History, decis
         **feature_names(model, corpus),
         "baseline": "the corpus's mean observation, no action, no history",
         "nodes": NODES}
+
+
+def _query_history(history: History) -> dict:
+    """The query's own previous steps (oldest first), as the record's ``query_history``:
+    ``observations`` (L, d_o), ``actions`` (L, d_a) or (L,), ``present`` (L,) bool."""
+    return {"observations": np.asarray(history.observations[0]).tolist(),
+            "actions": np.asarray(history.actions[0]).tolist(),
+            "present": np.asarray(history.mask[0], bool).tolist()}
+
+
+def audit_band(session: Session, residuals: np.ndarray) -> np.ndarray:
+    """(T,) the upper edge of the running OOD band over an episode's recorded residuals, as
+    the rollout's monitor drew it with the session's settings (inf during the warm-up)."""
+    from aoc_cli.control.monitor import OODMonitor
+    from aoc_cli.control.run import _band_limits
+
+    cfg = session.controller.config
+    floor, minimum = _band_limits(session)
+    monitor = OODMonitor(warmup=cfg.ood_warmup, sigmas=cfg.ood_sigmas, floor=floor,
+                         minimum=minimum)
+    for r in np.asarray(residuals, np.float64):
+        monitor.update(float(r))
+    return np.asarray(monitor.upper, np.float64)

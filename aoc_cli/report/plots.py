@@ -19,27 +19,42 @@ def save(fig, path) -> None:
 
 
 def plot_rollout_curves(results, path, title: str = "", noise_after: int | None = None) -> None:
-    """Per-step reward and corpus residual of each episode, with OOD flags and the 3-sigma band."""
+    """Per-step reward and corpus residual of each episode: one colour per episode (named in
+    the legend), its OOD band dashed in the same colour, flagged steps as red x markers."""
+    from matplotlib.lines import Line2D
+
     fig, (ax_r, ax_res) = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
-    for res in results:
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    handles, any_band, any_flag = [], False, False
+    for i, res in enumerate(results):
+        colour = colours[i % len(colours)]
         t = np.arange(res.length)
-        ax_r.plot(t, res.rewards, lw=1, alpha=0.8)
+        ax_r.plot(t, res.rewards, lw=1, alpha=0.8, color=colour)
         resid = np.array([np.nan if x is None else x for x in res.residuals], dtype=float)
-        line, = ax_res.plot(t, resid, lw=1, alpha=0.8)
+        ax_res.plot(t, resid, lw=1, alpha=0.8, color=colour)
+        handles.append(Line2D([], [], color=colour, lw=1.5,
+                              label=f"episode {getattr(res, 'episode', i)}"))
         band = np.array(getattr(getattr(res, "monitor", None), "upper", []), dtype=float)
         if len(band) == len(t):
             ax_res.plot(t, np.where(np.isfinite(band), band, np.nan), ls="--", lw=0.8,
-                        color=line.get_color(), alpha=0.6)
-        flags = np.flatnonzero(res.ood)
+                        color=colour, alpha=0.6)
+            any_band = True
+        flags = np.flatnonzero(np.asarray(res.ood, bool)[:len(t)])
         if len(flags):
-            ax_res.scatter(flags, resid[flags], marker="x", color="red", s=18, zorder=3)
+            ax_res.scatter(flags, resid[flags], marker="x", color="red", s=22, zorder=3)
+            any_flag = True
     if noise_after is not None:
         for ax in (ax_r, ax_res):
             ax.axvline(noise_after, color="grey", ls=":", lw=1)
+    if any_band:
+        handles.append(Line2D([], [], color="grey", ls="--", lw=0.8,
+                              label="OOD band (3 sigma, its episode's colour)"))
+    if any_flag:
+        handles.append(Line2D([], [], color="red", marker="x", ls="", label="OOD flag"))
     ax_r.set_ylabel("reward")
     ax_res.set_ylabel("corpus residual")
     ax_res.set_xlabel("step")
-    ax_res.legend(["residual", "3-sigma band", "OOD flag"][: 3], loc="upper left", fontsize=8)
+    ax_res.legend(handles=handles, loc="upper left", fontsize=8)
     fig.suptitle(title)
     save(fig, path)
 
