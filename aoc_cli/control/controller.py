@@ -39,7 +39,8 @@ class Decision:
     distances to the query. ``candidates`` (K, d_a) or (K,), with ``candidate_residuals``,
     ``candidate_values`` (K,) and ``passed`` (K,) bool (empty in imitation mode).
     ``support``: the effective number of distinct episodes behind the decision's value
-    (:mod:`aoc_cli.control.support`), ``candidate_support`` (K,) each candidate's,
+    (:mod:`aoc_cli.control.support`), ``candidate_support`` (K,) each candidate's (computed
+    where ``min_support`` or ``support_penalty`` reads it, else empty),
     ``support_counts`` (m,) the distinct episodes at each supporting row's belief.
     """
 
@@ -158,15 +159,20 @@ class Controller:
             dec = self.index.decompose(beliefs, k=self.config.k, selection=self._rows(selection))
         residual = np.asarray(dec.residual, dtype=np.float64)
         value = np.asarray(dec.value, dtype=np.float64)
-        support, counts = self.support(dec)
+        # every candidate's support only where a rule reads it (a few ms for K = 100)
+        rules = self.config.min_support is not None or self.config.support_penalty is not None
+        support = self.support(dec)[0] if rules else np.empty(0)
         if choose:
             threshold, passed = self.candidate_filter(residual)
-            passed = support_filter(passed, support, self.config.min_support)
-            key = penalised(value, support, self.config.support_penalty, self.value_std)
+            key = value
+            if rules:
+                passed = support_filter(passed, support, self.config.min_support)
+                key = penalised(value, support, self.config.support_penalty, self.value_std)
             order = np.lexsort((residual, -key))  # by value (key) desc, then residual asc
             chosen = int(next(i for i in order if passed[i]))
         else:
             threshold, passed, chosen = float("nan"), np.ones(n, bool), 0
+        own, counts = self.support(dec, chosen)  # the decision's own, for its record
         decision = Decision(
             action=np.asarray(candidates[chosen]),
             value=float(value[chosen]),
@@ -180,18 +186,20 @@ class Controller:
             passed=passed,
             chosen=chosen,
             threshold=threshold,
-            support=float(support[chosen]),
+            support=float(own[0]),
             candidate_support=support,
-            support_counts=_trim(counts[chosen], dec.rows[chosen]),
+            support_counts=_trim(counts[0], dec.rows[chosen]),
         )
         decision.warnings = self.heterogeneity(decision)
         return decision
 
-    def support(self, dec) -> tuple[np.ndarray, np.ndarray]:
+    def support(self, dec, which: int | None = None) -> tuple[np.ndarray, np.ndarray]:
         """(Q,) the effective number of distinct episodes behind each of ``dec``'s values and
-        (Q, m) the episodes at each vertex (:func:`aoc_cli.control.support.support_episodes`)."""
-        return support_episodes(self.index.beliefs, dec.rows, dec.weights, dec.neighbours,
-                                self.row_episode)
+        (Q, m) the episodes at each vertex (:func:`aoc_cli.control.support.support_episodes`);
+        ``which``: of that query alone, (1,) and (1, m)."""
+        part = slice(None) if which is None else slice(which, which + 1)
+        return support_episodes(self.index.beliefs, dec.rows[part], dec.weights[part],
+                                dec.neighbours[part], self.row_episode)
 
     def candidate_filter(self, residual: np.ndarray) -> tuple[float, np.ndarray]:
         """(threshold, passed (K,) bool): residual <= min(q_epsilon, c x typical p90).

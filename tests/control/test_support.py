@@ -103,8 +103,14 @@ def test_min_support_passes_over_an_action_tried_by_one_patient(lucky):
     obs = np.ones(2, np.float32)
     plain = open_session(lucky, config=ControllerConfig(epsilon=1.0)).controller
     d = plain.decide(obs, history)
-    # every action is logged in this state (residual 0): the paper's rule takes the lucky one
+    # every action is logged in this state (residual 0): the paper's rule takes the lucky one;
+    # its record has its support, the candidates' are computed only where a rule reads them
     assert int(d.action) == 1 and d.value == pytest.approx(1.0)
+    assert d.support == pytest.approx(1.0, rel=1e-6) and len(d.candidate_support) == 0
+    # a minimum of 1 episode passes every candidate (the support is at least 1)
+    d = open_session(lucky, config=ControllerConfig(epsilon=1.0, min_support=1.0)
+                     ).controller.decide(obs, history)
+    assert int(d.action) == 1
     # (the query's belief is the rows' up to float32 rounding, so weights of ~1e-8 may fall
     # on a second vertex)
     np.testing.assert_allclose(d.candidate_support, [30, 1, 20], rtol=1e-6)
