@@ -49,7 +49,7 @@ import aoc_cli.decompose.engine as engine  # noqa: E402
 import aoc_cli.decompose.hull as hull  # noqa: E402
 from aoc_cli.control import HistoryBuffer  # noqa: E402
 from aoc_cli.envs import make_env  # noqa: E402
-from aoc_cli.session import open_session  # noqa: E402
+from aoc_cli.control import open_session  # noqa: E402
 from aoc_cli.store import Store  # noqa: E402
 
 

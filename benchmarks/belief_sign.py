@@ -32,7 +32,7 @@ from aoc_cli.threads import wait_passively  # noqa: E402
 wait_passively()  # OpenMP threads wait passively, as under the aoc command (aoc_cli/threads.py)
 
 from aoc_cli.envs.pendulum_het import swingup_action  # noqa: E402
-from aoc_cli.session import open_session  # noqa: E402
+from aoc_cli.control import open_session  # noqa: E402
 from aoc_cli.store import Store  # noqa: E402
 
 

@@ -31,7 +31,8 @@ import torch  # noqa: E402
 from aoc_cli.belief import BeliefConfig, train_model  # noqa: E402
 from aoc_cli.control import HistoryBuffer  # noqa: E402
 from aoc_cli.envs import collect, make_env  # noqa: E402
-from aoc_cli.session import build_index, open_session  # noqa: E402
+from aoc_cli.control import open_session  # noqa: E402
+from aoc_cli.corpus_index import build_index  # noqa: E402
 from aoc_cli.store import Store  # noqa: E402
 
 

@@ -1,7 +1,7 @@
 """Benchmark: one control step of two source trees, alternated in one run, same decisions?
 
-`benchmarks/control_ab.py` swaps an older tree's decomposition modules into this process; a
-refactor moves modules and names, so this script runs each tree whole, in its own Python
+A refactor moves modules and names (the retired `control_ab.py` swapped an older tree's
+decomposition modules into one process), so this script runs each tree whole, in its own Python
 process (``PYTHONPATH=TREE``), on the same corpus, model and index, and alternates the trees
 round by round (old, new, new, old, ...) so that both see the same load of a shared machine.
 Each round opens a session and times ``Controller.decide`` over the same states of a
@@ -36,7 +36,7 @@ import torch
 torch.set_num_threads(1)
 from aoc_cli.store import Store
 try:
-    from aoc_cli.session import open_session
+    from aoc_cli.control import open_session
 except ImportError:  # the tree before aoc_cli/session.py
     from aoc_cli.control import open_session
 from aoc_cli.control import HistoryBuffer

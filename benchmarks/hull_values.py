@@ -29,7 +29,7 @@ from aoc_cli.belief.targets import value_targets  # noqa: E402
 from aoc_cli.control.config import ControllerConfig  # noqa: E402
 from aoc_cli.control.rollout import run_episode  # noqa: E402
 from aoc_cli.envs import make_env  # noqa: E402
-from aoc_cli.session import open_session  # noqa: E402
+from aoc_cli.control import open_session  # noqa: E402
 from aoc_cli.store import Store  # noqa: E402
 
 

@@ -80,7 +80,7 @@ def stage_train(store, rows: int) -> dict:
 
 
 def stage_index(store, rows: int) -> dict:
-    from aoc_cli.session import build_index
+    from aoc_cli.corpus_index import build_index
 
     corpus = store.corpus(name_of(rows))
     ci = build_index(corpus, "default")
@@ -111,7 +111,7 @@ def stage_control(store, rows: int, steps: int, recall_steps: int) -> dict:
     import torch
 
     from aoc_cli.control import HistoryBuffer
-    from aoc_cli.session import open_session
+    from aoc_cli.control import open_session
     from aoc_cli.envs import make_env
 
     torch.set_num_threads(1)

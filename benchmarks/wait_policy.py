@@ -27,7 +27,7 @@ def child(store: str, corpus_name: str, model: str | None, steps: int) -> None:
 
     from aoc_cli.control import ControllerConfig, HistoryBuffer
     from aoc_cli.envs import make_env
-    from aoc_cli.session import open_session
+    from aoc_cli.control import open_session
     from aoc_cli.store import Store
 
     corpus = Store(store).corpus(corpus_name)

@@ -9,7 +9,7 @@ from aoc_cli.control import rollout
 from aoc_cli.control.rollout import action_space_of
 from aoc_cli.envs import collect, make_env
 from aoc_cli.progress import stage, tracked
-from aoc_cli.session import model_free_session
+from aoc_cli.control import model_free_session
 from aoc_cli.store import Store
 
 
@@ -45,7 +45,7 @@ def test_collection_and_rollout_report_through_the_protocol(tmp_path):
 
 
 def test_the_library_never_loads_a_terminal_library():
-    code = ("import sys, aoc_cli.session, aoc_cli.control, aoc_cli.belief.train, "
+    code = ("import sys, aoc_cli.corpus_index, aoc_cli.control, aoc_cli.belief.train, "
             "aoc_cli.belief.stream, aoc_cli.formats, aoc_cli.envs, aoc_cli.baselines, "
             "aoc_cli.decompose, aoc_cli.index, aoc_cli.store, aoc_cli.progress, aoc_cli.threads; "
             "print(sorted(m for m in sys.modules if m.split('.')[0] in ('rich', 'typer')))")

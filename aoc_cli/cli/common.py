@@ -89,7 +89,7 @@ class BeliefKind(str, Enum):
 
 class StepCandidates(str, Enum):
     """``aoc index --candidates``: where step 1 takes its candidate rows
-    (:func:`aoc_cli.session.neighbours`)."""
+    (:func:`aoc_cli.corpus_index.neighbours`)."""
 
     auto = "auto"
     nearest = "nearest"

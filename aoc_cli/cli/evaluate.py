@@ -62,7 +62,7 @@ def register(app: typer.Typer) -> None:
         from aoc_cli.control import ControllerConfig
         from aoc_cli.control.evaluate import evaluate, step_records
         from aoc_cli.report.output import ProgressBar
-        from aoc_cli.session import open_session
+        from aoc_cli.control import open_session
 
         fmt = resolve_format(fmt)
         names = [b.strip() for b in baselines.split(",")]

@@ -102,7 +102,7 @@ def _logged_step(corpus, source, episode: int, step: int, opened: dict,
     """``--data``: the decision at a logged step of ``source`` and what supports the logged
     action there."""
     from aoc_cli.control import explain_logged_step
-    from aoc_cli.session import open_session
+    from aoc_cli.control import open_session
 
     return explain_logged_step(open_session(corpus, **opened), source, episode, step,
                                removal=removal)
@@ -112,10 +112,9 @@ def _recorded_step(corpus, audit: Path, episode: int, step: int, opened: dict,
                    removal) -> tuple[list[dict], object]:
     """``--audit``: a recorded decision replayed with its recorded inputs and settings;
     (records, the session)."""
-    from aoc_cli.control import ControllerConfig, read_audit_step, replay_decision
+    from aoc_cli.control import ControllerConfig, open_session, read_audit_step, replay_decision
     from aoc_cli.control.explain import explain_decisions
     from aoc_cli.control.records import label_of
-    from aoc_cli.session import open_session
     from aoc_cli.store import action_labels
 
     recorded = read_audit_step(audit, episode, step)
@@ -138,7 +137,7 @@ def _queries(corpus, source: str, compare: list[str] | None, opened: dict,
              removal) -> list[dict]:
     """``--input``: JSONL queries, each its own decision or the given actions compared."""
     from aoc_cli.control import explain_query, parse_query
-    from aoc_cli.session import open_session
+    from aoc_cli.control import open_session
 
     session = open_session(corpus, **opened)
     lines = _read_lines(source)

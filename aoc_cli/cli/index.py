@@ -41,7 +41,7 @@ def register(app: typer.Typer) -> None:
         fmt: FormatOption = None,
     ) -> None:
         """Compute every row's belief and build the index the controller searches."""
-        from aoc_cli.session import build_index
+        from aoc_cli.corpus_index import build_index
 
         corpus = get_store().corpus(name)
         rates = parse_rates(episode_rate, "--episode-rate")

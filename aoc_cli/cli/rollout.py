@@ -116,7 +116,7 @@ def _policy(policy: str, corpus, environment, model, index_id, config, selection
     """(session, baseline or None): the session the policy acts in (model-free for zero and
     random: no model or index is needed, or opened) and the baseline that acts, if not aoc."""
     from aoc_cli.control.rollout import action_space_of
-    from aoc_cli.session import model_free_session, open_session
+    from aoc_cli.control import model_free_session, open_session
 
     action_space = action_space_of(environment)
     if policy in MODEL_FREE:

@@ -12,6 +12,7 @@ from aoc_cli.control.run import (
     replay_decision,
     rollout,
 )
+from aoc_cli.control.session import ModelFreeSession, Session, model_free_session, open_session
 
 __all__ = [
     "Controller",
@@ -19,11 +20,15 @@ __all__ = [
     "Decision",
     "EpisodeResult",
     "HistoryBuffer",
+    "ModelFreeSession",
     "OODMonitor",
+    "Session",
     "decision_record",
     "explain_logged_step",
     "explain_query",
     "flags_against",
+    "model_free_session",
+    "open_session",
     "parse_query",
     "read_audit_step",
     "reference_band",

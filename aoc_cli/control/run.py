@@ -1,5 +1,5 @@
 """The library entry points behind `aoc rollout` and `aoc explain`, given a session
-(:mod:`aoc_cli.session`)."""
+(:mod:`aoc_cli.control.session`)."""
 
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ from aoc_cli.store import action_labels
 from aoc_cli.threads import thread_limits
 
 if TYPE_CHECKING:
-    from aoc_cli.session import ModelFreeSession, Session
+    from aoc_cli.control.session import ModelFreeSession, Session
 
 
 def rollout(session: Session | ModelFreeSession, env, episodes: int, seed: int = 0,

@@ -47,7 +47,7 @@ def session(corpus, env, task: str | None = None, model_id: str = "default",
     """An AOC session on ``corpus``: ControllerConfig fields ``config`` over the task's own
     controller settings (as `aoc rollout --env TASK` uses them) over the paper's defaults."""
     from aoc_cli.control import ControllerConfig
-    from aoc_cli.session import open_session
+    from aoc_cli.control import open_session
 
     return open_session(corpus, model_id, index_id, ControllerConfig.for_task(task, **config),
                         selection, seed, action_space_of(env))

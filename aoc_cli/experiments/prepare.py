@@ -10,7 +10,7 @@ from the user's ``corpora/``. Names say what was built:
   ``aoc_cli.belief.train_model``; reused when the saved config equals the wanted one and the
   corpus hash matches (``load_model`` refuses stale models anyway);
 * index ``default`` and derived indexes (e.g. ``pi1x0.5``: ``--episode-rate policy=pi1:0.5``),
-  built by ``aoc_cli.session.build_index``; reused when ``load_index`` accepts them and
+  built by ``aoc_cli.corpus_index.build_index``; reused when ``load_index`` accepts them and
   they were built with the same rates.
 """
 
@@ -111,7 +111,7 @@ class Artefacts:
     # -- indexes ---------------------------------------------------------------------------
     def index(self, corpus, model_id: str, index_id: str = "default",
               resample: dict | None = None, seed: int = 0):
-        from aoc_cli.session import build_index, load_index
+        from aoc_cli.corpus_index import build_index, load_index
 
         try:
             ci = load_index(corpus, model_id, index_id)

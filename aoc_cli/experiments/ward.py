@@ -65,7 +65,8 @@ def run_split(store, data, split: int, patients: int, seed: int = 0) -> list[dic
     from aoc_cli.belief.data import prepare
     from aoc_cli.control import ControllerConfig
     from aoc_cli.control.evaluate import evaluate
-    from aoc_cli.session import build_index, open_session
+    from aoc_cli.corpus_index import build_index
+    from aoc_cli.control import open_session
 
     rng = np.random.default_rng([seed, split])
     test = np.zeros(patients, bool)

@@ -93,7 +93,7 @@ def test_nearest_neighbour_control_is_the_argmax_over_the_same_candidates(sessio
 def test_neighbours_honour_the_row_selection(pendulum):
     from aoc_cli.experiments.common import session as make_session
     from aoc_cli.control import ControllerConfig
-    from aoc_cli.session import open_session
+    from aoc_cli.control import open_session
     from aoc_cli.envs import make_env
     from aoc_cli.rows import row_selection
 

@@ -7,7 +7,7 @@ from aoc_cli.control import ControllerConfig, HistoryBuffer, rollout
 from aoc_cli.envs import make_env
 from aoc_cli.errors import AocError
 from aoc_cli.rows import row_selection
-from aoc_cli.session import open_session
+from aoc_cli.control import open_session
 
 from tests.control.corpora import corridor_store, maze_store
 
@@ -187,7 +187,7 @@ def test_task_defaults_come_from_one_place():
 
 
 def test_the_typical_residual_has_one_typed_accessor(maze):
-    from aoc_cli.session import TypicalResidual, load_index
+    from aoc_cli.corpus_index import TypicalResidual, load_index
 
     ci = open_session(maze).index
     recorded = ci.meta["typical_residual"]

@@ -10,7 +10,8 @@ from aoc_cli.belief import BeliefConfig, train_model
 from aoc_cli.control import ControllerConfig, explain_logged_step
 from aoc_cli.control.evaluate import LeaveEpisodeOut, evaluate, step_records
 from aoc_cli.envs import collect
-from aoc_cli.session import build_index, open_session
+from aoc_cli.corpus_index import build_index
+from aoc_cli.control import open_session
 from aoc_cli.store import Store
 
 from tests.conftest import run_aoc

@@ -12,7 +12,8 @@ from aoc_cli.control import ControllerConfig
 from aoc_cli.control.evaluate import evaluate
 from aoc_cli.control.evaluate_ray import evaluate_on_ray
 from aoc_cli.envs import collect
-from aoc_cli.session import build_index, open_session
+from aoc_cli.corpus_index import build_index
+from aoc_cli.control import open_session
 from aoc_cli.store import Store
 
 

@@ -1,4 +1,4 @@
-"""The flow reads one way (store -> belief -> index -> decompose -> control -> session): the
+"""The flow reads one way (store -> belief -> index -> decompose -> corpus_index -> control): the
 index package knows only beliefs, so importing it must not import torch or anything above it."""
 
 import subprocess
@@ -17,7 +17,7 @@ def test_index_depends_on_numpy_and_faiss_only():
     assert "faiss" in mods and "numpy" in mods
     assert "torch" not in mods
     above = {m for m in mods if m.startswith(("aoc_cli.decompose", "aoc_cli.control",
-                                              "aoc_cli.belief", "aoc_cli.session"))}
+                                              "aoc_cli.belief", "aoc_cli.corpus_index"))}
     assert not above, above
 
 

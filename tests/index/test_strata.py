@@ -107,7 +107,7 @@ def test_an_approximate_index_finds_a_far_action_exactly():
 def test_the_index_rule_per_action_on_small_logs_only():
     from types import SimpleNamespace
 
-    from aoc_cli.session import SMALL_MAX_ROWS, neighbours
+    from aoc_cli.corpus_index import SMALL_MAX_ROWS, neighbours
 
     def corpus(n):
         acts = (np.arange(n) % 10 == 0).astype(np.int64)        # the rare action: 10%

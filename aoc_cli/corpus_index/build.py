@@ -1,9 +1,5 @@
-"""The session: a corpus with its belief model, index and controller (the top of the flow).
-
-The flow reads one way: store -> belief -> index -> decompose -> control -> session.
-:mod:`aoc_cli.index` knows only beliefs (numpy + FAISS); this module joins a corpus, its
-belief model and the index into a :class:`CorpusIndex`, and that with a controller into a
-:class:`Session` (or a :class:`ModelFreeSession` for the policies that need no model).
+"""Build and load a corpus index: the beliefs of every row of a corpus under a belief model,
+and the index the controller searches (the stage between decompose and control).
 
 Layout under ``<corpus>/models/<model>/``::
 
@@ -22,18 +18,16 @@ tag (the paper's adaptivity experiment) with no retraining: an episode rate of 4
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from aoc_cli.control.config import ControllerConfig
-from aoc_cli.control.controller import Controller
-from aoc_cli.decompose import decompose, default_k, rarest_share
+from aoc_cli.corpus_index.index import CorpusIndex
+from aoc_cli.decompose import default_k, rarest_share
 from aoc_cli.errors import AocError
 from aoc_cli.index import BeliefIndex
-from aoc_cli.index.strata import NEAREST, PER_ACTION, candidate_search
+from aoc_cli.index.strata import NEAREST, PER_ACTION
 from aoc_cli.progress import Progress
 from aoc_cli.rows import episode_multiplicity
 from aoc_cli.store import Corpus, atomic_dir, check_name, derived, writing_model
@@ -48,85 +42,6 @@ TYPICAL_SAMPLE = 500
 #: points of accuracy lost); the same bound as the settings chosen by validation
 #: (aoc_cli.belief.select.SELECT_MAX_ROWS).
 SMALL_MAX_ROWS = 20_000
-
-
-@dataclass(frozen=True)
-class TypicalResidual:
-    """The corpus's typical residual: quantiles of the residuals of ``sample`` held-out corpus
-    rows decomposed against the other rows (``index.json`` ``typical_residual``). Each is None
-    for an index that recorded none (fewer than 3 rows)."""
-
-    p50: float | None = None
-    p90: float | None = None
-    p99: float | None = None
-    sample: int = 0
-
-    @classmethod
-    def from_meta(cls, meta: dict) -> "TypicalResidual":
-        """From an index's metadata (``index.json``)."""
-        rec = meta.get("typical_residual") or {}
-        return cls(*(None if rec.get(q) is None else float(rec[q]) for q in ("p50", "p90", "p99")),
-                   sample=int(rec.get("sample") or 0))
-
-
-@dataclass
-class CorpusIndex:
-    """A built index: model, beliefs of every corpus row (N, d_b), row values (N,), the FAISS
-    index (possibly derived: re-sampled or sub-sampled rows) and what it was built from."""
-
-    index_id: str
-    model: BeliefModel
-    beliefs: np.ndarray
-    values: np.ndarray | None
-    index: BeliefIndex
-    meta: dict
-    strata: np.ndarray | None = None
-    _search: object = field(default=None, init=False, repr=False)
-
-    @property
-    def candidates(self) -> str:
-        """Step 1's candidates (``index.json`` ``candidates``): "nearest", the k nearest rows;
-        "per_action", the k / n nearest rows of each of the n actions
-        (:mod:`aoc_cli.index.strata`). An index that recorded none: "nearest"."""
-        return self.meta.get("candidates") or NEAREST
-
-    @property
-    def search(self):
-        """The search step 1 uses: the index, or the index per action."""
-        if self._search is None:
-            self._search = candidate_search(self.index, self.candidates, self.strata)
-        return self._search
-
-    @property
-    def typical(self) -> TypicalResidual:
-        """The corpus's typical residual (p50, p90, p99), as the index recorded it."""
-        return TypicalResidual.from_meta(self.meta)
-
-    @property
-    def typical_residual(self) -> float | None:
-        """The typical (p50) residual: what a decision's residual is compared with."""
-        return self.typical.p50
-
-    @property
-    def rows(self) -> np.ndarray:
-        """(M,) the corpus row of every index entry (repeats when re-sampled)."""
-        return self.index.row_of
-
-    def decompose(self, queries: np.ndarray, k: int | None = None,
-                  selection: np.ndarray | None = None):
-        """Decompose query beliefs (Q, d_b) over the corpus; ``rows`` are corpus rows.
-
-        ``selection`` is an (N,) bool mask over corpus rows, applied at query time.
-        """
-        queries = np.asarray(queries, dtype=np.float32)  # the beliefs' precision; checked there
-        return decompose(self.beliefs, queries, k=self.k if k is None else k,
-                         values=self.values, index=self.search, selection=selection)
-
-    @property
-    def k(self) -> int:
-        """Neighbours per query when none is given: the one the index was built with
-        (``index.json`` ``k``, :func:`neighbours`); the paper's for an index without it."""
-        return int(self.meta.get("k") or default_k(self.beliefs.shape[1]))
 
 
 def neighbours(corpus: Corpus, model, candidates: str = "auto") -> tuple[int, str]:
@@ -269,8 +184,20 @@ def load_index(corpus: Corpus, model_id: str | None = None, index_id: str = "def
         raise AocError(f"index {index_id!r} was built from another version of corpus "
                        f"{corpus.name!r} or model {model.id!r}: rebuild it with `{hint}`")
     beliefs = derived.open_beliefs(corpus.models_dir / model.id, what, todo)
-    index = derived.load_faiss(out / "index.faiss", beliefs, what, todo)
+    index = load_faiss(out / "index.faiss", beliefs, what, todo)
     return CorpusIndex(index_id, model, beliefs, model.values, index, meta, _strata(corpus, meta))
+
+
+def load_faiss(path: Path, beliefs, what: str, todo: str):
+    """``BeliefIndex.load`` with FAISS's errors (a damaged file) as one AocError."""
+    try:
+        return BeliefIndex.load(path, beliefs)
+    except AocError:
+        raise
+    except Exception as err:  # FAISS raises RuntimeError; numpy ValueError on the row map
+        first = str(err).strip().splitlines()[0][:120] if str(err).strip() else ""
+        raise AocError(f"{what}: reading {path} failed ({type(err).__name__}: {first}); "
+                       f"{todo}") from None
 
 
 def _strata(corpus: Corpus, meta: dict) -> np.ndarray | None:
@@ -278,74 +205,3 @@ def _strata(corpus: Corpus, meta: dict) -> np.ndarray | None:
     if meta.get("candidates") != PER_ACTION:
         return None
     return np.asarray(corpus.actions, dtype=np.int64)
-
-
-@dataclass
-class Session:
-    """A controller ready to act: corpus, belief model, index (with its row values) and the
-    controller over them (its settings and row selection). ``action_space``: the
-    environment's, when it is narrower than the corpus's."""
-
-    corpus: Corpus
-    model: BeliefModel
-    index: CorpusIndex
-    controller: Controller
-    action_space: dict | None = None
-
-    @property
-    def history_length(self) -> int:
-        """L of the model: the previous transitions a belief reads."""
-        return int(self.model.history_length)
-
-    def meta(self) -> dict:
-        """What an audit log records of the session."""
-        selection = self.controller.selection
-        return {
-            "corpus": self.corpus.name, "corpus_hash": self.corpus.hash,
-            "model": self.model.id, "model_hash": self.model.hash,
-            "index": self.index.index_id, "mode": self.model.mode,
-            "config": self.controller.config.to_dict(),
-            "selection": None if selection is None
-            else np.flatnonzero(selection).tolist() if selection.sum() < 10000 else "mask",
-        }
-
-
-@dataclass
-class ModelFreeSession:
-    """A corpus without model or index, for the policies that need neither (zero, random):
-    they run on a corpus before anything is trained."""
-
-    corpus: Corpus
-    action_space: dict | None = None
-
-    @property
-    def history_length(self) -> int:
-        """0: a model-free policy reads no history."""
-        return 0
-
-    def meta(self) -> dict:
-        return {"corpus": self.corpus.name, "corpus_hash": self.corpus.hash, "model": None}
-
-
-def open_session(corpus: Corpus, model_id: str | None = None, index_id: str = "default",
-                 config: ControllerConfig | None = None, selection: np.ndarray | None = None,
-                 seed: int = 0, action_space: dict | None = None) -> Session:
-    """Load the model and index of ``corpus`` and build a controller; ``selection`` an (N,)
-    bool row mask (:func:`aoc_cli.rows.row_selection`)."""
-    config = (config or ControllerConfig()).check()
-    index = load_index(corpus, model_id, index_id)
-    bc_model = None
-    if config.sampler == "bc" and index.model.mode == "value" and not corpus.discrete:
-        bc_model = load_model(corpus, config.bc_model)
-        if bc_model.mode != "imitation":
-            raise AocError(f"model {config.bc_model!r} is not an imitation-mode model: the bc "
-                           f"sampler needs `aoc train {corpus.name} --model {config.bc_model} "
-                           "--mode imitation`")
-    controller = Controller(corpus, index, config, selection=selection, bc_model=bc_model,
-                            seed=seed, action_space=action_space)
-    return Session(corpus, index.model, index, controller, action_space)
-
-
-def model_free_session(corpus: Corpus, action_space: dict | None = None) -> ModelFreeSession:
-    """A session for the zero and random policies: no model or index is opened."""
-    return ModelFreeSession(corpus, action_space)
