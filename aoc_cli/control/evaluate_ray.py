@@ -18,11 +18,12 @@ import time
 import numpy as np
 
 from aoc_cli.control.evaluate import CHUNK_STEPS, chunks, merge, score_episodes, summarise
+from aoc_cli.parallel import capacity, map_chunks, start_ray
 
 
 def _context(spec: dict):
     from aoc_cli.control.evaluate_inputs import EvalContext
-    from aoc_cli.session import open_session
+    from aoc_cli.control.session import open_session
     from aoc_cli.store import Store
 
     store = Store.open(spec["store"])
@@ -46,28 +47,23 @@ def evaluate_on_ray(store_root, name: str, data: str, model: str | None, index_i
                     workers: int | None = None, address: str | None = None,
                     chunk_steps: int = CHUNK_STEPS, progress=None):
     """(summary, StepScores) of ``aoc evaluate`` with the chunks on Ray (module docstring)."""
-    from aoc_cli.experiments.distributed import start_ray
-
     started = time.perf_counter()
     spec = {"store": str(store_root), "name": name, "data": data, "model": model,
             "index": index_id, "config": config, "baselines": list(baselines), "seed": int(seed),
             "exact": exact}
     ctx = _context(spec)
     groups = chunks(ctx, chunk_steps)
-    ray = start_ray(workers, address)
-    n_tasks = int(workers) if workers else max(1, int(ray.cluster_resources().get("CPU", 1)))
+    n_tasks = capacity(start_ray(workers, address), workers)
     runs = [list(r) for r in np.array_split(np.arange(len(groups)), min(n_tasks, len(groups)))]
-    remote = ray.remote(num_cpus=1, max_retries=1)(_score)
-    refs = {remote.remote(spec, [groups[i] for i in run]): j for j, run in enumerate(runs)}
-    results: list = [None] * len(runs)
-    pending, done = list(refs), 0
-    while pending:
-        finished, pending = ray.wait(pending, num_returns=1)
-        j = refs[finished[0]]
-        results[j] = ray.get(finished[0])
-        done += sum(len(p.row) for p in results[j])
+    rows = [0]
+
+    def done(_j, parts):
+        rows[0] += sum(len(p.row) for p in parts)
         if progress is not None:
-            progress(done, ctx.data.n_rows)
+            progress(rows[0], ctx.data.n_rows)
+
+    results = map_chunks(_score, [(spec, [groups[i] for i in run]) for run in runs],
+                         workers=workers, address=address, retries=1, done=done)
     res = merge([part for parts in results for part in parts])
     summary = summarise(ctx, res)
     summary["seconds"] = time.perf_counter() - started

@@ -10,7 +10,7 @@ a serial ``aoc collect`` with the same seed (that is one chunk with seed ``s`` i
 chunk ends its last episode where its rows end (a truncated episode), as a serial collect does
 at the end of its budget.
 
-The chunks run as Ray tasks (:mod:`aoc_cli.experiments.distributed` starts or joins Ray) or, with
+The chunks run as Ray tasks (:func:`aoc_cli.parallel.map_chunks`) or, with
 ``workers=None`` and no address, one after the other here.
 """
 
@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from aoc_cli.envs.base import budget
+from aoc_cli.parallel import map_chunks
 
 #: Rows (or episodes) per chunk.
 CHUNK_STEPS = 100_000
@@ -67,18 +68,17 @@ def collect_chunked(task: str, steps: int | None = None, episodes: int | None = 
             if progress is not None:
                 progress(i + 1, len(parts))
     else:
-        from aoc_cli.experiments.distributed import start_ray
+        finished = []
 
-        ray = start_ray(workers, address)
-        remote = ray.remote(num_cpus=1, max_retries=1)(_collect_chunk)
-        refs = {remote.remote(task, seed, i, part, behaviour, policy): i
-                for i, part in enumerate(parts)}
-        pending = list(refs)
-        while pending:
-            finished, pending = ray.wait(pending, num_returns=1)
-            results[refs[finished[0]]] = ray.get(finished[0])
+        def done(_i, _result):
+            finished.append(_i)
             if progress is not None:
-                progress(len(parts) - len(pending), len(parts))
+                progress(len(finished), len(parts))
+
+        results = map_chunks(_collect_chunk,
+                             [(task, seed, i, part, behaviour, policy)
+                              for i, part in enumerate(parts)],
+                             workers=workers, address=address, retries=1, done=done)
     data = results[0][0]
     for other, _summary in results[1:]:
         data = concat(data, other)

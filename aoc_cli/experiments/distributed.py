@@ -16,40 +16,8 @@ Imported only when a run asks for workers: the single-machine path never imports
 
 from __future__ import annotations
 
-import logging
-import os
-
 from aoc_cli.experiments.cells import Cell, CellResult, failed_result, run_cell
-from aoc_cli.errors import AocError
-
-#: Environment of every worker: one thread per task for the OpenMP/BLAS pools, passive waits.
-WORKER_ENV = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
-              "OMP_WAIT_POLICY": "PASSIVE"}
-
-
-def start_ray(workers: int | None, address: str | None):
-    """Join the cluster at ``address`` (or ``$RAY_ADDRESS``), else start a local Ray with
-    ``num_cpus=workers``; returns the ray module."""
-    try:
-        import ray
-    except ImportError:
-        raise AocError("--workers needs Ray: pip install -e '.[ray]'") from None
-    address = address or os.environ.get("RAY_ADDRESS") or None
-    env = dict(WORKER_ENV)
-    if os.environ.get("PYTHONPATH"):
-        env["PYTHONPATH"] = os.environ["PYTHONPATH"]
-    if not ray.is_initialized():
-        options = {"runtime_env": {"env_vars": env}, "log_to_driver": False,
-                   "logging_level": logging.ERROR}
-        try:
-            if address:
-                ray.init(address=address, **options)
-            else:
-                ray.init(num_cpus=int(workers), include_dashboard=False, **options)
-        except (ConnectionError, RuntimeError, ValueError) as err:
-            raise AocError(f"could not start or join Ray"
-                           f"{' at ' + address if address else ''}: {err}") from None
-    return ray
+from aoc_cli.parallel import as_completed, capacity, error_text, start_ray
 
 
 def _threads() -> None:
@@ -115,7 +83,6 @@ def run_on_ray(plan, ctx, scale: dict, cells: list[Cell], done, workers: int | N
         return
     ray = start_ray(workers, address)
     spec = spec_of(ctx)
-    limit = int(workers) if workers else max(1, int(ray.cluster_resources().get("CPU", 1)))
     plan_ref = ray.put(plan)
     prepare = ray.remote(num_cpus=1, max_retries=0)(_prepare_task)
     run = ray.remote(num_cpus=1, max_retries=0)(_cell_task)
@@ -126,25 +93,19 @@ def run_on_ray(plan, ctx, scale: dict, cells: list[Cell], done, workers: int | N
     label, n_done = f"{ctx.experiment}: {len(cells)} cells on Ray", 0
     if progress is not None:
         progress(0, len(cells), label)
-    queue = [(cell, 1) for cell in cells]
-    running: dict = {}
+
+    def submit(cell, attempt):
+        # the first attempt waits for its group's preparation; a retry prepares itself
+        ready = preps[cell.prep] if attempt == 1 else None
+        return run.remote(plan_ref, spec, scale, cell, ready)
+
     reported: set = set()
-    while queue or running:
-        while queue and len(running) < limit:
-            cell, attempt = queue.pop(0)
-            # the first attempt waits for its group's preparation; a retry prepares itself
-            ready = preps[cell.prep] if attempt == 1 else None
-            running[run.remote(plan_ref, spec, scale, cell, ready)] = (cell, attempt)
-        finished, _ = ray.wait(list(running), num_returns=1)
-        ref = finished[0]
-        cell, attempt = running.pop(ref)
-        try:
-            result = ray.get(ref)
-        except Exception as err:  # RayTaskError, a dead worker, a failed preparation
-            error = _error_text(err)
+    for cell, attempt, result, err in as_completed(ray, submit, cells,
+                                                   limit=capacity(ray, workers), attempts=2):
+        if err is not None:  # RayTaskError, a dead worker, a failed preparation
+            error = error_text(err)
             if attempt == 1:
                 ctx.say(f"{cell.label()}: failed ({error}); running it again")
-                queue.append((cell, 2))
                 continue
             ctx.say(f"{cell.label()}: failed twice ({error}); reported as failed")
             result = failed_result(ctx.experiment, cell, error, attempt)
@@ -161,11 +122,3 @@ def run_on_ray(plan, ctx, scale: dict, cells: list[Cell], done, workers: int | N
         n_done += 1
         if progress is not None:
             progress(n_done, len(cells), label)
-
-
-def _error_text(err: Exception) -> str:
-    cause = getattr(err, "cause", None)
-    if cause is not None and not isinstance(cause, type(err)):
-        err = cause
-    text = str(err).strip().splitlines()
-    return f"{type(err).__name__}: {text[-1] if text else ''}"[:300]
