@@ -99,7 +99,7 @@ def abc_validation(actions: np.ndarray, n_actions: int, k: int | None = None):
     corpus's discrete actions."""
     import torch
 
-    from aoc_cli.control.scores import auc
+    from aoc_cli.metrics import auc
     from aoc_cli.decompose import decompose, default_k
     from aoc_cli.index import BeliefIndex
     from aoc_cli.index.strata import PerAction

@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from aoc_cli.control import scores as sc
+from aoc_cli import metrics as sc
 from aoc_cli.control.evaluate_inputs import (EXACT_MAX_ROWS, EvalContext, candidate_beliefs,
                                              check_inputs, episode_rows, heterogeneity)
 from aoc_cli.control.records import label_of
@@ -257,7 +257,7 @@ class LeaveEpisodeOut:
 # -- the whole held-out corpus -----------------------------------------------------------------
 
 def summarise(ctx: EvalContext, res: StepScores) -> dict:
-    """The metrics of merged step results (see :mod:`aoc_cli.control.scores`)."""
+    """The metrics of merged step results (see :mod:`aoc_cli.metrics`)."""
     out: dict = {"mode": ctx.mode, "corpus": ctx.corpus.name, "model": ctx.model.id,
                  "data": ctx.data.name, "own_episode_left_out": ctx.own,
                  "steps": int(len(res.row)), "episodes": int(len(np.unique(res.episode)))}

@@ -94,17 +94,3 @@ def open_index_meta(folder: Path, what: str, todo: str) -> dict:
     meta = read_json(Path(folder) / "index.json", what, todo)
     check_files(folder, meta, sorted(meta.get("files") or {}), what, todo)
     return meta
-
-
-def load_faiss(path: Path, beliefs, what: str, todo: str):
-    """``BeliefIndex.load`` with FAISS's errors (a damaged file) as one AocError."""
-    from aoc_cli.index import BeliefIndex
-
-    try:
-        return BeliefIndex.load(path, beliefs)
-    except AocError:
-        raise
-    except Exception as err:  # FAISS raises RuntimeError; numpy ValueError on the row map
-        first = str(err).strip().splitlines()[0][:120] if str(err).strip() else ""
-        raise AocError(f"{what}: reading {path} failed ({type(err).__name__}: {first}); "
-                       f"{todo}") from None

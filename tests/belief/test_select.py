@@ -193,7 +193,7 @@ def _check_abc_validation(ward, m, err):
     from aoc_cli.belief import load_model
     from aoc_cli.belief.config import BeliefConfig
     from aoc_cli.belief.data import prepare
-    from aoc_cli.control.scores import auc
+    from aoc_cli.metrics import auc
     from aoc_cli.decompose import decompose, default_k
     from aoc_cli.index import BeliefIndex
     from aoc_cli.index.strata import PerAction
