@@ -47,7 +47,7 @@ from aoc_cli.envs.icu_sepsis import tables as sepsis_tables
 from aoc_cli.envs.tabular import greedy
 from aoc_cli.errors import AocError
 from aoc_cli.experiments import sepsis_policies as sp
-from aoc_cli.session import open_session
+from aoc_cli.control import open_session
 from aoc_cli.store import Store, atomic_path
 
 SCALES = {

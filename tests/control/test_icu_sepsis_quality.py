@@ -14,7 +14,7 @@ import pytest
 from aoc_cli.control import ControllerConfig
 from aoc_cli.envs import icu_sepsis
 from aoc_cli.experiments.sepsis_policies import LIVE, state_policy
-from aoc_cli.session import open_session
+from aoc_cli.control import open_session
 from aoc_cli.store import Store
 
 EPISODES = 1000

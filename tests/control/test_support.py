@@ -8,7 +8,8 @@ from aoc_cli.control import ControllerConfig
 from aoc_cli.control.support import penalised, row_episodes, support_episodes, support_filter
 from aoc_cli.decompose import decompose
 from aoc_cli.errors import AocError
-from aoc_cli.session import build_index, open_session
+from aoc_cli.control import open_session
+from aoc_cli.corpus_index import build_index
 from aoc_cli.store import (CorpusData, History, Store, box_space, discrete_space,
                            episode_starts_from_lengths)
 
