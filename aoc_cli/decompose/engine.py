@@ -25,7 +25,7 @@ from aoc_cli.errors import AocError
 from aoc_cli.index import BeliefIndex
 from aoc_cli.index.exact import nearest_rows
 from aoc_cli.index.faiss_kinds import check_queries
-from aoc_cli.index.threads import single_threaded_blas
+from aoc_cli.threads import single_threaded_blas
 
 
 @dataclass

@@ -23,7 +23,7 @@ from aoc_cli.index.config import IndexConfig
 from aoc_cli.index.cells import CellData, cells_search
 from aoc_cli.index.faiss_kinds import ADD_CHUNK, as_beliefs, as_queries, kind_of, new_faiss, storage_view
 from aoc_cli.index.pooled import exact_among as _exact_among, pooled_search
-from aoc_cli.index.threads import faiss_threads, single_threaded_blas
+from aoc_cli.threads import faiss_threads, single_threaded_blas
 from aoc_cli.store.atomic import atomic_path, write_json, write_npy
 
 

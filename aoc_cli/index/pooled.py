@@ -15,7 +15,7 @@ import faiss
 import numpy as np
 
 from aoc_cli.index.scan_kernels import pool_knn
-from aoc_cli.index.threads import faiss_threads
+from aoc_cli.threads import faiss_threads
 
 
 def pooled_search(ix, Y: np.ndarray, k: int, sel, available: int, depth: int = 0):
