@@ -36,6 +36,7 @@ import torch
 from aoc_cli.belief.config import BeliefConfig
 from aoc_cli.belief.data import EarlyStopping, model_dir, report, split_episodes
 from aoc_cli.belief.model import _STD_FLOOR, Encoder, Normalisation, _stats
+from aoc_cli.belief.objective import Objective
 from aoc_cli.belief.targets import value_spec, value_targets
 from aoc_cli.errors import AocError
 from aoc_cli.store import atomic_path
@@ -284,12 +285,10 @@ class _Blocks:
 
     def __init__(self, cols: Columns, ranges, encoder: Encoder, config: BeliefConfig,
                  use_action: bool, classify: bool, values, device: torch.device):
-        from aoc_cli.belief.train import _Objective
-
         self.cols, self.ranges, self.encoder, self.values = cols, ranges, encoder, values
         self.config, self.use_action, self.classify, self.device = (config, use_action,
                                                                     classify, device)
-        self.objective = _Objective(config.mode, encoder.discrete)
+        self.objective = Objective(config.mode, encoder.discrete)
 
     def block(self, a: int, b: int, mask=None):
         """(inputs, local rows, targets) of the rows of [a, b) in ``mask`` ((b - a,) bool)."""

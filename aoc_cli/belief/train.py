@@ -11,7 +11,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
-from torch import nn
 
 from aoc_cli.belief.artefact import save_model
 from aoc_cli.belief.config import BeliefConfig
@@ -19,6 +18,7 @@ from aoc_cli.belief.data import EarlyStopping, TrainingData, prepare, report
 from aoc_cli.belief.inputs import (CorpusInputs, build_net, encode_corpus, network_dims,
                                    pick_device)
 from aoc_cli.belief.model import Encoder, Normalisation
+from aoc_cli.belief.objective import Objective
 from aoc_cli.belief.targets import value_spec
 from aoc_cli.threads import thread_limits
 
@@ -38,66 +38,11 @@ def dynamics_targets(corpus) -> tuple[np.ndarray, np.ndarray]:
     return delta, valid
 
 
-def _r2(out: torch.Tensor, y: torch.Tensor) -> float:
-    """R^2, uniform average over the output dims."""
-    sse = ((out - y) ** 2).sum(0)
-    sst = ((y - y.mean(0)) ** 2).sum(0)
-    r2 = torch.where(sst > 0, 1 - sse / sst.clamp_min(1e-12), torch.zeros_like(sst))
-    return float(r2.mean())
-
-
 def class_weights(actions: np.ndarray, n_actions: int) -> np.ndarray:
     """(n_actions,) ``balanced`` weights N / (n_actions * N_a) of discrete actions (N,); an
     action absent from ``actions`` gets weight 0."""
     counts = np.bincount(np.asarray(actions, dtype=np.int64), minlength=n_actions)
     return np.where(counts > 0, len(actions) / (n_actions * np.maximum(counts, 1)), 0.0)
-
-
-class _Objective:
-    """Loss and validation metric of one mode, on encoded targets; with a dynamics weight,
-    plus that weight times the squared error of the auxiliary head on the standardised o' - o
-    (rows whose next observation is known only). Discrete imitation: the training loss may
-    weight the actions (``class_weight`` (n,)) and smooth the labels; the validation metric is
-    always the plain cross-entropy, so candidates of the model selection compare alike."""
-
-    def __init__(self, mode: str, discrete: bool, dynamics_weight: float = 0.0,
-                 dyn: torch.Tensor | None = None, dyn_valid: torch.Tensor | None = None,
-                 class_weight: torch.Tensor | None = None, label_smoothing: float = 0.0):
-        self.classify = mode == "imitation" and discrete
-        self.weight = float(dynamics_weight) if dyn is not None else 0.0
-        self.dyn, self.dyn_valid = dyn, dyn_valid
-        self.class_weight, self.label_smoothing = class_weight, float(label_smoothing)
-
-    def main_loss(self, out: torch.Tensor, y: torch.Tensor, train: bool = False) -> torch.Tensor:
-        if self.classify:
-            if train:
-                return nn.functional.cross_entropy(out, y, weight=self.class_weight,
-                                                   label_smoothing=self.label_smoothing)
-            return nn.functional.cross_entropy(out, y)
-        return nn.functional.mse_loss(out, y)
-
-    def dynamics_loss(self, net, b: torch.Tensor, rows: torch.Tensor) -> torch.Tensor:
-        err = ((net.dynamics(b) - self.dyn[rows]) ** 2).mean(1)
-        valid = self.dyn_valid[rows]
-        return (err * valid).sum() / valid.sum().clamp_min(1)
-
-    def loss(self, net, b, out, y, rows) -> torch.Tensor:
-        loss = self.main_loss(out, y, train=True)
-        if self.weight > 0:
-            loss = loss + self.weight * self.dynamics_loss(net, b, rows)
-        return loss
-
-    def metrics(self, net, b, out, y, rows) -> dict:
-        """Loss, and R^2 or accuracy, on all of ``out``; ``dynamics_r2`` with the head."""
-        main = self.main_loss(out, y)
-        if self.classify:
-            return {"loss": float(main), "accuracy": float((out.argmax(1) == y).float().mean())}
-        result = {"loss": float(main), "r2": _r2(out, y)}
-        if self.weight > 0:
-            result["loss"] = float(main + self.weight * self.dynamics_loss(net, b, rows))
-            keep = self.dyn_valid[rows]
-            result["dynamics_r2"] = _r2(net.dynamics(b[keep]), self.dyn[rows][keep])
-        return result
 
 
 def _evaluate(net, inputs: CorpusInputs, rows: torch.Tensor, y: torch.Tensor, objective) -> dict:
@@ -202,7 +147,7 @@ class _Problem:
     norm: Normalisation
     inputs: CorpusInputs
     targets: torch.Tensor
-    objective: _Objective
+    objective: Objective
     dynamics_standard: dict | None
 
     @classmethod
@@ -228,7 +173,7 @@ class _Problem:
         if classify and config.class_weight == "balanced":
             cw = torch.as_tensor(class_weights(corpus.actions, dims["n_actions"]),
                                  dtype=torch.float32, device=device)
-        objective = _Objective(config.mode, dims["discrete"], config.dynamics_weight, dyn,
+        objective = Objective(config.mode, dims["discrete"], config.dynamics_weight, dyn,
                                dyn_valid, class_weight=cw,
                                label_smoothing=config.label_smoothing if classify else 0.0)
         return cls(dims, classify, norm, inputs, y_all, objective, dyn_standard)
