@@ -33,8 +33,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from aoc_cli import metrics as sc
-from aoc_cli.control.evaluate_inputs import (EXACT_MAX_ROWS, EvalContext, candidate_beliefs,
-                                             check_inputs, episode_rows, heterogeneity)
+from aoc_cli.control.evaluate_inputs import (BASELINES, EXACT_MAX_ROWS, EvalContext,
+                                             candidate_beliefs, check_inputs, episode_rows,
+                                             heterogeneity)
 from aoc_cli.control.records import label_of
 from aoc_cli.control.support import penalised, support_episodes, support_filter
 from aoc_cli.decompose import decompose
@@ -43,7 +44,6 @@ from aoc_cli.index.strata import PerAction
 from aoc_cli.store import action_labels
 from aoc_cli.threads import one_thread
 
-BASELINES = ("knn", "bc")
 #: Held-out steps per chunk (whole episodes; a chunk has at least one episode).
 CHUNK_STEPS = 4096
 

@@ -11,6 +11,9 @@ from aoc_cli.control.controller import support_disagreement
 from aoc_cli.errors import AocError
 from aoc_cli.index.strata import candidate_search
 
+#: The baselines ``aoc evaluate`` scores on the same steps (``--baselines``).
+BASELINES = ("knn", "bc")
+
 
 def check_inputs(corpus, data, mode: str, baselines, value_target: str | None) -> list[str]:
     """Refuse held-out data the model cannot score; return the baselines as a list."""
@@ -26,8 +29,6 @@ def check_inputs(corpus, data, mode: str, baselines, value_target: str | None) -
     if data.n_rows == 0 or data.n_episodes == 0:
         raise AocError(f"corpus {data.name!r} holds no steps to evaluate")
     names = [b.strip() for b in (baselines or []) if b.strip()]
-    from aoc_cli.control.evaluate import BASELINES
-
     unknown = [b for b in names if b not in BASELINES and b != "none"]
     if unknown:
         raise AocError(f"unknown baseline {unknown[0]!r}: use {', '.join(BASELINES)} "
