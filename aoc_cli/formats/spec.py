@@ -22,7 +22,7 @@ import numpy as np
 
 from aoc_cli.errors import AocError, warn
 from aoc_cli.store import CorpusData, episode_starts_from_lengths
-from aoc_cli.store.writer import content_hash
+from aoc_cli.store.atomic import content_hash
 
 SPEC_KEY = "aoc"
 SPEC_VERSION = 1

@@ -194,3 +194,13 @@ def hash_file(path: str | os.PathLike, chunk: int = 1 << 22) -> str:
         while block := f.read(chunk):
             h.update(block)
     return h.hexdigest()
+
+
+def content_hash(observations, actions, rewards, terminals, truncations, episode_starts,
+                 tags: dict, columns: dict) -> str:
+    """The corpus content hash: SHA-256 (128 bits) of the arrays in a fixed order (tag codes
+    and numeric columns by name). The store records it; :mod:`aoc_cli.store.verify` and the
+    commands that read every column recompute it."""
+    parts = [observations, actions, rewards, terminals, truncations, episode_starts]
+    parts += [tags[k] for k in sorted(tags)] + [columns[k] for k in sorted(columns)]
+    return hash_arrays(*parts)

@@ -20,7 +20,7 @@ import h5py
 import numpy as np
 
 from aoc_cli.errors import AocError
-from aoc_cli.store.atomic import seal_status
+from aoc_cli.store.atomic import array_checksum, content_hash, seal_status
 from aoc_cli.store.corpus import CorpusData, History, action_labels, gather_history
 
 SCHEMA_VERSION = 1
@@ -111,8 +111,6 @@ class Corpus:
     def changed_arrays(self) -> list[str] | None:
         """The arrays of corpus.h5 whose checksum differs from the one the manifest records
         (``arrays``), or that cannot be read; None for a corpus written without them."""
-        from aoc_cli.store.atomic import array_checksum
-
         recorded = self.manifest.get("arrays")
         if not isinstance(recorded, dict):
             return None
@@ -128,8 +126,6 @@ class Corpus:
 
     def content_hash(self) -> str:
         """The content hash of the arrays as stored now (reads every hashed column)."""
-        from aoc_cli.store.writer import content_hash
-
         return content_hash(self.observations, self.actions, self.rewards,
                             self.read("terminals"), self.read("truncations"),
                             self.episode_starts,

@@ -20,6 +20,7 @@ from pathlib import Path
 from aoc_cli.errors import AocError, warn
 from aoc_cli.store.corpus import CorpusData
 from aoc_cli.store.reader import Corpus
+from aoc_cli.store.writer import write_corpus
 
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,127}$")
 
@@ -114,8 +115,6 @@ class Store:
               append: bool = False, float_opts: dict | None = None) -> Corpus:
         """Validate and store ``data`` as corpus ``name`` (see
         :func:`aoc_cli.store.writer.write_corpus`)."""
-        from aoc_cli.store.writer import write_corpus
-
         check_name(name)
-        return write_corpus(self.root, name, data, overwrite=overwrite, append=append,
+        return write_corpus(self, name, data, overwrite=overwrite, append=append,
                             float_opts=float_opts)

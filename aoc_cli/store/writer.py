@@ -17,16 +17,17 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from aoc_cli.store.atomic import array_checksum, atomic_dir, file_record, hash_arrays, seal, \
-    write_json
+from aoc_cli.store.atomic import (array_checksum, atomic_dir, content_hash, file_record, seal,
+                                  write_json)
 from aoc_cli.store.corpus import CorpusData, action_labels, episode_starts_from_lengths
 from aoc_cli.store.lock import writing_corpus
 from aoc_cli.store.reader import SCHEMA_VERSION, Corpus
 
 
-def write_corpus(root: Path, name: str, data: CorpusData, *, overwrite: bool = False,
+def write_corpus(store, name: str, data: CorpusData, *, overwrite: bool = False,
                  append: bool = False, float_opts: dict | None = None) -> Corpus:
-    """Validate and store ``data`` as corpus ``root/name`` (atomically, under its lock).
+    """Validate and store ``data`` as corpus ``name`` of ``store`` (a
+    :class:`aoc_cli.store.Store`; atomically, under its lock).
 
     ``append`` adds the episodes to an existing corpus with the same spaces (a missing one is
     created; ``aoc ingest`` warns); derived models are kept but become stale (their corpus
@@ -34,9 +35,7 @@ def write_corpus(root: Path, name: str, data: CorpusData, *, overwrite: bool = F
     ``overwrite``. ``float_opts``: h5py dataset options of the float columns instead of
     :data:`FLOAT_OPTS` (benchmarks/ingest.py compares compressions with it).
     """
-    from aoc_cli.store.store import Store
-
-    store = Store(root)
+    root = store.root
     data.validate()
     with writing_corpus(root, name):
         store.check_writable(name, overwrite=overwrite, append=append, notify=False)
@@ -172,16 +171,6 @@ def hashed_arrays(data: CorpusData) -> dict[str, np.ndarray]:
     out.update({f"tags/{k}": c for k, (c, _labels) in sorted(data.tags.items())})
     out.update({f"columns/{k}": data.columns[k] for k in sorted(data.columns)})
     return out
-
-
-def content_hash(observations, actions, rewards, terminals, truncations, episode_starts,
-                 tags: dict, columns: dict) -> str:
-    """The corpus content hash: SHA-256 (128 bits) of the arrays in a fixed order (tag codes
-    and numeric columns by name). The store records it; :mod:`aoc_cli.store.verify` and the
-    commands that read every column recompute it."""
-    parts = [observations, actions, rewards, terminals, truncations, episode_starts]
-    parts += [tags[k] for k in sorted(tags)] + [columns[k] for k in sorted(columns)]
-    return hash_arrays(*parts)
 
 
 def _manifest(name: str, data: CorpusData, digest: str, sources: list[dict],
