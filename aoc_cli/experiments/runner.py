@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from aoc_cli.experiments import lunar, maze, ood, paper, pendulum, plots
-from aoc_cli.experiments.cells import execute
+from aoc_cli.experiments.execute import execute
 from aoc_cli.experiments.common import SCALES, Context
 from aoc_cli.experiments.methods import Budget, Runner
 from aoc_cli.experiments.prepare import Artefacts

@@ -231,7 +231,7 @@ def test_aoc_is_more_conservative_with_a_small_epsilon_on_two_gates(tmp_path):
     """A real effect (the paper's two-gates table): epsilon 0.1 keeps AOC on the data and
     reaches the goal; epsilon 0.7 lets it extrapolate into the wall."""
     from aoc_cli.experiments import maze
-    from aoc_cli.experiments.cells import execute
+    from aoc_cli.experiments.execute import execute
     from aoc_cli.experiments.common import Context
     from aoc_cli.experiments.methods import Runner
     from aoc_cli.experiments.prepare import Artefacts

@@ -13,7 +13,8 @@ from pathlib import Path
 import pytest
 import ray
 
-from aoc_cli.experiments.cells import Cell, Plan, execute
+from aoc_cli.experiments.cells import Cell, Plan
+from aoc_cli.experiments.execute import execute
 from aoc_cli.experiments.common import Context
 from aoc_cli.experiments.methods import Budget, Runner
 from aoc_cli.experiments.prepare import Artefacts
