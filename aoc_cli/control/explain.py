@@ -21,7 +21,7 @@ from aoc_cli.control.whatif import Removal, redecide, what_if_record
 from aoc_cli.store import History
 
 if TYPE_CHECKING:
-    from aoc_cli.session import Session
+    from aoc_cli.control.session import Session
 
 
 def explain_decisions(session: Session, observation: np.ndarray, history: History,

@@ -16,7 +16,8 @@ from aoc_cli.control.whatif import redecide, removal
 from aoc_cli.envs import collect
 from aoc_cli.errors import AocError
 from aoc_cli.index import BeliefIndex
-from aoc_cli.session import CorpusIndex, open_session
+from aoc_cli.control import open_session
+from aoc_cli.corpus_index import CorpusIndex
 from aoc_cli.store import Store
 from tests.control.corpora import corridor_store
 
@@ -28,7 +29,7 @@ def maze(tmp_path_factory):
     data, _ = collect("maze", episodes=120, seed=0)
     corpus = store.write("maze", data)
     train_model(corpus, BeliefConfig(seed=0, threads=1, max_epochs=6, patience=3), "default")
-    from aoc_cli.session import build_index
+    from aoc_cli.corpus_index import build_index
 
     build_index(corpus)
     return store

@@ -106,7 +106,7 @@ def test_cli_bad_method_is_one_line_exit_2(aoc, tmp_path):
 def test_monte_carlo_of_a_policy_that_reads_a_history_covers_its_exact_value(tmp_path, tables):
     """The modal-action policy rolled out in the package's environment: the 95% interval of
     400 episodes holds its exact value (0.787)."""
-    from aoc_cli.session import model_free_session
+    from aoc_cli.control import model_free_session
     from aoc_cli.envs import collect, make_env
     from aoc_cli.store import Store
 
