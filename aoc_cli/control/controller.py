@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from aoc_cli.control.config import ControllerConfig
+from aoc_cli.control.epsilon import epsilon_filter, residual_cap
 from aoc_cli.control.support import penalised, row_episodes, support_episodes, support_filter
 from aoc_cli.errors import AocError
 from aoc_cli.store import History
@@ -202,28 +203,15 @@ class Controller:
                                 dec.neighbours[part], self.row_episode)
 
     def candidate_filter(self, residual: np.ndarray) -> tuple[float, np.ndarray]:
-        """(threshold, passed (K,) bool): residual <= min(q_epsilon, c x typical p90).
-
-        With no candidate under the threshold (possible only with the cap), the
-        smallest-residual candidates pass and the threshold is their residual.
-        """
-        threshold = float(np.quantile(residual, self.config.epsilon))
-        cap = self.residual_cap
-        if cap is not None:
-            threshold = min(threshold, cap)
-        passed = residual <= threshold + 1e-12 * max(1.0, threshold)
-        if not passed.any():
-            threshold = float(residual.min())
-            passed = residual <= threshold + 1e-12 * max(1.0, threshold)
-        return threshold, passed
+        """(threshold, passed (K,) bool): residual <= min(q_epsilon, c x typical p90)
+        (:func:`aoc_cli.control.epsilon.epsilon_filter`)."""
+        threshold, passed = epsilon_filter(residual, self.config.epsilon, self.residual_cap)
+        return float(threshold[0]), passed
 
     @property
     def residual_cap(self) -> float | None:
         """c x the index's typical p90 residual, or None (no cap set, or none recorded)."""
-        if self.config.residual_cap is None:
-            return None
-        p90 = self.index.typical.p90
-        return None if p90 is None else float(self.config.residual_cap) * float(p90)
+        return residual_cap(self.config.residual_cap, self.index.typical.p90)
 
     def _rows(self, selection: np.ndarray | None) -> np.ndarray | None:
         """The row mask of one decision: the one given, else the controller's own."""

@@ -37,6 +37,7 @@ from aoc_cli.control.evaluate_inputs import (BASELINES, EXACT_MAX_ROWS, EvalCont
                                              candidate_beliefs, check_inputs, episode_rows,
                                              heterogeneity)
 from aoc_cli.control.records import label_of
+from aoc_cli.control.epsilon import epsilon_filter, residual_cap
 from aoc_cli.control.support import penalised, support_episodes, support_filter
 from aoc_cli.decompose import decompose
 from aoc_cli.errors import AocError
@@ -194,13 +195,8 @@ def _value(ctx, rows, ep, obs, hist, logged) -> StepScores:
     dec = _decompose(ctx, b_c, np.repeat(ep, kk))
     res = dec.residual.reshape(s, kk)
     val = dec.value.reshape(s, kk)
-    thr = np.quantile(res, cfg.epsilon, axis=1, keepdims=True)
-    p90 = ctx.index.typical.p90
-    if cfg.residual_cap is not None and p90 is not None:  # as Controller.candidate_filter
-        thr = np.minimum(thr, float(cfg.residual_cap) * float(p90))
-        none = ~(res <= thr + 1e-12 * np.maximum(1.0, thr)).any(1, keepdims=True)
-        thr = np.where(none, res.min(1, keepdims=True), thr)
-    passed = res <= thr + 1e-12 * np.maximum(1.0, thr)
+    _thr, passed = epsilon_filter(res, cfg.epsilon,
+                                  residual_cap(cfg.residual_cap, ctx.index.typical.p90))
     rank = val
     if cfg.min_support is not None or cfg.support_penalty is not None:
         # the episodes behind each value (control/support.py)
