@@ -28,8 +28,10 @@ from dataclasses import replace
 import numpy as np
 
 from aoc_cli.belief.config import BeliefConfig
+from aoc_cli.settings import SMALL_LOG_ROWS
 
-SELECT_MAX_ROWS = 20_000
+#: Up to this many rows the settings are chosen by validation (aoc_cli.settings).
+SELECT_MAX_ROWS = SMALL_LOG_ROWS
 #: The settings searched, in order, with their candidate values (the first is tried first).
 SEARCH: tuple[tuple[str, tuple], ...] = (
     ("history_length", (0, 1, 4)),

@@ -16,6 +16,7 @@ from aoc_cli.cli.common import (CandidatesOption, CorpusArgument, EpsilonOption,
                                 WithoutOption, WorkersOption, get_store, parse_removal)
 from aoc_cli.errors import AocError
 from aoc_cli.report import resolve_format, write_object, write_records
+from aoc_cli.settings import SMALL_LOG_ROWS
 
 IMITATION_COLUMNS = ["method", "accuracy", "balanced_accuracy", "auc", "majority_accuracy",
                      "mae", "r2"]
@@ -45,9 +46,9 @@ def register(app: typer.Typer) -> None:
         support_penalty: SupportPenaltyOption = None,
         exact: Annotated[Optional[bool], typer.Option(
             "--exact/--ivf", help="Search the index exactly for every step, or an IVF structure "
-                                  "built for the run (default: exact up to 20,000 corpus rows, "
-                                  "IVF beyond: ~10x faster, recall of the nearest rows "
-                                  "~0.9999).")] = None,
+                                  "built for the run (default: exact up to "
+                                  f"{SMALL_LOG_ROWS:,} corpus rows, IVF beyond: ~10x faster, "
+                                  "recall of the nearest rows ~0.9999).")] = None,
         seed: Annotated[int, typer.Option(
             "--seed", help="Seed of the candidates (value mode, continuous actions).")] = 0,
         workers: WorkersOption = None,

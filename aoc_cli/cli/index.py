@@ -8,7 +8,9 @@ import typer
 
 from aoc_cli.cli.common import (CorpusArgument, FormatOption, IndexKind, ModelOption,
                                 StepCandidates, choice, get_store, parse_rates)
+from aoc_cli.errors import AocError
 from aoc_cli.report import ProgressBar, write_object
+from aoc_cli.settings import SMALL_LOG_ROWS
 
 
 def register(app: typer.Typer) -> None:
@@ -32,30 +34,35 @@ def register(app: typer.Typer) -> None:
                                 "older scripts; same as --episode-rate).")] = None,
         seed: Annotated[int, typer.Option(
             "--seed", help="Seed of sub-sampling and of the typical-residual sample.")] = 0,
-        candidates: Annotated[StepCandidates, typer.Option(
-            "--candidates", case_sensitive=False,
-            help="Step 1's candidates: auto (the nearest rows of each action for an "
-                 "imitation model of discrete actions on up to 20,000 rows, else the k "
-                 "nearest rows), nearest (the paper's k = 2 (d_b + 1) nearest rows) or "
-                 "per_action.")] = StepCandidates.auto,
+        neighbours: Annotated[Optional[StepCandidates], typer.Option(
+            "--neighbours", case_sensitive=False,
+            help="Step 1's neighbour rows: auto (the nearest rows of each action for an "
+                 f"imitation model of discrete actions on up to {SMALL_LOG_ROWS:,} rows, else "
+                 "the k nearest rows), nearest (the paper's k = 2 (d_b + 1) nearest rows) or "
+                 "per_action. [default: auto]")] = None,
+        old_neighbours: Annotated[Optional[StepCandidates], typer.Option(
+            "--candidates", case_sensitive=False, hidden=True,
+            help="The older name of --neighbours.")] = None,
         fmt: FormatOption = None,
     ) -> None:
         """Compute every row's belief and build the index the controller searches."""
         from aoc_cli.corpus_index import build_index
 
+        if neighbours is not None and old_neighbours is not None \
+                and neighbours != old_neighbours:
+            raise AocError("--neighbours and --candidates (its older name) differ: give one")
+        rule = neighbours or old_neighbours or StepCandidates.auto
         corpus = get_store().corpus(name)
         rates = parse_rates(episode_rate, "--episode-rate")
         rates_s = parse_rates(subsample, "--subsample")
         for key, rate in rates_s.items():
             if rate > 1:
-                from aoc_cli.errors import AocError
-
                 raise AocError(f"--subsample rates are <= 1 (got {rate} for {key}); use "
                                "--episode-rate")
         with ProgressBar("index") as p:
             ci = build_index(corpus, model, kind=choice(kind), index_id=index_id,
                              episode_rates={**rates_s, **rates}, seed=seed, progress=p,
-                             candidates=choice(candidates))
+                             candidates=choice(rule))
         meta = ci.meta
         write_object({
             "corpus": corpus.name, "model": meta["model"], "index": meta["index_id"],

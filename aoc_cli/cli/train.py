@@ -12,6 +12,7 @@ from aoc_cli.belief.data import prepare
 from aoc_cli.cli.common import (BeliefKind, BeliefMode, CorpusArgument, FormatOption, choice,
                                 get_store)
 from aoc_cli.report.output import ProgressBar, message, resolve_format, write_object
+from aoc_cli.settings import SMALL_LOG_ROWS
 
 #: Flag defaults are the config's (the paper's) defaults.
 _D = BeliefConfig()
@@ -45,7 +46,8 @@ def train(
     history_length: Optional[int] = typer.Option(
         None, "--history-length", help="Previous transitions of the episode the GRU reads "
                                        "(0: no history; default: chosen by validation among "
-                                       "0, 1, 4 on corpora of up to 20,000 rows, else 4)."),
+                                       f"0, 1, 4 on corpora of up to {SMALL_LOG_ROWS:,} rows, "
+                                       "else 4)."),
     dynamics_weight: float = typer.Option(_D.dynamics_weight, "--dynamics-weight",
                                           help="Value mode: weight of the auxiliary loss that "
                                                "makes the belief also predict o' - o "
@@ -67,7 +69,7 @@ def train(
     label_smoothing: Optional[float] = typer.Option(
         None, "--label-smoothing", help="Imitation, discrete actions: label smoothing of the "
                                         "training loss (0: none, the paper's; default: 0.1 "
-                                        "on corpora of up to 20,000 rows, else 0)."),
+                                        f"on corpora of up to {SMALL_LOG_ROWS:,} rows, else 0)."),
     paper: bool = typer.Option(False, "--paper", help="The paper's settings for everything "
                                                       "not given (L 4, 128 units, no weight "
                                                       "decay, no label smoothing): no "

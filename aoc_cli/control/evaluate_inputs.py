@@ -10,6 +10,7 @@ import numpy as np
 from aoc_cli.control.controller import support_disagreement
 from aoc_cli.errors import AocError
 from aoc_cli.index.strata import candidate_search
+from aoc_cli.settings import SMALL_LOG_ROWS
 
 #: The baselines ``aoc evaluate`` scores on the same steps (``--baselines``).
 BASELINES = ("knn", "bc")
@@ -78,10 +79,9 @@ def candidate_beliefs(model, obs: np.ndarray, hist, cands: np.ndarray,
     return out
 
 
-#: Above this many corpus rows, evaluate searches an IVF structure built for the run (exact
-#: search of every held-out step against a large corpus costs ~0.5 ms a step; IVF ~0.06 ms
-#: with a recall of the k nearest of 0.99999 on ward's beliefs: docs/benchmarks.md).
-EXACT_MAX_ROWS = 20_000
+#: Above this many corpus rows, evaluate searches an IVF structure built for the run
+#: (:data:`aoc_cli.settings.SMALL_LOG_ROWS`).
+EXACT_MAX_ROWS = SMALL_LOG_ROWS
 IVF_NPROBE = 16
 
 

@@ -30,6 +30,7 @@ from aoc_cli.index import BeliefIndex
 from aoc_cli.index.strata import NEAREST, PER_ACTION
 from aoc_cli.progress import Progress
 from aoc_cli.rows import episode_multiplicity
+from aoc_cli.settings import SMALL_LOG_ROWS
 from aoc_cli.store import Corpus, atomic_dir, check_name, derived, writing_model
 
 if TYPE_CHECKING:
@@ -38,10 +39,8 @@ if TYPE_CHECKING:
 #: Rows sampled to measure the corpus's typical residual (leave-those-rows-out).
 TYPICAL_SAMPLE = 500
 #: Up to this many rows an imitation index of discrete actions takes the nearest rows of each
-#: action (measured: ward at 5k rows, AUC 0.939 -> 0.962; at 100k rows no AUC gain and 0.7
-#: points of accuracy lost); the same bound as the settings chosen by validation
-#: (aoc_cli.belief.select.SELECT_MAX_ROWS).
-SMALL_MAX_ROWS = 20_000
+#: action (:data:`aoc_cli.settings.SMALL_LOG_ROWS`).
+SMALL_MAX_ROWS = SMALL_LOG_ROWS
 
 
 def neighbours(corpus: Corpus, model, candidates: str = "auto") -> tuple[int, str]:
@@ -58,10 +57,10 @@ def neighbours(corpus: Corpus, model, candidates: str = "auto") -> tuple[int, st
     ``candidates``: "auto" (that rule), "nearest" (the paper's k) or "per_action" (discrete
     actions only)."""
     if candidates not in ("auto", NEAREST, PER_ACTION):
-        raise AocError(f"unknown --candidates {candidates!r}: use auto, {NEAREST} or "
+        raise AocError(f"unknown --neighbours {candidates!r}: use auto, {NEAREST} or "
                        f"{PER_ACTION}")
     if candidates == PER_ACTION and not (corpus.discrete and corpus.n_rows > 0):
-        raise AocError(f"--candidates {PER_ACTION} needs discrete actions; corpus "
+        raise AocError(f"--neighbours {PER_ACTION} needs discrete actions; corpus "
                        f"{corpus.name!r} has continuous ones")
     imitation = model.mode == "imitation" and bool(corpus.discrete) and corpus.n_rows > 0
     if candidates == PER_ACTION or (candidates == "auto" and imitation
