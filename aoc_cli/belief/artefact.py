@@ -104,7 +104,7 @@ class BeliefModel:
         self.path = Path(path)
         self.meta = meta
         self.id = meta["model"]
-        self.config = BeliefConfig.from_dict(meta["config"])
+        self.config = BeliefConfig.from_dict(meta["config"], strict=False)
         self.mode: str = meta["mode"]
         self.dims: dict = meta["dims"]
         self.corpus_hash: str = meta["corpus_hash"]
@@ -297,7 +297,7 @@ def load_model(corpus, model_id: str | None = None, device: str | None = None) -
     check_files(path, meta, ("weights.pt", "values.npy"), what, todo)
     try:
         dev = pick_device(device or meta["config"].get("device", "auto"))
-        net = build_net(meta["dims"], BeliefConfig.from_dict(meta["config"]))
+        net = build_net(meta["dims"], BeliefConfig.from_dict(meta["config"], strict=False))
         state = torch.load(path / "weights.pt", map_location="cpu", weights_only=True)
         net.load_state_dict(state)
         values = None

@@ -172,6 +172,13 @@ class BeliefConfig:
         return asdict(self)
 
     @classmethod
-    def from_dict(cls, data: dict) -> "BeliefConfig":
+    def from_dict(cls, data: dict, strict: bool = True) -> "BeliefConfig":
+        """The config of ``data``'s settings. ``strict``: a key that is no setting is an
+        AocError; False (a saved model's config, which may hold an older aoc's keys) ignores
+        it."""
         known = {f.name for f in fields(cls)}
+        unknown = sorted(set(data) - known)
+        if strict and unknown:
+            raise AocError(f"unknown belief setting {unknown[0]!r}: the settings are "
+                           f"{', '.join(sorted(known))}")
         return cls(**{k: v for k, v in data.items() if k in known})

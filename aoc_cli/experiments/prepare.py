@@ -97,7 +97,7 @@ class Artefacts:
         if path.is_file():
             meta = json.loads(path.read_text())
             # through BeliefConfig, so a field added since the model was saved takes its default
-            known = asdict(BeliefConfig.from_dict(meta.get("config", {})))
+            known = asdict(BeliefConfig.from_dict(meta.get("config", {}), strict=False))
             saved = {k: v for k, v in known.items() if k not in _RUNTIME}
             wanted = {k: v for k, v in asdict(config).items() if k not in _RUNTIME}
             if saved == wanted and meta.get("corpus_hash") == corpus.hash:

@@ -323,7 +323,7 @@ class BeliefIndex:
         index = faiss.read_index(str(path))
         meta_path = Path(f"{path}.json")
         meta = json.loads(meta_path.read_text()) if meta_path.exists() else {}
-        config = IndexConfig.from_dict(meta.get("config", {}))
+        config = IndexConfig.from_dict(meta.get("config", {}), strict=False)
         kind = meta.get("kind") or kind_of(index)
         rows_path = Path(f"{path}.rows.npy")
         row_of = np.load(rows_path) if meta.get("derived") and rows_path.exists() else None

@@ -71,6 +71,12 @@ class IndexConfig:
         return int(min(4096, max(1, 2 ** math.floor(math.log2(max(target, 1.0))))))
 
     @classmethod
-    def from_dict(cls, data: dict) -> "IndexConfig":
+    def from_dict(cls, data: dict, strict: bool = True) -> "IndexConfig":
+        """The config of ``data``'s settings. ``strict``: a key that is no setting (a typo such
+        as ``kidn``) is an AocError; False (a saved index's config) ignores it."""
         names = {f.name for f in fields(cls)}
+        unknown = sorted(set(data) - names)
+        if strict and unknown:
+            raise AocError(f"unknown index setting {unknown[0]!r}: the settings are "
+                           f"{', '.join(sorted(names))}")
         return cls(**{key: value for key, value in data.items() if key in names})
