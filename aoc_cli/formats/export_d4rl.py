@@ -10,7 +10,7 @@ split episodes at ``terminals | timeouts`` see it end; the spec records which); 
 (:mod:`aoc_cli.formats.spec`), ``metadata/episode_starts`` the (E + 1,) offsets.
 
 Contiguous and uncompressed like the store's float columns: a 1M-row corpus is written at
-disk speed (benchmarks/export.py).
+disk speed (benchmarks/perf/export.py).
 """
 
 from __future__ import annotations

@@ -135,7 +135,7 @@ def hash_arrays(*arrays: np.ndarray | None) -> str:
     """A content hash (SHA-256 truncated to 16 bytes, hex) of arrays: dtype, shape and bytes.
 
     SHA-256 rather than blake2b: with the CPU's SHA extensions it hashes ~1.4 GB/s here,
-    blake2b ~0.65 GB/s, and hashing is a fixed part of every ingest (benchmarks/ingest.py).
+    blake2b ~0.65 GB/s, and hashing is a fixed part of every ingest (benchmarks/perf/ingest.py).
     """
     h = hashlib.sha256()
     for a in arrays:

@@ -33,7 +33,7 @@ def write_corpus(store, name: str, data: CorpusData, *, overwrite: bool = False,
     created; ``aoc ingest`` warns); derived models are kept but become stale (their corpus
     hash no longer matches). A damaged corpus folder (no manifest) is replaced only with
     ``overwrite``. ``float_opts``: h5py dataset options of the float columns instead of
-    :data:`FLOAT_OPTS` (benchmarks/ingest.py compares compressions with it).
+    :data:`FLOAT_OPTS` (benchmarks/perf/ingest.py compares compressions with it).
     """
     root = store.root
     data.validate()
@@ -110,7 +110,7 @@ def concat(a: CorpusData, b: CorpusData) -> CorpusData:
 
 
 #: Float columns (observations, actions, rewards, numeric columns) are stored contiguous and
-#: uncompressed: measured on 1M random-walk rows (benchmarks/ingest.py, docs/benchmarks.md),
+#: uncompressed: measured on 1M random-walk rows (benchmarks/perf/ingest.py, docs/benchmarks.md),
 #: gzip-1 + shuffle saved 25% of the bytes for 20x the write time and lzf 2%, and a contiguous
 #: uncompressed dataset can be memory-mapped (:meth:`Corpus.read` of large columns).
 #: Flags, step counters and tag codes compress 50-100x cheaply: gzip-1 + shuffle, chunked.

@@ -11,7 +11,7 @@ median), their ratio, the median of the rounds' own ratios (``paired``: a round 
 run back to back sees about the same load), and whether every decision is the same: the chosen action, its value
 and residual, step by step, compared to the bit (same machine, same inputs).
 
-Usage: .venv/bin/python benchmarks/control_trees.py --old ../aoc-old --new . --sizes 100k
+Usage: .venv/bin/python benchmarks/ab/control_trees.py --old ../aoc-old --new . --sizes 100k
        [--steps 100] [--rounds 4] [--store DIR]
   (``git worktree add ../aoc-old f2b73f1`` makes the old tree; the corpora, models and indexes
   are prepared with the new tree's code, in --store, and reused.)
@@ -37,8 +37,8 @@ torch.set_num_threads(1)
 from aoc_cli.store import Store
 try:
     from aoc_cli.control import open_session
-except ImportError:  # the tree before aoc_cli/session.py
-    from aoc_cli.control import open_session
+except ImportError:  # a tree before the renovation (issue 22): aoc_cli/session.py
+    from aoc_cli.session import open_session
 from aoc_cli.control import HistoryBuffer
 from aoc_cli.envs import make_env
 
@@ -90,7 +90,7 @@ def main() -> None:
                                                   "temporary folder)")
     args = ap.parse_args()
     sys.path.insert(0, os.path.abspath(args.new))
-    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    sys.path.insert(0, os.path.join(os.path.abspath(args.new), "benchmarks", "perf"))
     from control import parse_size, prepare  # noqa: E402  (the new tree's benchmark helpers)
 
     from aoc_cli.store import Store  # noqa: E402

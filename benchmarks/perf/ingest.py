@@ -1,7 +1,7 @@
 """Ingest benchmark (issue 2): a generated 1M-row D4RL-style file (17-d observations, 6-d
 actions) into the store, and history lookups for 100k random rows.
 
-    .venv/bin/python benchmarks/ingest.py [--rows 1000000] [--repeats 5] [--compare-compression]
+    .venv/bin/python benchmarks/perf/ingest.py [--rows 1000000] [--repeats 5] [--compare-compression]
 
 Goal: >= 1M rows/s for ingest; < 1 s for the histories (L = 4) of 100k random rows.
 The generated data are smooth random walks within 1000-step episodes (like logged control

@@ -5,7 +5,7 @@ configuration (``aoc_cli.experiments.beliefs.model_config`` at the scale), for o
 tasks' corpora (random and upright start); this trains the one asked for, so a single cell can
 be measured on a shared machine, then indexed and rolled out with the CLI as the bench does:
 
-    python benchmarks/belief_cell.py --task pendulum-het-upright --rows 100000 --kind critic
+    python benchmarks/notes/belief_cell.py --task pendulum-het-upright --rows 100000 --kind critic
     export AOC_STORE=bench/store C=pendulum-het-upright-100000r-s0
     aoc index $C --model critic
     aoc rollout $C --env pendulum-het-upright --model critic -n 8 --seed 10000
@@ -14,7 +14,7 @@ be measured on a shared machine, then indexed and rolled out with the CLI as the
 ``--patience`` and ``--train-seed`` vary one setting of the bench's configuration (give
 ``--model`` a name of its own), e.g. the value belief on the return-to-go at gamma 0.9:
 
-    python benchmarks/belief_cell.py --task pendulum-het-upright --rows 100000 --kind value \
+    python benchmarks/notes/belief_cell.py --task pendulum-het-upright --rows 100000 --kind value \
         --gamma 0.9 --model g09
 
 Prints the training's progress reports (the critic's every 500 steps) and the final metrics as

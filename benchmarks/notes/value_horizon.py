@@ -13,7 +13,7 @@ For each value target (the return-to-go at several gammas, the mean of the remai
 
 docs/belief.md ("Upright at 100k") reads the figures:
 
-    python benchmarks/value_horizon.py --store bench/store --corpus pendulum-het-upright-100000r-s0
+    python benchmarks/notes/value_horizon.py --store bench/store --corpus pendulum-het-upright-100000r-s0
 """
 
 from __future__ import annotations

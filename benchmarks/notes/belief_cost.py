@@ -21,7 +21,7 @@ residual (absolute, in belief units) and ``new_above`` the candidates whose resi
 tree exceeds the old arm's by more than 1e-9 (the new one is certified optimal, so it should
 be 0: where they differ, the old arm's reference-QP answer was the less precise).
 
-Usage: python benchmarks/belief_cost.py --store bench/store --corpus pendulum-het-30000r-s0 \\
+Usage: python benchmarks/notes/belief_cost.py --store bench/store --corpus pendulum-het-30000r-s0 \\
            --models default,dynamics,critic,reward [--env pendulum-het] [--steps 60] \\
            [--old ../aoc-old]
 (with --old, set NUMBA_CACHE_DIR to a directory of its own: the old module is compiled under

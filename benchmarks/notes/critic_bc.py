@@ -6,7 +6,7 @@ and prints, every RECORD_EVERY steps, the target critic's mean Q on the validati
 actions and on the actor's actions, beside the rows' discounted return-to-go. Pendulum rewards
 are <= 0, so any Q above 0 is overestimation for certain.
 
-    python benchmarks/critic_bc.py --rows 20000 --steps 3000 --history 0 --hidden 64
+    python benchmarks/notes/critic_bc.py --rows 20000 --steps 3000 --history 0 --hidden 64
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Evaluate benchmark (issue 14): held-out steps scored per second by `aoc evaluate`, the whole
 process (interpreter start, imports, loading, beliefs, decompositions, baselines, metrics).
 
-    .venv/bin/python benchmarks/evaluate.py [--patients 10000] [--repeats 3] [--store DIR]
+    .venv/bin/python benchmarks/perf/evaluate.py [--patients 10000] [--repeats 3] [--store DIR]
 
 Goal: at least 2,000 steps a second on a 100k-row corpus. Reported per case: steps per wall
 second of the whole process, and steps per CPU second (user + system time of the process:
@@ -33,7 +33,7 @@ import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 AOC = [sys.executable, "-c", "from aoc_cli.cli.app import main; main()"]
 
 

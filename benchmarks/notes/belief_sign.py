@@ -13,7 +13,7 @@ upright), so ``--policy swingup-noise0.5 --sign-of expert`` takes the rows of a 
 controller and the sign of the noiseless controller's torque at the row's state
 (``aoc_cli.envs.pendulum_het.swingup_action``), with |that torque| > ``--min-torque``.
 
-    python benchmarks/belief_sign.py --store bench/store --corpus pendulum-het-30000r-s0 \\
+    python benchmarks/notes/belief_sign.py --store bench/store --corpus pendulum-het-30000r-s0 \\
         --models default,dynamics,critic,reward --rows 300
 """
 

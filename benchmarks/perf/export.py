@@ -2,7 +2,7 @@
 rewards, two tags, one numeric column, 1000-step episodes with ids) written out by
 ``aoc export``.
 
-    .venv/bin/python benchmarks/export.py [--rows 1000000] [--repeats 5] [--other-rows 100000]
+    .venv/bin/python benchmarks/perf/export.py [--rows 1000000] [--repeats 5] [--other-rows 100000]
 
 Goal: >= 1M rows/s to D4RL HDF5 on the 1M-row corpus. Reported: the median of ``--repeats``
 runs of the library call (``aoc_cli.formats.export``) and of the command (``aoc export`` in a

@@ -1,7 +1,7 @@
 """Collect benchmark (issue 3): rows per second of each built-in task's behaviour mix, and the
 whole `aoc collect` (collect + store write) for pendulum-het.
 
-    .venv/bin/python benchmarks/collect.py [--repeats 5] [--pendulum-rows 100000]
+    .venv/bin/python benchmarks/perf/collect.py [--repeats 5] [--pendulum-rows 100000]
                                            [--lunar-rows 20000]
 
 Goal: 100k pendulum-het rows in <= 30 s on this machine. pendulum-het is stepped for all of its
@@ -22,7 +22,7 @@ import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
 from aoc_cli.threads import wait_passively  # noqa: E402

@@ -6,7 +6,7 @@ controller settings, seed 0) in fresh processes, alternating PASSIVE and unset r
 with OMP_NUM_THREADS=1 and unset, and prints the median step of each process, the 1-minute
 load, and a checksum of the actions chosen (the same in every process: the same decisions).
 
-Usage: .venv/bin/python benchmarks/wait_policy.py --store STORE --corpus NAME [--model ID]
+Usage: .venv/bin/python benchmarks/notes/wait_policy.py --store STORE --corpus NAME [--model ID]
        [--steps 150] [--rounds 4]   (a store with a trained model and its index, e.g. the
        bench store of `aoc bench pendulum-het --quick`)
 """

@@ -1,8 +1,8 @@
 """Belief-model benchmark (issue 4): time to train on pendulum-het to early stop, and the four
 pendulum-het figures (does the history identify the dynamics?).
 
-    .venv/bin/python benchmarks/train.py time    [--rows 100000] [--repeats 3] [--threads 2]
-    .venv/bin/python benchmarks/train.py figures [--rows 100000] [--seed 0] [--threads 2]
+    .venv/bin/python benchmarks/perf/train.py time    [--rows 100000] [--repeats 3] [--threads 2]
+    .venv/bin/python benchmarks/perf/train.py figures [--rows 100000] [--seed 0] [--threads 2]
 
 ``time``: collect ``--rows`` pendulum-het rows (collect seed = run index), store them, and train
 the default value-mode model (L = 4, d_b = 20, batch 500, Adam 1e-3, patience 10) to early stop
@@ -31,7 +31,7 @@ import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402

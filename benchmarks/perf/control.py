@@ -8,7 +8,7 @@ shared, oversubscribed machine the wall time includes waiting for a core), and s
 belief pass, the decomposition and, inside it, the neighbour search. One thread for torch, FAISS and BLAS (as `aoc rollout` runs). The 1-minute
 load average is printed with each line: the machine is shared.
 
-Usage: .venv/bin/python benchmarks/control.py --sizes 100k,600k [--steps 200] [--store DIR]
+Usage: .venv/bin/python benchmarks/perf/control.py --sizes 100k,600k [--steps 200] [--store DIR]
        [--kind auto|flat|ivf|hnsw]   (auto: flat up to 200k rows, IVF beyond; flat is exact)
 """
 

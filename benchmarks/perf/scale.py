@@ -21,7 +21,7 @@ run that was interrupted resumes (``--redo STAGE`` runs a stage again; the earli
 are kept under ``earlier``). Memory is set against
 the corpus's float arrays (observations, actions, rewards) and the belief array (N, d_b).
 
-Usage: .venv/bin/python benchmarks/scale.py --sizes 1m,3m,10m --store DIR [--steps 200]
+Usage: .venv/bin/python benchmarks/perf/scale.py --sizes 1m,3m,10m --store DIR [--steps 200]
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ of its validation episodes, linear and quadratic (``logistic_probe(..., quadrati
 system as an interaction, s = sign(a * s a)); the same probes on the raw (o, a) for reference.
 docs/belief.md reads the figures.
 
-    python benchmarks/belief_probe.py --store bench/store \\
+    python benchmarks/notes/belief_probe.py --store bench/store \\
         --corpus pendulum-het-upright-100000r-s0 --models default,dynamics,critic,reward
 """
 

@@ -21,7 +21,7 @@ y_i = base + A a_i with a_i uniform in [-1, 1]^2 and A a random (20, 2) matrix o
   mem x         memory of the beliefs + index + querying, in units of the belief array:
                 (belief array + peak resident growth while building and querying) / belief array
 
-Usage: .venv/bin/python benchmarks/decompose.py --sizes 100k,600k,10M
+Usage: .venv/bin/python benchmarks/perf/decompose.py --sizes 100k,600k,10M
 """
 
 from __future__ import annotations

@@ -6,11 +6,12 @@ Rows are matched by (experiment, task, method, setting, seed). Every column but 
 summation's rounding). Prints one line per differing row, the largest relative difference,
 and the median new/old ratio of `seconds_per_step` over the methods that have one.
 
-Usage: .venv/bin/python benchmarks/bench_diff.py OLD/results.csv NEW/results.csv
+Usage: .venv/bin/python benchmarks/ab/bench_diff.py OLD/results.csv NEW/results.csv
 """
 
 from __future__ import annotations
 
+import argparse
 import csv
 import math
 import statistics
@@ -66,4 +67,8 @@ def main(old_path: str, new_path: str) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main(*sys.argv[1:3]))
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("old", help="the older tree's results.csv")
+    ap.add_argument("new", help="the newer tree's results.csv")
+    args = ap.parse_args()
+    sys.exit(main(args.old, args.new))

@@ -7,7 +7,7 @@ computed from the corpus (``aoc_cli.belief.targets.value_targets``), to tell whi
 changes a result; the controller's settings are the task's, the episode seeds ``--seed``,
 ``--seed + 1``, ... as ``aoc rollout``'s.
 
-    python benchmarks/hull_values.py --corpus pendulum-het-upright-100000r-s0 --model g09 \\
+    python benchmarks/notes/hull_values.py --corpus pendulum-het-upright-100000r-s0 --model g09 \\
         --value return --gamma 0.99 --env pendulum-het-upright -n 8 --seed 10000
 """
 
