@@ -14,7 +14,8 @@ from aoc_cli.control import ControllerConfig, explain_logged_step
 from aoc_cli.control.evaluate import evaluate, step_records
 from aoc_cli.envs.ward import read_options, write_csv
 from aoc_cli.formats import read_dataset
-from aoc_cli.session import build_index, open_session
+from aoc_cli.control import open_session
+from aoc_cli.corpus_index import build_index
 from aoc_cli.store import Store
 
 LABELS = ["none", "oxygen"]
