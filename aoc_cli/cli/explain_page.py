@@ -44,7 +44,7 @@ def steps_overview(corpus, steps_file: Path, path: Path, model, index_id: str) -
     from aoc_cli.report.overview import steps_episodes
     from aoc_cli.report.pages import overview_page
     from aoc_cli.errors import AocError
-    from aoc_cli.session import load_index
+    from aoc_cli.corpus_index import load_index
 
     if not Path(steps_file).is_file():
         raise AocError(f"no such steps file: {steps_file} (write one with `aoc evaluate "

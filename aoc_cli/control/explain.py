@@ -16,6 +16,7 @@ import numpy as np
 from aoc_cli.belief.attribution import NODES, feature_names, jacobian_projection
 from aoc_cli.control.contrast import contrast_record
 from aoc_cli.control.controller import Decision
+from aoc_cli.control.monitor import OODMonitor, band_limits
 from aoc_cli.control.records import decision_record
 from aoc_cli.control.whatif import Removal, redecide, what_if_record
 from aoc_cli.store import History
@@ -99,11 +100,8 @@ def _query_history(history: History) -> dict:
 def audit_band(session: Session, residuals: np.ndarray) -> np.ndarray:
     """(T,) the upper edge of the running OOD band over an episode's recorded residuals, as
     the rollout's monitor drew it with the session's settings (inf during the warm-up)."""
-    from aoc_cli.control.monitor import OODMonitor
-    from aoc_cli.control.run import _band_limits
-
     cfg = session.controller.config
-    floor, minimum = _band_limits(session)
+    floor, minimum = band_limits(session)
     monitor = OODMonitor(warmup=cfg.ood_warmup, sigmas=cfg.ood_sigmas, floor=floor,
                          minimum=minimum)
     for r in np.asarray(residuals, np.float64):

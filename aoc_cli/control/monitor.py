@@ -100,3 +100,13 @@ def flags_against(residuals, band: np.ndarray) -> np.ndarray:
     r = np.array([np.nan if x is None else float(x) for x in residuals], dtype=float)
     edges = np.asarray(band, dtype=float)[np.minimum(np.arange(len(r)), len(band) - 1)]
     return np.nan_to_num(r, nan=-math.inf) > edges
+
+
+def band_limits(session) -> tuple[float, float]:
+    """(floor of the std, minimum edge) of the OOD bands: 0.1 x the corpus's typical p50
+    residual and its p99 (see :class:`OODMonitor`) of a session (model-free: none)."""
+    index = getattr(session, "index", None)
+    if index is None:  # a model-free session: no band limits
+        return 0.0, 0.0
+    typical = index.typical
+    return 0.1 * (typical.p50 or 0.0), typical.p99 or 0.0

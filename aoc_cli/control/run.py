@@ -11,7 +11,7 @@ import numpy as np
 
 from aoc_cli.control.config import ControllerConfig
 from aoc_cli.control.controller import Decision
-from aoc_cli.control.monitor import OODMonitor
+from aoc_cli.control.monitor import OODMonitor, band_limits
 from aoc_cli.control.records import decision_record, label_of, write_audit
 from aoc_cli.control.rollout import (EpisodeResult, Policy, check_same_spaces, check_spaces,
                                      run_episode, summarize)
@@ -40,7 +40,7 @@ def rollout(session: Session | ModelFreeSession, env, episodes: int, seed: int =
     if policy is None:
         raise AocError("a model-free session runs only a given policy (zero or random)")
     cfg = controller.config if controller is not None else None
-    floor, minimum = _band_limits(session)
+    floor, minimum = band_limits(session)
     results = []
     if progress is not None:
         progress(0, episodes, "rollout")
@@ -69,7 +69,7 @@ def explain_query(session: Session, observation, history, action=None,
     several actions side by side (``compare``); ``selection`` an (N,) bool row mask instead
     of the controller's own; ``removal`` (:func:`aoc_cli.control.whatif.removal`): each also
     re-decided without those rows (the record's ``what_if``)."""
-    from aoc_cli.control.explain import explain_decisions
+    from aoc_cli.control.explain import explain_decisions  # torch edge: attributions
 
     ctl = session.controller
     if compare:
@@ -172,19 +172,9 @@ def session_reference_band(session: Session, runs) -> np.ndarray:
     the same floor and minimum (the corpus's typical p50 / p99 residual) as its running band."""
     from aoc_cli.control.monitor import reference_band
 
-    floor, minimum = _band_limits(session)
+    floor, minimum = band_limits(session)
     return reference_band(runs, sigmas=session.controller.config.ood_sigmas, floor=floor,
                           minimum=minimum)
-
-
-def _band_limits(session: Session | ModelFreeSession) -> tuple[float, float]:
-    """(floor of the std, minimum edge) of the OOD bands: 0.1 x the corpus's typical p50
-    residual and its p99 (see :class:`aoc_cli.control.monitor.OODMonitor`)."""
-    index = getattr(session, "index", None)
-    if index is None:  # a model-free session: no band limits
-        return 0.0, 0.0
-    typical = index.typical
-    return 0.1 * (typical.p50 or 0.0), typical.p99 or 0.0
 
 
 def replay_decision(session: Session, recorded: dict) -> Decision:
