@@ -35,7 +35,7 @@ import numpy as np
 
 from aoc_cli.errors import AocError
 from aoc_cli.progress import Progress
-from aoc_cli.store import CorpusData, atomic_path
+from aoc_cli.store import CorpusData, action_labels, atomic_path
 
 RESERVED = ("id", "t", "reward", "terminal", "truncated")
 CHUNK_ROWS = 100_000
@@ -168,8 +168,8 @@ def write_csv(data: CorpusData, spec: dict, out: Path, progress: Progress | None
         obs_names, obs_index, static_cols = _split_static(data, obs_names, static)
     discrete = data.discrete
     actions = np.asarray(data.actions)
-    labels = list(data.action_space.get("names") or []) if discrete else []
-    labelled = discrete and len(labels) == int(data.action_space["n"]) > 1
+    labels = action_labels(data.action_space) or []
+    labelled = bool(labels)
     act_names = ["action"] if labelled else \
         _names(data.action_space, 1 if discrete else actions.shape[1], "act")
     obs_names, act_names = _header(obs_names, act_names, data)
