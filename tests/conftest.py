@@ -57,3 +57,20 @@ def run_in_process(capsys, *args: str):
 def aoc_inproc(capsys):
     """Run ``aoc ARGS...`` in this process: ``aoc_inproc("info", "x") -> (code, out, err)``."""
     return lambda *args: run_in_process(capsys, *args)
+
+
+@pytest.fixture(scope="session")
+def small_maze(tmp_path_factory):
+    """A small maze store (120 episodes, value mode, continuous actions, tag ``policy``), its
+    model and index, built once per test process (explanations, what-if, pages)."""
+    from aoc_cli.belief import BeliefConfig, train_model
+    from aoc_cli.envs import collect
+    from aoc_cli.corpus_index import build_index
+    from aoc_cli.store import Store
+
+    store = Store(tmp_path_factory.mktemp("small-maze") / "store")
+    data, _ = collect("maze", episodes=120, seed=0)
+    corpus = store.write("maze", data)
+    train_model(corpus, BeliefConfig(seed=0, threads=1, max_epochs=6, patience=3), "default")
+    build_index(corpus)
+    return store

@@ -125,8 +125,8 @@ def feature_names(model, corpus) -> dict:
     aspace = corpus.action_space or {}
     n_in = int(model.dims["action_input"])
     act = list(aspace.get("names") or [])
-    if model.discrete:  # one-hot: one feature per action
-        act = [f"action={act[i] if i < len(act) else i}" for i in range(n_in)]
+    if model.discrete:  # one-hot: one feature per action (labelled when each has a name)
+        act = [f"action={act[i] if len(act) == n_in else i}" for i in range(n_in)]
     elif len(act) != n_in:
         act = [f"act_{i}" for i in range(n_in)]
     # a history step holds the action in every mode; the input action only in value mode

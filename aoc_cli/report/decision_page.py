@@ -28,7 +28,10 @@ class PageContext:
         space = corpus.observation_space or {}
         d_o = corpus.observation_dim
         self.obs_names = list(space.get("names") or [f"obs_{i}" for i in range(d_o)])
-        self.action_names = list((corpus.action_space or {}).get("names") or [])
+        names = list((corpus.action_space or {}).get("names") or [])
+        # a discrete space's names label its actions only when there is one per action
+        self.action_names = names if not corpus.discrete or len(names) == corpus.n_actions \
+            else []
         obs = np.asarray(corpus.observations, np.float64)
         self.mean = obs.mean(0)
         self.std = np.where(obs.std(0) > 1e-9, obs.std(0), 1.0)
@@ -130,13 +133,14 @@ def card(s: dict, hist, obs_now, query: dict, ctx: PageContext, features, names:
     """One supporting row: who, when, what, how much, and its history beside the query's."""
     who = s.get("episode_id") if s.get("episode_id") is not None else f"episode {s['episode']}"
     tags = ", ".join(f"{k}={v}" for k, v in s["tags"].items())
+    value = "" if s.get("value") is None else f" &middot; value {num(s['value'])}"
     x = np.arange(-len(query["present"]), 1)
     q = _series(ctx, query["observations"], query["present"], query["observation"], features)
     r = _series(ctx, hist["observations"], hist["present"], obs_now, features)
     series = []
     for i, j in enumerate(features):
         colour = PALETTE[i % len(PALETTE)]
-        series.append({"y": r[i], "colour": colour, "label": f"{ctx.obs_names[j]} (row)"})
+        series.append({"y": r[i], "colour": colour, "label": ctx.obs_names[j]})
         series.append({"y": q[i], "colour": colour, "dash": True, "label": ""})
     plot = chart(x, series, title="history (standardised): row solid, query dashed",
                  height=150, ylabel="step")
@@ -148,8 +152,7 @@ def card(s: dict, hist, obs_now, query: dict, ctx: PageContext, features, names:
     return (f'<div class="card" data-row="{int(s["row"])}"><h3>{esc(who)}, step '
             f'{int(s["step"])}</h3><div class="kv">row {int(s["row"])}'
             f'{" &middot; " + esc(tags) if tags else ""}<br>action <b>'
-            f'{esc(ctx.action(s["action"]))}</b> &middot; value {num(s.get("value"))} '
-            f'&middot; weight <b>{s["weight"]:.1%}</b> &middot; distance '
+            f'{esc(ctx.action(s["action"]))}</b>{value} &middot; weight <b>{s["weight"]:.1%}</b> &middot; distance '
             f'{num(s["distance"], 3)}</div>{plot}{acts}'
             f'{_bars(s, ctx, names.get("history_step") or [], names.get("action") or [])}</div>')
 

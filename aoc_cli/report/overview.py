@@ -67,6 +67,7 @@ def _supports(corpus, rows: np.ndarray, weights: np.ndarray) -> list[list[tuple]
 def _labels(corpus, actions: np.ndarray) -> list[str]:
     names = list((corpus.action_space or {}).get("names") or [])
     if corpus.discrete:
+        names = names if len(names) == corpus.n_actions else []
         return [names[int(a)] if int(a) < len(names) else f"action {int(a)}"
                 for a in np.asarray(actions).reshape(-1)]
     return [num(np.asarray(a).reshape(-1).tolist(), 3) for a in actions]

@@ -9,30 +9,19 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from aoc_cli.belief import BeliefConfig, train_model
-from aoc_cli.control import Controller
+from aoc_cli.control import Controller, open_session
 from aoc_cli.control.run import explain_logged_step
 from aoc_cli.control.whatif import redecide, removal
-from aoc_cli.envs import collect
+from aoc_cli.corpus_index import CorpusIndex
 from aoc_cli.errors import AocError
 from aoc_cli.index import BeliefIndex
-from aoc_cli.control import open_session
-from aoc_cli.corpus_index import CorpusIndex
-from aoc_cli.store import Store
 from tests.control.corpora import corridor_store
 
 
-@pytest.fixture(scope="module")
-def maze(tmp_path_factory):
-    """A small maze corpus (value mode, continuous actions, tag ``policy``) and its session."""
-    store = Store(tmp_path_factory.mktemp("whatif") / "store")
-    data, _ = collect("maze", episodes=120, seed=0)
-    corpus = store.write("maze", data)
-    train_model(corpus, BeliefConfig(seed=0, threads=1, max_epochs=6, patience=3), "default")
-    from aoc_cli.corpus_index import build_index
-
-    build_index(corpus)
-    return store
+@pytest.fixture
+def maze(small_maze):
+    """A small maze corpus (value mode, continuous actions, tag ``policy``) and its index."""
+    return small_maze
 
 
 @pytest.fixture(scope="module")
