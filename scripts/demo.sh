@@ -27,8 +27,9 @@ $AOC rollout pendulum --env pendulum-het-upright --episodes 3 --seed 100 \
 step "the same controller from a random start: a swing-up, which AOC does not solve (docs/belief.md)"
 $AOC rollout pendulum --env pendulum-het --episodes 2 --seed 100 --format table
 
-step "explain the decision at step 50 of episode 0, from the audit log"
-$AOC explain pendulum --audit "$OUT/audit.h5" --episode 0 --step 50 --format table
+step "explain the decision at step 50 of episode 0, from the audit log (and its page: the episode's overview, the decision's supporting rows)"
+$AOC explain pendulum --audit "$OUT/audit.h5" --episode 0 --step 50 --format table \
+    --html "$OUT/decision.html"
 
 echo >&2
-echo "demo done: store $AOC_STORE, audit log $OUT/audit.h5, plot $OUT/rollout.png" >&2
+echo "demo done: store $AOC_STORE, audit log $OUT/audit.h5, plot $OUT/rollout.png, page $OUT/decision.html" >&2
