@@ -11,24 +11,33 @@ one fixed length). The arithmetic is numpy on a padded (E, T) layout.
 (E + 1,) row offsets, ``rewards`` (N,) (the reward of step t, after its action), ``rho``
 (N,) = pi_e(a_t | h_t) / pi_b(a_t | h_t), the ratio of the logged action's probability under
 the evaluated and the behaviour policy. A deterministic policy has pi_e = 1 where its action
-is the logged one and 0 elsewhere (:func:`ratios`).
+is the logged one and 0 elsewhere (:func:`ratios`). w_{i,t} = prod_{k <= t} rho_{i,k}.
 
-**Ragged episodes.** An episode that ended sits in an absorbing state: reward 0, ratio 1,
-q = v = 0. Its cumulative weight w_{i,t} = prod_{k <= t} rho_{i,k} therefore carries
-forward to every later step index t and stays in each step's normaliser sum_j w_{j,t}.
-(Normalising step t over the episodes still running at t instead is the classic mistake: with
-the reward at the end only, each step's few finishing episodes are then weighted as if they
-were all, and the estimate is off by tens of percent.)
+**Ragged episodes.** The textbook per-decision estimators normalise step t's weights over all
+E episodes, an ended one keeping its last weight (an absorbing state). That is consistent,
+but with the reward at the end and a policy that few long episodes follow it is far off at
+log sizes that matter: step t's normaliser holds the ended episodes' weights, realised well
+(few factors), while its numerator needs the rare episodes that followed the policy for t
+steps, realised poorly; on an icu-sepsis log of 5,000 episodes it gave 0.46 for a policy worth
+0.79 (the trajectory-wise estimator: 0.785). Here each step is normalised among the episodes
+*running* at t (numerator and normaliser then hold weights of the same t factors), and the
+share of the policy's episodes still running at t is estimated alongside, as a product of
+weighted continuation shares (Kaplan-Meier style):
 
-    PDWIS = sum_t gamma^t  sum_i w_{i,t} r_{i,t} / sum_i w_{i,t}
-    WDR   = PDWIS - sum_t gamma^t sum_i ( w_{i,t} q_{i,t} / sum_j w_{j,t}
-                                         - w_{i,t-1} v_{i,t} / sum_j w_{j,t-1} )
+    n_t   = sum_{i running at t} w_{i,t}
+    c_t   = sum_{i running at t + 1} w_{i,t} / n_t          (continuation share at t)
+    S_t   = prod_{k < t} c_k                                (S_0 = 1)
+    PDWIS = sum_t gamma^t S_t sum_{i running at t} w_{i,t} r_{i,t} / n_t
+    WDR   = mean_i v_{i,0} + sum_t gamma^t S_t sum_{i running at t} w_{i,t} delta_{i,t} / n_t
+    delta_{i,t} = r_{i,t} + gamma v_{i,t+1} - q_{i,t}        (v_{i,t+1} = 0 after the end)
 
-with w_{i,-1} = 1 (so the first normalised weight is 1 / E), q_{i,t} = Q_hat(s_t, a_t) of
-the logged action and v_{i,t} = sum_a pi_e(a | s_t) Q_hat(s_t, a). Every estimator here is a
-sum over t of ratios of sums over episodes, so a bootstrap replicate (episodes drawn with
-replacement: a count c_i per episode) is the same formula with the sums weighted by c: all
-replicates are a few (B, E) @ (E, T) products (:func:`bootstrap`).
+with q_{i,t} = Q_hat(s_t, a_t) of the logged action and v_{i,t} = sum_a pi_e(a | s_t)
+Q_hat(s_t, a). When every episode has the same length, S_t = 1 and these are exactly the
+textbook PDWIS and Thomas & Brunskill's WDR (written with its telescoped control variate).
+Each ratio is consistent, so both are. An episode cut short by a time limit counts as ended.
+Every quantity is a ratio of sums over episodes, so a bootstrap replicate (episodes drawn
+with replacement: a count c_i per episode) is the same formula with the sums weighted by c:
+all replicates are a few (B, E) @ (E, T) products (:func:`bootstrap`).
 """
 
 from __future__ import annotations
@@ -85,10 +94,12 @@ class Log:
                 or np.any(np.diff(self.starts) <= 0):
             raise AocError("episode offsets must start at 0, end at the step count and increase")
         if not 0.0 < self.gamma <= 1.0:
-            raise AocError(f"gamma must be in (0, 1], got {self.gamma}", param="gamma")
+            raise AocError(f"the OPE's gamma must be in (0, 1], got {self.gamma}")
         self.n_episodes = len(self.starts) - 1
         self.R = padded(self.starts, self.rewards)                       # (E, T)
-        self.mask = padded(self.starts, np.ones(len(self.rewards))) > 0  # (E, T)
+        self.mask = padded(self.starts, np.ones(len(self.rewards))) > 0  # (E, T) running
+        self.next_mask = np.concatenate(                                 # running at t + 1
+            [self.mask[:, 1:], np.zeros((self.n_episodes, 1), bool)], axis=1)
         self.discount = self.gamma ** np.arange(self.R.shape[1])        # (T,)
         self.lengths = np.diff(self.starts)
 
@@ -109,51 +120,76 @@ class Log:
         return self.weights(rho)[:, -1]
 
 
-# -- the estimators as sums of ratios --------------------------------------------------------
-# Each is  sum_t disc_t * sum_k (c @ A_k)_t / (c @ B_k)_t  for episode counts c (E,):
-# c = 1 gives the estimate, a multinomial c one bootstrap replicate.
+# -- the estimators as ratios of sums over episodes -------------------------------------------
+# For episode counts c (B, E): n = c @ A, c_t = (c @ A_cont) / n, S = shifted cumprod of c_t,
+# value = (c @ base) / (c @ 1) + sum_t disc_t S_t (c @ NUM)_t / n_t. c = 1 gives the estimate,
+# a multinomial c one bootstrap replicate.
 
-def _terms_pdwis(log: Log, W: np.ndarray) -> list:
-    return [(W * log.R, W)]
+@dataclass
+class _Parts:
+    """(E, T) running weights ``A``, their continuing part ``A_cont``, the numerator ``num``;
+    ``base`` (E,) per-episode baseline (WDR's v_{i,0}) or None."""
+
+    A: np.ndarray
+    A_cont: np.ndarray
+    num: np.ndarray
+    base: np.ndarray | None = None
 
 
-def _terms_wdr(log: Log, W: np.ndarray, q: np.ndarray, v: np.ndarray) -> list:
-    Q = padded(log.starts, q) * log.mask
-    V = padded(log.starts, v) * log.mask
-    W_prev = np.concatenate([np.ones((W.shape[0], 1)), W[:, :-1]], axis=1)
-    return [(W * (log.R - Q), W), (W_prev * V, W_prev)]
+def _running_parts(log: "Log", rho: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    W = _checked_weights(log, rho)
+    A = W * log.mask
+    return A, A * log.next_mask
 
 
-def _evaluate_terms(terms: list, discount: np.ndarray, counts: np.ndarray) -> np.ndarray:
-    """(B,) the estimator for each row of ``counts`` (B, E). A step whose normaliser is 0 (no
-    episode of the replicate agrees with the policy up to it) contributes 0."""
-    total = np.zeros(counts.shape[0])
-    for num, den in terms:
-        a, b = counts @ num, counts @ den                                # (B, T)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            part = np.where(b > 0, a / np.where(b > 0, b, 1.0), 0.0)
-        total += part @ discount
+def _parts_pdwis(log: "Log", rho: np.ndarray) -> _Parts:
+    A, A_cont = _running_parts(log, rho)
+    return _Parts(A, A_cont, A * log.R)
+
+
+def _parts_wdr(log: "Log", rho: np.ndarray, q: np.ndarray, v: np.ndarray) -> _Parts:
+    A, A_cont = _running_parts(log, rho)
+    Q = padded(log.starts, q)
+    V = padded(log.starts, v)
+    v_next = np.concatenate([V[:, 1:], np.zeros((V.shape[0], 1))], axis=1) * log.next_mask
+    delta = (log.R + log.gamma * v_next - Q) * log.mask
+    return _Parts(A, A_cont, A * delta, V[:, 0])
+
+
+def _parts_mean(values: np.ndarray) -> _Parts:
+    e = len(values)
+    zero = np.zeros((e, 1))
+    return _Parts(zero, zero, zero, np.asarray(values, np.float64))
+
+
+def _ratio(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(b > 0, a / np.where(b > 0, b, 1.0), 0.0)
+
+
+def _evaluate(p: _Parts, discount: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """(B,) the estimator for each row of ``counts`` (B, E). A step at which no running
+    episode of the replicate agrees with the policy contributes 0, and so do the later ones."""
+    n = counts @ p.A                                                  # (B, T)
+    cont = _ratio(counts @ p.A_cont, n)
+    S = np.concatenate([np.ones((len(counts), 1)), np.cumprod(cont, axis=1)[:, :-1]], axis=1)
+    total = (S * _ratio(counts @ p.num, n)) @ discount[:p.A.shape[1]]
+    if p.base is not None:
+        total = total + (counts @ p.base) / counts.sum(1)
     return total
 
 
-def _mean_terms(values: np.ndarray) -> list:
-    """A per-episode mean as a ratio term over one column."""
-    return [(np.asarray(values, np.float64)[:, None], np.ones((len(values), 1)))]
-
-
-def pdwis(log: Log, rho: np.ndarray) -> float:
+def pdwis(log: "Log", rho: np.ndarray) -> float:
     """Per-decision weighted importance sampling (module docstring)."""
-    W = _checked_weights(log, rho)
-    ones = np.ones((1, log.n_episodes))
-    return float(_evaluate_terms(_terms_pdwis(log, W), log.discount, ones)[0])
+    return float(_evaluate(_parts_pdwis(log, rho), log.discount,
+                           np.ones((1, log.n_episodes)))[0])
 
 
-def wdr(log: Log, rho: np.ndarray, q_logged: np.ndarray, v_state: np.ndarray) -> float:
+def wdr(log: "Log", rho: np.ndarray, q_logged: np.ndarray, v_state: np.ndarray) -> float:
     """Weighted doubly robust (module docstring): ``q_logged`` (N,) Q_hat(s_t, a_t),
     ``v_state`` (N,) sum_a pi_e(a | s_t) Q_hat(s_t, a)."""
-    W = _checked_weights(log, rho)
-    terms = _terms_wdr(log, W, q_logged, v_state)
-    return float(_evaluate_terms(terms, log.discount, np.ones((1, log.n_episodes)))[0])
+    return float(_evaluate(_parts_wdr(log, rho, q_logged, v_state), log.discount,
+                           np.ones((1, log.n_episodes)))[0])
 
 
 def ess(log: Log, rho: np.ndarray) -> float:
@@ -191,34 +227,32 @@ def bootstrap(log: Log, estimators: dict, n_boot: int = N_BOOTSTRAP, level: floa
     ``estimators`` name -> ("pdwis", rho) | ("wdr", rho, q_logged, v_state) | ("mean",
     per_episode_values (E,)) (the on-policy mean return, the direct method's mean V_hat(s_0)).
     Every estimator sees the same replicates. Returns name -> :class:`Estimate`."""
-    terms = {}
+    parts = {}
     for name, spec in estimators.items():
         kind = spec[0]
         if kind == "pdwis":
-            terms[name] = (_terms_pdwis(log, _checked_weights(log, spec[1])), log.discount)
+            parts[name] = _parts_pdwis(log, spec[1])
         elif kind == "wdr":
-            terms[name] = (_terms_wdr(log, _checked_weights(log, spec[1]), spec[2], spec[3]),
-                           log.discount)
+            parts[name] = _parts_wdr(log, *spec[1:])
         elif kind == "mean":
             if len(spec[1]) != log.n_episodes:
                 raise AocError(f"{len(spec[1])} per-episode values for {log.n_episodes} "
                                "episodes")
-            terms[name] = (_mean_terms(spec[1]), np.ones(1))
+            parts[name] = _parts_mean(spec[1])
         else:
             raise AocError(f"unknown estimator kind {kind!r}")
     rng = np.random.default_rng(seed)
     e = log.n_episodes
-    reps = {name: [] for name in terms}
+    reps = {name: [] for name in parts}
     for lo in range(0, n_boot, block):
         b = min(block, n_boot - lo)
         counts = rng.multinomial(e, np.full(e, 1.0 / e), size=b).astype(np.float64)
-        for name, (t, disc) in terms.items():
-            reps[name].append(_evaluate_terms(t, disc, counts))
+        for name, p in parts.items():
+            reps[name].append(_evaluate(p, log.discount, counts))
     alpha = (1.0 - level) / 2
-    ones = np.ones((1, e))
     out = {}
-    for name, (t, disc) in terms.items():
-        point = float(_evaluate_terms(t, disc, ones)[0])
+    for name, p in parts.items():
+        point = float(_evaluate(p, log.discount, np.ones((1, e)))[0])
         r = np.concatenate(reps[name])
         out[name] = Estimate(point, float(np.quantile(r, alpha)), float(np.quantile(r, 1 - alpha)))
     return out

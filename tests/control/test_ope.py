@@ -27,22 +27,41 @@ def test_cumulative_weights_carry_forward_after_an_episode_ends():
 
 
 def test_pdwis_matches_a_hand_computation():
-    # t = 0: (2 * 0 + 0.5 * 0) / 2.5 = 0
-    # t = 1: (1 * 1 + 1 * 0) / (1 + 1) = 0.5
-    # t = 2: (1 * 0 + 4 * 1) / (1 + 4) = 0.8   (episode 0's weight 1 stays in the normaliser;
-    #         dropping it would give 4 / 4 = 1)
-    assert pdwis(Log(STARTS, REWARDS), RHO) == pytest.approx(1.3, abs=1e-12)
+    # running weights n_t: t0 2 + 0.5 = 2.5; t1 1 + 1 = 2; t2 (episode 1 only) 4
+    # continuation shares: c0 = 2.5 / 2.5 = 1; c1 = 1 / 2 (episode 0 ends at t1); S = 1, 1, 0.5
+    # t0: 0;  t1: S 1 * (1 * 1 + 1 * 0) / 2 = 0.5;  t2: S 0.5 * (4 * 1) / 4 = 0.5
+    assert pdwis(Log(STARTS, REWARDS), RHO) == pytest.approx(1.0, abs=1e-12)
     assert pdwis(Log(STARTS, REWARDS, gamma=0.5), RHO) == pytest.approx(
-        0.0 + 0.5 * 0.5 + 0.25 * 0.8, abs=1e-12)
+        0.0 + 0.5 * 0.5 + 0.25 * 0.5 * 1.0, abs=1e-12)
 
 
 def test_wdr_matches_a_hand_computation():
-    # sum_t [ sum_i w_it (r_it - q_it) / sum_i w_it + sum_i w_i,t-1 v_it / sum_i w_i,t-1 ]
-    # t = 0: (2 * -0.3 + 0.5 * -0.2) / 2.5 = -0.28;  (0.4 + 0.3) / 2 = 0.35
-    # t = 1: (1 * 0.4 + 1 * -0.1) / 2 = 0.15;        (2 * 0.5 + 0.5 * 0.2) / 2.5 = 0.44
-    # t = 2: (1 * 0 + 4 * 0.3) / 5 = 0.24;           (1 * 0 + 1 * 0.6) / 2 = 0.3
+    # mean v_0 = (0.4 + 0.3) / 2 = 0.35; delta = r + v_next - q:
+    #   episode 0: 0 + 0.5 - 0.3 = 0.2, 1 + 0 - 0.6 = 0.4
+    #   episode 1: 0 + 0.2 - 0.2 = 0.0, 0 + 0.6 - 0.1 = 0.5, 1 + 0 - 0.7 = 0.3
+    # t0: (2 * 0.2 + 0.5 * 0) / 2.5 = 0.16; t1: (1 * 0.4 + 1 * 0.5) / 2 = 0.45;
+    # t2: S 0.5 * (4 * 0.3) / 4 = 0.15
     assert wdr(Log(STARTS, REWARDS), RHO, Q, V) == pytest.approx(
-        -0.28 + 0.35 + 0.15 + 0.44 + 0.24 + 0.3, abs=1e-12)
+        0.35 + 0.16 + 0.45 + 0.15, abs=1e-12)
+
+
+def test_on_episodes_of_one_length_they_are_the_textbook_estimators():
+    """S_t = 1: PDWIS = sum_t sum_i w_it r_it / sum_i w_it and Thomas & Brunskill's WDR."""
+    rng = np.random.default_rng(0)
+    e, t, gamma = 7, 4, 0.9
+    starts = np.arange(0, e * t + 1, t)
+    r, rho = rng.random(e * t), rng.uniform(0.2, 3, e * t)
+    q, v = rng.random(e * t), rng.random(e * t)
+    W = np.cumprod(rho.reshape(e, t), axis=1)
+    Wn = W / W.sum(0)
+    Wprev = np.concatenate([np.full((e, 1), 1 / e), Wn[:, :-1]], axis=1)
+    disc = gamma ** np.arange(t)
+    R, Qm, Vm = r.reshape(e, t), q.reshape(e, t), v.reshape(e, t)
+    textbook_pdwis = np.sum(disc * (Wn * R).sum(0))
+    textbook_wdr = textbook_pdwis - np.sum(disc * (Wn * Qm - Wprev * Vm).sum(0))
+    log = Log(starts, r, gamma)
+    assert pdwis(log, rho) == pytest.approx(textbook_pdwis, rel=1e-12)
+    assert wdr(log, rho, q, v) == pytest.approx(textbook_wdr, rel=1e-12)
 
 
 def test_ess_of_the_whole_trajectory_weights():
@@ -98,9 +117,9 @@ def test_estimators_recover_exact_values_on_ragged_episodes(which, gamma):
     assert est["wdr"].estimate == pytest.approx(wdr(log, rho, q, v), abs=1e-12)
 
 
-def test_normalising_over_running_episodes_only_would_fail_the_exact_value():
-    """The bug the module docstring describes, computed here directly: it is far off, and
-    pdwis is not."""
+def test_running_normalisation_without_the_continuation_share_would_fail():
+    """Normalising each step over the running episodes but dropping S_t sums conditional
+    rewards (a hazard, not a value): far off, and pdwis is not."""
     mdp = SmallMDP.random(seed=1, end=0.35)
     pi_b, greedy, _ = _policies(mdp, 1)
     truth, _ = mdp.exact(greedy)
