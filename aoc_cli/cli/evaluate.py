@@ -14,7 +14,7 @@ from aoc_cli.cli.common import (CandidatesOption, CorpusArgument, EpsilonOption,
                                 FormatOption, IndexOption, KOption, MinSupportOption, ModelOption,
                                 RayAddressOption, SupportPenaltyOption, WithoutEpisodesOption,
                                 WithoutOption, WorkersOption, get_store, parse_removal)
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, warn
 from aoc_cli.report import resolve_format, write_object, write_records
 from aoc_cli.settings import SMALL_LOG_ROWS
 
@@ -50,7 +50,22 @@ def register(app: typer.Typer) -> None:
                                   f"{SMALL_LOG_ROWS:,} corpus rows, IVF beyond: ~10x faster, "
                                   "recall of the nearest rows ~0.9999).")] = None,
         seed: Annotated[int, typer.Option(
-            "--seed", help="Seed of the candidates (value mode, continuous actions).")] = 0,
+            "--seed", help="Seed of the candidates (value mode, continuous actions), the "
+                           "bootstrap and FQE.")] = 0,
+        ope_names: Annotated[Optional[str], typer.Option(
+            "--ope", help="Offline policy evaluation of the decisions (value mode): pdwis, "
+                          "wdr, fqe, comma-separated, or none (default: all three when the "
+                          "held-out log has rewards and discrete actions).")] = None,
+        propensity: Annotated[Optional[str], typer.Option(
+            "--propensity", help="Corpus column of the behaviour's probability of each "
+                                 "logged action (default: 'propensity' when the log has it, "
+                                 "else an imitation model estimates them).")] = None,
+        ope_gamma: Annotated[float, typer.Option(
+            "--ope-gamma", help="Discount of the value the OPE estimates (1: the mean "
+                                "undiscounted return of an episode).")] = 1.0,
+        fqe_steps: Annotated[Optional[int], typer.Option(
+            "--fqe-steps", help="Gradient steps of fitted Q evaluation (default: about 30 "
+                                "passes over the log, 1,500 to 6,000).")] = None,
         workers: WorkersOption = None,
         ray_address: RayAddressOption = None,
         without: WithoutOption = None,
@@ -65,8 +80,18 @@ def register(app: typer.Typer) -> None:
         from aoc_cli.report.output import ProgressBar
         from aoc_cli.control import open_session
 
+        from aoc_cli.control.ope_eval import OPESettings, parse_estimators
+
         fmt = resolve_format(fmt)
         names = [b.strip() for b in baselines.split(",")]
+        ope = None
+        if any(v is not None for v in (ope_names, propensity, fqe_steps)) or ope_gamma != 1.0:
+            if fqe_steps is not None and fqe_steps < 1:
+                raise AocError(f"--fqe-steps must be >= 1, got {fqe_steps}")
+            if not 0.0 < ope_gamma <= 1.0:
+                raise AocError(f"--ope-gamma must be in (0, 1], got {ope_gamma}")
+            ope = OPESettings(parse_estimators(ope_names), gamma=ope_gamma,
+                              propensity=propensity, fqe_steps=fqe_steps, seed=seed)
         store = get_store()
         corpus = store.corpus(name)
         held_out = corpus if data == name else store.corpus(data)
@@ -82,7 +107,7 @@ def register(app: typer.Typer) -> None:
                          transient=True) as on_progress:
             if workers is None and ray_address is None:
                 summary, res = evaluate(session, held_out, names, seed=seed,
-                                        progress=on_progress, exact=exact)
+                                        progress=on_progress, exact=exact, ope=ope)
             else:  # the chunks of episodes as Ray tasks (aoc_cli.control.evaluate_ray)
                 from aoc_cli.control.evaluate_ray import evaluate_on_ray
 
@@ -91,7 +116,7 @@ def register(app: typer.Typer) -> None:
                 summary, res = evaluate_on_ray(store.root, name, data, session.model.id,
                                                index_id, config, names, seed=seed, exact=exact,
                                                workers=workers, address=ray_address,
-                                               progress=on_progress)
+                                               progress=on_progress, ope=ope)
         if removal is not None:
             summary["what_if"] = _what_if(session, held_out, names, seed, exact, removal, res)
         if steps_file is not None:
@@ -101,12 +126,15 @@ def register(app: typer.Typer) -> None:
                 with open(tmp, "w") as fh:
                     for rec in step_records(session, held_out, res):
                         fh.write(json.dumps(rec) + "\n")
+        for text in summary.get("ope_warnings", []):
+            warn(text)
         _print(summary, fmt)
 
 
 def _what_if(session, held_out, names, seed, exact, removal, before) -> dict:
     """The same steps decided again without ``removal``'s rows, and what changed."""
     from aoc_cli.control.evaluate import evaluate
+    from aoc_cli.control.ope_eval import OPESettings
     from aoc_cli.control.whatif import what_if_steps
     from aoc_cli.report.output import ProgressBar
 
@@ -114,7 +142,8 @@ def _what_if(session, held_out, names, seed, exact, removal, before) -> dict:
     with ProgressBar(f"without {removal.label}", held_out.n_rows,
                      transient=True) as on_progress:
         summary, after = evaluate(session, held_out, [], seed=seed, progress=on_progress,
-                                  exact=exact, selection=keep)
+                                  exact=exact, selection=keep,
+                                  ope=OPESettings(estimators=()))
     return what_if_steps(before, after, removal, session.corpus, summary)
 
 
@@ -124,6 +153,21 @@ def _method_rows(summary: dict) -> list[dict]:
     rows = [{"method": own, **flat}]
     for method, rec in summary["baselines"].items():
         rows.append({"method": method, **rec})
+    return rows
+
+
+def _ope_rows(summary: dict) -> list[dict]:
+    """One row per policy: each estimator's estimate [low, high] and the ESS."""
+    def cell(e):
+        return None if e is None else f"{e['estimate']:.4f} [{e['low']:.4f}, {e['high']:.4f}]"
+
+    rows = [{"policy": "aoc", "ess": summary["ess"],
+             **{k: cell(v) for k, v in summary["policy_value"].items()}}]
+    for name, rec in summary["baselines"].items():
+        if "policy_value" in rec:
+            rows.append({"policy": name, "ess": rec["ess"],
+                         **{k: cell(v) for k, v in (rec["policy_value"] or {}).items()}})
+    rows.append({"policy": "behaviour", "mean_return": cell(summary["behaviour_value"])})
     return rows
 
 
@@ -164,6 +208,10 @@ def _print(summary: dict, fmt: str) -> None:
                     f"{w[key]['mean']:.4g} / {w[key]['mean_abs']:.4g}"
         head.update({f"{k} after": v for k, v in w["after"].items()})
         write_object(head, "table", title="what if")
+    if "policy_value" in summary:
+        write_records(_ope_rows(summary), "table",
+                      title=f"policy value from the log alone (propensities: "
+                            f"{summary['ope']['propensity']})")
     if "confusion" in summary:
         n = len(summary["confusion"])
         write_records([{"logged": i, **{f"decided {j}": summary["confusion"][i][j]

@@ -36,13 +36,13 @@ from aoc_cli import metrics as sc
 from aoc_cli.control.evaluate_inputs import (BASELINES, EXACT_MAX_ROWS, EvalContext,
                                              candidate_beliefs, check_inputs, episode_rows,
                                              heterogeneity)
-from aoc_cli.control.records import label_of
 from aoc_cli.control.epsilon import epsilon_filter, residual_cap
+from aoc_cli.control.ope_eval import add_ope
+from aoc_cli.control.records import step_records  # noqa: F401 (aoc_cli.control.evaluate's API)
 from aoc_cli.control.support import penalised, support_episodes, support_filter
 from aoc_cli.decompose import decompose
 from aoc_cli.errors import AocError
 from aoc_cli.index.strata import PerAction
-from aoc_cli.store import action_labels
 from aoc_cli.threads import one_thread
 
 #: Held-out steps per chunk (whole episodes; a chunk has at least one episode).
@@ -120,6 +120,13 @@ def chunks(ctx: EvalContext, max_steps: int = CHUNK_STEPS) -> list[np.ndarray]:
     return out
 
 
+def chunk_size(ctx: EvalContext, chunk_steps: int = CHUNK_STEPS) -> int:
+    """Held-out steps per chunk: ``chunk_steps``, or 16 times as many where each distinct
+    observation and history is decided once (:func:`_value_distinct` batches those itself)."""
+    distinct = ctx.mode == "value" and ctx.discrete and not ctx.own
+    return chunk_steps * 16 if distinct else chunk_steps
+
+
 # -- one chunk ---------------------------------------------------------------------------------
 
 def score_episodes(ctx: EvalContext, episodes) -> StepScores:
@@ -131,6 +138,8 @@ def score_episodes(ctx: EvalContext, episodes) -> StepScores:
     logged = ctx.data_actions[rows]
     if ctx.mode == "imitation":
         out = _imitate(ctx, rows, ep, obs, hist, logged)
+    elif ctx.discrete and not ctx.own:
+        return _value_distinct(ctx, rows, ep, obs, hist, logged)
     else:
         out = _value(ctx, rows, ep, obs, hist, logged)
     if "knn" in ctx.baselines:
@@ -182,13 +191,12 @@ def _imitate(ctx, rows, ep, obs, hist, logged) -> StepScores:
     return out
 
 
-def _value(ctx, rows, ep, obs, hist, logged) -> StepScores:
+def _candidates_decided(ctx, rows, ep, obs, hist):
+    """The controller's rule (the same as Controller.evaluate) over its candidates at S steps:
+    (candidates (S, K[, d_a]), the decomposition of every candidate (S * K queries), values
+    (S, K), the chosen candidate (S,), its query (S,), the bc head (S, K) or None)."""
     model, cfg = ctx.model, ctx.config
     s = len(rows)
-    # v_hat of the logged action, against the logged value target
-    b_logged = model.beliefs(obs, logged, hist)
-    dec_l = _decompose(ctx, b_logged, ep)
-    # the controller's own decision over its candidates (the same rule as Controller.evaluate)
     cands = ctx.candidates(rows)                                    # (S, K) or (S, K, d_a)
     kk = cands.shape[1]
     b_c = candidate_beliefs(model, obs, hist, cands)                # (S * K, d_b)
@@ -210,17 +218,74 @@ def _value(ctx, rows, ep, obs, hist, logged) -> StepScores:
     # ties on v_hat: the smaller residual
     chosen = np.where(key == best, res, np.inf).argmin(1)
     pick = np.arange(s) * kk + chosen
+    head_c = None
+    if "bc" in ctx.baselines:
+        head_c = (b_c.astype(np.float64) @ ctx.head.weight.T + ctx.head.bias).reshape(s, kk)
+    return cands, dec, val, chosen, pick, head_c
+
+
+def _value(ctx, rows, ep, obs, hist, logged) -> StepScores:
+    s = len(rows)
+    # v_hat of the logged action, against the logged value target
+    b_logged = ctx.model.beliefs(obs, logged, hist)
+    dec_l = _decompose(ctx, b_logged, ep)
+    cands, dec, _val, chosen, pick, head_c = _candidates_decided(ctx, rows, ep, obs, hist)
     decided = cands[np.arange(s), chosen]
     out = StepScores(rows, ep, rows - ctx.data_starts[ep], logged, decided,
                      dec.residual[pick], heterogeneity(ctx, dec.rows[pick], dec.weights[pick]),
                      dec.rows[pick], dec.weights[pick], v_hat=dec_l.value,
                      target=ctx.data_values[rows], decided_value=dec.value[pick])
-    if "bc" in ctx.baselines:
+    if head_c is not None:
         head_l = b_logged.astype(np.float64) @ ctx.head.weight.T + ctx.head.bias
-        head_c = (b_c.astype(np.float64) @ ctx.head.weight.T + ctx.head.bias).reshape(s, kk)
         out.baselines["bc"] = {"decided": cands[np.arange(s), head_c.argmax(1)],
                                "v_hat": head_l[:, 0]}
     return out
+
+
+def distinct_inputs(obs: np.ndarray, hist) -> tuple[np.ndarray, np.ndarray]:
+    """(first (U,), inverse (S,)): the steps whose observation and history (S rows) differ,
+    and each step's one among them (``obs[first][inverse]`` is ``obs``)."""
+    parts = [np.ascontiguousarray(obs, np.float64).reshape(len(obs), -1)]
+    parts += [np.asarray(x, np.float64).reshape(len(obs), -1) for x in hist]
+    key = np.ascontiguousarray(np.concatenate(parts, axis=1))
+    view = key.view(np.dtype((np.void, key.dtype.itemsize * key.shape[1]))).ravel()
+    _, first, inverse = np.unique(view, return_index=True, return_inverse=True)
+    return first, inverse.reshape(-1)
+
+
+def _value_distinct(ctx, rows, ep, obs, hist, logged) -> StepScores:
+    """Value mode, discrete actions, held-out data other than the corpus: a decision depends
+    on the step's observation and history alone, so each distinct one is decided once (in
+    batches of :data:`CHUNK_STEPS`) and the steps take its results; every action is a
+    candidate, so the logged action's v_hat (and the baselines') is that candidate's."""
+    first, inverse = distinct_inputs(obs, hist)
+    parts, vals, heads = [], [], []
+    for lo in range(0, len(first), CHUNK_STEPS):
+        sel = first[lo:lo + CHUNK_STEPS]
+        h = type(hist)(*[np.asarray(x)[sel] for x in hist])
+        _c, dec, val, chosen, pick, head_c = _candidates_decided(ctx, rows[sel], ep[sel],
+                                                                 obs[sel], h)
+        parts.append(StepScores(
+            rows[sel], ep[sel], rows[sel] - ctx.data_starts[ep[sel]], logged[sel], chosen,
+            dec.residual[pick], heterogeneity(ctx, dec.rows[pick], dec.weights[pick]),
+            dec.rows[pick], dec.weights[pick], decided_value=dec.value[pick]))
+        vals.append(val)                                            # (m, n)
+        heads.append(head_c)
+    u = merge(parts)                                                # per distinct input
+    val = np.concatenate(vals)                                      # (U, n)
+    out = StepScores(rows, ep, rows - ctx.data_starts[ep], logged, u.decided[inverse],
+                     u.residual[inverse], u.warning[inverse], u.support_rows[inverse],
+                     u.support_weights[inverse], v_hat=val[inverse, logged],
+                     target=ctx.data_values[rows], decided_value=u.decided_value[inverse])
+    if "bc" in ctx.baselines:
+        head = np.concatenate(heads)                                # (U, n)
+        out.baselines["bc"] = {"decided": head.argmax(1)[inverse],
+                               "v_hat": head[inverse, logged]}
+    if "knn" in ctx.baselines:
+        per = ctx.knn.action_values(ctx, obs[first], ep[first])     # (U, n)
+        out.baselines["knn"] = {"v_hat": per[inverse, logged], "decided": per.argmax(1)[inverse]}
+    return out
+
 
 
 class LeaveEpisodeOut:
@@ -294,19 +359,21 @@ def summarise(ctx: EvalContext, res: StepScores) -> dict:
 
 def evaluate(session, data, baselines=BASELINES, seed: int = 0, progress=None,
              chunk_steps: int = CHUNK_STEPS, exact: bool | None = None,
-             selection: np.ndarray | None = None) -> tuple[dict, StepScores]:
+             selection: np.ndarray | None = None, ope=None) -> tuple[dict, StepScores]:
     """Score every step of corpus ``data`` with ``session`` (its corpus, model, index and
     controller settings); ``progress(done_steps, total_steps)``. ``exact``: search the
     session's own index (True), an IVF structure built for the run (False), or the index up
     to :data:`EXACT_MAX_ROWS` corpus rows and IVF beyond (None). ``selection``: an (N,) bool
     mask of the corpus rows the decisions may use (None: every row; the baselines always use
-    every row). Returns (summary, steps).
+    every row). ``ope``: :class:`aoc_cli.control.ope_eval.OPESettings` of the offline policy
+    evaluation of the decisions (value mode; None: all estimators when the log allows it, see
+    :func:`aoc_cli.control.ope_eval.wanted`). Returns (summary, steps).
     Runs with one thread in torch, FAISS and BLAS (:func:`aoc_cli.threads.one_thread`)."""
     started = time.perf_counter()
     with one_thread():
         ctx = EvalContext.build(session, data, baselines, seed, exact, selection)
         parts, done = [], 0
-        for group in chunks(ctx, chunk_steps):
+        for group in chunks(ctx, chunk_size(ctx, chunk_steps)):
             part = score_episodes(ctx, group)
             parts.append(part)
             done += len(part.row)
@@ -314,47 +381,13 @@ def evaluate(session, data, baselines=BASELINES, seed: int = 0, progress=None,
                 progress(done, ctx.data.n_rows)
     res = merge(parts)
     summary = summarise(ctx, res)
+    decided = time.perf_counter()
+    with one_thread():
+        add_ope(summary, data, res, ope, seed)
+    summary["ope_seconds"] = time.perf_counter() - decided
     summary["seconds"] = time.perf_counter() - started
     summary["steps_per_second"] = summary["steps"] / max(summary["seconds"], 1e-9)
     return summary, res
-
-
-def step_records(ctx_or_session, data, res: StepScores):
-    """One JSON-ready record per scored step (for ``--steps FILE.jsonl``): episode, its id,
-    step, logged action, decision (with their labels, ``logged_label`` / ``decision_label``,
-    when the corpus's actions are labelled), scores, residual, warning, supporting rows with
-    their episodes and ids."""
-    corpus = ctx_or_session.corpus
-    from aoc_cli.control.records import episode_ids
-
-    data_ids, corpus_ids = episode_ids(data), episode_ids(corpus)
-    labels = action_labels(corpus.action_space)
-    sup_ep = corpus.episode_of(np.maximum(res.support_rows, 0))
-    for i in range(len(res.row)):
-        keep = res.support_rows[i] >= 0
-        rec = {"episode": int(res.episode[i]),
-               "episode_id": None if data_ids is None else data_ids[res.episode[i]],
-               "step": int(res.step[i]), "row": int(res.row[i]),
-               "logged": np.asarray(res.logged[i]).tolist(),
-               **label_of(labels, res.logged[i], "logged_label"),
-               "decision": np.asarray(res.decided[i]).tolist(),
-               **label_of(labels, res.decided[i], "decision_label")}
-        if res.scores is not None:
-            rec["scores"] = res.scores[i].tolist()
-        if res.v_hat is not None:
-            rec["v_hat"] = float(res.v_hat[i])
-            rec["target"] = float(res.target[i])
-        rec["residual"] = float(res.residual[i])
-        rec["warning"] = bool(res.warning[i])
-        rec["support"] = [{"row": int(r), "episode": int(e),
-                           "episode_id": None if corpus_ids is None else corpus_ids[e],
-                           "weight": float(w)}
-                          for r, e, w in zip(res.support_rows[i][keep], sup_ep[i][keep],
-                                             res.support_weights[i][keep])]
-        for name, b in res.baselines.items():
-            rec[f"{name}_decision"] = np.asarray(b["decided"][i]).tolist()
-            rec.update(label_of(labels, b["decided"][i], f"{name}_decision_label"))
-        yield rec
 
 
 __all__ = ["BASELINES", "EXACT_MAX_ROWS", "LeaveEpisodeOut", "StepScores", "check_inputs",

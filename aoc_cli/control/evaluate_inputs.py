@@ -193,11 +193,15 @@ class KNNBaseline:
             return {"decided": acts.mean(1)}
         out = {"v_hat": ctx.index.values[idx].mean(1), "decided": None}
         if ctx.discrete:
-            per = [ctx.index.values[self.neighbours(
-                ctx, self.features(ctx, obs, np.full(len(obs), a)), query_episodes)].mean(1)
-                for a in range(ctx.n_actions)]
-            out["decided"] = np.stack(per, axis=1).argmax(1)
+            out["decided"] = self.action_values(ctx, obs, query_episodes).argmax(1)
         return out
+
+    def action_values(self, ctx, obs, query_episodes) -> np.ndarray:
+        """(S, n) value mode, discrete actions: the neighbours' mean value of each action."""
+        per = [ctx.index.values[self.neighbours(
+            ctx, self.features(ctx, obs, np.full(len(obs), a)), query_episodes)].mean(1)
+            for a in range(ctx.n_actions)]
+        return np.stack(per, axis=1)
 
 
 @dataclass

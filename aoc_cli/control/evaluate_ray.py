@@ -17,8 +17,11 @@ import time
 
 import numpy as np
 
-from aoc_cli.control.evaluate import CHUNK_STEPS, chunks, merge, score_episodes, summarise
+from aoc_cli.control.evaluate import (CHUNK_STEPS, chunk_size, chunks, merge, score_episodes,
+                                      summarise)
+from aoc_cli.control.ope_eval import add_ope
 from aoc_cli.parallel import capacity, map_chunks, start_ray
+from aoc_cli.threads import one_thread
 
 
 def _context(spec: dict):
@@ -45,14 +48,14 @@ def _score(spec: dict, groups: list) -> list:
 def evaluate_on_ray(store_root, name: str, data: str, model: str | None, index_id: str,
                     config, baselines, seed: int = 0, exact: bool | None = None,
                     workers: int | None = None, address: str | None = None,
-                    chunk_steps: int = CHUNK_STEPS, progress=None):
+                    chunk_steps: int = CHUNK_STEPS, progress=None, ope=None):
     """(summary, StepScores) of ``aoc evaluate`` with the chunks on Ray (module docstring)."""
     started = time.perf_counter()
     spec = {"store": str(store_root), "name": name, "data": data, "model": model,
             "index": index_id, "config": config, "baselines": list(baselines), "seed": int(seed),
             "exact": exact}
     ctx = _context(spec)
-    groups = chunks(ctx, chunk_steps)
+    groups = chunks(ctx, chunk_size(ctx, chunk_steps))
     n_tasks = capacity(start_ray(workers, address), workers)
     runs = [list(r) for r in np.array_split(np.arange(len(groups)), min(n_tasks, len(groups)))]
     rows = [0]
@@ -66,6 +69,10 @@ def evaluate_on_ray(store_root, name: str, data: str, model: str | None, index_i
                          workers=workers, address=address, retries=1, done=done)
     res = merge([part for parts in results for part in parts])
     summary = summarise(ctx, res)
+    decided = time.perf_counter()
+    with one_thread():
+        add_ope(summary, ctx.data, res, ope, seed)
+    summary["ope_seconds"] = time.perf_counter() - decided
     summary["seconds"] = time.perf_counter() - started
     summary["steps_per_second"] = summary["steps"] / max(summary["seconds"], 1e-9)
     return summary, res

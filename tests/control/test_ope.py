@@ -64,6 +64,15 @@ def test_on_episodes_of_one_length_they_are_the_textbook_estimators():
     assert wdr(log, rho, q, v) == pytest.approx(textbook_wdr, rel=1e-12)
 
 
+def test_pdwis_is_conditional_on_ending_where_the_log_still_follows_the_policy():
+    # episode 0: one step, survives; episode 1 leaves the policy at its second step (rho 0)
+    # t0: n = 2, c0 = 1 / 2, mean reward (1 * 1 + 1 * 0) / 2 = 0.5; t1: no running episode
+    # follows the policy: the share S1 = 0.5 still running is beyond the log's reach, so the
+    # estimate is conditional on the ended share 1 - S1 = 0.5: 0.5 / 0.5
+    log = Log(np.array([0, 1, 4]), np.array([1.0, 0.0, 0.0, 1.0]))
+    assert pdwis(log, np.array([1.0, 1.0, 0.0, 1.0])) == pytest.approx(1.0, abs=1e-12)
+
+
 def test_ess_of_the_whole_trajectory_weights():
     # trajectory weights 2 * 0.5 = 1 and 0.5 * 2 * 4 = 4: (1 + 4)^2 / (1 + 16)
     assert ess(Log(STARTS, REWARDS), RHO) == pytest.approx(25 / 17, abs=1e-12)

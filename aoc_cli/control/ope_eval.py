@@ -1,0 +1,238 @@
+"""Offline policy evaluation of decided policies on a held-out log (``aoc evaluate``'s value
+mode): the estimators of :mod:`aoc_cli.control.ope` and :mod:`aoc_cli.control.ope_fqe`
+applied to the controller's decisions (and each baseline's) at every logged step.
+
+Inputs, for a log of E episodes and N steps (discrete actions, n of them): observations
+(N, d_o), logged actions (N,), rewards (N,), ``starts`` (E + 1,), and per evaluated policy
+its decisions (N,) (deterministic: pi_e(a | h_t) = 1 for the decided action) or its
+probabilities (N, n). The behaviour's propensity of each logged action comes from a corpus
+column when the log has one (``propensity``), else from an imitation model fitted to the log
+(:func:`imitation_propensities`); the output says which.
+
+Output (JSON-ready): ``policy_value`` {estimator: {estimate, low, high}}, ``ess`` (the
+whole-trajectory weights' effective sample size, of E), ``behaviour_value`` (the log's mean
+return with its interval), ``ope`` (settings, the propensities' source, notes) and
+``ope_warnings`` (a small ESS; estimators whose intervals do not overlap).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from aoc_cli.control import ope
+from aoc_cli.control.ope_fqe import available, default_steps, fit_fqe
+from aoc_cli.errors import AocError
+
+ESTIMATORS = ("pdwis", "wdr", "fqe")
+#: The propensity column looked for when none is named.
+PROPENSITY_COLUMN = "propensity"
+#: Estimated propensities are floored here (a logged action the model finds near impossible
+#: would otherwise carry an unbounded weight).
+PROPENSITY_FLOOR = 1e-3
+#: An ESS below this share of the episodes (or below 30) is warned about.
+ESS_WARN_SHARE = 0.01
+
+
+@dataclass
+class OPESettings:
+    """``estimators`` of :data:`ESTIMATORS`; ``gamma`` the discount of the value estimated
+    (1: the mean undiscounted return of an episode); ``propensity`` a column name (None: the
+    ``propensity`` column when the log has one, else an imitation model); ``fqe_steps``
+    (None: :func:`aoc_cli.control.ope_fqe.default_steps`); bootstrap replicates; seed."""
+
+    estimators: tuple = ESTIMATORS
+    gamma: float = 1.0
+    propensity: str | None = None
+    fqe_steps: int | None = None
+    n_boot: int = ope.N_BOOTSTRAP
+    seed: int = 0
+
+
+def parse_estimators(text: str | None) -> tuple:
+    """'pdwis,wdr,fqe' -> a tuple; 'none' -> ()."""
+    if text is None:
+        return ESTIMATORS
+    names = [t.strip() for t in text.split(",") if t.strip()]
+    if names == ["none"]:
+        return ()
+    bad = [n for n in names if n not in ESTIMATORS]
+    if bad or not names:
+        raise AocError(f"unknown OPE estimator {bad[0] if bad else text!r}: use "
+                       f"{', '.join(ESTIMATORS)} (comma-separated) or none", param="ope")
+    return tuple(dict.fromkeys(names))
+
+
+def imitation_propensities(observations, actions, n_actions: int, seed: int = 0) -> np.ndarray:
+    """(N, n) the behaviour policy estimated from the log: a multinomial logistic regression
+    (scikit-learn) of the logged action on the standardised observation; probabilities
+    floored at :data:`PROPENSITY_FLOOR` and renormalised."""
+    # scikit-learn only here (its import costs ~1 s; the column path never needs it)
+    from sklearn.linear_model import LogisticRegression
+    from sklearn.preprocessing import StandardScaler
+
+    x = StandardScaler().fit_transform(np.asarray(observations, np.float64))
+    y = np.asarray(actions, np.int64)
+    probs = np.full((len(y), n_actions), 0.0)
+    present = np.unique(y)
+    if len(present) == 1:
+        probs[:, present[0]] = 1.0
+    else:
+        model = LogisticRegression(max_iter=300, random_state=seed).fit(x, y)
+        probs[:, model.classes_] = model.predict_proba(x)
+    probs = np.maximum(probs, PROPENSITY_FLOOR)
+    return probs / probs.sum(1, keepdims=True)
+
+
+def behaviour_propensities(data, logged: np.ndarray, settings: OPESettings):
+    """((N,) the behaviour's probability of each logged action, source text)."""
+    columns = list(getattr(data, "manifest", {}).get("columns", []))
+    name = settings.propensity
+    if name is None and PROPENSITY_COLUMN in columns:
+        name = PROPENSITY_COLUMN
+    if name is not None:
+        p = np.asarray(data.column(name), np.float64)
+        return p, f"column {name!r} of {data.name!r}"
+    probs = imitation_propensities(data.observations, logged, data.n_actions, settings.seed)
+    return (probs[np.arange(len(logged)), logged],
+            "estimated by an imitation model (multinomial logistic regression of the logged "
+            f"action on the observation, fitted to {data.name!r}; floored at "
+            f"{PROPENSITY_FLOOR})")
+
+
+def _as_probs(policy: np.ndarray, n_actions: int) -> np.ndarray:
+    policy = np.asarray(policy)
+    if policy.ndim == 1:
+        return np.eye(n_actions)[policy.astype(np.int64)]
+    return np.asarray(policy, np.float64)
+
+
+def policy_value(log: ope.Log, observations, logged, propensity, policy, n_actions: int,
+                 settings: OPESettings, progress=None) -> dict:
+    """One policy's ``policy_value`` {estimator: Estimate dict}, ``ess`` and notes.
+    ``policy`` (N,) decisions or (N, n) probabilities at the logged steps."""
+    probs = _as_probs(policy, n_actions)                          # (N, n)
+    rows = np.arange(len(logged))
+    rho = ope.ratios(probs[rows, logged], propensity)
+    out: dict = {"ess": ope.ess(log, rho), "notes": []}
+    specs: dict = {}
+    if "pdwis" in settings.estimators:
+        specs["pdwis"] = ("pdwis", rho)
+    q = None
+    if "fqe" in settings.estimators or "wdr" in settings.estimators:
+        reason = available()
+        if reason is None:
+            q = fit_fqe(observations, logged, log.rewards, log.starts, probs, settings.gamma,
+                        settings.fqe_steps, settings.seed, progress)          # (N, n)
+        else:
+            out["notes"].append(reason)
+    if "wdr" in settings.estimators:
+        if q is None:
+            out["notes"].append("wdr: no Q model (needs fqe), so it equals pdwis")
+            specs["wdr"] = ("wdr", rho, np.zeros(len(rho)), np.zeros(len(rho)))
+        else:
+            specs["wdr"] = ("wdr", rho, q[rows, logged], (probs * q).sum(1))
+    if "fqe" in settings.estimators and q is not None:
+        first = log.starts[:-1]
+        specs["fqe"] = ("mean", (probs[first] * q[first]).sum(1))
+        out["notes"].append("fqe: the interval resamples episodes' start values of one fitted "
+                            "Q model (the model's own error is not in it)")
+    est = ope.bootstrap(log, specs, n_boot=settings.n_boot, seed=settings.seed)
+    out["policy_value"] = {k: v.as_dict() for k, v in est.items()}
+    return out
+
+
+def warnings_for(name: str, rec: dict, n_episodes: int) -> list[str]:
+    """A small ESS; a pair of estimators whose intervals do not overlap."""
+    out = []
+    small = max(30.0, ESS_WARN_SHARE * n_episodes)
+    if rec["ess"] < small:
+        out.append(f"policy {name!r}: effective sample size {rec['ess']:.1f} of {n_episodes} episodes "
+                   "(few logged episodes follow this policy; its estimates are unreliable)")
+    items = list(rec["policy_value"].items())
+    for i, (a, ea) in enumerate(items):
+        for b, eb in items[i + 1:]:
+            if ea["high"] < eb["low"] or eb["high"] < ea["low"]:
+                out.append(f"policy {name!r}: {a} ({ea['estimate']:.4g}) and {b} ({eb['estimate']:.4g}) "
+                           "disagree (their 95% intervals do not overlap)")
+    return out
+
+
+def off_policy_values(data, logged: np.ndarray, policies: dict, settings: OPESettings,
+                      progress=None) -> dict:
+    """The OPE block of ``aoc evaluate`` for held-out corpus ``data`` (every row, in order):
+    ``policies`` name -> decisions (N,) or probabilities (N, n). Returns {"ope": ...,
+    "behaviour_value": ..., "policies": {name: {policy_value, ess, notes}}, "ope_warnings"}."""
+    if not data.discrete:
+        raise AocError("offline policy evaluation needs discrete actions (a deterministic "
+                       "policy of continuous actions matches no logged action); use --ope none",
+                       param="ope")
+    if not data.has_rewards:
+        raise AocError(f"corpus {data.name!r} has no rewards: offline policy evaluation needs "
+                       "the logged rewards; use --ope none", param="ope")
+    logged = np.asarray(logged, np.int64)
+    if len(logged) != data.n_rows:
+        raise AocError(f"{len(logged)} decided steps for a log of {data.n_rows} rows")
+    log = ope.Log(data.episode_starts, data.rewards, settings.gamma)
+    propensity, source = behaviour_propensities(data, logged, settings)
+    ope.ratios(np.ones(len(logged)), propensity)       # refuses a zero propensity up front
+    mean = ope.bootstrap(log, {"mean": ("mean", log.returns())}, n_boot=settings.n_boot,
+                         seed=settings.seed)["mean"]
+    out = {"ope": {"estimators": list(settings.estimators), "gamma": settings.gamma,
+                   "propensity": source, "bootstrap": settings.n_boot,
+                   "fqe_steps": (settings.fqe_steps or default_steps(data.n_rows))
+                   if "fqe" in settings.estimators or "wdr" in settings.estimators else None},
+           "behaviour_value": mean.as_dict(), "policies": {}, "ope_warnings": []}
+    for i, (name, policy) in enumerate(policies.items()):
+        try:
+            rec = policy_value(log, data.observations, logged, propensity, policy,
+                               data.n_actions, settings, progress)
+        except AocError as err:
+            if i == 0:          # the first policy is the one asked about: its error is the run's
+                raise AocError(f"policy {name!r}: {err}") from None
+            out["policies"][name] = {"policy_value": None, "ess": None, "notes": [str(err)]}
+            continue
+        out["policies"][name] = rec
+        out["ope_warnings"] += warnings_for(name, rec, log.n_episodes)
+    return out
+
+
+def wanted(settings: OPESettings | None, mode: str, data) -> bool:
+    """Whether ``aoc evaluate`` runs the OPE: asked for (estimators given) in value mode.
+    ``settings`` None is the default: the OPE when the log allows it (value mode, discrete
+    actions, rewards); explicit settings on a log that does not allow it are refused by
+    :func:`off_policy_values` (imitation mode here)."""
+    if settings is None:
+        return mode == "value" and data.discrete and data.has_rewards
+    if not settings.estimators:
+        return False
+    if mode != "value":
+        raise AocError("offline policy evaluation is for value-mode models (an imitation model "
+                       "has no values to compare); use --ope none", param="ope")
+    return True
+
+
+def add_ope(summary: dict, data, res, settings: OPESettings | None, seed: int = 0,
+            progress=None) -> None:
+    """Put the OPE of the controller's decisions (``res.decided``) and of each baseline's into
+    an ``aoc evaluate`` summary, when :func:`wanted` (``seed``: of the default settings)."""
+    if not wanted(settings, summary["mode"], data):
+        return
+    settings = settings or OPESettings(seed=seed)
+    if not np.array_equal(res.row, np.arange(data.n_rows)):
+        raise AocError("offline policy evaluation needs every step of the held-out log")
+    policies = {"aoc": res.decided}
+    for name, b in res.baselines.items():
+        if b.get("decided") is not None:
+            policies[name] = b["decided"]
+    block = off_policy_values(data, res.logged, policies, settings, progress)
+    own = block["policies"].pop("aoc")
+    summary["policy_value"] = own["policy_value"]
+    summary["ess"] = own["ess"]
+    summary["behaviour_value"] = block["behaviour_value"]
+    summary["ope"] = {**block["ope"], "notes": own["notes"]}
+    for name, rec in block["policies"].items():
+        summary["baselines"][name].update(policy_value=rec["policy_value"], ess=rec["ess"],
+                                          ope_notes=rec["notes"])
+    summary["ope_warnings"] = block["ope_warnings"]

@@ -1,0 +1,114 @@
+"""Value-mode `aoc evaluate` on an icu-sepsis log with the offline policy evaluation (issue 26):
+held-out steps per second, decisions and OPE.
+
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/evaluate_ope.py [--store DIR] [--repeats 3]
+        [--per-step-episodes 1000]
+
+Uses the store of ``benchmarks/ope_sepsis.py`` (run it first, or it builds the corpus of
+10,000 clinician episodes, the paper-settings value model with no history and its index, and
+a held-out log ``held0`` of 5,000 episodes). Times :func:`aoc_cli.control.evaluate.evaluate`
+in this process (the model and index loaded once before; 25 candidate actions a step, the knn
+and bc baselines), each case ``--repeats`` times, median reported, wall and CPU seconds
+(user + system of this one-threaded process: what the wall figure would be on an idle core):
+
+* ``per step``: every held-out step decided on its own (the path before deciding each distinct
+  observation once), on the first ``--per-step-episodes`` episodes of the log (its rate per
+  step does not depend on the log's size);
+* ``distinct``: each distinct observation and history decided once, no OPE (``--ope none``);
+* ``distinct + pdwis``: with PDWIS for the controller and both baselines;
+* ``distinct + OPE``: with PDWIS, WDR and FQE (d3rlpy's DiscreteFQE, the default steps) for
+  the controller and both baselines: ``aoc evaluate``'s default.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from aoc_cli.control import ControllerConfig  # noqa: E402
+from aoc_cli.control import evaluate as ev  # noqa: E402
+from aoc_cli.control.ope_eval import OPESettings  # noqa: E402
+from aoc_cli.errors import AocError  # noqa: E402
+from aoc_cli.control import open_session  # noqa: E402
+from aoc_cli.store import Store  # noqa: E402
+
+
+def timed(fn):
+    w, c = time.perf_counter(), time.process_time()
+    out = fn()
+    return out, time.perf_counter() - w, time.process_time() - c
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--store", default="/tmp/aoc-ope-sepsis")
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--per-step-episodes", type=int, default=1000)
+    args = ap.parse_args()
+    store = Store(args.store)
+    try:
+        corpus, held = store.corpus("train"), store.corpus("held0")
+    except AocError:
+        sys.exit("run benchmarks/ope_sepsis.py --logs 1 first (it builds the store)")
+    session = open_session(corpus, config=ControllerConfig())
+    small_rows = int(held.episode_starts[args.per_step_episodes])
+    small = held.load().select_episodes(np.arange(held.n_episodes) < args.per_step_episodes)
+    try:
+        few = store.corpus("held0-first")
+    except AocError:
+        few = store.write("held0-first", small)
+    assert few.n_rows == small_rows
+    none = OPESettings(estimators=())
+    cases = {
+        "per step": (few, none, True),
+        "distinct": (held, none, False),
+        "distinct + pdwis": (held, OPESettings(estimators=("pdwis",)), False),
+        "distinct + OPE": (held, OPESettings(), False),
+    }
+    distinct = ev._value_distinct
+    rows = []
+    for name, (data, ope, per_step) in cases.items():
+        walls, cpus, opes = [], [], []
+        for _ in range(args.repeats):
+            if per_step:   # the path before: every step decided on its own
+                ev._value_distinct = lambda ctx, *a: _per_step(ctx, *a)
+                ev.chunk_size = lambda ctx, chunk_steps=ev.CHUNK_STEPS: chunk_steps
+            try:
+                (summary, _), wall, cpu = timed(lambda: ev.evaluate(
+                    session, data, ["knn", "bc"], ope=ope))
+            finally:
+                ev._value_distinct = distinct
+                ev.chunk_size = _chunk_size
+            walls.append(wall)
+            cpus.append(cpu)
+            opes.append(summary["ope_seconds"])
+        steps = data.n_rows
+        rows.append({"case": name, "steps": steps, "wall_s": round(statistics.median(walls), 2),
+                     "cpu_s": round(statistics.median(cpus), 2),
+                     "ope_s": round(statistics.median(opes), 2),
+                     "steps_per_s": round(steps / statistics.median(walls), 1),
+                     "steps_per_cpu_s": round(steps / statistics.median(cpus), 1),
+                     "runs_wall_s": [round(w, 2) for w in walls]})
+        print(json.dumps(rows[-1]), file=sys.stderr)
+    print(json.dumps(rows, indent=1))
+
+
+def _per_step(ctx, rows, ep, obs, hist, logged):
+    out = ev._value(ctx, rows, ep, obs, hist, logged)
+    if "knn" in ctx.baselines:
+        out.baselines["knn"] = ctx.knn.predict(ctx, obs, logged, ep)
+    return out
+
+
+_chunk_size = ev.chunk_size
+
+if __name__ == "__main__":
+    main()

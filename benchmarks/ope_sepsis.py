@@ -1,0 +1,161 @@
+"""Offline policy evaluation on icu-sepsis against the exact values (issue 26): on held-out
+logs of clinician episodes, does each estimator's 95% interval cover the truth, and how far is
+its point estimate?
+
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/ope_sepsis.py [--logs 10] [--episodes 5000]
+        [--train-episodes 10000] [--store DIR] [--out results.json]
+
+Builds (once, in ``--store``) a corpus of ``--train-episodes`` clinician episodes, a value
+model with the paper's settings and ``--history-length 0`` (so AOC's decision depends on the
+state alone) and its index. AOC's policy is its decision in every state: each state's
+observation decided by ``aoc_cli.control.evaluate`` (one-step episodes, the same code path as
+``aoc evaluate``); on the first held-out log the script checks that ``aoc evaluate``'s own
+decisions are that policy's. BC is the training log's most frequent action per state (the
+clinicians' modal action as the log shows it). The clinicians are the behaviour itself (the
+package's stochastic policy). Truths: the package's tables by a linear solve
+(``aoc_cli.envs.icu_sepsis.tables``). Then for each of ``--logs`` held-out logs of
+``--episodes`` clinician episodes (seeds 1000, 1001, ...), the estimators of ``aoc evaluate``
+(:mod:`aoc_cli.control.ope_eval`: PDWIS, WDR, FQE with the log's ``propensity`` column) for
+each policy. Prints one row per policy and estimator: coverage (of the logs), mean estimate,
+mean error, mean |error|, mean interval width, mean ESS.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from aoc_cli.belief import BeliefConfig, train_model  # noqa: E402
+from aoc_cli.control import ControllerConfig  # noqa: E402
+from aoc_cli.control import ope  # noqa: E402
+from aoc_cli.control.evaluate import evaluate  # noqa: E402
+from aoc_cli.control.ope_eval import OPESettings, policy_value  # noqa: E402
+from aoc_cli.envs import collect  # noqa: E402
+from aoc_cli.envs.icu_sepsis import tables  # noqa: E402
+from aoc_cli.errors import AocError  # noqa: E402
+from aoc_cli.control import open_session  # noqa: E402
+from aoc_cli.corpus_index import build_index  # noqa: E402
+from aoc_cli.store import CorpusData, Store  # noqa: E402
+from aoc_cli.threads import one_thread  # noqa: E402
+
+
+def prepare(store: Store, train_episodes: int):
+    """The training corpus, its value model (the paper's settings, no history) and index."""
+    try:
+        corpus = store.corpus("train")
+    except AocError:
+        corpus = store.write("train", collect("icu-sepsis", episodes=train_episodes, seed=0)[0])
+    if not (corpus.models_dir / "default" / "weights.pt").exists():
+        train_model(corpus, BeliefConfig(history_length=0, threads=1, seed=0), "default")
+    if not (corpus.models_dir / "default" / "index").exists():
+        build_index(corpus, "default")
+    return corpus
+
+
+def aoc_policy(store: Store, corpus, t) -> np.ndarray:
+    """(716,) AOC's decision in every state (terminal states: 0), by aoc's evaluate."""
+    states = np.flatnonzero(~t.mdp.terminal)
+    n = len(states)
+    one = np.ones(n, bool)
+    data = CorpusData(observations=t.observations[states].astype(np.float32),
+                      actions=np.zeros(n, np.int64), rewards=np.zeros(n),
+                      terminals=one, truncations=~one, episode_starts=np.arange(n + 1),
+                      observation_space=corpus.observation_space,
+                      action_space=corpus.action_space)
+    try:
+        every = store.corpus("every-state")
+    except AocError:
+        every = store.write("every-state", data)
+    session = open_session(corpus, config=ControllerConfig())
+    _, res = evaluate(session, every, [], ope=OPESettings(estimators=()))
+    policy = np.zeros(t.mdp.n_states, np.int64)
+    policy[states] = res.decided
+    return policy
+
+
+def bc_policy(corpus, t) -> np.ndarray:
+    """(716,) the training log's most frequent action per state (unseen: the overall mode)."""
+    s = corpus.column("state").astype(np.int64)
+    counts = np.zeros((t.mdp.n_states, corpus.n_actions))
+    np.add.at(counts, (s, corpus.actions), 1)
+    out = counts.argmax(1)
+    out[counts.sum(1) == 0] = np.bincount(corpus.actions).argmax()
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--logs", type=int, default=10)
+    ap.add_argument("--episodes", type=int, default=5000)
+    ap.add_argument("--train-episodes", type=int, default=10000)
+    ap.add_argument("--store", default="/tmp/aoc-ope-sepsis")
+    ap.add_argument("--fqe-steps", type=int, default=None)
+    ap.add_argument("--out", default=None)
+    args = ap.parse_args()
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    store = Store(args.store)
+    t = tables("mean")
+    corpus = prepare(store, args.train_episodes)
+    policies = {"aoc": aoc_policy(store, corpus, t), "bc": bc_policy(corpus, t)}
+    truth = {name: t.mdp.value(p) for name, p in policies.items()}
+    truth["clinicians"] = t.mdp.value(t.clinicians)
+    print("truth", json.dumps(truth), file=sys.stderr)
+    settings = OPESettings(fqe_steps=args.fqe_steps)
+    runs = []
+    for i in range(args.logs):
+        started = time.perf_counter()
+        name = f"held{i}"
+        try:
+            held = store.corpus(name)
+        except AocError:
+            held = store.write(name, collect("icu-sepsis", episodes=args.episodes,
+                                             seed=1000 + i)[0])
+        s = held.column("state").astype(np.int64)
+        logged = np.asarray(held.actions, np.int64)
+        log = ope.Log(held.episode_starts, held.rewards, 1.0)
+        prop = held.column("propensity")
+        if i == 0:   # aoc evaluate's own decisions are the policy evaluated here
+            session = open_session(corpus, config=ControllerConfig())
+            _, res = evaluate(session, held, [], ope=OPESettings(estimators=()))
+            agree = float(np.mean(res.decided == policies["aoc"][s]))
+            print(f"aoc evaluate's decisions = the state policy on {agree:.4f} of the steps",
+                  file=sys.stderr)
+        at_steps = {"aoc": policies["aoc"][s], "bc": policies["bc"][s],
+                    "clinicians": t.clinicians[s]}
+        for pname, pol in at_steps.items():
+            with one_thread():
+                rec = policy_value(log, held.observations, logged, prop, pol, held.n_actions,
+                                   settings)
+            runs.append({"log": i, "policy": pname, "truth": truth[pname], "ess": rec["ess"],
+                         **{k: v for k, v in rec["policy_value"].items()}})
+        print(f"log {i}: {time.perf_counter() - started:.0f} s", file=sys.stderr)
+        if args.out:
+            Path(args.out).write_text(json.dumps({"truth": truth, "runs": runs}, indent=1))
+    rows = []
+    for pname in at_steps:
+        for est in ("pdwis", "wdr", "fqe"):
+            r = [x for x in runs if x["policy"] == pname and est in x]
+            if not r:
+                continue
+            e = np.array([x[est]["estimate"] for x in r])
+            cover = sum(x[est]["low"] <= x["truth"] <= x["high"] for x in r)
+            width = np.mean([x[est]["high"] - x[est]["low"] for x in r])
+            rows.append({"policy": pname, "truth": round(truth[pname], 4), "estimator": est,
+                         "covered": f"{cover} of {len(r)}", "mean": round(float(e.mean()), 4),
+                         "bias": round(float(e.mean() - truth[pname]), 4),
+                         "mean_abs_error": round(float(np.abs(e - truth[pname]).mean()), 4),
+                         "width": round(float(width), 4),
+                         "ess": round(float(np.mean([x["ess"] for x in r])), 1)})
+    print(json.dumps(rows, indent=1))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,149 @@
+"""`aoc evaluate`'s offline policy evaluation (value mode): the figures are the estimators'
+on the decisions, the JSON keys, the propensities' source, and bad input (a log without
+rewards, a zero propensity, a policy that never takes the logged action) as one line and
+exit 2. Deciding each distinct observation once gives the per-step decisions."""
+
+import json
+
+import numpy as np
+import pytest
+
+from aoc_cli.belief import BeliefConfig, train_model
+from aoc_cli.control import ControllerConfig
+from aoc_cli.control import ope
+from aoc_cli.control.evaluate import _value, _value_distinct, evaluate
+from aoc_cli.control.evaluate_inputs import EvalContext, episode_rows
+from aoc_cli.control.ope_eval import OPESettings
+from aoc_cli.envs import collect
+from aoc_cli.control import open_session
+from aoc_cli.corpus_index import build_index
+from aoc_cli.store import Store
+
+from tests.conftest import run_in_process
+
+
+@pytest.fixture(scope="module")
+def sepsis(tmp_path_factory):
+    root = tmp_path_factory.mktemp("sepsis-ope")
+    store = Store(root)
+    store.write("icu", collect("icu-sepsis", episodes=300, seed=0)[0])
+    held = collect("icu-sepsis", episodes=150, seed=1)[0]
+    store.write("held", held)
+    corpus = store.corpus("icu")
+    small = dict(history_length=0, hidden=32, belief_dim=4, max_epochs=3, threads=1, seed=0)
+    train_model(corpus, BeliefConfig(**small), "default")
+    build_index(corpus, "default")
+    return root, store, held
+
+
+def _session(store):
+    return open_session(store.corpus("icu"), config=ControllerConfig())
+
+
+def test_policy_value_is_the_estimators_on_the_decisions(sepsis):
+    _root, store, _ = sepsis
+    held = store.corpus("held")
+    settings = OPESettings(estimators=("pdwis", "wdr"), n_boot=200, fqe_steps=200)
+    summary, res = evaluate(_session(store), held, ["bc"], ope=settings)
+    log = ope.Log(held.episode_starts, held.rewards)
+    rho = ope.ratios((res.decided == held.actions).astype(float), held.column("propensity"))
+    assert summary["policy_value"]["pdwis"]["estimate"] == pytest.approx(ope.pdwis(log, rho),
+                                                                         abs=1e-12)
+    assert summary["ess"] == pytest.approx(ope.ess(log, rho), abs=1e-9)
+    e = summary["policy_value"]["wdr"]
+    assert e["low"] <= e["estimate"] <= e["high"]
+    assert summary["behaviour_value"]["estimate"] == pytest.approx(
+        np.mean(held.episode_returns()), abs=1e-12)
+    assert summary["ope"]["propensity"] == "column 'propensity' of 'held'"
+    bc = summary["baselines"]["bc"]
+    rho_bc = ope.ratios((res.baselines["bc"]["decided"] == held.actions).astype(float),
+                        held.column("propensity"))
+    assert bc["policy_value"]["pdwis"]["estimate"] == pytest.approx(ope.pdwis(log, rho_bc),
+                                                                    abs=1e-12)
+
+
+def test_without_a_propensity_column_an_imitation_model_estimates_them(sepsis, tmp_path):
+    _root, store, held = sepsis
+    bare = type(held)(**{**held.__dict__, "columns": {}})
+    store.write("bare", bare)
+    settings = OPESettings(estimators=("pdwis",), n_boot=100)
+    summary, _ = evaluate(_session(store), store.corpus("bare"), [], ope=settings)
+    assert summary["ope"]["propensity"].startswith("estimated by an imitation model")
+    assert 0 < summary["ess"] <= held.n_episodes
+
+
+def test_each_distinct_observation_is_decided_once_with_the_per_step_results(sepsis):
+    _root, store, _ = sepsis
+    ctx = EvalContext.build(_session(store), store.corpus("held"), ["bc", "knn"])
+    rows = episode_rows(ctx.data_starts, np.arange(40))
+    ep = np.searchsorted(ctx.data_starts, rows, side="right") - 1
+    args = (rows, ep, ctx.data_obs[rows], ctx.data.history(rows, 0), ctx.data_actions[rows])
+    per_step, distinct = _value(ctx, *args), _value_distinct(ctx, *args)
+    assert np.array_equal(per_step.decided, distinct.decided)
+    assert np.allclose(per_step.v_hat, distinct.v_hat, rtol=1e-9, atol=1e-12)
+    assert np.allclose(per_step.residual, distinct.residual, rtol=1e-9, atol=1e-12)
+    assert np.array_equal(per_step.baselines["bc"]["decided"], distinct.baselines["bc"]["decided"])
+    knn = ctx.knn.predict(ctx, args[2], args[4], ep)
+    assert np.array_equal(knn["decided"], distinct.baselines["knn"]["decided"])
+    assert np.allclose(knn["v_hat"], distinct.baselines["knn"]["v_hat"], atol=1e-12)
+
+
+def _ope_cli(capsys, root, data, *extra):
+    return run_in_process(capsys, "--store", str(root), "evaluate", "icu", "--data", data,
+                          "--baselines", "none", "--ope", "pdwis", *extra)
+
+
+def test_json_has_policy_value_behaviour_value_and_ess(sepsis, capsys):
+    root, _store, _ = sepsis
+    code, out, _err = _ope_cli(capsys, root, "held", "-f", "json")
+    assert code == 0
+    doc = json.loads(out)
+    assert set(doc["policy_value"]["pdwis"]) == {"estimate", "low", "high"}
+    assert set(doc["behaviour_value"]) == {"estimate", "low", "high"}
+    assert 0 < doc["ess"] <= 150
+
+
+def test_zero_propensity_of_a_logged_action_is_one_line(sepsis, capsys):
+    root, store, held = sepsis
+    p = held.columns["propensity"].copy()
+    p[3] = 0.0
+    store.write("zero", type(held)(**{**held.__dict__, "columns": {**held.columns,
+                                                                   "propensity": p}}))
+    code, out, err = _ope_cli(capsys, root, "zero")
+    assert code == 2 and out == ""
+    assert err.strip().splitlines() == [
+        "aoc: error: the behaviour propensity of logged step 3 is 0.0: a logged action must "
+        "have a probability above 0 (1 such steps)"]
+
+
+def test_a_policy_that_never_takes_the_logged_action_is_one_line(sepsis, capsys, tmp_path):
+    root, store, held = sepsis
+    steps = tmp_path / "steps.jsonl"          # the command's own decisions (its task settings)
+    code, _, _ = run_in_process(capsys, "--store", str(root), "evaluate", "icu", "--data",
+                                "held", "--baselines", "none", "--ope", "none", "--steps",
+                                str(steps))
+    assert code == 0
+    decided = np.array([json.loads(line)["decision"] for line in steps.read_text().splitlines()])
+    other = (decided + 1) % 25                 # decisions depend on the observation alone
+    store.write("never", type(held)(**{**held.__dict__, "actions": other}))
+    code, out, err = _ope_cli(capsys, root, "never")
+    assert code == 2 and out == ""
+    assert len(err.strip().splitlines()) == 1
+    assert "never takes the logged action" in err
+
+
+def test_a_log_without_rewards_asked_for_ope_is_one_line(sepsis, capsys):
+    root, store, held = sepsis
+    # a reward-free log whose value model is trained on a column
+    train = store.corpus("icu").load()
+    corpus = store.write("icu-norew", type(train)(**{**train.__dict__, "rewards": None}))
+    train_model(corpus, BeliefConfig(value="state", history_length=0, hidden=16, belief_dim=4,
+                                     max_epochs=1, threads=1, seed=0), "default")
+    build_index(corpus, "default")
+    store.write("norew", type(held)(**{**held.__dict__, "rewards": None}))
+    code, out, err = run_in_process(capsys, "--store", str(root), "evaluate", "icu-norew",
+                                    "--data", "norew", "--baselines", "none", "--ope", "pdwis")
+    assert code == 2 and out == ""
+    assert err.strip().splitlines() == [
+        "aoc: error: corpus 'norew' has no rewards: offline policy evaluation needs the logged "
+        "rewards; use --ope none"]
