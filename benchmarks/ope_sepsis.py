@@ -146,7 +146,7 @@ def main() -> None:
             if not r:
                 continue
             e = np.array([x[est]["estimate"] for x in r])
-            cover = sum(x[est]["low"] <= x["truth"] <= x["high"] for x in r)
+            cover = sum(x[est]["low"] <= x["truth"] <= x[est]["high"] for x in r)
             width = np.mean([x[est]["high"] - x[est]["low"] for x in r])
             rows.append({"policy": pname, "truth": round(truth[pname], 4), "estimator": est,
                          "covered": f"{cover} of {len(r)}", "mean": round(float(e.mean()), 4),
