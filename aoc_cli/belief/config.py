@@ -22,6 +22,15 @@ MODES = ("value", "imitation")
 BELIEFS = ("value", "critic", "reward", "dynamics")
 #: The dynamics weight ``--belief dynamics`` implies when none is given.
 DEFAULT_DYNAMICS_WEIGHT = 1.0
+#: ``--belief critic`` when ``critic_steps`` is not given (BeliefConfig.critic_steps_for):
+#: CRITIC_STEPS at CRITIC_STEPS_ROWS rows and above, proportionally fewer below, at least
+#: CRITIC_STEPS_MIN.
+CRITIC_STEPS = 10_000
+CRITIC_STEPS_ROWS = 100_000
+CRITIC_STEPS_MIN = 500
+#: Seconds a critic step takes on one CPU thread at batch 500 (measured here: ~0.07-0.1 s);
+#: ``aoc train`` shows the estimate up front.
+CRITIC_STEP_SECONDS = 0.08
 #: Value targets computed from the rewards; any other name is a numeric corpus column.
 REWARD_TARGETS = ("return", "mean-return", "reward", "fqe")
 
@@ -63,10 +72,12 @@ class BeliefConfig:
     #: Value mode: weight of the auxiliary loss that makes b(o, a, h) also predict the change of
     #: observation o' - o through a second linear head (0 = the paper's objective exactly).
     dynamics_weight: float = 0.0
-    #: ``critic``: gradient steps of the offline critic (TD3+BC, aoc_cli.belief.critic). 10,000 is
-    #: what the bench's full scale trains and what docs/results.md measures (pendulum-het upright
-    #: at 100k: -0.051; lunar at 0.3M: 265.8); the TD loss rises again after ~6,000 steps there.
-    critic_steps: int = 10_000
+    #: ``critic``: gradient steps of the offline critic (TD3+BC, aoc_cli.belief.critic); None:
+    #: :meth:`critic_steps_for` (10,000 at 100k rows and above, what the bench's full scale
+    #: trains and docs/results.md measures: pendulum-het upright at 100k -0.051, lunar at 0.3M
+    #: 265.8; fewer on a smaller corpus, and at most ``max_epochs`` passes over the training
+    #: rows). The resolved count is what the saved model's config records.
+    critic_steps: int | None = None
     #: ``critic``: weight of the behaviour-cloning term in the actor's loss (TD3+BC's 1 / alpha;
     #: 0 = plain TD3 as the reference code; see aoc_cli/belief/critic.py).
     critic_bc_weight: float = 0.4
@@ -114,7 +125,7 @@ class BeliefConfig:
         if self.dynamics_weight > 0 and self.belief in ("critic", "reward"):
             raise AocError(f"--dynamics-weight belongs to --belief dynamics, not "
                            f"--belief {self.belief}")
-        if self.critic_steps < 1:
+        if self.critic_steps is not None and self.critic_steps < 1:
             raise AocError(f"--critic-steps must be >= 1, got {self.critic_steps}")
         if not self.critic_bc_weight >= 0:
             raise AocError(f"--critic-bc-weight must be >= 0, got {self.critic_bc_weight}")
@@ -158,6 +169,28 @@ class BeliefConfig:
         if self.device not in ("auto", "cpu", "cuda"):
             raise AocError(f"unknown device {self.device!r}: use auto, cpu or cuda")
         return self
+
+    def critic_steps_for(self, n_rows: int, n_train_rows: int) -> tuple[int, str]:
+        """The critic's gradient steps on a corpus of ``n_rows`` rows (``n_train_rows`` of them
+        in training episodes), and the rule that gave them, as a phrase.
+
+        Given (``critic_steps``): exactly that. Else :data:`CRITIC_STEPS` x n_rows /
+        :data:`CRITIC_STEPS_ROWS` (one step per 10 rows), between :data:`CRITIC_STEPS_MIN` and
+        :data:`CRITIC_STEPS`, and at most ``max_epochs`` passes over the training rows in
+        batches of ``batch_size`` (``--epochs`` bounds the critic as it bounds every belief).
+        """
+        if self.critic_steps is not None:
+            return int(self.critic_steps), "--critic-steps"
+        by_rows = min(CRITIC_STEPS, max(CRITIC_STEPS_MIN,
+                                        -(-CRITIC_STEPS * int(n_rows) // CRITIC_STEPS_ROWS)))
+        per_epoch = max(1, -(-int(n_train_rows) // int(self.batch_size)))
+        by_epochs = int(self.max_epochs) * per_epoch
+        if by_epochs < by_rows:
+            return by_epochs, (f"{self.max_epochs} epochs of {per_epoch} batches of the "
+                               f"{n_train_rows} training rows")
+        return by_rows, (f"one step per {CRITIC_STEPS_ROWS // CRITIC_STEPS} rows, between "
+                         f"{CRITIC_STEPS_MIN} and {CRITIC_STEPS:,} (from {CRITIC_STEPS_ROWS:,} "
+                         "rows)")
 
     def resolved_threads(self) -> int:
         """The explicit CPU thread count torch will use."""

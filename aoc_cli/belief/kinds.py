@@ -79,9 +79,11 @@ def refit_value_head(net: BeliefNet, inputs, values: np.ndarray, train_rows: np.
 
 
 def train_critic_model(corpus, config: BeliefConfig, model_id: str, data,
-                       progress=None) -> dict:
-    """``--belief critic``: train the critic, fit the head, write the model; final metrics
-    (those of every model, plus ``val_td_loss`` and ``val_q_mean``)."""
+                       progress=None, extra: dict | None = None) -> dict:
+    """``--belief critic``: train the critic for :meth:`BeliefConfig.critic_steps_for` steps
+    (saved in the model's config), fit the head, write the model; final metrics (those of
+    every model, plus ``val_td_loss``, ``val_q_mean`` and ``critic_steps_rule``; ``extra``
+    merged in)."""
     from aoc_cli.belief.artefact import save_model
     from aoc_cli.belief.critic import fit_critic
     from aoc_cli.belief.data import report
@@ -90,6 +92,8 @@ def train_critic_model(corpus, config: BeliefConfig, model_id: str, data,
     from aoc_cli.belief.inputs import encode_corpus, network_dims, pick_device
 
     started = time.perf_counter()
+    steps, rule = config.critic_steps_for(corpus.n_rows, len(data.train_rows))
+    config = dataclasses.replace(config, critic_steps=steps)
     device = pick_device(config.device)
     threads = config.resolved_threads()  # set by train_model for the training (aoc_cli.threads)
     dims = network_dims(corpus, "value")
@@ -116,7 +120,7 @@ def train_critic_model(corpus, config: BeliefConfig, model_id: str, data,
                "val_q_mean": last["val_q_mean"], "rows": corpus.n_rows,
                "train_rows": len(data.train_rows), "val_rows": len(data.val_rows),
                "device": device.type, "threads": threads if device.type == "cpu" else None,
-               "belief": "critic"}
+               "belief": "critic", "critic_steps_rule": rule, **(extra or {})}
     metrics["seconds"] = time.perf_counter() - started
     save_model(corpus, model_id, net=net.cpu(), config=config, dims=dims, norm=norm,
                value=value_spec(config.value, config.gamma), values=data.values,

@@ -1,10 +1,11 @@
 """Settings that hold up on small logs: ``aoc train`` chooses what the user did not fix.
 
-On a small corpus (at most :data:`SELECT_MAX_ROWS` rows) the paper's settings (a 4-step GRU
-history, 128 units, no weight decay) can overfit or underfit what the data supports, and
-nothing tells the user. So, for the settings the user leaves open, ``aoc train`` trains
-candidates on the same split of whole episodes and keeps the one with the lowest validation
-loss (cross-entropy of the logged action, or squared error of the standardised target):
+On a small corpus (at most :data:`SELECT_MAX_ROWS` rows) whose model imitates discrete actions
+(ABC on a reward-free log, e.g. ward), the paper's settings (a 4-step GRU history, 128 units,
+no weight decay) can overfit or underfit what the data supports, and nothing tells the user.
+So, for the settings the user leaves open, ``aoc train`` trains candidates on the same split
+of whole episodes and keeps the one with the lowest validation loss (cross-entropy of the
+logged action):
 
 1. history length L in (0, 1, 4);
 2. then the width (GRU and hidden units) in (128, 64, 256) at the chosen L;
@@ -14,8 +15,16 @@ A candidate replaces the current choice only when its validation loss is lower b
 :data:`MARGIN` (relative): ties keep the simpler, earlier setting. Candidates stop early with
 patience :data:`SEARCH_PATIENCE` (at most the user's); the chosen settings are then trained
 with the user's patience and saved. What was tried, what was chosen and why go to the output
-and to the model's config (``metrics.selection``). Corpora larger than the limit, the critic /
-reward / dynamics beliefs, and ``--paper`` use the paper's settings for whatever is open.
+and to the model's config (``metrics.selection``).
+
+**Where it runs** (:func:`searches`): only for imitation of discrete actions, where it was
+measured (docs/results.md, "ward"). For a decision's accountability the action's validation
+loss is the thing decided (the head and ABC both score actions); a value model's validation
+loss is not: on the maze (19,138 rows) every candidate had a validation R^2 of 0.998, the search
+kept width 256 and its weight decay, and AOC on that belief failed every episode (success 0.0,
+1.0 with the paper's settings; docs/design.md "Settings chosen on small logs"). So value-mode
+models (every belief), continuous imitation, corpora over the limit and ``--paper`` take the
+paper's value (or the task's own, aoc_cli.belief.task_settings) for whatever is open.
 
 After training, :func:`baseline_check` says when the model is no better than predicting the
 majority action (discrete) or the mean (continuous, value) on the held-out episodes.
@@ -46,10 +55,17 @@ SEARCH_PATIENCE = 5
 BASELINE_MARGIN = 0.005
 
 
+def searches(corpus, config: BeliefConfig, paper: bool = False) -> bool:
+    """Whether open settings are chosen by validation: the model imitates discrete actions,
+    the corpus has at most :data:`SELECT_MAX_ROWS` rows and ``paper`` is off."""
+    return (not paper and config.mode == "imitation" and bool(corpus.discrete)
+            and corpus.n_rows <= SELECT_MAX_ROWS)
+
+
 def open_settings(corpus, config: BeliefConfig, given: dict, paper: bool = False) -> list[str]:
     """The settings to search: those of :data:`SEARCH` the user did not give (``given``:
-    name -> value or None), when the corpus is small and the belief is the plain one."""
-    if paper or config.belief != "value" or corpus.n_rows > SELECT_MAX_ROWS:
+    name -> value or None), where :func:`searches` holds; else none."""
+    if not searches(corpus, config, paper):
         return []
     return [name for name, _values in SEARCH if given.get(name) is None]
 
@@ -73,8 +89,7 @@ def with_imitation_defaults(corpus, config: BeliefConfig, given: dict,
     smoothing left open. The value is saved in the model's config."""
     if given.get("label_smoothing") is not None:
         return replace(config, label_smoothing=float(given["label_smoothing"]))
-    small = not paper and config.belief == "value" and corpus.n_rows <= SELECT_MAX_ROWS
-    on = small and config.mode == "imitation" and bool(corpus.discrete)
+    on = searches(corpus, config, paper)
     return replace(config, label_smoothing=LABEL_SMOOTHING if on else 0.0)
 
 
@@ -85,8 +100,13 @@ def why_no_search(corpus, config: BeliefConfig, given: dict, paper: bool) -> str
         return None
     if paper:
         return "--paper: the paper's settings"
-    if config.belief != "value":
-        return f"--belief {config.belief}: the paper's settings"
+    if config.mode != "imitation":
+        return ("value mode: the paper's settings (settings are chosen by validation only "
+                "when imitating discrete actions; a lower value loss is not a better "
+                "controller)")
+    if not corpus.discrete:
+        return ("continuous actions: the paper's settings (settings are chosen by validation "
+                "only when imitating discrete actions)")
     return (f"the corpus has {corpus.n_rows} rows, over the {SELECT_MAX_ROWS} up to which "
             "settings are chosen by validation: the paper's settings")
 
@@ -143,7 +163,7 @@ def _score(metrics: dict) -> float:
 
 
 def select_and_train(corpus, config: BeliefConfig, open_names: list[str], model_id: str,
-                     overwrite: bool, prepared, progress=None) -> dict:
+                     overwrite: bool, prepared, progress=None, extra: dict | None = None) -> dict:
     """Search ``open_names`` (see the module docstring), then train and save the chosen
     configuration as ``model_id``; the final metrics, with ``selection`` (what was tried and
     why the winner was chosen). ``progress`` (:mod:`aoc_cli.progress`): each candidate tried
@@ -206,7 +226,8 @@ def select_and_train(corpus, config: BeliefConfig, open_names: list[str], model_
     if config.mode == "imitation" and corpus.discrete:  # ABC's own decisions, validated
         inspect = abc_validation(corpus.actions, int(corpus.n_actions))
     metrics = train_model(corpus, best, model_id, overwrite=overwrite, progress=progress,
-                          prepared=prepared, extra={"selection": selection}, inspect=inspect)
+                          prepared=prepared, extra={**(extra or {}), "selection": selection},
+                          inspect=inspect)
     return metrics
 
 

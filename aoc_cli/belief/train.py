@@ -83,7 +83,7 @@ def train_model(corpus, config: BeliefConfig, model_id: str = "default", overwri
         if config.belief == "critic":  # its own training (aoc_cli.belief.kinds)
             from aoc_cli.belief.kinds import train_critic_model
 
-            return train_critic_model(corpus, config, model_id, data, progress)
+            return train_critic_model(corpus, config, model_id, data, progress, extra)
         return _train(corpus, config, model_id, data, device, threads, started, progress, save,
                       extra, inspect)
 

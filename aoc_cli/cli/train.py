@@ -6,8 +6,8 @@ from typing import Annotated, Optional
 
 import typer
 
-from aoc_cli.belief import select
-from aoc_cli.belief.config import BeliefConfig
+from aoc_cli.belief import select, task_settings
+from aoc_cli.belief.config import CRITIC_STEP_SECONDS, BeliefConfig
 from aoc_cli.belief.data import prepare
 from aoc_cli.cli.common import (BeliefKind, BeliefMode, CorpusArgument, FormatOption, choice,
                                 get_store)
@@ -22,33 +22,39 @@ def train(
     name: CorpusArgument,
     model: Annotated[str, typer.Option(
         "--model", help="Model id to write (models/<ID>/ of the corpus).")] = "default",
-    mode: Annotated[BeliefMode, typer.Option(
+    mode: Annotated[Optional[BeliefMode], typer.Option(
         "--mode", case_sensitive=False,
         help="value: b(o, a, h) predicts v (AOC); imitation: b(o, h) predicts the action "
-             "(ABC, reward-free data).")] = BeliefMode(_D.mode),
-    belief: Annotated[BeliefKind, typer.Option(
+             "(ABC, reward-free data). Default: the task's (ward: imitation), else "
+             "value.")] = None,
+    belief: Annotated[Optional[BeliefKind], typer.Option(
         "--belief", case_sensitive=False,
         help="Value mode: what the belief is trained on: value (regress --value), critic (an "
              "offline TD3+BC critic's last hidden layer), reward (a model of the immediate "
              "reward) or dynamics (value + the o' - o head). The linear head maps every "
-             "belief to --value.")] = BeliefKind(_D.belief),
-    critic_steps: int = typer.Option(_D.critic_steps, "--critic-steps",
-                                     help="--belief critic: gradient steps."),
+             "belief to --value. Default: value.")] = None,
+    critic_steps: Optional[int] = typer.Option(
+        None, "--critic-steps", help="--belief critic: gradient steps (default: one per 10 "
+                                     "rows, between 500 and 10,000, at most --epochs passes "
+                                     "over the training rows)."),
     critic_bc_weight: float = typer.Option(_D.critic_bc_weight, "--critic-bc-weight",
                                            help="--belief critic: weight of the actor's "
                                                 "behaviour-cloning term (0: plain TD3)."),
-    value: str = typer.Option(_D.value, "--value",
-                              help="Value target: return (discounted return-to-go), "
-                                   "mean-return, reward, fqe (the behaviour's Q by fitted Q "
-                                   "evaluation, bootstrapped through the log), or a numeric "
-                                   "corpus column."),
-    gamma: float = typer.Option(_D.gamma, "--gamma", help="Discount of --value return and fqe."),
+    value: Optional[str] = typer.Option(None, "--value",
+                                        help="Value target: return (discounted return-to-go, "
+                                             "the default), mean-return, reward, fqe (the "
+                                             "behaviour's Q by fitted Q evaluation, "
+                                             "bootstrapped through the log), or a numeric "
+                                             "corpus column."),
+    gamma: Optional[float] = typer.Option(
+        None, "--gamma", help="Discount of --value return and fqe (default: the task's: "
+                              "pendulum-het-upright 0.9; else 0.99)."),
     history_length: Optional[int] = typer.Option(
         None, "--history-length", help="Previous transitions of the episode the GRU reads "
                                        "(0: no history; default: chosen by validation among "
                                        f"0, 1, 4 on corpora of up to {SMALL_LOG_ROWS:,} rows, "
                                        "else 4)."),
-    dynamics_weight: float = typer.Option(_D.dynamics_weight, "--dynamics-weight",
+    dynamics_weight: Optional[float] = typer.Option(None, "--dynamics-weight",
                                           help="Value mode: weight of the auxiliary loss that "
                                                "makes the belief also predict o' - o "
                                                "(0: the paper's objective alone; "
@@ -72,10 +78,12 @@ def train(
                                         f"on corpora of up to {SMALL_LOG_ROWS:,} rows, else 0)."),
     paper: bool = typer.Option(False, "--paper", help="The paper's settings for everything "
                                                       "not given (L 4, 128 units, no weight "
-                                                      "decay, no label smoothing): no "
-                                                      "selection."),
+                                                      "decay, no label smoothing, gamma "
+                                                      "0.99): no selection, not the task's "
+                                                      "own settings."),
     epochs: int = typer.Option(_D.max_epochs, "--epochs", help="Maximum epochs (early stopping ends "
-                                                     "sooner)."),
+                                                     "sooner; --belief critic: at most this "
+                                                     "many passes over the training rows)."),
     batch_size: int = typer.Option(_D.batch_size, "--batch-size", help="Mini-batch rows."),
     lr: float = typer.Option(_D.lr, "--lr", help="Adam learning rate."),
     patience: int = typer.Option(_D.patience, "--patience",
@@ -93,25 +101,33 @@ def train(
 ) -> None:
     """Train the belief model b and linear head l of corpus NAME; print the final metrics."""
     fmt = resolve_format(fmt)
-    config = BeliefConfig(mode=choice(mode), belief=choice(belief), critic_steps=critic_steps,
-                          critic_bc_weight=critic_bc_weight, value=value, gamma=gamma,
-                          dynamics_weight=dynamics_weight,
+    corpus = get_store().corpus(name)
+    given = {"mode": choice(mode) if mode is not None else None,
+             "belief": choice(belief) if belief is not None else None, "gamma": gamma,
+             "value": value, "dynamics_weight": dynamics_weight,
+             "history_length": history_length, "hidden": hidden, "weight_decay": weight_decay}
+    task, settings = task_settings.for_corpus(corpus, paper)
+    given, from_task = task_settings.resolve(given, settings)
+    searched = {k: given.pop(k) for k in select.PAPER}
+    config = BeliefConfig(**{k: v for k, v in given.items() if v is not None},
+                          critic_steps=critic_steps, critic_bc_weight=critic_bc_weight,
                           belief_dim=belief_dim, max_epochs=epochs,
                           batch_size=batch_size, lr=lr, patience=patience,
                           val_fraction=val_fraction, seed=seed, threads=threads,
                           dropout=dropout, class_weight=class_weight,
                           label_smoothing=label_smoothing or 0.0)
-    given = {"history_length": history_length, "hidden": hidden, "weight_decay": weight_decay}
-    config = select.with_defaults(config, given).validate()
-    corpus = get_store().corpus(name)
+    config = select.with_defaults(config, searched).validate()
     config = select.with_imitation_defaults(
         corpus, config, {"label_smoothing": label_smoothing}, paper).validate()
+    if from_task:
+        message(task_settings.describe(task, from_task))
+    extra = {"task_settings": {"task": task, "settings": from_task}} if task else {}
     from aoc_cli.store import check_name, writing_model
 
     with writing_model(corpus.path, check_name(model, "model")):  # one writer per model id
         metrics = _train(corpus, config, model, overwrite,
-                         select.open_settings(corpus, config, given, paper),
-                         select.why_no_search(corpus, config, given, paper))
+                         select.open_settings(corpus, config, searched, paper),
+                         select.why_no_search(corpus, config, searched, paper), extra)
     score = (f"val R^2 {metrics['val_r2']:.3f}" if "val_r2" in metrics
              else f"val accuracy {metrics['val_accuracy']:.3f} (majority "
                   f"{metrics['val_majority_accuracy']:.3f})")
@@ -143,13 +159,18 @@ def train(
         message(f"settings: {metrics['selection']['why']}")
     if fmt == "table" and not chosen and "selection" in metrics:
         shown = {**metrics, "selection": metrics["selection"]["why"]}
+    if fmt == "table" and "task_settings" in metrics:
+        own = metrics["task_settings"]
+        shown = {**shown, "task_settings": f"{own['task']}: " + (", ".join(
+            f"{k} {v}" for k, v in own["settings"].items()) or "none")}
     write_object(shown, fmt, title=f"aoc train {name} --model {model}")
 
 
 def _train(corpus, config: BeliefConfig, model: str, overwrite: bool, open_names: list[str],
-           defaults_note: str | None) -> dict:
+           defaults_note: str | None, extra: dict) -> dict:
     """Check the inputs (and the corpus's content hash), then train with a progress bar;
-    with ``open_names``, choose those settings by validation first (aoc_cli.belief.select)."""
+    with ``open_names``, choose those settings by validation first (aoc_cli.belief.select).
+    ``extra``: more entries of the saved metrics (the task's settings)."""
     name = corpus.name
     if config.mode == "value" and config.value == "fqe":
         with ProgressBar(f"fitted Q evaluation of {name}", 1, transient=True) as bar:
@@ -160,14 +181,30 @@ def _train(corpus, config: BeliefConfig, model: str, overwrite: bool, open_names
     from aoc_cli.belief.train import train_model  # imports torch: only once the input is good
 
     critic = config.belief == "critic"  # counted in gradient steps, not epochs
-    with ProgressBar(f"training {name}/{model}",
-                     config.critic_steps if critic else config.max_epochs, transient=True) as bar:
+    total = config.max_epochs
+    if critic:
+        total, rule = config.critic_steps_for(corpus.n_rows, len(prepared.train_rows))
+        seconds = total * CRITIC_STEP_SECONDS * config.batch_size / 500
+        message(f"training the critic: {total:,} gradient steps ({rule}), about "
+                f"{_duration(seconds)} at {CRITIC_STEP_SECONDS * config.batch_size / 500:.2g} s "
+                "a step on one CPU thread (--critic-steps or --epochs to bound it)")
+    with ProgressBar(f"training {name}/{model}", total, transient=True) as bar:
         if open_names:
             return select.select_and_train(corpus, config, open_names, model, overwrite,
-                                           prepared, bar)
-        extra = {"selection": {"searched": [], "why": defaults_note}} if defaults_note else None
+                                           prepared, bar, extra)
+        if defaults_note:
+            extra = {**extra, "selection": {"searched": [], "why": defaults_note}}
         return train_model(corpus, config, model, overwrite=overwrite, progress=bar,
-                           prepared=prepared, extra=extra)
+                           prepared=prepared, extra=extra or None)
+
+
+def _duration(seconds: float) -> str:
+    """``40 s``, ``12 min``, ``1.5 h``."""
+    if seconds < 90:
+        return f"{max(1, round(seconds))} s"
+    if seconds < 90 * 60:
+        return f"{round(seconds / 60)} min"
+    return f"{seconds / 3600:.1f} h"
 
 
 def register(app: typer.Typer) -> None:

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import gymnasium
 
-from aoc_cli.envs.base import Episode, Progress, Task
+from aoc_cli.envs.base import Episode, Progress, Task, collected_task
 from aoc_cli.errors import AocError
 from aoc_cli.store import CorpusData
 
@@ -102,4 +102,4 @@ def collect(task: str, steps: int | None = None, episodes: int | None = None, se
     return data.validate(), summary
 
 
-__all__ = ["TASKS", "Episode", "Task", "collect", "get_task", "make_env"]
+__all__ = ["TASKS", "Episode", "Task", "collect", "collected_task", "get_task", "make_env"]

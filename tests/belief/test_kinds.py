@@ -126,3 +126,18 @@ def test_the_config_names_the_belief_and_dynamics_is_the_weighted_head():
                       (dict(belief="critic", critic_bc_weight=-1), "--critic-bc-weight")):
         with pytest.raises(AocError, match=says):
             BeliefConfig(**bad).validate()
+
+
+def test_critic_steps_scale_with_the_rows_and_are_bounded_by_epochs():
+    from aoc_cli.belief.config import CRITIC_STEPS, CRITIC_STEPS_MIN
+
+    cfg = BeliefConfig(belief="critic")
+    assert cfg.critic_steps_for(100_000, 80_000)[0] == CRITIC_STEPS == 10_000
+    assert cfg.critic_steps_for(300_000, 240_000)[0] == 10_000
+    assert cfg.critic_steps_for(50_000, 40_000)[0] == 5_000
+    assert cfg.critic_steps_for(4_000, 3_200)[0] == CRITIC_STEPS_MIN == 500
+    # --epochs 2: two passes over 3,200 training rows in batches of 500 = 2 x 7 steps
+    steps, rule = BeliefConfig(belief="critic", max_epochs=2).critic_steps_for(4_000, 3_200)
+    assert steps == 14 and "2 epochs" in rule
+    assert BeliefConfig(belief="critic", critic_steps=20,
+                        max_epochs=2).critic_steps_for(4_000, 3_200) == (20, "--critic-steps")

@@ -80,3 +80,16 @@ def test_belief_kinds_train_from_the_cli_and_are_recorded(aoc, corpora, belief, 
 def test_bad_belief_requests_exit_2(aoc, corpora, args, says):
     code, out, err = aoc("train", "syn", *args, *QUICK)
     assert code == 2 and out == "" and says in err and len(err.strip().splitlines()) == 1
+
+
+def test_critic_steps_follow_the_data_and_epochs_with_the_estimate_shown_first(aoc, corpora):
+    code, out, err = aoc("train", "syn", "--belief", "critic", "--model", "c", *QUICK)
+    assert code == 0, err
+    metrics = json.loads(out)
+    per_epoch = -(-metrics["train_rows"] // 500)
+    assert metrics["epochs"] == 2 * per_epoch and "2 epochs" in metrics["critic_steps_rule"]
+    meta = json.loads((corpora.corpus("syn").models_dir / "c" / "config.json").read_text())
+    assert meta["config"]["critic_steps"] == metrics["epochs"]  # resolved, not None
+    said = " ".join(err.split())  # the console wraps long lines
+    assert said.startswith(f"training the critic: {2 * per_epoch} gradient steps (2 epochs")
+    assert " s at " in said.split("trained syn/c")[0]  # the estimate, before training ends
