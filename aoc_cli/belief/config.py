@@ -188,9 +188,9 @@ class BeliefConfig:
         if by_epochs < by_rows:
             return by_epochs, (f"{self.max_epochs} epochs of {per_epoch} batches of the "
                                f"{n_train_rows} training rows")
-        return by_rows, (f"one step per {CRITIC_STEPS_ROWS // CRITIC_STEPS} rows, between "
-                         f"{CRITIC_STEPS_MIN} and {CRITIC_STEPS:,} (from {CRITIC_STEPS_ROWS:,} "
-                         "rows)")
+        return by_rows, (f"one step per {CRITIC_STEPS_ROWS // CRITIC_STEPS} rows of the "
+                         f"{n_rows:,}, at least {CRITIC_STEPS_MIN} and at most "
+                         f"{CRITIC_STEPS:,}")
 
     def resolved_threads(self) -> int:
         """The explicit CPU thread count torch will use."""

@@ -356,6 +356,9 @@ def _task(name: str, gym_id: str, strategy: str, description: str) -> Task:
         plot_fn=_plot, trajectory_fn=_trajectory, default_episodes=DEFAULT_EPISODES,
         extra={"strategy": strategy, "choose_policy": True},
         controller=dict(CONTROLLER),
+        # Markov in its observation: the value belief reads no history, so AOC's policy is a
+        # state policy (valued exactly; tests/control/test_icu_sepsis_quality.py)
+        training={"value": {"history_length": 0}},
     )
 
 

@@ -98,8 +98,11 @@ class Artefacts:
             meta = json.loads(path.read_text())
             # through BeliefConfig, so a field added since the model was saved takes its default
             known = asdict(BeliefConfig.from_dict(meta.get("config", {}), strict=False))
-            saved = {k: v for k, v in known.items() if k not in _RUNTIME}
-            wanted = {k: v for k, v in asdict(config).items() if k not in _RUNTIME}
+            # the critic's steps mean nothing to another belief (None since issue 24, 10,000
+            # in the configs saved before)
+            skip = set(_RUNTIME) | ({"critic_steps"} if config.belief != "critic" else set())
+            saved = {k: v for k, v in known.items() if k not in skip}
+            wanted = {k: v for k, v in asdict(config).items() if k not in skip}
             if saved == wanted and meta.get("corpus_hash") == corpus.hash:
                 return model_id
         started = time.perf_counter()
