@@ -74,3 +74,28 @@ def small_maze(tmp_path_factory):
     train_model(corpus, BeliefConfig(seed=0, threads=1, max_epochs=6, patience=3), "default")
     build_index(corpus)
     return store
+
+
+def pytest_configure(config):
+    config.addinivalue_line(
+        "markers", "quality: an end-to-end quality test of a built-in task (collect, train, "
+                   "index, rollout; tens of seconds): spread over the collection order so that "
+                   "pytest-xdist's workers share them")
+
+
+def pytest_collection_modifyitems(session, config, items):
+    """Place the ``quality`` tests evenly among the others: pytest-xdist hands each worker
+    runs of consecutive tests, and the slow ones side by side would all go to one worker.
+    Deterministic, so every worker collects the same order."""
+    heavy = [item for item in items if item.get_closest_marker("quality")]
+    if not heavy or len(heavy) == len(items):
+        return
+    rest = [item for item in items if not item.get_closest_marker("quality")]
+    gap = len(rest) / len(heavy)
+    spread, j = [], 0
+    for i, item in enumerate(rest):
+        while j < len(heavy) and int(gap * (j + 0.5)) <= i:
+            spread.append(heavy[j])
+            j += 1
+        spread.append(item)
+    items[:] = spread + heavy[j:]
