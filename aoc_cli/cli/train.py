@@ -52,8 +52,8 @@ def train(
     history_length: Optional[int] = typer.Option(
         None, "--history-length", help="Previous transitions of the episode the GRU reads "
                                        "(0: no history; default: chosen by validation among "
-                                       f"0, 1, 4 on corpora of up to {SMALL_LOG_ROWS:,} rows, "
-                                       "else 4)."),
+                                       "0, 1, 4 when imitating discrete actions on up to "
+                                       f"{SMALL_LOG_ROWS:,} rows; else the task's, or 4)."),
     dynamics_weight: Optional[float] = typer.Option(None, "--dynamics-weight",
                                           help="Value mode: weight of the auxiliary loss that "
                                                "makes the belief also predict o' - o "
@@ -62,10 +62,12 @@ def train(
     belief_dim: int = typer.Option(_D.belief_dim, "--belief-dim", help="Belief dimension d_b."),
     hidden: Optional[int] = typer.Option(
         None, "--hidden", help="Units of the GRU and hidden layers (default: chosen among 128, "
-                               "64, 256 on small corpora, else 128)."),
+                               "64, 256 when imitating discrete actions on small corpora, "
+                               "else 128)."),
     weight_decay: Optional[float] = typer.Option(
         None, "--weight-decay", help="Adam's L2 penalty (default: chosen among 0, 1e-4, 1e-3 "
-                                     "on small corpora, else 0)."),
+                                     "when imitating discrete actions on small corpora, "
+                                     "else 0)."),
     dropout: float = typer.Option(_D.dropout, "--dropout",
                                   help="Dropout after the two hidden layers while training "
                                        "(0: none, the paper's)."),
@@ -101,22 +103,21 @@ def train(
 ) -> None:
     """Train the belief model b and linear head l of corpus NAME; print the final metrics."""
     fmt = resolve_format(fmt)
-    corpus = get_store().corpus(name)
     given = {"mode": choice(mode) if mode is not None else None,
              "belief": choice(belief) if belief is not None else None, "gamma": gamma,
              "value": value, "dynamics_weight": dynamics_weight,
              "history_length": history_length, "hidden": hidden, "weight_decay": weight_decay}
+    fixed = dict(critic_steps=critic_steps, critic_bc_weight=critic_bc_weight,
+                 belief_dim=belief_dim, max_epochs=epochs, batch_size=batch_size, lr=lr,
+                 patience=patience, val_fraction=val_fraction, seed=seed, threads=threads,
+                 dropout=dropout, class_weight=class_weight,
+                 label_smoothing=label_smoothing or 0.0)
+    _config(given, fixed)  # the flags checked before the store is read
+    corpus = get_store().corpus(name)
     task, settings = task_settings.for_corpus(corpus, paper)
     given, from_task = task_settings.resolve(given, settings)
-    searched = {k: given.pop(k) for k in select.PAPER}
-    config = BeliefConfig(**{k: v for k, v in given.items() if v is not None},
-                          critic_steps=critic_steps, critic_bc_weight=critic_bc_weight,
-                          belief_dim=belief_dim, max_epochs=epochs,
-                          batch_size=batch_size, lr=lr, patience=patience,
-                          val_fraction=val_fraction, seed=seed, threads=threads,
-                          dropout=dropout, class_weight=class_weight,
-                          label_smoothing=label_smoothing or 0.0)
-    config = select.with_defaults(config, searched).validate()
+    searched = {k: given[k] for k in select.PAPER}
+    config = _config(given, fixed)
     config = select.with_imitation_defaults(
         corpus, config, {"label_smoothing": label_smoothing}, paper).validate()
     if from_task:
@@ -164,6 +165,15 @@ def train(
         shown = {**shown, "task_settings": f"{own['task']}: " + (", ".join(
             f"{k} {v}" for k, v in own["settings"].items()) or "none")}
     write_object(shown, fmt, title=f"aoc train {name} --model {model}")
+
+
+def _config(given: dict, fixed: dict) -> BeliefConfig:
+    """The checked configuration of the settings ``given`` (None: not given; the paper's value
+    for a searched one) and the flags ``fixed``."""
+    searched = {k: given.get(k) for k in select.PAPER}
+    config = BeliefConfig(**{k: v for k, v in given.items()
+                             if v is not None and k not in select.PAPER}, **fixed)
+    return select.with_defaults(config, searched).validate()
 
 
 def _train(corpus, config: BeliefConfig, model: str, overwrite: bool, open_names: list[str],
