@@ -18,8 +18,10 @@ from aoc_cli.control import open_session
 from aoc_cli.store import Store
 
 EPISODES = 1000
-#: The exact survival AOC's decisions must reach (clinicians 0.7818, random 0.7801).
-THRESHOLD = 0.786
+#: The exact survival AOC's decisions must reach (clinicians 0.7818, random 0.7801, their
+#: modal dose 0.7868). Measured 0.7953 with the task's defaults (fqe values, cap, support
+#: penalty); the return-to-go values of before gave 0.7895.
+THRESHOLD = 0.790
 
 
 @pytest.fixture(scope="module")
