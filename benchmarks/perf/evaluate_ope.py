@@ -1,10 +1,10 @@
 """Value-mode `aoc evaluate` on an icu-sepsis log with the offline policy evaluation (issue 26):
 held-out steps per second, decisions and OPE.
 
-    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/evaluate_ope.py [--store DIR] [--repeats 3]
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/perf/evaluate_ope.py [--store DIR] [--repeats 3]
         [--per-step-episodes 1000]
 
-Uses the store of ``benchmarks/ope_sepsis.py`` (run it first, or it builds the corpus of
+Uses the store of ``benchmarks/perf/ope_sepsis.py`` (run it first, or it builds the corpus of
 10,000 clinician episodes, the paper-settings value model with no history and its index, and
 a held-out log ``held0`` of 5,000 episodes). Times :func:`aoc_cli.control.evaluate.evaluate`
 in this process (the model and index loaded once before; 25 candidate actions a step, the knn
@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from aoc_cli.control import ControllerConfig  # noqa: E402
 from aoc_cli.control import evaluate as ev  # noqa: E402
@@ -57,7 +57,7 @@ def main() -> None:
     try:
         corpus, held = store.corpus("train"), store.corpus("held0")
     except AocError:
-        sys.exit("run benchmarks/ope_sepsis.py --logs 1 first (it builds the store)")
+        sys.exit("run benchmarks/perf/ope_sepsis.py --logs 1 first (it builds the store)")
     session = open_session(corpus, config=ControllerConfig())
     small_rows = int(held.episode_starts[args.per_step_episodes])
     small = held.load().select_episodes(np.arange(held.n_episodes) < args.per_step_episodes)

@@ -2,7 +2,7 @@
 logs of clinician episodes, does each estimator's 95% interval cover the truth, and how far is
 its point estimate?
 
-    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/ope_sepsis.py [--logs 10] [--episodes 5000]
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/perf/ope_sepsis.py [--logs 10] [--episodes 5000]
         [--train-episodes 10000] [--store DIR] [--out results.json]
 
 Builds (once, in ``--store``) a corpus of ``--train-episodes`` clinician episodes, a value
@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from aoc_cli.belief import BeliefConfig, train_model  # noqa: E402
 from aoc_cli.control import ControllerConfig  # noqa: E402
