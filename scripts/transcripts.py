@@ -34,7 +34,7 @@ FENCE = re.compile(r"^```")
 def _env(workdir: Path) -> dict:
     env = dict(os.environ)
     env.update(AOC_STORE=str(workdir / "corpora"), COLUMNS="100", OMP_NUM_THREADS="1",
-               MKL_NUM_THREADS="1", PYTHONPATH=str(ROOT), TERM="dumb", NO_COLOR="1", AOC_PROGRESS="0",
+               MKL_NUM_THREADS="1", PYTHONPATH=str(ROOT), TERM="xterm", NO_COLOR="1", AOC_PROGRESS="0",
                PATH=f"{ROOT / '.venv' / 'bin'}{os.pathsep}{env.get('PATH', '')}")
     return env
 
