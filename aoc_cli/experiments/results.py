@@ -89,6 +89,18 @@ def write_csv(path: Path, rows: list[dict]) -> None:
         Path(tmp).write_text(buf.getvalue())
 
 
+def write_rows_csv(path: Path, rows: list[dict]) -> None:
+    """``rows`` as a CSV whose columns are every key of the rows, in first-seen order (the
+    experiments whose rows are not :data:`COLUMNS`: ward, icu-sepsis); written atomically."""
+    columns = list(dict.fromkeys(k for r in rows for k in r)) or ["method"]
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=columns, lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    with atomic_path(path, suffix=".csv") as tmp:
+        Path(tmp).write_text(buf.getvalue())
+
+
 def _csv_cell(v):
     if v is None:
         return ""

@@ -28,7 +28,6 @@ Writes ``results.csv``, ``summary.json`` and ``summary.md`` to ``out``.
 
 from __future__ import annotations
 
-import csv
 import json
 import os
 import subprocess
@@ -47,6 +46,7 @@ from aoc_cli.envs.icu_sepsis import tables as sepsis_tables
 from aoc_cli.envs.tabular import greedy
 from aoc_cli.errors import AocError
 from aoc_cli.experiments import sepsis_policies as sp
+from aoc_cli.experiments.results import write_rows_csv
 from aoc_cli.control import open_session
 from aoc_cli.store import Store, atomic_path
 
@@ -241,12 +241,7 @@ def run_sepsis(out: Path, bench_store: Path, scale: str = "full", seeds: int | N
     if progress is not None:
         progress(len(cells), len(cells), f"bench {task}")
     summary = summarise(rows, refs, methods)
-    columns = list(dict.fromkeys(k for r in rows for k in r)) or ["method"]
-    with atomic_path(out / "results.csv", suffix=".csv") as tmp:
-        with open(tmp, "w", newline="") as fh:
-            w = csv.DictWriter(fh, fieldnames=columns, lineterminator="\n")
-            w.writeheader()
-            w.writerows(rows)
+    write_rows_csv(out / "results.csv", rows)
     with atomic_path(out / "summary.json", suffix=".json") as tmp:
         Path(tmp).write_text(json.dumps({"task": task, "scale": scale, "sizes": sizes,
                                          "seeds": n_seeds, "summary": summary, "rows": rows},

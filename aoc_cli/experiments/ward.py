@@ -25,6 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
+from aoc_cli.experiments.results import write_rows_csv
+
 SCALES = {"full": {"patients": 550, "splits": 10}, "quick": {"patients": 550, "splits": 3},
           "tiny": {"patients": 110, "splits": 2}}
 METHODS = ("abc", "abc-head", "bc-lr", "bc-mlp", "knn", "majority")
@@ -164,14 +166,7 @@ def run_ward(out: Path, bench_store: Path, scale: str = "full", splits: int | No
             abc = next(r for r in rows if r["method"] == "abc" and r["split"] == s)
             log(f"ward split {s}: abc accuracy {abc['accuracy']:.3f} auc {abc['auc']:.3f}")
     summary = summarise(rows)
-    columns = list(dict.fromkeys(k for r in rows for k in r))
-    with atomic_path(out / "results.csv", suffix=".csv") as tmp:
-        import csv
-
-        with open(tmp, "w", newline="") as fh:
-            w = csv.DictWriter(fh, fieldnames=columns, lineterminator="\n")
-            w.writeheader()
-            w.writerows(rows)
+    write_rows_csv(out / "results.csv", rows)
     with atomic_path(out / "summary.json", suffix=".json") as tmp:
         Path(tmp).write_text(json.dumps({"scale": scale, "patients": cfg["patients"],
                                          "splits": n_splits, "summary": summary,

@@ -23,3 +23,12 @@ def test_summary_is_mean_and_std_over_splits():
     (s,) = summarise(rows)
     assert s["splits"] == 2 and abs(s["accuracy_mean"] - 0.925) < 1e-12
     assert abs(s["auc_std"] - 0.05) < 1e-12
+
+
+def test_rows_csv_takes_every_key_in_first_seen_order(tmp_path):
+    from aoc_cli.experiments.results import write_rows_csv
+
+    rows = [{"method": "abc", "auc": 0.5}, {"method": "knn", "split": 1, "auc": 0.25}]
+    write_rows_csv(tmp_path / "r.csv", rows)
+    assert (tmp_path / "r.csv").read_text() == "method,auc,split\nabc,0.5,\nknn,0.25,1\n"
+    assert not list(tmp_path.glob("*.tmp"))
