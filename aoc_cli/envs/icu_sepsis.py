@@ -43,6 +43,7 @@ import gymnasium
 import numpy as np
 
 from aoc_cli.envs.base import Progress, Task, budget
+from aoc_cli.envs.render import step_series
 from aoc_cli.envs.tabular import TabularMDP
 from aoc_cli.errors import AocError
 from aoc_cli.store import CorpusData, box_space, discrete_space, episode_starts_from_lengths
@@ -325,18 +326,8 @@ def make_sepsis_env(strategy: str = "mean", render_mode=None) -> gymnasium.Env:
     return SepsisObservations(env, tables(strategy).observations)
 
 
-def _plot(paths, out_png, title=None, labels=None) -> None:
-    from aoc_cli.envs import render
-
-    paths = render.check_paths(paths, labels)
-    fig, ax = render.new_axes(title or "icu-sepsis", "step", "SOFA score")
-    render.draw_paths(ax, paths, labels)
-    render.save(fig, out_png)
-
-
-def _trajectory(observations: np.ndarray) -> np.ndarray:
-    obs = np.asarray(observations, dtype=float)
-    return np.stack([np.arange(len(obs), dtype=float), obs[:, -1]], axis=1)
+#: The trajectory of a stay: SOFA score over its steps (``aoc collect --plot``).
+_plot, _trajectory = step_series("icu-sepsis", "SOFA score", -1)
 
 
 #: AOC's settings on these tasks (docs/design.md, "Support"; docs/results.md, "icu-sepsis"):

@@ -73,3 +73,22 @@ def save(fig, out_png) -> Path:
     with atomic_path(out_png, suffix=".png") as tmp:
         fig.savefig(tmp, format="png")
     return out_png
+
+
+def step_series(name: str, ylabel: str, column: int):
+    """``(plot, trajectory)`` of a task whose trajectory is one observation feature over the
+    steps of an episode (ward: SpO2, icu-sepsis: SOFA): ``trajectory(observations (T, d_o))``
+    is the (T, 2) array of (step, feature), ``plot(paths, out_png, title, labels)`` draws such
+    paths; a task's ``plot_fn`` and ``trajectory_fn``."""
+
+    def plot(paths, out_png, title=None, labels=None) -> None:
+        paths = check_paths(paths, labels)
+        fig, ax = new_axes(title or name, "step", ylabel)
+        draw_paths(ax, paths, labels)
+        save(fig, out_png)
+
+    def trajectory(observations: np.ndarray) -> np.ndarray:
+        obs = np.asarray(observations, dtype=float)
+        return np.stack([np.arange(len(obs), dtype=float), obs[:, column]], axis=1)
+
+    return plot, trajectory

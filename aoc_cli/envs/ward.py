@@ -40,6 +40,7 @@ import numpy as np
 from gymnasium import spaces
 
 from aoc_cli.envs.base import Progress, Task, budget
+from aoc_cli.envs.render import step_series
 from aoc_cli.errors import AocError
 from aoc_cli.store import CorpusData, atomic_path
 
@@ -289,18 +290,8 @@ class WardEnv(gymnasium.Env):
         return self._obs(), 0.0, done, False, info
 
 
-def _plot(paths, out_png, title=None, labels=None) -> None:
-    from aoc_cli.envs import render
-
-    paths = render.check_paths(paths, labels)
-    fig, ax = render.new_axes(title or "ward", "step", "SpO2 (%)")
-    render.draw_paths(ax, paths, labels)
-    render.save(fig, out_png)
-
-
-def _trajectory(observations: np.ndarray) -> np.ndarray:
-    obs = np.asarray(observations, dtype=float)
-    return np.stack([np.arange(len(obs), dtype=float), obs[:, 0]], axis=1)
+#: The trajectory of a stay: SpO2 (%) over its steps (``aoc collect --plot``).
+_plot, _trajectory = step_series("ward", "SpO2 (%)", 0)
 
 
 TASKS = [Task(
