@@ -37,7 +37,7 @@ from aoc_cli.control.evaluate_inputs import (BASELINES, EXACT_MAX_ROWS, EvalCont
                                              candidate_beliefs, check_inputs, episode_rows,
                                              heterogeneity)
 from aoc_cli.control.epsilon import epsilon_filter, residual_cap
-from aoc_cli.control.ope_eval import add_ope
+from aoc_cli.control.ope_eval import add_ope, wanted
 from aoc_cli.control.records import step_records  # noqa: F401 (aoc_cli.control.evaluate's API)
 from aoc_cli.control.support import penalised, support_episodes, support_filter
 from aoc_cli.decompose import decompose
@@ -372,6 +372,7 @@ def evaluate(session, data, baselines=BASELINES, seed: int = 0, progress=None,
     started = time.perf_counter()
     with one_thread():
         ctx = EvalContext.build(session, data, baselines, seed, exact, selection)
+        wanted(ope, ctx.mode, data)       # a log the OPE cannot use is refused before deciding
         parts, done = [], 0
         for group in chunks(ctx, chunk_size(ctx, chunk_steps)):
             part = score_episodes(ctx, group)

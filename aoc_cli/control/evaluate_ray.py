@@ -19,7 +19,7 @@ import numpy as np
 
 from aoc_cli.control.evaluate import (CHUNK_STEPS, chunk_size, chunks, merge, score_episodes,
                                       summarise)
-from aoc_cli.control.ope_eval import add_ope
+from aoc_cli.control.ope_eval import add_ope, wanted
 from aoc_cli.parallel import capacity, map_chunks, start_ray
 from aoc_cli.threads import one_thread
 
@@ -55,6 +55,7 @@ def evaluate_on_ray(store_root, name: str, data: str, model: str | None, index_i
             "index": index_id, "config": config, "baselines": list(baselines), "seed": int(seed),
             "exact": exact}
     ctx = _context(spec)
+    wanted(ope, ctx.mode, ctx.data)     # a log the OPE cannot use is refused before deciding
     groups = chunks(ctx, chunk_size(ctx, chunk_steps))
     n_tasks = capacity(start_ray(workers, address), workers)
     runs = [list(r) for r in np.array_split(np.arange(len(groups)), min(n_tasks, len(groups)))]

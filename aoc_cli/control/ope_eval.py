@@ -159,11 +159,8 @@ def warnings_for(name: str, rec: dict, n_episodes: int) -> list[str]:
     return out
 
 
-def off_policy_values(data, logged: np.ndarray, policies: dict, settings: OPESettings,
-                      progress=None) -> dict:
-    """The OPE block of ``aoc evaluate`` for held-out corpus ``data`` (every row, in order):
-    ``policies`` name -> decisions (N,) or probabilities (N, n). Returns {"ope": ...,
-    "behaviour_value": ..., "policies": {name: {policy_value, ess, notes}}, "ope_warnings"}."""
+def check_log(data) -> None:
+    """Refuse a held-out log the OPE cannot use: continuous actions or no rewards."""
     if not data.discrete:
         raise AocError("offline policy evaluation needs discrete actions (a deterministic "
                        "policy of continuous actions matches no logged action); use --ope none",
@@ -171,6 +168,14 @@ def off_policy_values(data, logged: np.ndarray, policies: dict, settings: OPESet
     if not data.has_rewards:
         raise AocError(f"corpus {data.name!r} has no rewards: offline policy evaluation needs "
                        "the logged rewards; use --ope none", param="ope")
+
+
+def off_policy_values(data, logged: np.ndarray, policies: dict, settings: OPESettings,
+                      progress=None) -> dict:
+    """The OPE block of ``aoc evaluate`` for held-out corpus ``data`` (every row, in order):
+    ``policies`` name -> decisions (N,) or probabilities (N, n). Returns {"ope": ...,
+    "behaviour_value": ..., "policies": {name: {policy_value, ess, notes}}, "ope_warnings"}."""
+    check_log(data)
     logged = np.asarray(logged, np.int64)
     if len(logged) != data.n_rows:
         raise AocError(f"{len(logged)} decided steps for a log of {data.n_rows} rows")
@@ -202,7 +207,7 @@ def wanted(settings: OPESettings | None, mode: str, data) -> bool:
     """Whether ``aoc evaluate`` runs the OPE: asked for (estimators given) in value mode.
     ``settings`` None is the default: the OPE when the log allows it (value mode, discrete
     actions, rewards); explicit settings on a log that does not allow it are refused by
-    :func:`off_policy_values` (imitation mode here)."""
+    :func:`check_log` before anything is decided."""
     if settings is None:
         return mode == "value" and data.discrete and data.has_rewards
     if not settings.estimators:
@@ -210,6 +215,7 @@ def wanted(settings: OPESettings | None, mode: str, data) -> bool:
     if mode != "value":
         raise AocError("offline policy evaluation is for value-mode models (an imitation model "
                        "has no values to compare); use --ope none", param="ope")
+    check_log(data)         # before any step is decided
     return True
 
 

@@ -17,6 +17,7 @@ from aoc_cli.control.ope_eval import OPESettings
 from aoc_cli.envs import collect
 from aoc_cli.control import open_session
 from aoc_cli.corpus_index import build_index
+from aoc_cli.errors import AocError
 from aoc_cli.store import Store
 
 from tests.conftest import run_in_process
@@ -147,3 +148,17 @@ def test_a_log_without_rewards_asked_for_ope_is_one_line(sepsis, capsys):
     assert err.strip().splitlines() == [
         "aoc: error: corpus 'norew' has no rewards: offline policy evaluation needs the logged "
         "rewards; use --ope none"]
+
+
+def test_continuous_actions_asked_for_ope_are_refused_before_any_step_is_decided(tmp_path):
+    store = Store(tmp_path)
+    corpus = store.write("pend", collect("pendulum-het", steps=1200, seed=0)[0])
+    train_model(corpus, BeliefConfig(history_length=0, hidden=16, belief_dim=4, max_epochs=1,
+                                     threads=1, seed=0), "default")
+    build_index(corpus, "default")
+    decided = []
+    with pytest.raises(AocError, match="offline policy evaluation needs discrete actions"):
+        evaluate(open_session(corpus, config=ControllerConfig(candidates=8)), corpus,
+                 baselines=[], progress=lambda done, total: decided.append(done),
+                 ope=OPESettings(estimators=("pdwis",)))
+    assert decided == []
