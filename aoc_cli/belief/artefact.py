@@ -22,11 +22,11 @@ import numpy as np
 import torch
 
 from aoc_cli.belief.config import BeliefConfig
-from aoc_cli.belief.data import model_dir
 from aoc_cli.belief.inputs import build_net, encode_corpus, pick_device
 from aoc_cli.belief.model import BeliefNet, Encoder, Normalisation
 from aoc_cli.errors import AocError
-from aoc_cli.store import History, atomic_dir, file_record, seal, write_json, write_npy
+from aoc_cli.store import (DEFAULT_MODEL, History, atomic_dir, file_record, model_dir, seal,
+                           write_json, write_npy)
 from aoc_cli.store.verify import check_files, read_json
 
 FORMAT = "aoc-belief-model"
@@ -58,7 +58,7 @@ def save_model(corpus, model_id: str, *, net: BeliefNet, config: BeliefConfig, d
     ``dynamics_target``: the standardisation {"mean", "std"} (d_o,) of the auxiliary head's
     target o' - o, when the model has the head; ``extra``: more JSON entries of config.json
     (e.g. the critic's Q head, ``--belief critic``)."""
-    path = model_dir(corpus, model_id)
+    path = model_dir(corpus.path, model_id)
     meta = {
         "format": FORMAT, "format_version": FORMAT_VERSION,
         "model": model_id, "corpus": corpus.name, "corpus_hash": corpus.hash,
@@ -282,8 +282,8 @@ def load_model(corpus, model_id: str | None = None, device: str | None = None) -
         if not ids:
             raise AocError(f"corpus {corpus.name!r} has no trained model: run "
                            f"`aoc train {corpus.name}`")
-        model_id = "default" if "default" in ids else ids[-1]
-    path = model_dir(corpus, model_id)
+        model_id = DEFAULT_MODEL if DEFAULT_MODEL in ids else ids[-1]
+    path = model_dir(corpus.path, model_id)
     if not path.is_dir():
         known = ", ".join(ids) or "none"
         raise AocError(f"corpus {corpus.name!r} has no model {model_id!r} (models: {known}): "

@@ -7,19 +7,13 @@ import copy
 import math
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from aoc_cli.belief.config import BeliefConfig
 from aoc_cli.belief.targets import value_targets
 from aoc_cli.errors import AocError
-from aoc_cli.store import check_name
-
-
-def model_dir(corpus, model_id: str) -> Path:
-    """``<corpus>/models/<model_id>/``."""
-    return Path(corpus.models_dir) / check_name(model_id, "model")
+from aoc_cli.store import model_dir
 
 
 def split_episodes(n_episodes: int, val_fraction: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -59,7 +53,7 @@ def prepare(corpus, config: BeliefConfig, model_id: str, overwrite: bool,
     """Check the request (config, model id, value target, split) and compute the targets;
     ``progress`` follows a target that takes a while (``fqe``'s backups)."""
     config.validate()
-    if model_dir(corpus, model_id).exists() and not overwrite:
+    if model_dir(corpus.path, model_id).exists() and not overwrite:
         raise AocError(f"model {model_id!r} of corpus {corpus.name!r} already exists: pass "
                        "--overwrite to replace it, or choose another --model")
     values = (value_targets(corpus, config.value, config.gamma, progress=progress)

@@ -34,12 +34,13 @@ import numpy as np
 import torch
 
 from aoc_cli.belief.config import BeliefConfig
-from aoc_cli.belief.data import EarlyStopping, model_dir, report, split_episodes
+from aoc_cli.belief.data import EarlyStopping, report, split_episodes
 from aoc_cli.belief.model import _STD_FLOOR, Encoder, Normalisation, _stats
 from aoc_cli.belief.objective import Objective
 from aoc_cli.belief.targets import value_spec, value_targets
 from aoc_cli.errors import AocError
-from aoc_cli.store import atomic_path
+from aoc_cli.store import DEFAULT_MODEL, atomic_path, model_dir
+from aoc_cli.store.layout import CORPUS_FILE
 from aoc_cli.threads import thread_limits
 
 #: Corpora with more rows than this train by streaming (when the model has no dynamics head).
@@ -62,7 +63,7 @@ class Columns:
     """Contiguous row ranges of a corpus's float columns, read from ``corpus.h5``."""
 
     def __init__(self, corpus):
-        self.path = Path(corpus.path) / "corpus.h5"
+        self.path = Path(corpus.path) / CORPUS_FILE
         self.starts = np.asarray(corpus.episode_starts, dtype=np.int64)
         self.has_rewards = corpus.has_rewards
         self.n_rows = corpus.n_rows
@@ -199,7 +200,7 @@ def _episode_mask(starts: np.ndarray, episodes: np.ndarray, a: int, b: int) -> n
     return np.repeat(keep, lengths)
 
 
-def train_streaming(corpus, config: BeliefConfig, model_id: str = "default",
+def train_streaming(corpus, config: BeliefConfig, model_id: str = DEFAULT_MODEL,
                     overwrite: bool = False, progress=None, block_rows: int = BLOCK_ROWS,
                     save: bool = True, extra: dict | None = None) -> dict:
     """Train like :func:`aoc_cli.belief.train.train_model`, streaming blocks of rows
@@ -215,7 +216,7 @@ def train_streaming(corpus, config: BeliefConfig, model_id: str = "default",
                        "without them")
     if config.dynamics_weight > 0:
         raise AocError("the dynamics head is trained in memory, not streamed")
-    if model_dir(corpus, model_id).exists() and not overwrite:
+    if model_dir(corpus.path, model_id).exists() and not overwrite:
         raise AocError(f"model {model_id!r} of corpus {corpus.name!r} already exists: pass "
                        "--overwrite to replace it, or choose another --model")
     cols = Columns(corpus)

@@ -21,6 +21,7 @@ from aoc_cli.belief.model import Encoder, Normalisation
 from aoc_cli.belief.objective import Objective
 from aoc_cli.belief.targets import value_spec
 from aoc_cli.threads import thread_limits
+from aoc_cli.store import DEFAULT_MODEL
 
 #: Rows per forward pass when evaluating (no gradients).
 EVAL_BATCH = 65536
@@ -55,7 +56,7 @@ def _evaluate(net, inputs: CorpusInputs, rows: torch.Tensor, y: torch.Tensor, ob
         return objective.metrics(net, torch.cat(beliefs), torch.cat(outs), y, rows)
 
 
-def train_model(corpus, config: BeliefConfig, model_id: str = "default", overwrite: bool = False,
+def train_model(corpus, config: BeliefConfig, model_id: str = DEFAULT_MODEL, overwrite: bool = False,
                 progress=None, prepared: TrainingData | None = None, save: bool = True,
                 extra: dict | None = None, inspect=None) -> dict:
     """Learn b and l on ``corpus`` and write ``corpus.models_dir/<model_id>/``; final metrics.

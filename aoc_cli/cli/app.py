@@ -54,7 +54,7 @@ def _version(value: bool) -> None:
 @app.callback()
 def _global(
     store: Optional[Path] = typer.Option(
-        None, "--store", envvar="AOC_STORE", help="Corpus store folder (default ./corpora)."
+        None, "--store", help="Corpus store folder (default $AOC_STORE, else ./corpora)."
     ),
     debug: bool = typer.Option(False, "--debug", help="Show tracebacks of errors."),
     version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
@@ -86,7 +86,13 @@ def global_options_first(args: list[str]) -> list[str]:
     """``aoc``'s own options (``--store DIR``, ``--store=DIR``, ``--debug``) moved before the
     command wherever they were typed, so ``aoc evaluate ward --store s`` works as
     ``aoc --store s evaluate ward`` (no command has options of these names). Nothing after a
-    ``--`` is touched."""
+    ``--`` is touched.
+
+    Kept on purpose: click parses a group's options only before the command name, and this
+    rewrite is what lets ``--store`` (and ``--debug``) follow it without every command
+    declaring them. The root itself is resolved in one place,
+    :func:`aoc_cli.store.layout.store_root` (``--store``, else ``$AOC_STORE``, else
+    ``./corpora``): the callback passes only what was typed."""
     front: list[str] = []
     rest: list[str] = []
     i, end = 0, args.index("--") if "--" in args else len(args)

@@ -184,7 +184,8 @@ RayAddressOption = Annotated[Optional[str], typer.Option(
 
 
 def get_store():
-    """The corpus store selected by --store, AOC_STORE or ./corpora."""
+    """The corpus store at --store, else $AOC_STORE, else ./corpora
+    (:func:`aoc_cli.store.layout.store_root`)."""
     from aoc_cli.store import Store
 
     return Store.open(state.store)

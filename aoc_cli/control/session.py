@@ -13,7 +13,7 @@ from aoc_cli.control.config import ControllerConfig
 from aoc_cli.control.controller import Controller
 from aoc_cli.corpus_index import CorpusIndex, load_index, load_model
 from aoc_cli.errors import AocError
-from aoc_cli.store import Corpus
+from aoc_cli.store import DEFAULT_INDEX, Corpus
 
 if TYPE_CHECKING:
     from aoc_cli.belief.artefact import BeliefModel
@@ -66,7 +66,7 @@ class ModelFreeSession:
         return {"corpus": self.corpus.name, "corpus_hash": self.corpus.hash, "model": None}
 
 
-def open_session(corpus: Corpus, model_id: str | None = None, index_id: str = "default",
+def open_session(corpus: Corpus, model_id: str | None = None, index_id: str = DEFAULT_INDEX,
                  config: ControllerConfig | None = None, selection: np.ndarray | None = None,
                  seed: int = 0, action_space: dict | None = None) -> Session:
     """Load the model and index of ``corpus`` and build a controller; ``selection`` an (N,)

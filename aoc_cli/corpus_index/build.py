@@ -31,7 +31,8 @@ from aoc_cli.index.strata import NEAREST, PER_ACTION
 from aoc_cli.progress import Progress
 from aoc_cli.rows import episode_multiplicity
 from aoc_cli.settings import SMALL_LOG_ROWS
-from aoc_cli.store import Corpus, atomic_dir, check_name, derived, writing_model
+from aoc_cli.store import (DEFAULT_INDEX, Corpus, atomic_dir, derived, index_dir, model_dir,
+                           writing_model)
 
 if TYPE_CHECKING:
     from aoc_cli.belief.artefact import BeliefModel
@@ -79,12 +80,8 @@ def load_model(corpus: Corpus, model_id: str | None) -> BeliefModel:
     return load(corpus, model_id)
 
 
-def _index_dir(corpus, model_id: str, index_id: str) -> Path:
-    return corpus.models_dir / model_id / "index" / check_name(index_id, "index")
-
-
 def build_index(corpus: Corpus, model_id: str | None = None, kind: str = "auto",
-                index_id: str = "default", episode_rates: dict | None = None,
+                index_id: str = DEFAULT_INDEX, episode_rates: dict | None = None,
                 seed: int = 0, progress: Progress | None = None, *,
                 resample: dict | None = None, subsample: dict | None = None,
                 candidates: str = "auto", **params) -> CorpusIndex:
@@ -103,20 +100,20 @@ def build_index(corpus: Corpus, model_id: str | None = None, kind: str = "auto",
     episode_rates = {**(resample or {}), **(subsample or {}), **(episode_rates or {})}
     model = load_model(corpus, model_id)
     model_k = neighbours(corpus, model, candidates)
-    if episode_rates and index_id == "default":
+    if episode_rates and index_id == DEFAULT_INDEX:
         raise AocError("index_id must name a new index for a re-sampled or sub-sampled one "
                        "(the default index holds every row once)", "index_id")
-    model_dir = corpus.models_dir / model.id
-    out = _index_dir(corpus, model.id, index_id)
+    folder = model_dir(corpus.path, model.id)
+    out = index_dir(corpus.path, model.id, index_id)
     todo = f"retrain it: `aoc train {corpus.name} --model {model.id} --overwrite`"
-    fresh = derived.beliefs_fresh(model_dir, model.hash)
+    fresh = derived.beliefs_fresh(folder, model.hash)
     with writing_model(corpus.path, model.id), atomic_dir(out) as tmp:
         # the columns the beliefs read, hashed on the way (with reused beliefs a pass of its
         # own, small beside building the index: an index of damaged data is never built)
         corpus.verify_content()
         staged = None
         if fresh:
-            beliefs = derived.open_beliefs(model_dir, f"beliefs of model {model.id!r}", todo)
+            beliefs = derived.open_beliefs(folder, f"beliefs of model {model.id!r}", todo)
         else:
             if progress is not None:
                 progress(0, corpus.n_rows, "beliefs of every row")
@@ -145,7 +142,7 @@ def build_index(corpus: Corpus, model_id: str | None = None, kind: str = "auto",
         meta["typical_residual"] = typical_residual(ci, seed)
         derived.write_index_meta(tmp, meta)
         if staged is not None:  # everything built: the beliefs go in first, then the index
-            derived.commit_beliefs(staged, model_dir, {
+            derived.commit_beliefs(staged, folder, {
                 "model_hash": model.hash, "corpus_hash": corpus.hash,
                 "shape": list(beliefs.shape)})
     return ci
@@ -166,12 +163,12 @@ def typical_residual(ci: CorpusIndex, seed: int = 0) -> dict:
             "p99": float(np.quantile(r, 0.99)), "sample": int(len(sample)), "k": ci.k}
 
 
-def load_index(corpus: Corpus, model_id: str | None = None, index_id: str = "default") -> CorpusIndex:
+def load_index(corpus: Corpus, model_id: str | None = None, index_id: str = DEFAULT_INDEX) -> CorpusIndex:
     """Load a built index, refusing one built from another corpus or model, or damaged."""
     model = load_model(corpus, model_id)
-    out = _index_dir(corpus, model.id, index_id)
+    out = index_dir(corpus.path, model.id, index_id)
     hint = f"aoc index {corpus.name} --model {model.id}"
-    if index_id != "default":
+    if index_id != DEFAULT_INDEX:
         hint += f" --index-id {index_id} (with its --episode-rate)"
     if not (out / "index.json").is_file():
         raise AocError(f"no index {index_id!r} for model {model.id!r} of corpus "
@@ -182,7 +179,7 @@ def load_index(corpus: Corpus, model_id: str | None = None, index_id: str = "def
     if meta.get("corpus_hash") != corpus.hash or meta.get("model_hash") != model.hash:
         raise AocError(f"index {index_id!r} was built from another version of corpus "
                        f"{corpus.name!r} or model {model.id!r}: rebuild it with `{hint}`")
-    beliefs = derived.open_beliefs(corpus.models_dir / model.id, what, todo)
+    beliefs = derived.open_beliefs(model_dir(corpus.path, model.id), what, todo)
     index = load_faiss(out / "index.faiss", beliefs, what, todo)
     return CorpusIndex(index_id, model, beliefs, model.values, index, meta, _strata(corpus, meta))
 

@@ -8,6 +8,7 @@ from pathlib import Path
 from aoc_cli.experiments.methods import Runner
 from aoc_cli.experiments.prepare import Artefacts
 from aoc_cli.control.rollout import action_space_of
+from aoc_cli.store import DEFAULT_INDEX, DEFAULT_MODEL
 
 SCALES = ("tiny", "quick", "full")
 
@@ -42,8 +43,8 @@ class Context:
         return [m for m in self.methods]
 
 
-def session(corpus, env, task: str | None = None, model_id: str = "default",
-            index_id: str = "default", seed: int = 0, selection=None, **config):
+def session(corpus, env, task: str | None = None, model_id: str = DEFAULT_MODEL,
+            index_id: str = DEFAULT_INDEX, seed: int = 0, selection=None, **config):
     """An AOC session on ``corpus``: ControllerConfig fields ``config`` over the task's own
     controller settings (as `aoc rollout --env TASK` uses them) over the paper's defaults."""
     from aoc_cli.control import ControllerConfig

@@ -14,6 +14,7 @@ from aoc_cli.experiments.cells import Cell, Plan
 from aoc_cli.experiments.common import Context, belief_config, make_task_env, session
 from aoc_cli.experiments.methods import DATA, data_values, row_values
 from aoc_cli.experiments.results import result_row
+from aoc_cli.store import DEFAULT_MODEL
 
 METHODS = ["aoc", "aoc-dynamics", "aoc-critic", "aoc-reward", "knn", "1nn", "knn-belief", "1nn-belief", "bc", "td3bc", "cql", "mpc",
            "zero", "random"]
@@ -44,10 +45,10 @@ def _cells(ctx: Context, scale: dict) -> list[Cell]:
 def _prepare(ctx: Context, scale: dict, prep: tuple):
     _task, size, seed, bc, kinds = prep
     corpus = ctx.artefacts.corpus("lunar", rows=size, seed=seed)
-    ctx.artefacts.model(corpus, "default", belief_config(scale, "value", seed))
+    ctx.artefacts.model(corpus, DEFAULT_MODEL, belief_config(scale, "value", seed))
     if bc:
         ctx.artefacts.model(corpus, "bc", belief_config(scale, "imitation", seed))
-    ctx.artefacts.index(corpus, "default")
+    ctx.artefacts.index(corpus, DEFAULT_MODEL)
     prepare_beliefs(ctx, scale, corpus, list(kinds), seed)
     return corpus
 

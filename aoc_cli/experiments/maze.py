@@ -24,6 +24,7 @@ from aoc_cli.experiments.cells import Cell, Plan
 from aoc_cli.experiments.common import Context, belief_config, make_task_env, session
 from aoc_cli.experiments.methods import row_values
 from aoc_cli.experiments.results import result_row
+from aoc_cli.store import DEFAULT_INDEX, DEFAULT_MODEL
 
 RATES = (4.0, 3.0, 2.0, 1.0, 0.75, 0.5, 0.25)
 EPSILONS = (0.1, 0.3, 0.5, 0.7)
@@ -108,7 +109,7 @@ def start_probe(session) -> dict:
 
 
 def _index_id(rate: float) -> str:
-    return "default" if rate == 1.0 else f"pi1x{rate:g}"
+    return DEFAULT_INDEX if rate == 1.0 else f"pi1x{rate:g}"
 
 
 def _plot(ctx: Context, task: str, results, name: str, title: str) -> None:
@@ -129,10 +130,10 @@ def _maze_cells(ctx: Context, scale: dict) -> list[Cell]:
 def _maze_prepare(ctx: Context, scale: dict, prep: tuple):
     seed = prep[1]
     corpus = ctx.artefacts.corpus("maze", episodes=scale["episodes_data"], seed=seed)
-    ctx.artefacts.model(corpus, "default", belief_config(scale, "value", seed))
+    ctx.artefacts.model(corpus, DEFAULT_MODEL, belief_config(scale, "value", seed))
     for rate in scale["rates"]:
         resample = None if rate == 1.0 else {"policy=pi1": rate}
-        ctx.artefacts.index(corpus, "default", _index_id(rate), resample=resample, seed=seed)
+        ctx.artefacts.index(corpus, DEFAULT_MODEL, _index_id(rate), resample=resample, seed=seed)
     return corpus
 
 
@@ -170,8 +171,8 @@ def _two_gates_cells(ctx: Context, scale: dict) -> list[Cell]:
 def _two_gates_prepare(ctx: Context, scale: dict, prep: tuple):
     seed = prep[1]
     corpus = ctx.artefacts.corpus("two-gates", episodes=scale["episodes_data"], seed=seed)
-    ctx.artefacts.model(corpus, "default", belief_config(scale, "value", seed))
-    ctx.artefacts.index(corpus, "default")
+    ctx.artefacts.model(corpus, DEFAULT_MODEL, belief_config(scale, "value", seed))
+    ctx.artefacts.index(corpus, DEFAULT_MODEL)
     return corpus
 
 

@@ -32,6 +32,7 @@ from aoc_cli.experiments.methods import row_values
 from aoc_cli.experiments.results import result_row
 from aoc_cli.control.monitor import flags_against
 from aoc_cli.control.run import session_reference_band
+from aoc_cli.store import DEFAULT_MODEL
 
 #: The clean reference rollouts of bench seed s use the episode seeds of bench seed s + this.
 REFERENCE_SEEDS = 500
@@ -132,8 +133,8 @@ def _prepare(ctx: Context, scale: dict, prep: tuple):
     spec = scale["tasks"][i]
     corpus = ctx.artefacts.corpus(spec["task"], rows=spec.get("rows"),
                                   episodes=spec.get("episodes"), seed=seed)
-    ctx.artefacts.model(corpus, "default", belief_config(spec, "value", seed))
-    ctx.artefacts.index(corpus, "default")
+    ctx.artefacts.model(corpus, DEFAULT_MODEL, belief_config(spec, "value", seed))
+    ctx.artefacts.index(corpus, DEFAULT_MODEL)
     return corpus
 
 

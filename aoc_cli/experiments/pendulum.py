@@ -28,6 +28,7 @@ from aoc_cli.experiments.common import Context, belief_config, make_task_env, se
 from aoc_cli.experiments.methods import DATA, data_values, row_values
 from aoc_cli.experiments.results import result_row
 from aoc_cli.decompose import default_k
+from aoc_cli.store import DEFAULT_MODEL
 
 TASKS = ("pendulum-het", "pendulum-het-upright")
 METHODS = ["aoc", "aoc-dynamics", "aoc-critic", "aoc-reward", "aoc-gamma0.9", "aoc-normal-rows",
@@ -87,7 +88,7 @@ def _prepare(ctx: Context, scale: dict, prep: tuple):
     bc, dynamics, belief rows)."""
     data_task, rows, seed, bc, dynamics, beliefs = prep
     corpus = ctx.artefacts.corpus(data_task, rows=rows, seed=seed)
-    ctx.artefacts.model(corpus, "default", belief_config(scale, "value", seed))
+    ctx.artefacts.model(corpus, DEFAULT_MODEL, belief_config(scale, "value", seed))
     if dynamics:
         ctx.artefacts.model(corpus, "dynamics", belief_config(scale, "value", seed,
                                                               dynamics_weight=DYNAMICS_WEIGHT))
@@ -95,7 +96,7 @@ def _prepare(ctx: Context, scale: dict, prep: tuple):
     prepare_beliefs(ctx, scale, corpus, [m for m in beliefs if m != DYNAMICS], seed)
     if bc:
         ctx.artefacts.model(corpus, "bc", belief_config(scale, "imitation", seed))
-    ctx.artefacts.index(corpus, "default")
+    ctx.artefacts.index(corpus, DEFAULT_MODEL)
     return corpus
 
 
@@ -156,7 +157,7 @@ def _ablation_run(name: str):
     def run(ctx: Context, scale: dict, cell: Cell, corpus) -> dict:
         task, method, setting, seed = cell.key
         env = make_task_env(task, scale)
-        model_id = "default" if method == "aoc" else "dynamics"
+        model_id = DEFAULT_MODEL if method == "aoc" else "dynamics"
         s = session(corpus, env, task, model_id=model_id, seed=seed,
                     **{**ctx.aoc_config, **dict(cell.args)})
         run = ctx.runner.run("aoc", s, env, ctx.n_episodes(scale["episodes"]), seed,

@@ -24,7 +24,7 @@ from pathlib import Path
 from aoc_cli.belief import BeliefConfig
 from aoc_cli.errors import AocError
 from aoc_cli.progress import stage
-from aoc_cli.store import Store
+from aoc_cli.store import DEFAULT_INDEX, Store, model_dir
 
 #: BeliefConfig fields that do not change the trained model.
 _RUNTIME = ("threads", "device")
@@ -93,7 +93,7 @@ class Artefacts:
         """Train ``model_id`` with ``config`` unless an identical one exists."""
         from aoc_cli.belief import train_model
 
-        path = Path(corpus.models_dir) / model_id / "config.json"
+        path = model_dir(corpus.path, model_id) / "config.json"
         if path.is_file():
             meta = json.loads(path.read_text())
             # through BeliefConfig, so a field added since the model was saved takes its default
@@ -112,7 +112,7 @@ class Artefacts:
         return model_id
 
     # -- indexes ---------------------------------------------------------------------------
-    def index(self, corpus, model_id: str, index_id: str = "default",
+    def index(self, corpus, model_id: str, index_id: str = DEFAULT_INDEX,
               resample: dict | None = None, seed: int = 0):
         from aoc_cli.corpus_index import build_index, load_index
 

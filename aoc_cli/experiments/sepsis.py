@@ -48,7 +48,7 @@ from aoc_cli.errors import AocError
 from aoc_cli.experiments import sepsis_policies as sp
 from aoc_cli.experiments.results import write_rows_csv
 from aoc_cli.control import open_session
-from aoc_cli.store import Store, atomic_path
+from aoc_cli.store import DEFAULT_MODEL, Store, atomic_path
 
 SCALES = {
     "full": {"sizes": (1000, 10000, 50000), "cql_steps": 10000, "mc_episodes": 1000},
@@ -126,7 +126,7 @@ def run_size(store, task: str, episodes: int, seed: int, cfg: dict, methods: lis
     if needs_session:
         started = time.perf_counter()
         metrics = train_aoc(store.root, name, seed=seed)
-        session = open_session(corpus, "default", config=ControllerConfig.for_task(task))
+        session = open_session(corpus, DEFAULT_MODEL, config=ControllerConfig.for_task(task))
         L = session.history_length
         train_seconds = time.perf_counter() - started
         chosen = (metrics.get("selection") or {}).get("chosen") or {}

@@ -25,7 +25,15 @@ from pathlib import Path
 
 import numpy as np
 
+from aoc_cli.belief import select
+from aoc_cli.belief.config import BeliefConfig
+from aoc_cli.belief.data import prepare
+from aoc_cli.control import ControllerConfig, open_session
+from aoc_cli.control.evaluate import evaluate
+from aoc_cli.corpus_index import build_index
+from aoc_cli.envs import collect, render
 from aoc_cli.experiments.results import write_rows_csv
+from aoc_cli.store import DEFAULT_MODEL, Store, atomic_path
 
 SCALES = {"full": {"patients": 550, "splits": 10}, "quick": {"patients": 550, "splits": 3},
           "tiny": {"patients": 110, "splits": 2}}
@@ -62,14 +70,6 @@ def run_split(store, data, split: int, patients: int, seed: int = 0) -> list[dic
     from sklearn.metrics import roc_auc_score
     from sklearn.neural_network import MLPClassifier
 
-    from aoc_cli.belief import select
-    from aoc_cli.belief.config import BeliefConfig
-    from aoc_cli.belief.data import prepare
-    from aoc_cli.control import ControllerConfig
-    from aoc_cli.control.evaluate import evaluate
-    from aoc_cli.corpus_index import build_index
-    from aoc_cli.control import open_session
-
     rng = np.random.default_rng([seed, split])
     test = np.zeros(patients, bool)
     test[rng.choice(patients, size=patients // 11, replace=False)] = True
@@ -81,12 +81,12 @@ def run_split(store, data, split: int, patients: int, seed: int = 0) -> list[dic
     config = select.with_defaults(BeliefConfig(mode="imitation", threads=1, seed=split),
                                   given).validate()
     config = select.with_imitation_defaults(tr, config, {}).validate()
-    prepared = prepare(tr, config, "default", True)
+    prepared = prepare(tr, config, DEFAULT_MODEL, True)
     started = time.perf_counter()
     metrics = select.select_and_train(tr, config, select.open_settings(tr, config, given),
-                                      "default", True, prepared)
-    build_index(tr, "default")
-    session = open_session(tr, "default", config=ControllerConfig())
+                                      DEFAULT_MODEL, True, prepared)
+    build_index(tr, DEFAULT_MODEL)
+    session = open_session(tr, DEFAULT_MODEL, config=ControllerConfig())
     summary, _res = evaluate(session, te, ["knn", "bc"])
     abc_seconds = time.perf_counter() - started
     chosen = metrics["selection"]["chosen"]
@@ -127,8 +127,6 @@ def summarise(rows: list[dict]) -> list[dict]:
 
 
 def plot(summary: list[dict], out_png: Path) -> None:
-    from aoc_cli.envs import render
-
     fig, ax = render.new_axes("ward: held-out patients (mean ± std over splits)", "method",
                               "score", size=(7.0, 4.0))
     x = np.arange(len(summary))
@@ -145,9 +143,6 @@ def plot(summary: list[dict], out_png: Path) -> None:
 def run_ward(out: Path, bench_store: Path, scale: str = "full", splits: int | None = None,
              log=None, progress=None) -> dict:
     """Collect the ward log, run every split, write the outputs; the report."""
-    from aoc_cli.envs import collect
-    from aoc_cli.store import Store, atomic_path
-
     cfg = SCALES[scale]
     n_splits = splits or cfg["splits"]
     started = time.perf_counter()

@@ -25,6 +25,8 @@ from aoc_cli.store.corpus import (
     episode_starts_from_lengths,
     gather_history,
 )
+from aoc_cli.store.layout import (DEFAULT_INDEX, DEFAULT_MODEL, index_dir, model_dir,
+                                  store_root)
 from aoc_cli.store.lock import writing_corpus, writing_model
 from aoc_cli.store.reader import Corpus
 from aoc_cli.store.store import Store, check_name
@@ -33,12 +35,14 @@ from aoc_cli.store.summary import built_from, list_corpora, summarize
 
 
 def open_corpus(name: str, store=None) -> Corpus:
-    """Open corpus ``name`` of the store at ``store`` (default: $AOC_STORE or ./corpora)."""
+    """Open corpus ``name`` of the store at ``store`` (:func:`aoc_cli.store.layout.store_root`)."""
     return Store.open(store).corpus(name)
 
 
 __all__ = [
     "Corpus",
+    "DEFAULT_INDEX",
+    "DEFAULT_MODEL",
     "action_labels",
     "CorpusData",
     "History",
@@ -55,10 +59,13 @@ __all__ = [
     "gather_history",
     "hash_arrays",
     "hash_file",
+    "index_dir",
     "list_corpora",
+    "model_dir",
     "open_corpus",
     "seal",
     "seal_status",
+    "store_root",
     "summarize",
     "write_json",
     "write_npy",

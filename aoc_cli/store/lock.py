@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import Callable, Iterator
 
 from aoc_cli.errors import AocError
+from aoc_cli.store.layout import models_dir
 from aoc_cli.store.lockfiles import pid_alive, remove_locked, same_file
 from aoc_cli.store.sweep import clear_dead
 
@@ -151,7 +152,7 @@ def writing_model(corpus_path: str | os.PathLike, model_id: str) -> Iterator[Non
     with writing_corpus(root, name, shared=True), \
             file_lock(model_lock_path(root, name, model_id),
                       f"model {model_id!r} of corpus {name!r}",
-                      keep=lambda: (corpus_path / "models" / model_id).exists()):
+                      keep=lambda: (models_dir(corpus_path) / model_id).exists()):
         yield
 
 

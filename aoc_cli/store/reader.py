@@ -22,6 +22,7 @@ import numpy as np
 from aoc_cli.errors import AocError
 from aoc_cli.store.atomic import array_checksum, content_hash, seal_status
 from aoc_cli.store.corpus import CorpusData, History, action_labels, gather_history
+from aoc_cli.store.layout import models_dir
 
 SCHEMA_VERSION = 1
 #: Columns up to this many bytes are read into memory once; larger ones are sliced from disk.
@@ -176,7 +177,7 @@ class Corpus:
 
     @property
     def models_dir(self) -> Path:
-        return self.path / "models"
+        return models_dir(self.path)
 
     def check_same_spaces(self, data: CorpusData) -> None:
         def shape(space):  # labelled actions may differ in labels: appending merges them

@@ -1,6 +1,6 @@
 """The corpus store: ``<root>/<name>/corpus.h5`` + ``manifest.json`` (+ ``models/<id>/``).
 
-The root is ``--store``, else ``$AOC_STORE``, else ``./corpora``. Writing is
+The root and the layout are :mod:`aoc_cli.store.layout`. Writing is
 :mod:`aoc_cli.store.writer` (a temporary folder renamed into place, under the corpus's writer
 lock, :mod:`aoc_cli.store.lock`); reading is :mod:`aoc_cli.store.reader`. The manifest's
 ``content_hash`` identifies the data; everything derived from a corpus records it and is
@@ -14,25 +14,16 @@ A folder of the store that holds a corpus file or models but no ``manifest.json`
 from __future__ import annotations
 
 import os
-import re
 from pathlib import Path
 
 from aoc_cli.errors import AocError, warn
 from aoc_cli.store.corpus import CorpusData
+from aoc_cli.store.layout import (CORPUS_FILE, MANIFEST_FILE, check_name, is_name, models_dir,
+                                  store_root)
 from aoc_cli.store.reader import Corpus
 from aoc_cli.store.writer import write_corpus
 
-_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,127}$")
-
-
-def check_name(name: str, what: str = "corpus") -> str:
-    """A store name: letters, digits, '.', '_', '-'; no path separators, no '..'."""
-    if not _NAME.match(name or "") or ".." in name:
-        raise AocError(
-            f"invalid {what} name {name!r}: use letters, digits, '.', '_' and '-' "
-            "(no path separators, no '..')"
-        )
-    return name
+__all__ = ["Store", "check_name"]
 
 
 class Store:
@@ -43,9 +34,7 @@ class Store:
 
     @classmethod
     def open(cls, root: str | os.PathLike | None = None) -> "Store":
-        if root is None:
-            root = os.environ.get("AOC_STORE") or "corpora"
-        root = Path(root)
+        root = store_root(root)
         if root.exists() and not root.is_dir():
             raise AocError(f"store {root} is not a folder: pass --store with a folder path")
         return cls(root)
@@ -54,32 +43,32 @@ class Store:
         return self.root / check_name(name)
 
     def exists(self, name: str) -> bool:
-        return (self.path(name) / "manifest.json").is_file()
+        return (self.path(name) / MANIFEST_FILE).is_file()
 
     def is_damaged(self, name: str) -> bool:
         """A folder with a corpus file or models but no manifest."""
         path = self.path(name)
-        return not (path / "manifest.json").is_file() and (
-            (path / "corpus.h5").exists() or (path / "models").exists())
+        return not (path / MANIFEST_FILE).is_file() and (
+            (path / CORPUS_FILE).exists() or models_dir(path).exists())
 
     def names(self) -> list[str]:
         if not self.root.is_dir():
             return []
         return sorted(p.name for p in self.root.iterdir()
-                      if not p.name.startswith(".") and (p / "manifest.json").is_file())
+                      if not p.name.startswith(".") and (p / MANIFEST_FILE).is_file())
 
     def damaged_names(self) -> list[str]:
         """Folders that hold a corpus file or models but no manifest."""
         if not self.root.is_dir():
             return []
         return sorted(p.name for p in self.root.iterdir()
-                      if p.is_dir() and not p.name.startswith(".") and _NAME.match(p.name)
+                      if p.is_dir() and not p.name.startswith(".") and is_name(p.name)
                       and self.is_damaged(p.name))
 
     def corpus(self, name: str) -> Corpus:
         """Open a stored corpus (read-only, lazy)."""
         path = self.path(name)
-        if not (path / "manifest.json").is_file():
+        if not (path / MANIFEST_FILE).is_file():
             if self.is_damaged(name):
                 raise AocError(f"corpus {name!r} is damaged: {path} has no manifest.json; "
                                f"re-ingest or re-collect it with --overwrite (`aoc verify "

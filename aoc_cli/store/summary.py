@@ -17,6 +17,7 @@ from aoc_cli.errors import AocError
 from aoc_cli.store.atomic import seal_status
 from aoc_cli.store.reader import Corpus
 from aoc_cli.store.store import Store
+from aoc_cli.store.verify import file_status
 
 
 def space_text(space: dict) -> str:
@@ -34,8 +35,6 @@ def built_from(corpus: Corpus) -> list[dict]:
     another size, or, when small, with another SHA-256: ``aoc verify`` checks everything);
     ``unknown`` (no config). Records: ``{"id", "status", "corpus_hash", "mode", "files"}``.
     """
-    from aoc_cli.store.verify import file_status
-
     out = []
     if not corpus.models_dir.is_dir():
         return out

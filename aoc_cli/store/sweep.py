@@ -22,6 +22,7 @@ import re
 import shutil
 from pathlib import Path
 
+from aoc_cli.store.layout import models_dir
 from aoc_cli.store.lockfiles import pid_alive, remove_locked
 
 #: A temporary that records its writer's pid: ``.<name>.p<pid>.<random>.tmp[suffix]`` / ``.old``.
@@ -69,7 +70,7 @@ def clear_dead(root: str | os.PathLike) -> list[dict]:
 def _orphan(root: Path, name: str, model: str | None) -> bool:
     """The corpus (or its model) a lock file guards does not exist."""
     corpus = root / name
-    return not (corpus / "models" / model).exists() if model else not corpus.exists()
+    return not (models_dir(corpus) / model).exists() if model else not corpus.exists()
 
 
 def _remove_unheld(path: Path) -> bool:

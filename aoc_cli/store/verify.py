@@ -23,6 +23,9 @@ from pathlib import Path
 
 from aoc_cli.errors import AocError
 from aoc_cli.store.atomic import seal_status, sha256_file
+from aoc_cli.store.layout import CORPUS_FILE, INDEXES, models_dir
+from aoc_cli.store.reader import Corpus
+from aoc_cli.store.sweep import clear_dead
 
 #: Opening an artefact hashes its recorded files up to this size; larger ones are checked
 #: by size only (``aoc verify`` hashes everything).
@@ -130,7 +133,7 @@ def verify_corpus(store, name: str) -> list[dict]:
                      "detail": "cannot be checked: no readable manifest"})
     if manifest is not None and h5.is_file() and row["status"] != "damaged":
         rows.append(_content_row(store, name))
-    models = folder / "models"
+    models = models_dir(folder)
     if models.is_dir():
         for model in sorted(p for p in models.iterdir()
                             if p.is_dir() and not p.name.startswith(".")):
@@ -139,8 +142,6 @@ def verify_corpus(store, name: str) -> list[dict]:
 
 
 def _content_row(store, name: str) -> dict:
-    from aoc_cli.store.reader import Corpus
-
     try:
         corpus = Corpus(store.path(name))
         failed = None
@@ -176,7 +177,7 @@ def _model_rows(corpus: str, model: Path) -> list[dict]:
             status, detail = file_status(model / "beliefs.npy", None)
             rows.append({"corpus": corpus, "file": f"{base}/beliefs.npy", "status": status,
                          "detail": detail})
-    index_root = model / "index"
+    index_root = model / INDEXES
     if index_root.is_dir():
         for index in sorted(p for p in index_root.iterdir()
                             if p.is_dir() and not p.name.startswith(".")):
@@ -205,8 +206,6 @@ def corpora_to_verify(store, names: list[str] | None = None) -> list[str]:
 def cleared_rows(store) -> list[dict]:
     """Clear what dead writers left in the store (:func:`aoc_cli.store.sweep.clear_dead`) and
     return one ``cleared`` row per removed temporary or lock file."""
-    from aoc_cli.store.sweep import clear_dead
-
     rows = []
     for r in clear_dead(store.root):
         detail = (f"temporary of a dead writer (pid {r['pid']}), removed" if r["what"] ==

@@ -20,6 +20,7 @@ import numpy as np
 from aoc_cli.store.atomic import (array_checksum, atomic_dir, content_hash, file_record, seal,
                                   write_json)
 from aoc_cli.store.corpus import CorpusData, action_labels, episode_starts_from_lengths
+from aoc_cli.store.layout import models_dir
 from aoc_cli.store.lock import writing_corpus
 from aoc_cli.store.reader import SCHEMA_VERSION, Corpus
 
@@ -46,14 +47,14 @@ def write_corpus(store, name: str, data: CorpusData, *, overwrite: bool = False,
             old.check_same_spaces(data)
             sources = old.manifest.get("sources", []) + [data.source]
             data = concat(old.load(), data)
-            keep_models = old.path / "models"
+            keep_models = old.models_dir
         Path(root).mkdir(parents=True, exist_ok=True)
         with atomic_dir(store.path(name)) as tmp:
             digest = _write_h5(tmp / "corpus.h5", data,
                                FLOAT_OPTS if float_opts is None else float_opts)
             arrays = {key: array_checksum(arr) for key, arr in hashed_arrays(data).items()}
             if keep_models is not None and keep_models.is_dir():
-                shutil.copytree(keep_models, tmp / "models")
+                shutil.copytree(keep_models, models_dir(tmp))
             files = {"corpus.h5": file_record(tmp / "corpus.h5")}
             write_json(tmp / "manifest.json",
                        _manifest(name, data, digest, sources, files, arrays))
