@@ -1,9 +1,9 @@
-"""icu-sepsis end to end at CI size: a log of 1,000 clinician episodes, ``aoc train`` and ``aoc
-index`` with their defaults, the controller with the task's settings, and the exact value of
-its decisions (every live state decided once: a state policy, valued by one linear solve over
-the package's tables).
+"""icu-sepsis and icu-sepsis-terminate end to end at CI size: a log of 1,000 clinician
+episodes, ``aoc train`` and ``aoc index`` with their defaults, the controller with the task's
+settings, and the exact value of its decisions (every live state decided once: a state policy,
+valued by one linear solve over the package's tables).
 
-Guards decision quality: AOC must beat the clinicians who wrote the log (0.782) by
+Guards decision quality: AOC must beat the clinicians who wrote the log by the task's
 :data:`THRESHOLD`, with every decision backed by at most d_b + 1 named rows of named patients.
 Sizes: docs/results.md, "icu-sepsis" (the bench at 1k, 10k and 50k episodes).
 """
@@ -18,24 +18,32 @@ from aoc_cli.control import open_session
 from aoc_cli.store import Store
 
 EPISODES = 1000
-#: The exact survival AOC's decisions must reach (clinicians 0.7818, random 0.7801, their
-#: modal dose 0.7868). Measured 0.7953 with the task's defaults (fqe values, cap, support
-#: penalty); the return-to-go values of before gave 0.7895.
-THRESHOLD = 0.790
+#: The exact survival AOC's decisions must reach, per task.
+#: icu-sepsis (clinicians 0.7818, random 0.7801, their modal dose 0.7868): measured 0.7953 with
+#: the task's defaults (fqe values, cap, support penalty); the return-to-go values of before
+#: gave 0.7895.
+#: icu-sepsis-terminate (a dose outside the clinicians' admissible set is fatal; the clinicians'
+#: estimated policy 0.4158, which puts ~16% of its mass there; their modal dose 0.7868):
+#: measured 0.632 with the task's defaults, fatal doses in 12.6% of the live states; the
+#: paper's controller (epsilon 0.5, no cap, no support rule) on the same model 0.384, fatal
+#: doses in 25.4% (docs/results.md, "icu-sepsis").
+THRESHOLD = {"icu-sepsis": 0.790, "icu-sepsis-terminate": 0.60}
+STRATEGY = {"icu-sepsis": "mean", "icu-sepsis-terminate": "terminate"}
 
 
-@pytest.fixture(scope="module")
-def decided(tmp_path_factory):
+@pytest.fixture(scope="module", params=sorted(THRESHOLD))
+def decided(request, tmp_path_factory):
     from tests.conftest import run_aoc
 
+    task = request.param
     root = tmp_path_factory.mktemp("sepsis-store")
     env = {**__import__("os").environ, "AOC_STORE": str(root)}
-    for args in (("collect", "icu-sepsis", "--episodes", str(EPISODES), "--name", "log"),
+    for args in (("collect", task, "--episodes", str(EPISODES), "--name", "log"),
                  ("train", "log"), ("index", "log")):
         code, _out, err = run_aoc(*args, "--format", "json", env=env)
         assert code == 0, (args, err)
     corpus = Store(root).corpus("log")
-    session = open_session(corpus, "default", config=ControllerConfig.for_task("icu-sepsis"))
+    session = open_session(corpus, "default", config=ControllerConfig.for_task(task))
     decisions = []
 
     def decide(observation, history):
@@ -43,22 +51,32 @@ def decided(tmp_path_factory):
         decisions.append(d)
         return d
 
-    tables = icu_sepsis.tables("mean")
+    tables = icu_sepsis.tables(STRATEGY[task])
     assert session.history_length == 0, "icu-sepsis is Markov in its observation: the task's " \
         "default history length is 0, so AOC's policy is a state policy"
     policy = state_policy(decide, tables)
-    return corpus, session, tables, policy, decisions
+    return task, corpus, session, tables, policy, decisions
 
 
 def test_aoc_beats_the_clinicians_exactly(decided):
-    _corpus, _session, tables, policy, _decisions = decided
+    task, _corpus, _session, tables, policy, _decisions = decided
     value = tables.mdp.value(policy)
     clinicians = tables.mdp.value(tables.clinicians)
-    assert value >= THRESHOLD > clinicians, (value, clinicians)
+    assert value >= THRESHOLD[task] > clinicians, (task, value, clinicians)
+
+
+@pytest.mark.parametrize("decided", ["icu-sepsis-terminate"], indirect=True)
+def test_fatal_doses_stay_rare_where_the_variant_makes_them_fatal(decided):
+    # the task's residual cap keeps the candidates the corpus holds, the support penalty those
+    # many patients took: 12.6% of the live states get an inadmissible dose at 1k episodes, the
+    # paper's controller 25.4% (the log's clinicians put ~16% of their mass there)
+    _task, _corpus, _session, tables, policy, _decisions = decided
+    live = np.arange(LIVE)
+    assert np.mean(~tables.admissible[live, np.asarray(policy)[live]]) < 0.2
 
 
 def test_every_decision_is_backed_by_at_most_d_b_plus_one_rows_of_named_patients(decided):
-    corpus, session, _tables, _policy, decisions = decided
+    _task, corpus, session, _tables, _policy, decisions = decided
     assert len(decisions) == LIVE
     ids = corpus.episode_ids
     starts = corpus.episode_starts
