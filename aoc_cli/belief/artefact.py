@@ -24,7 +24,7 @@ import torch
 from aoc_cli.belief.config import BeliefConfig
 from aoc_cli.belief.inputs import build_net, encode_corpus, pick_device
 from aoc_cli.belief.model import BeliefNet, Encoder, Normalisation
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, ModelMissing, ModelStale, call, param
 from aoc_cli.store import (DEFAULT_MODEL, History, atomic_dir, file_record, model_dir, seal,
                            write_json, write_npy)
 from aoc_cli.store.verify import check_files, read_json
@@ -165,7 +165,8 @@ class BeliefModel:
         target = self.meta.get("dynamics_target")
         if self.net.dynamics is None or target is None:
             raise AocError(f"model {self.id!r} has no dynamics head: train it with "
-                           "--dynamics-weight > 0 (a model of an earlier version: retrain it)")
+                           f"{param('dynamics_weight')} > 0 (a model of an earlier version: "
+                           "retrain it)")
         with torch.no_grad():
             b = torch.as_tensor(np.asarray(beliefs, dtype=np.float32), device=self.device)
             z = self.net.dynamics(b).cpu().double().numpy()
@@ -199,7 +200,7 @@ class BeliefModel:
                 raise AocError(f"this belief model needs a history of length {L}")
             if history.mask.shape[1] < L:
                 raise AocError(f"history of length {history.mask.shape[1]} given, the model "
-                               f"was trained with --history-length {L}")
+                               f"was trained with {param('history_length', L)}")
             h = [np.asarray(x)[:, -L:] for x in history]
             steps = self.encoder.steps(*h)
             q = max(q, len(steps))
@@ -267,11 +268,7 @@ class BeliefModel:
 def check_corpus(model: BeliefModel, corpus) -> None:
     """Refuse a model trained on other data than ``corpus`` holds now."""
     if model.corpus_hash != corpus.hash:
-        raise AocError(
-            f"model {model.id!r} was trained on a different version of corpus {corpus.name!r} "
-            f"(hash {model.corpus_hash[:12]}, now {corpus.hash[:12]}): re-run "
-            f"`aoc train {corpus.name} --model {model.id} --overwrite`"
-        )
+        raise ModelStale(corpus.name, model.id, model.corpus_hash, corpus.hash)
 
 
 def load_model(corpus, model_id: str | None = None, device: str | None = None) -> BeliefModel:
@@ -280,16 +277,13 @@ def load_model(corpus, model_id: str | None = None, device: str | None = None) -
     ids = list_models(corpus)
     if model_id is None:
         if not ids:
-            raise AocError(f"corpus {corpus.name!r} has no trained model: run "
-                           f"`aoc train {corpus.name}`")
+            raise ModelMissing(corpus.name, None)
         model_id = DEFAULT_MODEL if DEFAULT_MODEL in ids else ids[-1]
     path = model_dir(corpus.path, model_id)
     if not path.is_dir():
-        known = ", ".join(ids) or "none"
-        raise AocError(f"corpus {corpus.name!r} has no model {model_id!r} (models: {known}): "
-                       f"run `aoc train {corpus.name} --model {model_id}`")
+        raise ModelMissing(corpus.name, model_id, ids)
     what = f"model {model_id!r} of corpus {corpus.name!r} is damaged"
-    todo = f"re-run `aoc train {corpus.name} --model {model_id} --overwrite`"
+    todo = f"re-run `{call('train', corpus.name, model=model_id, overwrite=True)}`"
     meta = read_json(path / "config.json", what, todo)
     if meta.get("format") != FORMAT or meta.get("format_version") != FORMAT_VERSION:
         raise AocError(f"model {model_id!r} of corpus {corpus.name!r} has an unknown format: "

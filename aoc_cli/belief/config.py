@@ -11,7 +11,7 @@ from __future__ import annotations
 import os
 from dataclasses import asdict, dataclass, fields
 
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, BadSetting, param
 
 MODES = ("value", "imitation")
 #: What the value-mode belief b(o, a, h) is trained on (the linear head always maps it to the
@@ -117,57 +117,79 @@ class BeliefConfig:
             self.dynamics_weight = DEFAULT_DYNAMICS_WEIGHT
 
     def validate(self) -> "BeliefConfig":
-        """Check every field; AocError names the flag to fix."""
+        """Check every field; a :class:`BadSetting` names the setting to fix."""
         if self.mode not in MODES:
-            raise AocError(f"unknown --mode {self.mode!r}: use value or imitation")
+            raise BadSetting("mode", self.mode, f"unknown {param('mode')} {self.mode!r}: use value "
+                             "or imitation")
         if self.belief not in BELIEFS:
-            raise AocError(f"unknown --belief {self.belief!r}: use {', '.join(BELIEFS)}")
+            raise BadSetting("belief", self.belief, f"unknown {param('belief')} {self.belief!r}: "
+                             f"use {', '.join(BELIEFS)}")
         if self.dynamics_weight > 0 and self.belief in ("critic", "reward"):
-            raise AocError(f"--dynamics-weight belongs to --belief dynamics, not "
-                           f"--belief {self.belief}")
+            raise BadSetting("dynamics_weight", self.dynamics_weight,
+                             f"{param('dynamics_weight')} belongs to {param('belief', 'dynamics')}"
+                             f", not {param('belief', self.belief)}")
         if self.critic_steps is not None and self.critic_steps < 1:
-            raise AocError(f"--critic-steps must be >= 1, got {self.critic_steps}")
+            raise BadSetting("critic_steps", self.critic_steps,
+                             f"must be >= 1, got {self.critic_steps}")
         if not self.critic_bc_weight >= 0:
-            raise AocError(f"--critic-bc-weight must be >= 0, got {self.critic_bc_weight}")
+            raise BadSetting("critic_bc_weight", self.critic_bc_weight,
+                             f"must be >= 0, got {self.critic_bc_weight}")
         if not self.value:
-            raise AocError("--value is empty: use return, mean-return, reward or a column name")
+            raise BadSetting("value", self.value, "is empty: use return, mean-return, reward or a "
+                             "column name")
         if self.history_length < 0:
-            raise AocError(f"--history-length must be >= 0, got {self.history_length}")
+            raise BadSetting("history_length", self.history_length,
+                             f"must be >= 0, got {self.history_length}")
         if not 0.0 <= self.gamma <= 1.0:
-            raise AocError(f"--gamma must be in [0, 1], got {self.gamma}")
-        for name, flag in (("belief_dim", "--belief-dim"), ("hidden", "--hidden"),
-                           ("batch_size", "--batch-size"), ("max_epochs", "--epochs")):
+            raise BadSetting("gamma", self.gamma,
+                             f"must be in [0, 1], got {self.gamma}")
+        for name in ("belief_dim", "hidden", "batch_size", "max_epochs"):
             if getattr(self, name) < 1:
-                raise AocError(f"{flag} must be >= 1, got {getattr(self, name)}")
+                raise BadSetting(name, getattr(self, name),
+                                 f"must be >= 1, got {getattr(self, name)}")
         if not self.dynamics_weight >= 0:
-            raise AocError(f"--dynamics-weight must be >= 0, got {self.dynamics_weight}")
+            raise BadSetting("dynamics_weight", self.dynamics_weight,
+                             f"must be >= 0, got {self.dynamics_weight}")
         if self.dynamics_weight > 0 and self.mode != "value":
-            raise AocError("--dynamics-weight needs --mode value (the imitation belief b(o, h) "
-                           "has no action to predict the next observation from)")
+            raise BadSetting("dynamics_weight", self.dynamics_weight,
+                             f"needs {param('mode', 'value')} (the imitation belief b(o, h) "
+                             "has no action to predict the next observation from)")
         if self.belief != "value" and self.mode != "value":
-            raise AocError(f"--belief {self.belief} needs --mode value (the imitation belief "
-                           "is trained on the logged action)")
+            raise BadSetting("belief", self.belief,
+                             f"{param('belief', self.belief)} needs {param('mode', 'value')} "
+                             "(the imitation belief is trained on the logged action)")
         if self.patience < 1:
-            raise AocError(f"--patience must be >= 1, got {self.patience}")
+            raise BadSetting("patience", self.patience,
+                             f"must be >= 1, got {self.patience}")
         if not self.weight_decay >= 0:
-            raise AocError(f"--weight-decay must be >= 0, got {self.weight_decay}")
+            raise BadSetting("weight_decay", self.weight_decay,
+                             f"must be >= 0, got {self.weight_decay}")
         if self.class_weight not in ("none", "balanced"):
-            raise AocError(f"unknown --class-weight {self.class_weight!r}: use none or balanced")
+            raise BadSetting("class_weight", self.class_weight,
+                             f"unknown {param('class_weight')} {self.class_weight!r}: use none "
+                             "or balanced")
         if not 0.0 <= self.label_smoothing < 1.0:
-            raise AocError(f"--label-smoothing must be in [0, 1), got {self.label_smoothing}")
+            raise BadSetting("label_smoothing", self.label_smoothing,
+                             f"must be in [0, 1), got {self.label_smoothing}")
         if not 0.0 <= self.dropout < 1.0:
-            raise AocError(f"--dropout must be in [0, 1), got {self.dropout}")
+            raise BadSetting("dropout", self.dropout,
+                             f"must be in [0, 1), got {self.dropout}")
         if not self.lr > 0:
-            raise AocError(f"--lr must be > 0, got {self.lr}")
+            raise BadSetting("lr", self.lr,
+                             f"must be > 0, got {self.lr}")
         if not 0.0 < self.val_fraction < 1.0:
-            raise AocError(f"--val-fraction must be in (0, 1), got {self.val_fraction}")
+            raise BadSetting("val_fraction", self.val_fraction,
+                             f"must be in (0, 1), got {self.val_fraction}")
         if self.threads is not None and self.threads < 1:
-            raise AocError(f"--threads must be >= 1, got {self.threads}")
+            raise BadSetting("threads", self.threads,
+                             f"must be >= 1, got {self.threads}")
         if self.belief_activation not in ("tanh", "relu"):
-            raise AocError(f"unknown belief activation {self.belief_activation!r}: "
-                           "use tanh or relu")
+            raise BadSetting("belief_activation", self.belief_activation,
+                             f"unknown belief activation {self.belief_activation!r}: "
+                             "use tanh or relu")
         if self.device not in ("auto", "cpu", "cuda"):
-            raise AocError(f"unknown device {self.device!r}: use auto, cpu or cuda")
+            raise BadSetting("device", self.device,
+                             f"unknown device {self.device!r}: use auto, cpu or cuda")
         return self
 
     def critic_steps_for(self, n_rows: int, n_train_rows: int) -> tuple[int, str]:

@@ -46,7 +46,7 @@ from torch import nn
 
 from aoc_cli.belief.config import BeliefConfig
 from aoc_cli.belief.model import BeliefNet, Encoder
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, BadSetting, NoRewards, param
 
 TAU = 0.005
 POLICY_NOISE = 0.2      # target smoothing noise, times the action box's half-width
@@ -161,8 +161,8 @@ def fit_critic(corpus, inputs, encoder: Encoder, config: BeliefConfig,
     tr = torch.as_tensor(train_rows[usable[train_rows]], device=device)
     va = torch.as_tensor(val_rows[usable[val_rows]], device=device)
     if len(tr) == 0:
-        raise AocError("no training row has a next row in its episode: --belief critic needs "
-                       "episodes longer than one step")
+        raise AocError("no training row has a next row in its episode: "
+                       f"{param('belief', 'critic')} needs episodes longer than one step")
     low, high = action_box(corpus, encoder)
     critic, actor, critic_t, actor_t = _networks(corpus, config, low, high, device)
     opt_q = torch.optim.Adam(critic.parameters(), lr=LR)
@@ -208,7 +208,7 @@ def fit_critic(corpus, inputs, encoder: Encoder, config: BeliefConfig,
                 on_record(record)
             if not math.isfinite(record["train_loss"]):
                 raise AocError("the critic diverged (the TD loss is not finite): lower "
-                               "--lr or raise --critic-bc-weight")
+                               f"{param('lr')} or raise {param('critic_bc_weight')}")
     return CriticFit(critic_t, actor_t, history, scale)
 
 
@@ -230,11 +230,14 @@ def _networks(corpus, config: BeliefConfig, low: torch.Tensor, high: torch.Tenso
 def _refuse_unsuitable(corpus) -> None:
     """The corpora a TD3 critic cannot be trained on: discrete actions, no rewards."""
     if corpus.discrete:
-        raise AocError("--belief critic needs continuous actions (its actor is a TD3 actor): "
-                       "use --belief value or reward for a discrete action space")
+        raise BadSetting("belief", "critic",
+                         f"{param('belief', 'critic')} needs continuous actions (its actor is a "
+                         f"TD3 actor): use {param('belief', 'value')} or reward for a discrete "
+                         "action space")
     if not corpus.has_rewards:
-        raise AocError(f"corpus {corpus.name!r} has no rewards: --belief critic learns Q "
-                       "from them; use --mode imitation")
+        raise NoRewards(corpus.name, "belief critic",
+                        f"corpus {corpus.name!r} has no rewards: {param('belief', 'critic')} "
+                        f"learns Q from them; use {param('mode', 'imitation')}")
 
 
 def _actor_step(actor: Actor, critic: TwinCritic, opt_pi, o, a, h, bc_weight: float) -> None:

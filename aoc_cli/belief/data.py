@@ -12,7 +12,7 @@ import numpy as np
 
 from aoc_cli.belief.config import BeliefConfig
 from aoc_cli.belief.targets import value_targets
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, ModelExists
 from aoc_cli.store import model_dir
 
 
@@ -54,8 +54,7 @@ def prepare(corpus, config: BeliefConfig, model_id: str, overwrite: bool,
     ``progress`` follows a target that takes a while (``fqe``'s backups)."""
     config.validate()
     if model_dir(corpus.path, model_id).exists() and not overwrite:
-        raise AocError(f"model {model_id!r} of corpus {corpus.name!r} already exists: pass "
-                       "--overwrite to replace it, or choose another --model")
+        raise ModelExists(corpus.name, model_id)
     values = (value_targets(corpus, config.value, config.gamma, progress=progress)
               if config.mode == "value" else None)
     train_eps, val_eps = split_episodes(corpus.n_episodes, config.val_fraction, config.seed)

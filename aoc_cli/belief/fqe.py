@@ -33,7 +33,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, BadSetting, param
 
 #: Rows of the forward passes that compute the targets.
 _EVAL_BATCH = 65536
@@ -90,7 +90,8 @@ def fitted_q_values(observations: np.ndarray, actions: np.ndarray, rewards: np.n
     if n == 0:
         return np.zeros(0)
     if not 0.0 <= gamma <= 1.0:
-        raise AocError(f"gamma must be in [0, 1] for --value fqe, got {gamma}", "gamma")
+        raise BadSetting("gamma", gamma, f"must be in [0, 1] for {param('value', 'fqe')}, "
+                         f"got {gamma}")
     discrete = n_actions is not None
     x = _inputs(observations, actions, discrete)
     act = np.asarray(actions, np.int64).reshape(-1) if discrete else np.zeros(n, np.int64)

@@ -16,7 +16,7 @@ import torch
 
 from aoc_cli.belief.config import BeliefConfig
 from aoc_cli.belief.model import BeliefNet, Encoder
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, BadSetting, param
 
 
 def history_index(episode_starts: np.ndarray, n_rows: int, length: int) -> np.ndarray:
@@ -66,7 +66,8 @@ def encode_corpus(corpus, encoder: Encoder, history_length: int, use_action: boo
 def pick_device(name: str) -> torch.device:
     if name == "cuda" or (name == "auto" and torch.cuda.is_available()):
         if not torch.cuda.is_available():
-            raise AocError("--device cuda asked for, but torch sees no GPU: use --device cpu")
+            raise BadSetting("device", "cuda", f"{param('device', 'cuda')} asked for, but torch "
+                             f"sees no GPU: use {param('device', 'cpu')}")
         return torch.device("cuda")
     return torch.device("cpu")
 

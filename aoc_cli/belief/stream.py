@@ -38,7 +38,7 @@ from aoc_cli.belief.data import EarlyStopping, report, split_episodes
 from aoc_cli.belief.model import _STD_FLOOR, Encoder, Normalisation, _stats
 from aoc_cli.belief.objective import Objective
 from aoc_cli.belief.targets import value_spec, value_targets
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, BadSetting, ModelExists, param
 from aoc_cli.store import DEFAULT_MODEL, atomic_path, model_dir
 from aoc_cli.store.layout import CORPUS_FILE
 from aoc_cli.threads import thread_limits
@@ -211,14 +211,16 @@ def train_streaming(corpus, config: BeliefConfig, model_id: str = DEFAULT_MODEL,
     started = time.perf_counter()
     config.validate()
     if config.class_weight != "none" or config.label_smoothing > 0:
-        raise AocError(f"--class-weight and --label-smoothing are not available for corpora "
-                       f"of over {STREAM_ROWS:,} rows (trained a block at a time): train "
-                       "without them")
+        raise BadSetting("class_weight" if config.class_weight != "none" else "label_smoothing",
+                         config.class_weight if config.class_weight != "none"
+                         else config.label_smoothing,
+                         f"{param('class_weight')} and {param('label_smoothing')} are not "
+                         f"available for corpora of over {STREAM_ROWS:,} rows (trained a block "
+                         "at a time): train without them")
     if config.dynamics_weight > 0:
         raise AocError("the dynamics head is trained in memory, not streamed")
     if model_dir(corpus.path, model_id).exists() and not overwrite:
-        raise AocError(f"model {model_id!r} of corpus {corpus.name!r} already exists: pass "
-                       "--overwrite to replace it, or choose another --model")
+        raise ModelExists(corpus.name, model_id)
     cols = Columns(corpus)
     starts = cols.starts
     ranges = blocks(starts, block_rows)

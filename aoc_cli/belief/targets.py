@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from aoc_cli.belief.config import REWARD_TARGETS
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, BadSetting, NoRewards, param
 
 #: Padded cells allowed per group of episodes of similar length (beyond 4x the real rows).
 _GROUP_CELLS = 1 << 22
@@ -75,10 +75,11 @@ def value_targets(corpus, value: str, gamma: float, progress=None) -> np.ndarray
     ``progress`` (:mod:`aoc_cli.progress`) follows ``fqe``'s backups."""
     if value in REWARD_TARGETS:
         if not corpus.has_rewards:
-            raise AocError(
-                f"corpus {corpus.name!r} has no rewards, so --value {value} cannot be computed: "
-                "use --mode imitation (or --value COLUMN with a numeric column of the corpus)"
-            )
+            raise NoRewards(
+                corpus.name, f"value {value}",
+                f"corpus {corpus.name!r} has no rewards, so {param('value', value)} cannot be "
+                f"computed: use {param('mode', 'imitation')} (or {param('value', 'COLUMN')} "
+                "with a numeric column of the corpus)")
         rewards = corpus.rewards
         if value == "reward":
             v = np.asarray(rewards, dtype=np.float64).copy()
@@ -97,17 +98,18 @@ def value_targets(corpus, value: str, gamma: float, progress=None) -> np.ndarray
         columns = list(corpus.manifest.get("columns", []))
         if value not in columns:
             known = ", ".join(columns) or "none"
-            raise AocError(
-                f"unknown --value {value!r}: use return, mean-return, reward, fqe or a numeric "
-                f"column of corpus {corpus.name!r} (columns: {known})"
-            )
+            raise BadSetting(
+                "value", value,
+                f"unknown {param('value')} {value!r}: use return, mean-return, reward, fqe or a "
+                f"numeric column of corpus {corpus.name!r} (columns: {known})")
         v = np.asarray(corpus.column(value), dtype=np.float64).copy()
     bad = ~np.isfinite(v)
     if bad.any():
-        raise AocError(
-            f"--value {value} is not finite (NaN or inf) in {int(bad.sum())} rows, first row "
-            f"{int(np.flatnonzero(bad)[0])}: choose another --value or fix the column"
-        )
+        raise BadSetting(
+            "value", value,
+            f"{param('value', value)} is not finite (NaN or inf) in {int(bad.sum())} rows, "
+            f"first row {int(np.flatnonzero(bad)[0])}: choose another {param('value')} or fix "
+            "the column")
     return v
 
 

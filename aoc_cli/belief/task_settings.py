@@ -44,7 +44,7 @@ def for_corpus(corpus, paper: bool = False) -> tuple[str, dict]:
     unknown = sorted(set(settings) - set(KEYS)) + sorted(
         {k for values in settings.values() for k in values} - set(FIELDS))
     if unknown:
-        raise AocError(f"internal: task {task!r} has training settings that aoc train cannot "
+        raise AocError(f"internal: task {task!r} has training settings that train cannot "
                        f"take: {', '.join(unknown)}")
     return task, settings
 

@@ -3,7 +3,8 @@
 0 success, 1 a failed run, 2 bad input or usage (one line ``aoc: error: ...`` on stderr, no
 traceback unless ``--debug``): a library error (:class:`aoc_cli.errors.AocError`) and a usage
 error (an unknown command or option, a missing argument, a value that is not one of the
-choices) alike.
+choices) alike. The line of a library error, with its flags and the command that fixes it,
+comes from :mod:`aoc_cli.cli.errors`.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ except ImportError:  # pragma: no cover - older typer on click
 
 from aoc_cli import __version__  # noqa: E402
 from aoc_cli.cli.common import state  # noqa: E402
+from aoc_cli.cli.errors import message, showing_warnings  # noqa: E402
 from aoc_cli.errors import AocError  # noqa: E402
 
 #: Command modules in the order of the data flow.
@@ -116,7 +118,8 @@ def main(argv: list[str] | None = None) -> None:
     previous = _terminate_like_interrupt()
     code = 0
     try:
-        code = app(args=args, prog_name="aoc", standalone_mode=False)
+        with showing_warnings():  # library warnings: one line ``aoc: warning: ...`` each
+            code = app(args=args, prog_name="aoc", standalone_mode=False)
     except Terminated:
         if debug:
             raise
@@ -135,7 +138,7 @@ def main(argv: list[str] | None = None) -> None:
     except AocError as err:
         if debug:
             raise
-        print(f"aoc: error: {err.for_command_line()}", file=sys.stderr)
+        print(f"aoc: error: {message(err)}", file=sys.stderr)
         sys.exit(2)
     except Exception as err:
         if debug:

@@ -25,7 +25,7 @@ import numpy as np
 
 from aoc_cli.corpus_index.index import CorpusIndex
 from aoc_cli.decompose import default_k, rarest_share
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, BadSetting, IndexMissing, IndexStale, call, param
 from aoc_cli.index import BeliefIndex
 from aoc_cli.index.strata import NEAREST, PER_ACTION
 from aoc_cli.progress import Progress
@@ -58,11 +58,13 @@ def neighbours(corpus: Corpus, model, candidates: str = "auto") -> tuple[int, st
     ``candidates``: "auto" (that rule), "nearest" (the paper's k) or "per_action" (discrete
     actions only)."""
     if candidates not in ("auto", NEAREST, PER_ACTION):
-        raise AocError(f"unknown --neighbours {candidates!r}: use auto, {NEAREST} or "
-                       f"{PER_ACTION}")
+        raise BadSetting("neighbours", candidates,
+                         f"unknown {param('neighbours')} {candidates!r}: use auto, {NEAREST} or "
+                         f"{PER_ACTION}")
     if candidates == PER_ACTION and not (corpus.discrete and corpus.n_rows > 0):
-        raise AocError(f"--neighbours {PER_ACTION} needs discrete actions; corpus "
-                       f"{corpus.name!r} has continuous ones")
+        raise BadSetting("neighbours", candidates,
+                         f"{param('neighbours', PER_ACTION)} needs discrete actions; corpus "
+                         f"{corpus.name!r} has continuous ones")
     imitation = model.mode == "imitation" and bool(corpus.discrete) and corpus.n_rows > 0
     if candidates == PER_ACTION or (candidates == "auto" and imitation
                                     and corpus.n_rows <= SMALL_MAX_ROWS):
@@ -105,7 +107,7 @@ def build_index(corpus: Corpus, model_id: str | None = None, kind: str = "auto",
                        "(the default index holds every row once)", "index_id")
     folder = model_dir(corpus.path, model.id)
     out = index_dir(corpus.path, model.id, index_id)
-    todo = f"retrain it: `aoc train {corpus.name} --model {model.id} --overwrite`"
+    todo = f"retrain it: `{call('train', corpus.name, model=model.id, overwrite=True)}`"
     fresh = derived.beliefs_fresh(folder, model.hash)
     with writing_model(corpus.path, model.id), atomic_dir(out) as tmp:
         # the columns the beliefs read, hashed on the way (with reused beliefs a pass of its
@@ -167,18 +169,19 @@ def load_index(corpus: Corpus, model_id: str | None = None, index_id: str = DEFA
     """Load a built index, refusing one built from another corpus or model, or damaged."""
     model = load_model(corpus, model_id)
     out = index_dir(corpus.path, model.id, index_id)
-    hint = f"aoc index {corpus.name} --model {model.id}"
+    hint = call("build_index", corpus.name, model=model.id)
     if index_id != DEFAULT_INDEX:
-        hint += f" --index-id {index_id} (with its --episode-rate)"
+        hint = (call("build_index", corpus.name, model=model.id, index_id=index_id)
+                + f" (with its {param('episode_rates')})")
     if not (out / "index.json").is_file():
-        raise AocError(f"no index {index_id!r} for model {model.id!r} of corpus "
-                       f"{corpus.name!r}: run `{hint}`")
+        raise IndexMissing(corpus.name, model.id, index_id)
     what = f"index {index_id!r} of model {model.id!r} of corpus {corpus.name!r} is damaged"
     todo = f"rebuild it with `{hint}`"
     meta = derived.open_index_meta(out, what, todo)
     if meta.get("corpus_hash") != corpus.hash or meta.get("model_hash") != model.hash:
-        raise AocError(f"index {index_id!r} was built from another version of corpus "
-                       f"{corpus.name!r} or model {model.id!r}: rebuild it with `{hint}`")
+        raise IndexStale(corpus.name, model.id, index_id,
+                         {"corpus": meta.get("corpus_hash"), "model": meta.get("model_hash")},
+                         {"corpus": corpus.hash, "model": model.hash})
     beliefs = derived.open_beliefs(model_dir(corpus.path, model.id), what, todo)
     index = load_faiss(out / "index.faiss", beliefs, what, todo)
     return CorpusIndex(index_id, model, beliefs, model.values, index, meta, _strata(corpus, meta))

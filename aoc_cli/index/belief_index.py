@@ -18,7 +18,7 @@ from pathlib import Path
 import faiss
 import numpy as np
 
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, call
 from aoc_cli.index.config import IndexConfig
 from aoc_cli.index.cells import CellData, cells_search
 from aoc_cli.index.faiss_kinds import ADD_CHUNK, as_beliefs, as_queries, kind_of, new_faiss, storage_view
@@ -319,7 +319,7 @@ class BeliefIndex:
         """Read an index written by `save`. beliefs: the corpus belief array (optional)."""
         path = Path(path)
         if not path.exists():
-            raise AocError(f"no index at {path}; build it first (aoc index)")
+            raise AocError(f"no index at {path}; build it first ({call('build_index')})")
         index = faiss.read_index(str(path))
         meta_path = Path(f"{path}.json")
         meta = json.loads(meta_path.read_text()) if meta_path.exists() else {}

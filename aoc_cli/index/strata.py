@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, call
 
 #: The ``candidates`` an index records (``index.json``): the k nearest rows, or the nearest
 #: rows of each action.
@@ -122,4 +122,5 @@ def candidate_search(search, candidates: str | None, strata: np.ndarray | None, 
         if strata is None:
             raise AocError("internal: per-action candidates need the rows' actions")
         return PerAction(search, strata, split)
-    raise AocError(f"unknown candidates {candidates!r} in the index: rebuild it with `aoc index`")
+    raise AocError(f"unknown candidates {candidates!r} in the index: rebuild it with "
+                   f"`{call('build_index')}`")

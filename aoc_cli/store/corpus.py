@@ -17,7 +17,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, param
 
 
 def box_space(dim: int, low=None, high=None, names: list[str] | None = None) -> dict:
@@ -151,7 +151,7 @@ class CorpusData:
                 bad = int(np.flatnonzero(~finite)[0])
                 raise AocError(
                     f"{name} of row {bad} is not finite (NaN or inf): fix the data or pass "
-                    "--drop-nonfinite to drop the episodes that hold such rows"
+                    f"{param('drop_nonfinite', True)} to drop the episodes that hold such rows"
                 )
 
     def _check_names(self) -> None:

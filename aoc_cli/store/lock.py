@@ -30,7 +30,7 @@ import time
 from pathlib import Path
 from typing import Callable, Iterator
 
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, Locked
 from aoc_cli.store.layout import models_dir
 from aoc_cli.store.lockfiles import pid_alive, remove_locked, same_file
 from aoc_cli.store.sweep import clear_dead
@@ -60,9 +60,7 @@ def _busy(path: Path, what: str) -> AocError:
             break
         time.sleep(0.025)
         pids = _holders(path)
-    who = ("pid " + ", ".join(str(p) for p in pids)) if pids else "another process"
-    return AocError(f"{what} is being written by {who}: wait until it has finished, then "
-                    "run this again")
+    return Locked(what, pids)
 
 
 @contextlib.contextmanager

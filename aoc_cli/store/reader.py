@@ -19,7 +19,7 @@ from typing import Iterator
 import h5py
 import numpy as np
 
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, Damaged, param
 from aoc_cli.store.atomic import array_checksum, content_hash, seal_status
 from aoc_cli.store.corpus import CorpusData, History, action_labels, gather_history
 from aoc_cli.store.layout import models_dir
@@ -43,24 +43,22 @@ def read_manifest(folder: Path) -> dict:
     an AocError naming the file."""
     path = Path(folder) / "manifest.json"
     name = Path(folder).name
-    todo = (f"run `aoc verify {name}`; re-ingest or re-collect the corpus with --overwrite")
     try:
         manifest = json.loads(path.read_text())
     except FileNotFoundError:
-        raise AocError(f"corpus {name!r} is damaged: {path} is missing; {todo}") from None
+        raise Damaged(name, f"{path} is missing") from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
-        raise AocError(f"corpus {name!r} is damaged: {path} is not valid JSON "
-                       f"({_first_line(err)}); {todo}") from None
+        raise Damaged(name, f"{path} is not valid JSON "
+                       f"({_first_line(err)})") from None
     if not isinstance(manifest, dict):
-        raise AocError(f"corpus {name!r} is damaged: {path} is not a JSON object; {todo}")
+        raise Damaged(name, f"{path} is not a JSON object")
     bad = [k for k, t in MANIFEST_KEYS.items()
            if not isinstance(manifest.get(k), t) or (t is int and isinstance(manifest[k], bool))]
     if bad:
-        raise AocError(f"corpus {name!r} is damaged: {path} lacks valid {', '.join(bad)}; "
-                       f"{todo}")
+        raise Damaged(name, f"{path} lacks valid {', '.join(bad)}")
     if seal_status(manifest) is False:
-        raise AocError(f"corpus {name!r} is damaged: {path} was changed after it was written "
-                       f"(its sha256 does not match); {todo}")
+        raise Damaged(name, f"{path} was changed after it was written "
+                       f"(its sha256 does not match)")
     return manifest
 
 
@@ -86,9 +84,7 @@ class Corpus:
 
     def damaged(self, what: str) -> AocError:
         """The error for a damaged corpus file: names it and what to do."""
-        return AocError(f"corpus {self.name!r} is damaged: {what}; run `aoc verify "
-                        f"{self.name}` to see every damaged file, then re-ingest or re-collect "
-                        "it with --overwrite")
+        return Damaged(self.name, what)
 
     def _check_size(self) -> None:
         """The fast check of every open: corpus.h5 exists and has the size recorded."""
@@ -188,7 +184,7 @@ class Corpus:
                 shape(self.action_space) != shape(data.action_space) or \
                 self.has_rewards != (data.rewards is not None):
             raise AocError(
-                f"cannot --append to {self.name!r}: its spaces are observation "
+                f"cannot {param('append', True)} to {self.name!r}: its spaces are observation "
                 f"{shape(self.observation_space)}, action {shape(self.action_space)}, rewards "
                 f"{self.has_rewards}; the new data has observation "
                 f"{shape(data.observation_space)}, action {shape(data.action_space)}, rewards "

@@ -16,7 +16,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from aoc_cli.errors import AocError, warn
+from aoc_cli.errors import AocError, CorpusExists, CorpusNotFound, Damaged, param, warn
 from aoc_cli.store.corpus import CorpusData
 from aoc_cli.store.layout import (CORPUS_FILE, MANIFEST_FILE, check_name, is_name, models_dir,
                                   store_root)
@@ -36,7 +36,8 @@ class Store:
     def open(cls, root: str | os.PathLike | None = None) -> "Store":
         root = store_root(root)
         if root.exists() and not root.is_dir():
-            raise AocError(f"store {root} is not a folder: pass --store with a folder path")
+            raise AocError(f"store {root} is not a folder: pass {param('store')} with a folder "
+                           "path")
         return cls(root)
 
     def path(self, name: str) -> Path:
@@ -70,14 +71,8 @@ class Store:
         path = self.path(name)
         if not (path / MANIFEST_FILE).is_file():
             if self.is_damaged(name):
-                raise AocError(f"corpus {name!r} is damaged: {path} has no manifest.json; "
-                               f"re-ingest or re-collect it with --overwrite (`aoc verify "
-                               f"{name}` lists its files)")
-            known = ", ".join(self.names()) or "none"
-            raise AocError(
-                f"no corpus {name!r} in store {self.root} (known: {known}); "
-                "create it with `aoc ingest` or `aoc collect`"
-            )
+                raise Damaged(name, f"{path} has no manifest.json")
+            raise CorpusNotFound(name, self.root, self.names())
         return Corpus(path)
 
     def check_writable(self, name: str, *, overwrite: bool = False, append: bool = False,
@@ -88,17 +83,17 @@ class Store:
         ``notify``)."""
         check_name(name)
         if overwrite and append:
-            raise AocError("pass either --overwrite or --append, not both")
+            raise AocError(f"pass either {param('overwrite', True)} or {param('append', True)}, "
+                           "not both")
         if self.is_damaged(name) and not overwrite:
             raise AocError(f"corpus folder {self.path(name)} is damaged (a corpus file or "
-                           "models but no manifest.json): pass --overwrite to replace it and "
+                           f"models but no manifest.json): pass {param('overwrite', True)} to replace it and "
                            "everything in it, or move it away")
         if self.exists(name):
             if not (overwrite or append):
-                raise AocError(f"corpus {name!r} already exists: pass --overwrite to replace "
-                               "it or --append to add to it")
+                raise CorpusExists(name)
         elif append and notify and not self.is_damaged(name):
-            warn(f"--append: corpus {name!r} does not exist in {self.root}; creating it")
+            warn(f"{param('append', True)}: corpus {name!r} does not exist in {self.root}; creating it")
 
     def write(self, name: str, data: CorpusData, *, overwrite: bool = False,
               append: bool = False, float_opts: dict | None = None) -> Corpus:

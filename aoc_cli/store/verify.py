@@ -21,7 +21,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, call
 from aoc_cli.store.atomic import seal_status, sha256_file
 from aoc_cli.store.layout import CORPUS_FILE, INDEXES, models_dir
 from aoc_cli.store.reader import Corpus
@@ -45,7 +45,7 @@ def file_status(path: Path, record: dict | None, full: bool = True) -> tuple[str
         if sha256_file(path) != record.get("sha256"):
             return "damaged", "SHA-256 differs from the one recorded"
         return "ok", "SHA-256 matches"
-    return "ok", "size matches (`aoc verify` hashes it)"
+    return "ok", "size matches (a full verify hashes it)"
 
 
 def read_json(path: Path, what: str, todo: str) -> dict:
@@ -76,7 +76,7 @@ def check_files(folder: Path, meta: dict, names, what: str, todo: str) -> None:
         status, detail = file_status(Path(folder) / name, records[name], full=False)
         if status in ("damaged", "missing"):
             raise AocError(f"{what}: {Path(folder) / name} is {status} ({detail}); {todo} "
-                           "(`aoc verify` lists every damaged file)")
+                           f"(`{call('verify')}` lists every damaged file)")
 
 
 def _json_row(corpus: str, path: Path, rel: str) -> tuple[dict, dict | None]:

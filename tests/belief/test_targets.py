@@ -58,12 +58,12 @@ def test_value_targets_by_name(tmp_path):
 def test_value_targets_refuse_bad_requests(tmp_path):
     store = Store(tmp_path)
     corpus = store.write("c", synthetic_value(episodes=4, length=5))
-    with pytest.raises(AocError, match="unknown --value 'nope'.*columns: broken, v"):
+    with pytest.raises(AocError, match="unknown value 'nope'.*columns: broken, v"):
         value_targets(corpus, "nope", 0.9)
     with pytest.raises(AocError, match="not finite.*first row 7"):
         value_targets(corpus, "broken", 0.9)
     free = store.write("free", synthetic_value(episodes=4, length=5, rewards=False))
-    with pytest.raises(AocError, match="has no rewards.*--mode imitation"):
+    with pytest.raises(AocError, match="has no rewards.*mode='imitation'"):
         value_targets(free, "return", 0.9)
     # a numeric column is still a valid target without rewards
     assert value_targets(free, "v", 0.9).shape == (20,)

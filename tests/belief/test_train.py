@@ -7,7 +7,7 @@ import torch
 
 from aoc_cli.belief import BeliefConfig, load_model, train_model
 from aoc_cli.belief.targets import value_targets
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, ModelExists, ModelMissing, ModelStale
 from aoc_cli.store import Store
 
 from tests.belief.corpora import (continuous_imitation, discrete_imitation, history_dependent,
@@ -145,15 +145,16 @@ def test_imitation_on_continuous_actions_predicts_them_in_original_units(tmp_pat
 def test_bad_requests_are_refused_with_what_to_do(tmp_path):
     store = Store(tmp_path)
     corpus = store.write("c", synthetic_value(episodes=4, length=10))
-    with pytest.raises(AocError, match="--history-length must be >= 0"):
+    with pytest.raises(AocError, match="history_length must be >= 0"):
         train_model(corpus, BeliefConfig(value="v", history_length=-1), "x")
     one = store.write("one", synthetic_value(episodes=1, length=10))
     with pytest.raises(AocError, match="1 episode.*at least 2"):
         train_model(one, BeliefConfig(value="v", threads=1), "x")
-    with pytest.raises(AocError, match="has no trained model: run `aoc train c`"):
+    with pytest.raises(ModelMissing, match="has no trained model") as err:
         load_model(corpus)
+    assert (err.value.corpus, err.value.model) == ("c", None)
     train_model(corpus, BeliefConfig(value="v", threads=1, max_epochs=1), "x")
-    with pytest.raises(AocError, match="already exists: pass --overwrite"):
+    with pytest.raises(ModelExists, match="already exists: pass overwrite=True"):
         train_model(corpus, BeliefConfig(value="v", threads=1, max_epochs=1), "x")
     train_model(corpus, BeliefConfig(value="v", threads=1, max_epochs=2), "x", overwrite=True)
     assert load_model(corpus, "x").meta["metrics"]["epochs"] == 2
@@ -170,7 +171,9 @@ def test_a_model_of_a_changed_corpus_is_refused(tmp_path):
     corpus = store.write("c", synthetic_value(episodes=4, length=10))
     train_model(corpus, BeliefConfig(value="v", threads=1, max_epochs=1), "m")
     changed = store.write("c", synthetic_value(episodes=2, length=10, seed=1), append=True)
-    with pytest.raises(AocError, match=r"different version.*aoc train c --model m --overwrite"):
+    with pytest.raises(ModelStale, match=r"different version") as err:
         load_model(changed, "m")
+    assert (err.value.model, err.value.built_from, err.value.found) == \
+        ("m", corpus.hash, changed.hash)
     with pytest.raises(AocError, match="different version"):
         load_model(corpus, "m").row_beliefs(changed)

@@ -4,7 +4,7 @@ import os
 import numpy as np
 import pytest
 
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, CorpusExists
 from aoc_cli.store import CorpusData, Store, box_space, discrete_space, episode_starts_from_lengths
 
 
@@ -76,8 +76,9 @@ def test_reward_free_and_discrete_corpora_are_first_class(tmp_path):
 def test_existing_name_needs_overwrite_and_overwrite_replaces(tmp_path):
     store = Store(tmp_path)
     store.write("c", make_data(seed=0))
-    with pytest.raises(AocError, match="--overwrite"):
+    with pytest.raises(CorpusExists, match="overwrite=True") as err:
         store.write("c", make_data(seed=1))
+    assert err.value.name == "c"
     new = store.write("c", make_data(seed=1), overwrite=True)
     np.testing.assert_array_equal(new.observations, make_data(seed=1).observations)
     # no temporary folders left (the writer lock file .c.lock stays: it is never removed)

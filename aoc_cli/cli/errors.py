@@ -1,0 +1,113 @@
+"""The library's errors and warnings as the command line shows them: one line each, with flags
+for parameters and the ``aoc ...`` command that fixes the problem.
+
+The library (:mod:`aoc_cli.errors`) names parameters (``epsilon``) and library calls
+(``train('c')``); this module alone knows the flags and commands: :func:`message` turns an
+:class:`~aoc_cli.errors.AocError` into the text after ``aoc: error:``, :func:`showing_warnings`
+prints each :class:`~aoc_cli.errors.AocWarning` as ``aoc: warning: ...`` on stderr.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import sys
+import warnings
+from typing import Iterator
+
+from aoc_cli.errors import (AocError, AocWarning, CorpusNotFound, Damaged, IndexMissing,
+                            IndexStale, ModelMissing, ModelStale, render)
+
+#: Library parameters whose flag is not ``--`` + the name with dashes.
+FLAGS = {"max_epochs": "--epochs", "episode_rates": "--episode-rate", "fmt": "--from", "tag_columns": "--tag-column", "tags": "--tag",
+         "static_path": "--static", "columns_file": "--columns"}
+
+#: Library calls whose command is not their name.
+COMMANDS = {"build_index": "index"}
+
+#: The model and index ids a command takes when none is given (no flag shown for them).
+DEFAULT_ID = "default"
+
+
+def flag(name: str, *value) -> str:
+    """``residual_cap`` -> ``--residual-cap``; with a value ``--residual-cap 0.5``; ``True``
+    (a switch) the flag alone."""
+    text = FLAGS.get(name, "--" + name.replace("_", "-"))
+    if not value or value[0] is True:
+        return text
+    return f"{text} {value[0]}"
+
+
+def command(function: str, args: list, kwargs: dict) -> str:
+    """The command line of a library call: ``train('c', model='m')`` -> ``aoc train c
+    --model m``."""
+    words = ["aoc", COMMANDS.get(function, function.replace("_", "-"))]
+    words += [str(a) for a in args] + [flag(k, v) for k, v in kwargs.items()]
+    return " ".join(words)
+
+
+def text(marked: str) -> str:
+    """A marked library message (:func:`aoc_cli.errors.param`, :func:`~aoc_cli.errors.call`)
+    with flags and commands."""
+    return render(marked, flag, command)
+
+
+def _train(corpus: str, model: str | None, *extra: str) -> str:
+    words = ["aoc train", corpus] + ([f"--model {model}"] if model is not None else [])
+    return " ".join(words + list(extra))
+
+
+def _index(corpus: str, model: str, index: str) -> str:
+    line = f"aoc index {corpus} --model {model}"
+    if index != DEFAULT_ID:
+        line += f" --index-id {index} (with its --episode-rate)"
+    return line
+
+
+def hint(err: AocError) -> str:
+    """What to run, for the typed errors that have a command as their fix ('' for the
+    others), with the separator it follows the message with."""
+    if isinstance(err, CorpusNotFound):
+        return "; create it with `aoc ingest` or `aoc collect`"
+    if isinstance(err, Damaged):
+        return (f"; run `aoc verify {err.corpus}` to see every damaged file, then re-ingest or "
+                "re-collect it with --overwrite")
+    if isinstance(err, ModelMissing):
+        extra = ("--mode", err.mode) if err.mode else ()
+        return f": run `{_train(err.corpus, err.model, *extra)}`"
+    if isinstance(err, ModelStale):
+        return f": re-run `aoc train {err.corpus} --model {err.model} --overwrite`"
+    if isinstance(err, IndexMissing):
+        return f": run `{_index(err.corpus, err.model, err.index)}`"
+    if isinstance(err, IndexStale):
+        return f": rebuild it with `{_index(err.corpus, err.model, err.index)}`"
+    return ""
+
+
+def message(err: AocError) -> str:
+    """The one line a user sees after ``aoc: error:`` for ``err``."""
+    line = text(err.marked)
+    if err.param and err.marked.startswith(err.param):  # the plain ``param=`` hook
+        line = flag(err.param) + line[len(err.param):]
+    return line + hint(err)
+
+
+def show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """:func:`warnings.showwarning` of the command line: an :class:`AocWarning` as one line
+    ``aoc: warning: ...`` on stderr; any other warning as Python shows it."""
+    if isinstance(message, AocWarning):
+        print(f"aoc: warning: {text(message.marked)}", file=sys.stderr)
+    elif issubclass(category, AocWarning):
+        print(f"aoc: warning: {message}", file=sys.stderr)
+    else:  # as Python's own warnings.showwarning does
+        (file or sys.stderr).write(warnings.formatwarning(message, category, filename, lineno,
+                                                          line))
+
+
+@contextlib.contextmanager
+def showing_warnings() -> Iterator[None]:
+    """Within: every :class:`AocWarning` is shown (each time, not once per place) by
+    :func:`show_warning`; the previous filters and display come back after."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("always", AocWarning)
+        warnings.showwarning = show_warning
+        yield
