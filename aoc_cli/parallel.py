@@ -32,7 +32,7 @@ def start_ray(workers: int | None, address: str | None):
     try:
         import ray  # optional dependency (the ray extra): imported only when workers are asked
     except ImportError:
-        raise AocError("--workers needs Ray: pip install -e '.[ray]'", "workers") from None
+        raise AocError("workers needs Ray: pip install -e '.[ray]'", "workers") from None
     address = address or os.environ.get("RAY_ADDRESS") or None
     env = dict(WORKER_ENV)
     if os.environ.get("PYTHONPATH"):

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from aoc_cli.baselines.common import ActionSpace
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, ModelMissing, call, param
 
 BC_MODEL = "bc"
 
@@ -26,14 +26,14 @@ def load_bc_model(corpus, model_id: str = BC_MODEL):
     from aoc_cli.belief import list_models, load_model
 
     if model_id not in list_models(corpus):
-        raise AocError(f"the bc baseline needs an imitation-mode model {model_id!r} of corpus "
-                       f"{corpus.name!r}: run `aoc train {corpus.name} --model {model_id} "
-                       "--mode imitation`")
+        raise ModelMissing(corpus.name, model_id, list_models(corpus), mode="imitation",
+                           why=f"the bc baseline needs an imitation-mode model {model_id!r} of "
+                               f"corpus {corpus.name!r}")
     model = load_model(corpus, model_id)
     if model.mode != "imitation":
+        fix = call("train", corpus.name, model=model_id, mode="imitation", overwrite=True)
         raise AocError(f"model {model_id!r} of corpus {corpus.name!r} is a {model.mode}-mode "
-                       f"model; the bc baseline needs `aoc train {corpus.name} --model "
-                       f"{model_id} --mode imitation --overwrite`")
+                       f"model; the bc baseline needs `{fix}`")
     return model
 
 
@@ -48,7 +48,7 @@ class BehaviourCloning:
         if self.model.history_length > session.model.history_length:
             raise AocError(f"the bc model uses a history of {self.model.history_length} steps, "
                            f"longer than the session's {session.model.history_length}: train "
-                           "it with the same --history-length")
+                           f"it with the same {param('history_length')}")
 
     def decide(self, observation, history):
         obs = np.asarray(observation, np.float32).reshape(1, -1)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, call
 
 
 class MissingExtra(AocError):
@@ -83,5 +83,5 @@ def corpus_values(session, method: str) -> np.ndarray:
     values = session.index.values
     if values is None:
         raise AocError(f"the {method} baseline needs row values: use a value-mode model "
-                       f"(`aoc train {session.corpus.name}`), not an imitation-mode one")
+                       f"(`{call('train', session.corpus.name)}`), not an imitation-mode one")
     return np.asarray(values, np.float64)

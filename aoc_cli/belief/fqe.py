@@ -33,7 +33,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from aoc_cli.errors import AocError, BadSetting, param
+from aoc_cli.errors import BadSetting, param
 
 #: Rows of the forward passes that compute the targets.
 _EVAL_BATCH = 65536

@@ -16,7 +16,7 @@ import torch
 
 from aoc_cli.belief.config import BeliefConfig
 from aoc_cli.belief.model import BeliefNet, Encoder
-from aoc_cli.errors import AocError, BadSetting, param
+from aoc_cli.errors import BadSetting, param
 
 
 def history_index(episode_starts: np.ndarray, n_rows: int, length: int) -> np.ndarray:

@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from aoc_cli.belief.config import REWARD_TARGETS
-from aoc_cli.errors import AocError, BadSetting, NoRewards, param
+from aoc_cli.errors import BadSetting, NoRewards, param
 
 #: Padded cells allowed per group of episodes of similar length (beyond 4x the real rows).
 _GROUP_CELLS = 1 << 22

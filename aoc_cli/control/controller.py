@@ -26,7 +26,7 @@ import numpy as np
 from aoc_cli.control.config import ControllerConfig
 from aoc_cli.control.epsilon import epsilon_filter, residual_cap
 from aoc_cli.control.support import penalised, row_episodes, support_episodes, support_filter
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, ModelMissing, param
 from aoc_cli.store import History
 from aoc_cli.threads import one_thread
 
@@ -105,9 +105,8 @@ class Controller:
         self.discrete = corpus.discrete
         self.action_space = action_space or corpus.action_space
         if self.config.sampler == "bc" and bc_model is None and self.model.mode == "value":
-            raise AocError("--sampler bc needs an imitation-mode model: run "
-                           f"`aoc train {corpus.name} --model {self.config.bc_model} "
-                           "--mode imitation`")
+            raise ModelMissing(corpus.name, self.config.bc_model, mode="imitation",
+                               why=f"{param('sampler', 'bc')} needs an imitation-mode model")
         self.corpus_actions = corpus.actions
         if not self.discrete:
             self.low, self.high = action_bounds(self.action_space, self.corpus_actions)

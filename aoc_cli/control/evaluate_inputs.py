@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from aoc_cli.control.controller import support_disagreement
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, NoRewards, call
 from aoc_cli.index.strata import candidate_search
 from aoc_cli.settings import SMALL_LOG_ROWS
 
@@ -21,9 +21,10 @@ def check_inputs(corpus, data, mode: str, baselines, value_target: str | None) -
     from aoc_cli.belief.config import REWARD_TARGETS
 
     if mode == "value" and value_target in REWARD_TARGETS and not data.has_rewards:
-        raise AocError(f"corpus {data.name!r} has no rewards: a value-mode model (target "
-                       f"{value_target!r}) cannot be scored on it; evaluate an imitation-mode "
-                       "model (aoc train --mode imitation) or one trained on a column")
+        raise NoRewards(data.name, "a value-mode model",
+                        f"corpus {data.name!r} has no rewards: a value-mode model (target "
+                        f"{value_target!r}) cannot be scored on it; evaluate an imitation-mode "
+                        f"model ({call('train', mode='imitation')}) or one trained on a column")
     from aoc_cli.control.rollout import check_same_spaces
 
     check_same_spaces(corpus, data, "evaluate it")

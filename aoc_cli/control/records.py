@@ -15,7 +15,7 @@ import h5py
 import numpy as np
 
 from aoc_cli.control.controller import Decision
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, BadInput, call
 from aoc_cli.store import History, action_labels, atomic_path
 
 
@@ -181,8 +181,8 @@ def read_audit_residuals(path) -> tuple[dict, list[np.ndarray]]:
                       key=lambda k: int(k.split("_")[1]))
         runs = [np.asarray(f[k]["residuals"], np.float64) for k in keys if "residuals" in f[k]]
     if not runs:
-        raise AocError(f"audit log {path} holds no decisions with residuals (record it with "
-                       "`aoc rollout ... --audit FILE` using the AOC controller)")
+        raise BadInput(path, f"audit log {path} holds no decisions with residuals (record it "
+                       f"with `{call('rollout', '...', audit='FILE')}` using the AOC controller)")
     return meta, runs
 
 
@@ -191,8 +191,8 @@ def _open_audit(path) -> h5py.File:
     from pathlib import Path
 
     if not Path(path).is_file():
-        raise AocError(f"audit log {path} does not exist: record one with "
-                       "`aoc rollout NAME --env ENV --audit FILE`")
+        raise BadInput(path, f"audit log {path} does not exist: record one with "
+                       f"`{call('rollout', 'NAME', env='ENV', audit='FILE')}`")
     try:
         return h5py.File(path, "r")
     except (OSError, FileNotFoundError) as err:

@@ -15,7 +15,7 @@ from aoc_cli.control.monitor import OODMonitor, band_limits
 from aoc_cli.control.records import decision_record, label_of, write_audit
 from aoc_cli.control.rollout import (EpisodeResult, Policy, check_same_spaces, check_spaces,
                                      run_episode, summarize)
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, BadInput, call
 from aoc_cli.progress import Progress
 from aoc_cli.store import action_labels
 from aoc_cli.threads import thread_limits
@@ -161,9 +161,9 @@ def reference_from_audit(session: Session, path) -> np.ndarray:
     meta, runs = read_audit_residuals(path)
     if meta.get("corpus_hash") != session.corpus.hash or \
             meta.get("model_hash") != session.model.hash:
-        raise AocError(f"the audit log {path} was recorded with another version of the corpus "
-                       "or model: record the clean reference again with `aoc rollout "
-                       f"{session.corpus.name} ... --audit FILE`")
+        raise BadInput(path, f"the audit log {path} was recorded with another version of the "
+                       "corpus or model: record the clean reference again with "
+                       f"`{call('rollout', session.corpus.name, '...', audit='FILE')}`")
     return session_reference_band(session, runs)
 
 

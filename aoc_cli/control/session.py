@@ -12,7 +12,7 @@ import numpy as np
 from aoc_cli.control.config import ControllerConfig
 from aoc_cli.control.controller import Controller
 from aoc_cli.corpus_index import CorpusIndex, load_index, load_model
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, call
 from aoc_cli.store import DEFAULT_INDEX, Corpus
 
 if TYPE_CHECKING:
@@ -78,8 +78,8 @@ def open_session(corpus: Corpus, model_id: str | None = None, index_id: str = DE
         bc_model = load_model(corpus, config.bc_model)
         if bc_model.mode != "imitation":
             raise AocError(f"model {config.bc_model!r} is not an imitation-mode model: the bc "
-                           f"sampler needs `aoc train {corpus.name} --model {config.bc_model} "
-                           "--mode imitation`")
+                           "sampler needs "
+                           f"`{call('train', corpus.name, model=config.bc_model, mode='imitation')}`")
     controller = Controller(corpus, index, config, selection=selection, bc_model=bc_model,
                             seed=seed, action_space=action_space)
     return Session(corpus, index.model, index, controller, action_space)

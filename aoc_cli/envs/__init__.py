@@ -21,7 +21,7 @@ from __future__ import annotations
 import gymnasium
 
 from aoc_cli.envs.base import Episode, Progress, Task, collected_task
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, BadSetting, call, param
 from aoc_cli.store import CorpusData
 
 _IDS = {
@@ -51,8 +51,8 @@ TASKS: dict[str, Task] = {t.name: t for mod in (pendulum_het, maze, lunar, ward,
 def get_task(name: str) -> Task:
     """The built-in task ``name``; unknown -> AocError listing the tasks."""
     if name not in TASKS:
-        raise AocError(f"unknown task {name!r}: use one of {', '.join(TASKS)} "
-                       "(see `aoc collect --list`)")
+        raise BadSetting("task", name, f"unknown task {name!r}: use one of "
+                         f"{', '.join(TASKS)} (see `{call('collect', list=True)}`)")
     return TASKS[name]
 
 
@@ -91,8 +91,9 @@ def collect(task: str, steps: int | None = None, episodes: int | None = None, se
     extra = {} if behaviour == "mix" else {"behaviour": behaviour}
     if policy is not None:
         if not t.extra.get("choose_policy"):
-            raise AocError(f"task {task!r} logs its own mix of policies: --policy is for "
-                           "tasks with one behaviour at a time (icu-sepsis)")
+            raise BadSetting("policy", policy, f"task {task!r} logs its own mix of policies: "
+                             f"{param('policy')} is for tasks with one behaviour at a time "
+                             "(icu-sepsis)")
         if policy not in t.policies:
             raise AocError(f"task {task!r} has no policy {policy!r}: use "
                            f"{' or '.join(t.policies)}")

@@ -13,7 +13,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, BadSetting, param
 from aoc_cli.progress import Progress  # noqa: F401  (collection reports rows, or episodes, done)
 from aoc_cli.store import CorpusData, episode_starts_from_lengths
 
@@ -137,12 +137,12 @@ def collected_task(corpus) -> str:
 
 def budget(steps: int | None, episodes: int | None, default_steps: int | None,
            default_episodes: int | None) -> tuple[int | None, int | None]:
-    """Resolve ``--steps`` / ``--episodes`` against the task's defaults (exactly one is set)."""
+    """Resolve ``steps`` / ``episodes`` against the task's defaults (exactly one is set)."""
     if steps is not None and episodes is not None:
-        raise AocError("give --steps or --episodes, not both")
-    for flag, value in (("--steps", steps), ("--episodes", episodes)):
+        raise AocError(f"give {param('steps')} or {param('episodes')}, not both")
+    for name, value in (("steps", steps), ("episodes", episodes)):
         if value is not None and (isinstance(value, bool) or int(value) != value or value <= 0):
-            raise AocError(f"{flag} must be a positive integer, got {value}")
+            raise BadSetting(name, value, f"must be a positive integer, got {value}")
     if steps is None and episodes is None:
         steps, episodes = default_steps, (None if default_steps else default_episodes)
     return (None if steps is None else int(steps)), (None if episodes is None else int(episodes))

@@ -20,7 +20,7 @@ from aoc_cli.experiments.common import SCALES, Context
 from aoc_cli.experiments.methods import Budget, Runner
 from aoc_cli.experiments.prepare import Artefacts
 from aoc_cli.experiments.results import summarize_rows, summary_markdown, write_outputs
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, BadSetting, param
 
 RETURN = [("return_mean", "return"), ("success_rate", "success")]
 
@@ -85,22 +85,25 @@ def check(name: str, scale: str, seeds: int | None, episodes: int | None,
           behaviour: str = "mix", workers: int | None = None) -> None:
     """Bad experiment, scale, counts, sizes, method names, AOC settings or workers -> AocError."""
     if behaviour not in ("mix", "replay"):
-        raise AocError(f"unknown --behaviour {behaviour!r}: use mix or replay")
+        raise BadSetting("behaviour", behaviour,
+                         f"unknown {param('behaviour')} {behaviour!r}: use mix or replay")
     if behaviour != "mix" and name not in SIZED:
-        raise AocError(f"--behaviour {behaviour} applies to {' and '.join(SIZED)}, not {name}")
+        raise BadSetting("behaviour", behaviour, f"{param('behaviour', behaviour)} applies to "
+                         f"{' and '.join(SIZED)}, not {name}")
     if name != "all" and name not in EXPERIMENTS:
         raise AocError(f"unknown experiment {name!r}: use one of {', '.join(ORDER)} or all")
     if scale not in SCALES:
         raise AocError(f"unknown scale {scale!r}: use one of {', '.join(SCALES)}")
     if seeds is not None and seeds < 1:
-        raise AocError(f"--seeds must be >= 1, got {seeds}")
+        raise BadSetting("seeds", seeds, f"must be >= 1, got {seeds}")
     if episodes is not None and episodes < 1:
-        raise AocError(f"--episodes must be >= 1, got {episodes}")
+        raise BadSetting("episodes", episodes, f"must be >= 1, got {episodes}")
     if epsilon is not None:
         if name in ("epsilon", "two-gates"):
-            raise AocError(f"--epsilon does not apply to {name}: epsilon is what it varies")
+            raise BadSetting("epsilon", epsilon,
+                             f"does not apply to {name}: epsilon is what it varies")
         if not 0.0 < epsilon <= 1.0:
-            raise AocError(f"--epsilon must be in (0, 1], got {epsilon}")
+            raise BadSetting("epsilon", epsilon, f"must be in (0, 1], got {epsilon}")
     if methods:
         from aoc_cli.baselines import BASELINES
 
@@ -109,15 +112,15 @@ def check(name: str, scale: str, seeds: int | None, episodes: int | None,
             raise AocError(f"unknown method(s) {', '.join(unknown)}: use "
                            f"{', '.join([*AOC_METHODS, *BASELINES])}")
     if workers is not None and workers < 1:
-        raise AocError(f"--workers must be >= 1, got {workers}")
+        raise BadSetting("workers", workers, f"must be >= 1, got {workers}")
     if residual_cap is not None and not residual_cap > 0:
-        raise AocError(f"--residual-cap must be > 0, got {residual_cap}")
+        raise BadSetting("residual_cap", residual_cap, f"must be > 0, got {residual_cap}")
     if sizes is not None:
         if name not in SIZED:
-            raise AocError(f"--sizes applies to {' and '.join(SIZED)} (the data-size sweeps), "
-                           f"not to {name}")
+            raise BadSetting("sizes", sizes, f"applies to {' and '.join(SIZED)} (the data-size "
+                             f"sweeps), not to {name}")
         if not sizes or any(n < 100 for n in sizes):
-            raise AocError(f"--sizes must be row counts >= 100, got {sizes}")
+            raise BadSetting("sizes", sizes, f"must be row counts >= 100, got {sizes}")
 
 
 def sized(params: dict, sizes: list[int] | None) -> dict:

@@ -16,7 +16,7 @@ from typing import Iterator
 import h5py
 import numpy as np
 
-from aoc_cli.errors import AocError, warn
+from aoc_cli.errors import AocError, param, warn
 from aoc_cli.progress import Progress
 from aoc_cli.store import CorpusData, box_space, discrete_space, episode_starts_from_lengths
 from aoc_cli.store.corpus import all_finite
@@ -113,7 +113,7 @@ def action_space_of(actions: np.ndarray, discrete: bool, names=None) -> tuple[np
             if not ok.all():
                 bad = int(np.flatnonzero(~ok)[0])
                 raise AocError(f"discrete action of row {bad} is not an integer: {flat[bad]}; "
-                               "drop --discrete-actions for continuous actions")
+                               f"drop {param('discrete_actions')} for continuous actions")
         flat = flat.astype(np.int64)
         if len(flat) and flat.min() < 0:
             raise AocError(f"discrete actions must be 0, 1, 2, ...; row "
@@ -212,7 +212,8 @@ def from_flat(
     for col in options.tag_columns:
         if col not in extra:
             known = ", ".join(sorted(extra)) or "none"
-            raise AocError(f"--tag-column {col!r} is not in the file (per-row arrays: {known})")
+            raise AocError(f"{param('tag_columns')} {col!r} is not in the file (per-row arrays: "
+                           f"{known})")
         check_lengths({"observations": observations, col: extra[col]})
         tags[col] = encode_labels(extra[col])
     columns = {k: np.asarray(v, dtype=np.float64) for k, v in extra.items()

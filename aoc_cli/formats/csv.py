@@ -39,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-from aoc_cli.errors import AocError, warn
+from aoc_cli.errors import AocError, param, warn
 from aoc_cli.formats.common import ReadOptions, action_space_of, encode_labels
 from aoc_cli.formats.text_actions import text_actions
 from aoc_cli.formats.csv_exported import exported_mapping, restore_exported
@@ -71,9 +71,11 @@ def _mapping(options: ReadOptions) -> dict:
     try:
         mapping = json.loads(Path(options.columns_file).read_text())
     except (OSError, json.JSONDecodeError) as err:
-        raise AocError(f"cannot read --columns {options.columns_file}: {err}") from None
+        raise AocError(f"cannot read {param('columns_file')} {options.columns_file}: "
+                       f"{err}") from None
     if not isinstance(mapping, dict) or set(mapping) - MAPPING_KEYS:
-        raise AocError(f"--columns {options.columns_file} must be a JSON object with keys among "
+        raise AocError(f"{param('columns_file')} {options.columns_file} must be a JSON object "
+                       f"with keys among "
                        f"{sorted(MAPPING_KEYS)}")
     return mapping
 
@@ -131,13 +133,14 @@ def _roles(path: Path, header: list[str], options: ReadOptions) -> Roles:
             "reward" if "reward" in header else None))  # a mapping's null: no reward
         if reward_col is not None and reward_col not in header:
             raise AocError(f"{path}: no reward column {reward_col!r}: name it with "
-                           "--reward-column or pass --reward-free")
+                           f"{param('reward_column')} or pass {param('reward_free')}")
     term_col = options.terminal_column or m.get("terminal")
     if term_col is not None and term_col not in header:
         raise AocError(f"{path}: no terminal column {term_col!r}")
     discrete = options.discrete_actions or bool(m.get("discrete_actions", False))
     if discrete and len(act_cols) != 1:
-        raise AocError(f"--discrete-actions needs exactly one action column, got {act_cols}")
+        raise AocError(f"{param('discrete_actions')} needs exactly one action column, got "
+                       f"{act_cols}")
     return Roles(id_col, time_col, obs_cols, act_cols, reward_col, term_col,
                  list(options.tag_columns) or list(m.get("tags", [])), discrete,
                  m.get("static_id") or id_col)
@@ -206,8 +209,8 @@ def _tags(path: Path, cols: dict, roles: Roles, eps: Episodes, static_tags: dict
         elif c in static_tags:
             tags[c] = encode_labels(np.repeat(static_tags[c], lengths))
         else:
-            raise AocError(f"--tag-column {c!r} is not a column of {path}"
-                           + (" or of the --static file" if has_static else ""))
+            raise AocError(f"{param('tag_columns')} {c!r} is not a column of {path}"
+                           + (f" or of the {param('static')} file" if has_static else ""))
     return tags
 
 
@@ -226,15 +229,15 @@ def read_csv(path: Path, options: ReadOptions) -> CorpusData:
     static_tags: dict[str, np.ndarray] = {}
     if options.static is not None:
         if roles.id is None:
-            raise AocError("--static needs an episode id column to join on: name it with "
-                           "--id-column")
+            raise AocError(f"{param('static')} needs an episode id column to join on: name it with "
+                           f"{param('id_column')}")
         static_names, static_feats, static_tags = read_static(
             Path(options.static), roles.static_id, eps.keys, eps.ids,
             bool(np.issubdtype(np.asarray(eps.keys).dtype, np.number)), roles.tags)
     obs_names = list(roles.observations) + static_names
     if not obs_names:
-        raise AocError(f"{path}: no observation columns: name them with --obs-columns, a "
-                       "--columns mapping file or obs_* column names")
+        raise AocError(f"{path}: no observation columns: name them with {param('obs_columns')}, a "
+                       f"{param('columns_file')} mapping file or obs_* column names")
     parts = [numeric(cols[c], c, path)[eps.order][:, None] for c in roles.observations]
     if static_feats is not None:
         parts.append(np.repeat(static_feats, np.diff(eps.starts), axis=0))

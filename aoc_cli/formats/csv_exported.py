@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, param
 from aoc_cli.formats.common import ReadOptions
 from aoc_cli.formats.export_csv import mapping_path
 from aoc_cli.formats.spec import restore, take_episodes
@@ -54,7 +54,8 @@ def restore_exported(data: CorpusData, spec: dict, path: Path) -> CorpusData:
     where = {e: i for i, e in enumerate(data.episode_ids or [])}
     if len(keys) != data.n_episodes or any(k not in where for k in keys):
         raise AocError(f"{path}: its episode ids differ from those of its export metadata "
-                       "(edited after export?); re-export it, or pass --columns with your "
+                       f"(edited after export?); re-export it, or pass {param('columns_file')} "
+                       f"with your "
                        "own mapping")
     data = take_episodes(data, np.array([where[k] for k in keys], dtype=np.int64))
     truncated = data.columns.pop("truncated", None)

@@ -19,7 +19,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, param
 from aoc_cli.formats.common import (
     ReadOptions,
     action_space_of,
@@ -58,7 +58,8 @@ def read_d3rlpy(path: Path, options: ReadOptions) -> CorpusData:
                              get["terminals"], None, source, options,
                              episode_ends=get["episode_terminals"])
         if options.tag_columns:
-            raise AocError("d3rlpy dumps have no per-row columns for --tag-column: use --tag "
+            raise AocError(f"d3rlpy dumps have no per-row columns for {param('tag_columns')}: "
+                           f"use {param('tags')} "
                            "KEY=VALUE for a constant tag")
         if "num_episodes" in f:
             n_ep = int(f["num_episodes"][()])

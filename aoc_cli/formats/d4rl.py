@@ -18,7 +18,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, param
 from aoc_cli.formats.common import ReadOptions, encode_labels, from_flat, open_h5
 from aoc_cli.formats.spec import parse_spec, restore
 from aoc_cli.store import CorpusData
@@ -72,7 +72,7 @@ def _read_exported(f: h5py.File, path: Path, options: ReadOptions) -> CorpusData
     for key in list(spec["tags"]) + list(options.tag_columns):
         if not isinstance(f.get(f"infos/{key}"), h5py.Dataset):
             raise AocError(f"{path}: no infos/{key} (a tag of the export metadata or "
-                           "--tag-column); re-export it")
+                           f"{param('tag_columns')}); re-export it")
         if key in spec["tags"]:
             tags[key] = (f[f"infos/{key}"][()], spec["tags"][key])
         else:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, param
 from aoc_cli.formats.minari import data_folder, datasets_root
 
 FORMATS = ("minari", "d4rl", "d3rlpy", "npz", "csv")
@@ -57,7 +57,8 @@ def detect_format(path: str | os.PathLike) -> str:
                                "metadata.json: pass the dataset folder")
             keys = ", ".join(sorted(f.keys())[:8]) or "none"
         raise AocError(f"cannot tell the format of HDF5 file {path} (top-level keys: {keys}): "
-                       "pass --from d4rl or --from d3rlpy if it is one of those")
+                       f"pass {param('fmt', 'd4rl')} or {param('fmt', 'd3rlpy')} if it is one "
+                       f"of those")
     with open(p, "rb") as fh:
         head = fh.read(4)
     if head == _ZIP_SIGNATURE or p.suffix == ".npz":
@@ -67,5 +68,5 @@ def detect_format(path: str | os.PathLike) -> str:
         suffixes = suffixes[:-1]
     if suffixes and suffixes[-1] in (".csv", ".tsv"):
         return "csv"
-    raise AocError(f"cannot tell the format of {path}: pass --from "
+    raise AocError(f"cannot tell the format of {path}: pass {param('fmt')} "
                    f"{'|'.join(FORMATS)}")

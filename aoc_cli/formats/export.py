@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, param
 from aoc_cli.formats import export_csv, export_d4rl, export_minari
 from aoc_cli.formats.minari import data_folder
 from aoc_cli.formats.spec import describe
@@ -107,17 +107,17 @@ def check_target(path: Path, store: Store, overwrite: bool, *, folder: bool = Fa
     if not os.path.lexists(target):
         return
     if not overwrite:
-        raise AocError(f"{path} already exists: pass --overwrite to replace it, or choose "
-                       "another --out")
+        raise AocError(f"{path} already exists: pass {param('overwrite')} to replace it, or choose "
+                       f"another {param('out')}")
     if folder:
         if not target.is_dir():
             raise AocError(f"{path} is a file, a Minari dataset is a folder: choose another "
-                           "--out")
+                           f"{param('out')}")
         if any(target.iterdir()) and data_folder(target) is None:
-            raise AocError(f"{path} is a folder that holds no Minari dataset: --overwrite "
-                           "replaces only a dataset folder; choose another --out")
+            raise AocError(f"{path} is a folder that holds no Minari dataset: {param('overwrite')} "
+                           f"replaces only a dataset folder; choose another {param('out')}")
     elif target.is_dir():
-        raise AocError(f"{path} is a folder: pass a file name as --out")
+        raise AocError(f"{path} is a folder: pass a file name as {param('out')}")
 
 
 def export(name: str, fmt: str, out: str | os.PathLike, *, store: Store | None = None,
@@ -133,9 +133,10 @@ def export(name: str, fmt: str, out: str | os.PathLike, *, store: Store | None =
     file, one row per episode id, and leave them out of the step rows."""
     t0 = time.perf_counter()
     if fmt not in EXPORT_FORMATS:
-        raise AocError(f"unknown export format {fmt!r}: use --to {'|'.join(EXPORT_FORMATS)}")
+        raise AocError(f"unknown export format {fmt!r}: use {param('to')} "
+                       f"{'|'.join(EXPORT_FORMATS)}")
     if static is not None and fmt != "csv":
-        raise AocError("--static writes CSV covariates: use it with --to csv")
+        raise AocError(f"{param('static')} writes CSV covariates: use it with {param('to', 'csv')}")
     store = store or Store.open()
     out = Path(out)
     corpus = store.corpus(name)

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, param
 from aoc_cli.progress import Progress
 from aoc_cli.store import CorpusData, action_labels, atomic_path
 
@@ -57,7 +57,8 @@ def targets(out: Path, static: str | os.PathLike | None) -> list[Path]:
     if static is not None:
         files.append(Path(static))
     if len({os.path.abspath(f) for f in files}) != len(files):
-        raise AocError(f"--out {out} and --static {static} name the same file: give the "
+        raise AocError(f"{param('out')} {out} and {param('static')} {static} name the same "
+                       f"file: give the "
                        "static covariates their own file")
     return files
 
@@ -97,9 +98,10 @@ def _static_groups(names: list[str], values: np.ndarray, path: Path):
             text = np.array(levels, dtype=object)[np.argmax(block, axis=1)]
             present = sorted(set(text.tolist()))
             if present != levels:
-                raise AocError(f"--static {path}: covariate {col!r} has levels {levels} but "
+                raise AocError(f"{param('static')} {path}: covariate {col!r} has levels "
+                               f"{levels} but "
                                f"the exported patients hold {present}; read back they would "
-                               "not give the same columns: export without --static")
+                               f"not give the same columns: export without {param('static')}")
             out.append((col, text.astype(str)))
         else:
             for k in range(i, j):
@@ -113,15 +115,17 @@ def _split_static(data: CorpusData, names: list[str], static: Path):
     space = data.observation_space
     stat = list(space.get("static") or [])
     if not stat or names[len(names) - len(stat):] != stat:
-        raise AocError(f"--static {static}: corpus has no per-patient covariates (it was not "
-                       "read with --static); export without --static")
+        raise AocError(f"{param('static')} {static}: corpus has no per-patient covariates (it "
+                       f"was not "
+                       f"read with {param('static')}); export without {param('static')}")
     d = len(names) - len(stat)
     obs = np.asarray(data.observations)[:, d:]
     first = obs[np.asarray(data.episode_starts[:-1])]
     lengths = np.diff(data.episode_starts)
     if not np.array_equal(np.repeat(first, lengths, axis=0), obs):
-        raise AocError(f"--static {static}: the covariates change within an episode, so they "
-                       "are not per patient; export without --static")
+        raise AocError(f"{param('static')} {static}: the covariates change within an episode, "
+                       f"so they "
+                       f"are not per patient; export without {param('static')}")
     return names[:d], list(range(d)), _static_groups(stat, first.astype(np.float64), static)
 
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, param
 from aoc_cli.formats.common import ReadOptions, observed_bounds
 from aoc_cli.formats.detect import FORMATS, detect_format
 from aoc_cli.store import CorpusData, Store, check_name, writing_corpus
@@ -34,7 +34,7 @@ def read_dataset(path: str | os.PathLike, fmt: str | None = None,
     if fmt is None:
         fmt = detect_format(path)
     elif fmt not in FORMATS:
-        raise AocError(f"unknown format {fmt!r}: use --from {'|'.join(FORMATS)}")
+        raise AocError(f"unknown format {fmt!r}: use {param('fmt')} {'|'.join(FORMATS)}")
     elif fmt != "minari" and not Path(path).exists():
         raise AocError(f"no such file or folder: {path}; check the path")
     reader = {"minari": minari.read_minari, "d4rl": d4rl.read_d4rl,
@@ -46,7 +46,8 @@ def read_dataset(path: str | os.PathLike, fmt: str | None = None,
         data.rewards = None
     for key, value in options.tags.items():
         if key in data.tags:
-            raise AocError(f"tag {key!r} is given twice (--tag and --tag-column)")
+            raise AocError(f"tag {key!r} is given twice ({param('tags')} and "
+                           f"{param('tag_columns')})")
         data.tags[key] = (np.zeros(data.n_rows, np.int32), [value])
     data.source = {**data.source, "format": fmt}
     if options.drop_nonfinite:
@@ -87,7 +88,8 @@ def _check_finite(data: CorpusData) -> None:
     ep = int(np.searchsorted(starts, row, side="right") - 1)
     label = f"episode {ep}" + (f" (id {data.episode_ids[ep]})" if data.episode_ids else "")
     raise AocError(f"{name} of row {row} ({label}, step {row - int(starts[ep])}) is not finite "
-                   "(NaN or inf): fix the data or pass --drop-nonfinite to drop the episodes "
+                   f"(NaN or inf): fix the data or pass {param('drop_nonfinite')} to drop the "
+                   f"episodes "
                    "that hold such rows")
 
 

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, param
 from aoc_cli.formats.common import ReadOptions, encode_labels
 from aoc_cli.formats.spec import parse_spec, restore
 from aoc_cli.progress import tracked
@@ -164,7 +164,7 @@ def _add_episode(out: dict, ep: dict, options: ReadOptions, flatten, to_action) 
     for col in options.tag_columns:
         infos = ep.get("infos") or {}
         if col not in infos:
-            raise AocError(f"--tag-column {col!r} is not an info key of the Minari "
+            raise AocError(f"{param('tag_columns')} {col!r} is not an info key of the Minari "
                            f"dataset (info keys: {', '.join(sorted(infos)) or 'none'})")
         out["tags"][col].append(np.asarray(infos[col])[:t])
 

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, param
 from aoc_cli.formats.common import ReadOptions, from_flat
 from aoc_cli.store import CorpusData
 
@@ -25,7 +25,7 @@ def read_npz(path: Path, options: ReadOptions) -> CorpusData:
         head = fh.read(6)
     if head[:4] != b"PK\x03\x04" and head != b"\x93NUMPY":
         raise AocError(f"cannot read {path}: not an NPZ archive (no ZIP signature); save it "
-                       "with numpy.savez, or pass --from with its real format")
+                       f"with numpy.savez, or pass {param('fmt')} with its real format")
     try:
         z = np.load(path, allow_pickle=False)
         if not isinstance(z, np.lib.npyio.NpzFile):

@@ -77,13 +77,13 @@ def parse_spec(value, where) -> dict | None:
             value = value.decode("utf-8")
         spec = json.loads(value) if isinstance(value, str) else value
     except (UnicodeDecodeError, json.JSONDecodeError) as err:
-        raise AocError(f"{where}: the aoc export metadata is not JSON ({err}); re-export "
+        raise AocError(f"{where}: the export metadata is not JSON ({err}); re-export "
                        "the corpus") from None
     keys = ("rows", "episodes", "observation_space", "action_space", "observations_dtype",
             "actions_dtype", "has_rewards", "tags", "columns")
     missing = [k for k in keys if not isinstance(spec, dict) or k not in spec]
     if missing:
-        raise AocError(f"{where}: the aoc export metadata lacks {', '.join(missing)}; "
+        raise AocError(f"{where}: the export metadata lacks {', '.join(missing)}; "
                        "re-export the corpus")
     if spec.get("version", SPEC_VERSION) > SPEC_VERSION:
         raise AocError(f"{where} was exported by a newer aoc (export spec version "
@@ -151,7 +151,7 @@ def restore(data: CorpusData, spec: dict, where) -> CorpusData:
     are matched by label text."""
     if data.n_rows != spec["rows"] or data.n_episodes != spec["episodes"]:
         raise AocError(f"{where} holds {data.n_rows} rows in {data.n_episodes} episodes, its "
-                       f"aoc export metadata {spec['rows']} in {spec['episodes']}: the file was "
+                       f"export metadata {spec['rows']} in {spec['episodes']}: the file was "
                        "edited after export; re-export it, or read it without its metadata")
     act_space = spec["action_space"]
     actions = np.asarray(data.actions)

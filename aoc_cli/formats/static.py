@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from aoc_cli.errors import AocError, warn
+from aoc_cli.errors import AocError, param, warn
 from aoc_cli.formats.table import is_numeric, numeric, read_table
 
 
@@ -19,12 +19,13 @@ def read_static(path: Path, id_col: str, episode_keys: np.ndarray, episode_ids: 
     """Static per-episode features, one row per id -> (names, (E, d_s) float, tag values)."""
     header, cols = read_table(path)
     if id_col not in header:
-        raise AocError(f"--static {path} has no id column {id_col!r} (columns: "
+        raise AocError(f"{param('static')} {path} has no id column {id_col!r} (columns: "
                        f"{', '.join(header)}): name it as in the main file")
     keys = numeric(cols[id_col], id_col, path) if numeric_ids else np.char.strip(cols[id_col])
     uniq, counts = np.unique(keys, return_counts=True)
     if np.any(counts > 1):
-        raise AocError(f"--static {path} has several rows for id {str(uniq[counts > 1][0])!r}: "
+        raise AocError(f"{param('static')} {path} has several rows for id "
+                       f"{str(uniq[counts > 1][0])!r}: "
                        "give one row per episode")
     order = np.argsort(keys, kind="stable")
     pos = np.searchsorted(keys[order], episode_keys)
@@ -32,12 +33,12 @@ def read_static(path: Path, id_col: str, episode_keys: np.ndarray, episode_ids: 
     found = keys[order][pos] == episode_keys
     if not found.all():
         missing = episode_ids[int(np.flatnonzero(~found)[0])]
-        raise AocError(f"--static {path} has no row for episode id {missing!r}: add one")
+        raise AocError(f"{param('static')} {path} has no row for episode id {missing!r}: add one")
     rows = order[pos]
     unused = len(keys) - len(np.unique(rows))
     if unused:
         extra = sorted(set(range(len(keys))) - set(rows.tolist()))
-        warn(f"--static {path}: {unused} ids have no rows in the series (first: "
+        warn(f"{param('static')} {path}: {unused} ids have no rows in the series (first: "
              f"{str(np.char.strip(cols[id_col])[extra[0]])!r}); their static rows are not "
              "used")
     names: list[str] = []

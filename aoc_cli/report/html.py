@@ -14,7 +14,7 @@ import os
 import tempfile
 from pathlib import Path
 
-from aoc_cli.errors import AocError
+from aoc_cli.errors import BadInput, param
 from aoc_cli.store import atomic_path
 
 STYLE = """
@@ -68,10 +68,10 @@ def page(title: str, body: str) -> str:
 
 
 def check_html_path(path, store_root) -> Path:
-    """``--html FILE``: outside the store, in a folder that exists and can be written."""
+    """``html`` (a page's path): outside the store, in a folder that exists and can be written."""
     from aoc_cli.store.paths import check_output
 
-    path = check_output(path, "--html", store_root)
+    path = check_output(path, "html", store_root)
     parent = Path(path).resolve().parent
     try:  # a probe: access() says yes to root where the file system says no (/proc, ro mounts)
         if not os.access(parent, os.W_OK):
@@ -79,7 +79,7 @@ def check_html_path(path, store_root) -> Path:
         with tempfile.TemporaryFile(dir=parent):
             pass
     except OSError as err:
-        raise AocError(f"--html {path}: the folder {parent} is not writable "
+        raise BadInput(path, f"{param('html')} {path}: the folder {parent} is not writable "
                        f"({getattr(err, 'strerror', None) or err}); give another path") from None
     return path
 
@@ -90,4 +90,5 @@ def write_page(path, text: str) -> None:
         with atomic_path(path, suffix=".html") as tmp:
             Path(tmp).write_text(text, encoding="utf-8")
     except OSError as err:
-        raise AocError(f"--html {path}: cannot write it ({err.strerror or err})") from None
+        raise BadInput(path, f"{param('html')} {path}: cannot write it "
+                       f"({err.strerror or err})") from None

@@ -26,7 +26,7 @@ from rich.progress import (
 )
 from rich.table import Table
 
-from aoc_cli.errors import AocError
+from aoc_cli.errors import BadSetting, param
 
 FORMATS = ("table", "json", "jsonl", "csv")
 
@@ -45,7 +45,8 @@ def resolve_format(fmt: str | None) -> str:
         return "table" if sys.stdout.isatty() else "json"
     fmt = fmt.lower()
     if fmt not in FORMATS:
-        raise AocError(f"unknown --format {fmt!r}: use one of {', '.join(FORMATS)}")
+        raise BadSetting("format", fmt, f"unknown {param('format')} {fmt!r}: use one of "
+                         f"{', '.join(FORMATS)}")
     return fmt
 
 

@@ -95,7 +95,7 @@ def audit_episode(corpus, path, episode: int, upper: np.ndarray) -> Episode:
 def steps_episodes(corpus, path, typical: dict) -> list[Episode]:
     """The episodes of an ``aoc evaluate --steps`` file; a step is flagged when its residual is
     above the corpus's typical p99 (the band drawn: p50 to p99)."""
-    from aoc_cli.errors import AocError
+    from aoc_cli.errors import AocError, BadInput, call
 
     by: dict[int, list[dict]] = {}
     with open(path) as fh:
@@ -106,8 +106,8 @@ def steps_episodes(corpus, path, typical: dict) -> list[Episode]:
                 rec = json.loads(line)
                 by.setdefault(int(rec["episode"]), []).append(rec)
             except (ValueError, KeyError, TypeError):
-                raise AocError(f"{path} line {n} is not a step of `aoc evaluate --steps`") \
-                    from None
+                raise BadInput(path, f"{path} line {n} is not a step of "
+                               f"`{call('evaluate', steps=True)}`", where=f"line {n}") from None
     if not by:
         raise AocError(f"{path} holds no steps")
     p99 = typical.get("p99") or np.inf

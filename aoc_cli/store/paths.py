@@ -7,7 +7,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from aoc_cli.errors import AocError, call, param
+from aoc_cli.errors import AocError, param
 
 
 def check_output(path: str | os.PathLike, flag: str, store_root: str | os.PathLike,
