@@ -14,7 +14,8 @@ from aoc_cli.baselines import (
     make_baseline,
 )
 from aoc_cli.baselines.neighbours import NearestNeighbourController, default_k
-from aoc_cli.errors import AocError
+from aoc_cli.cli.errors import message
+from aoc_cli.errors import AocError, ModelMissing
 from tests.baselines.conftest import replay_history
 
 
@@ -153,10 +154,15 @@ def test_bc_without_an_imitation_model_says_how_to_train_one(pendulum, tmp_path)
     _root, corpus = pendulum
     env = make_env("pendulum-het")
     s = make_session(corpus, env)
-    with pytest.raises(AocError, match="--mode imitation"):
+    with pytest.raises(ModelMissing, match="needs an imitation-mode model 'nobc'") as err:
         make_baseline("bc", s, env, model_id="nobc")
-    with pytest.raises(AocError, match="value-mode model"):
+    assert (err.value.model, err.value.mode) == ("nobc", "imitation")
+    assert message(err.value).endswith(
+        f": run `aoc train {corpus.name} --model nobc --mode imitation`")
+    with pytest.raises(AocError, match="value-mode model") as err:
         make_baseline("bc", s, env, model_id="default")
+    assert message(err.value).endswith(
+        f"`aoc train {corpus.name} --model default --mode imitation --overwrite`")
 
 
 def test_an_unknown_policy_lists_the_baselines(session):
