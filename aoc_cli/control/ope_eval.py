@@ -23,7 +23,7 @@ import numpy as np
 
 from aoc_cli.control import ope
 from aoc_cli.control.ope_fqe import available, default_steps, fit_fqe
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, BadSetting, NoRewards, param
 
 ESTIMATORS = ("pdwis", "wdr", "fqe")
 #: The propensity column looked for when none is named.
@@ -162,12 +162,13 @@ def warnings_for(name: str, rec: dict, n_episodes: int) -> list[str]:
 def check_log(data) -> None:
     """Refuse a held-out log the OPE cannot use: continuous actions or no rewards."""
     if not data.discrete:
-        raise AocError("offline policy evaluation needs discrete actions (a deterministic "
-                       "policy of continuous actions matches no logged action); use --ope none",
-                       param="ope")
+        raise BadSetting("ope", None, "offline policy evaluation needs discrete actions (a "
+                         "deterministic policy of continuous actions matches no logged action); "
+                         f"use {param('ope', 'none')}")
     if not data.has_rewards:
-        raise AocError(f"corpus {data.name!r} has no rewards: offline policy evaluation needs "
-                       "the logged rewards; use --ope none", param="ope")
+        raise NoRewards(data.name, "offline policy evaluation",
+                        f"corpus {data.name!r} has no rewards: offline policy evaluation needs "
+                        f"the logged rewards; use {param('ope', 'none')}", param="ope")
 
 
 def off_policy_values(data, logged: np.ndarray, policies: dict, settings: OPESettings,
@@ -213,8 +214,9 @@ def wanted(settings: OPESettings | None, mode: str, data) -> bool:
     if not settings.estimators:
         return False
     if mode != "value":
-        raise AocError("offline policy evaluation is for value-mode models (an imitation model "
-                       "has no values to compare); use --ope none", param="ope")
+        raise BadSetting("ope", None, "offline policy evaluation is for value-mode models (an "
+                         "imitation model has no values to compare); use "
+                         f"{param('ope', 'none')}")
     check_log(data)         # before any step is decided
     return True
 

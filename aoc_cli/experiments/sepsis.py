@@ -44,7 +44,7 @@ from aoc_cli.envs import collect, make_env
 from aoc_cli.envs.icu_sepsis import STRATEGIES
 from aoc_cli.envs.icu_sepsis import tables as sepsis_tables
 from aoc_cli.envs.tabular import greedy
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, BadSetting, param
 from aoc_cli.experiments import sepsis_policies as sp
 from aoc_cli.experiments.results import write_rows_csv
 from aoc_cli.control import open_session
@@ -216,13 +216,15 @@ def run_sepsis(out: Path, bench_store: Path, scale: str = "full", seeds: int | N
     methods = list(methods or METHODS)
     unknown = [m for m in methods if m not in METHODS]
     if unknown:
-        raise AocError(f"--methods: unknown {', '.join(unknown)}; use {', '.join(METHODS)}")
+        raise BadSetting("methods", methods, f"{param('methods')}: unknown {', '.join(unknown)}; "
+                         f"use {', '.join(METHODS)}")
     if seeds is not None and seeds < 1:
-        raise AocError(f"--seeds must be >= 1, got {seeds}")
+        raise BadSetting("seeds", seeds, f"must be >= 1, got {seeds}")
     cfg = SCALES[scale]
     sizes = list(sizes or cfg["sizes"])
     if any(s < 1 for s in sizes):
-        raise AocError(f"--sizes: episodes per log must be >= 1, got {sizes}")
+        raise BadSetting("sizes", sizes, f"{param('sizes')}: episodes per log must be >= 1, "
+                         f"got {sizes}")
     n_seeds = int(seeds or 1)
     started = time.perf_counter()
     tables = sepsis_tables(STRATEGIES[task])

@@ -8,7 +8,8 @@ import pytest
 from aoc_cli.experiments import sepsis_policies as sp
 from aoc_cli.experiments.sepsis import run_sepsis
 from aoc_cli.envs import icu_sepsis
-from aoc_cli.errors import AocError
+from aoc_cli.cli.errors import message
+from aoc_cli.errors import AocError, BadSetting
 
 
 @pytest.fixture(scope="module")
@@ -91,10 +92,12 @@ def test_run_writes_the_table_with_the_references_and_log_policies(tmp_path):
 def test_bad_bench_arguments_are_refused(tmp_path):
     with pytest.raises(AocError, match="unknown nope"):
         run_sepsis(tmp_path / "o", tmp_path / "s", "tiny", methods=["nope"])
-    with pytest.raises(AocError, match="--sizes"):
+    with pytest.raises(BadSetting, match="sizes: episodes per log") as err:
         run_sepsis(tmp_path / "o", tmp_path / "s", "tiny", methods=["bc"], sizes=[0])
-    with pytest.raises(AocError, match="--seeds"):
+    assert (err.value.param, err.value.value) == ("sizes", [0])
+    with pytest.raises(BadSetting, match="seeds must be >= 1") as err:
         run_sepsis(tmp_path / "o", tmp_path / "s", "tiny", seeds=0, methods=["bc"])
+    assert message(err.value) == "--seeds must be >= 1, got 0"
 
 
 def test_cli_bad_method_is_one_line_exit_2(aoc, tmp_path):
