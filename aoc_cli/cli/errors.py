@@ -85,9 +85,11 @@ def hint(err: AocError) -> str:
 
 def message(err: AocError) -> str:
     """The one line a user sees after ``aoc: error:`` for ``err``."""
-    line = text(err.marked)
-    if err.param and err.marked.startswith(err.param):  # the plain ``param=`` hook
-        line = flag(err.param) + line[len(err.param):]
+    marked = getattr(err, "marked", None) or str(err)  # (Ray's copy reaches it via its cause)
+    param = getattr(err, "param", None)
+    line = text(marked)
+    if param and marked.startswith(param):  # the plain ``param=`` hook
+        line = flag(param) + line[len(param):]
     return line + hint(err)
 
 

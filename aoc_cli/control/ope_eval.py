@@ -196,7 +196,7 @@ def off_policy_values(data, logged: np.ndarray, policies: dict, settings: OPESet
                                data.n_actions, settings, progress)
         except AocError as err:
             if i == 0:          # the first policy is the one asked about: its error is the run's
-                raise AocError(f"policy {name!r}: {err}") from None
+                raise AocError(f"policy {name!r}: {err.marked}") from None
             out["policies"][name] = {"policy_value": None, "ess": None, "notes": [str(err)]}
             continue
         out["policies"][name] = rec

@@ -75,8 +75,7 @@ def _mapping(options: ReadOptions) -> dict:
                        f"{err}") from None
     if not isinstance(mapping, dict) or set(mapping) - MAPPING_KEYS:
         raise AocError(f"{param('columns_file')} {options.columns_file} must be a JSON object "
-                       f"with keys among "
-                       f"{sorted(MAPPING_KEYS)}")
+                       f"with keys among {sorted(MAPPING_KEYS)}")
     return mapping
 
 

@@ -55,8 +55,7 @@ def restore_exported(data: CorpusData, spec: dict, path: Path) -> CorpusData:
     if len(keys) != data.n_episodes or any(k not in where for k in keys):
         raise AocError(f"{path}: its episode ids differ from those of its export metadata "
                        f"(edited after export?); re-export it, or pass {param('columns_file')} "
-                       f"with your "
-                       "own mapping")
+                       "with your own mapping")
     data = take_episodes(data, np.array([where[k] for k in keys], dtype=np.int64))
     truncated = data.columns.pop("truncated", None)
     if truncated is not None:

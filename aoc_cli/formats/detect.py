@@ -58,7 +58,7 @@ def detect_format(path: str | os.PathLike) -> str:
             keys = ", ".join(sorted(f.keys())[:8]) or "none"
         raise AocError(f"cannot tell the format of HDF5 file {path} (top-level keys: {keys}): "
                        f"pass {param('fmt', 'd4rl')} or {param('fmt', 'd3rlpy')} if it is one "
-                       f"of those")
+                       "of those")
     with open(p, "rb") as fh:
         head = fh.read(4)
     if head == _ZIP_SIGNATURE or p.suffix == ".npz":

@@ -58,7 +58,7 @@ def targets(out: Path, static: str | os.PathLike | None) -> list[Path]:
         files.append(Path(static))
     if len({os.path.abspath(f) for f in files}) != len(files):
         raise AocError(f"{param('out')} {out} and {param('static')} {static} name the same "
-                       f"file: give the "
+                       "file: give the "
                        "static covariates their own file")
     return files
 
@@ -116,16 +116,14 @@ def _split_static(data: CorpusData, names: list[str], static: Path):
     stat = list(space.get("static") or [])
     if not stat or names[len(names) - len(stat):] != stat:
         raise AocError(f"{param('static')} {static}: corpus has no per-patient covariates (it "
-                       f"was not "
-                       f"read with {param('static')}); export without {param('static')}")
+                       f"was not read with {param('static')}); export without {param('static')}")
     d = len(names) - len(stat)
     obs = np.asarray(data.observations)[:, d:]
     first = obs[np.asarray(data.episode_starts[:-1])]
     lengths = np.diff(data.episode_starts)
     if not np.array_equal(np.repeat(first, lengths, axis=0), obs):
         raise AocError(f"{param('static')} {static}: the covariates change within an episode, "
-                       f"so they "
-                       f"are not per patient; export without {param('static')}")
+                       f"so they are not per patient; export without {param('static')}")
     return names[:d], list(range(d)), _static_groups(stat, first.astype(np.float64), static)
 
 

@@ -89,8 +89,7 @@ def _check_finite(data: CorpusData) -> None:
     label = f"episode {ep}" + (f" (id {data.episode_ids[ep]})" if data.episode_ids else "")
     raise AocError(f"{name} of row {row} ({label}, step {row - int(starts[ep])}) is not finite "
                    f"(NaN or inf): fix the data or pass {param('drop_nonfinite')} to drop the "
-                   f"episodes "
-                   "that hold such rows")
+                   "episodes that hold such rows")
 
 
 @dataclass
