@@ -16,16 +16,14 @@ from typing import Iterator
 
 from aoc_cli.errors import (AocError, AocWarning, CorpusNotFound, Damaged, IndexMissing,
                             IndexStale, ModelMissing, ModelStale, render)
+from aoc_cli.store import DEFAULT_INDEX
 
 #: Library parameters whose flag is not ``--`` + the name with dashes.
-FLAGS = {"max_epochs": "--epochs", "episode_rates": "--episode-rate", "fmt": "--from", "tag_columns": "--tag-column", "tags": "--tag",
-         "static_path": "--static", "columns_file": "--columns"}
+FLAGS = {"max_epochs": "--epochs", "episode_rates": "--episode-rate", "fmt": "--from",
+         "tag_columns": "--tag-column", "tags": "--tag", "columns_file": "--columns"}
 
 #: Library calls whose command is not their name.
 COMMANDS = {"build_index": "index"}
-
-#: The model and index ids a command takes when none is given (no flag shown for them).
-DEFAULT_ID = "default"
 
 
 def flag(name: str, *value) -> str:
@@ -58,7 +56,7 @@ def _train(corpus: str, model: str | None, *extra: str) -> str:
 
 def _index(corpus: str, model: str, index: str) -> str:
     line = f"aoc index {corpus} --model {model}"
-    if index != DEFAULT_ID:
+    if index != DEFAULT_INDEX:
         line += f" --index-id {index} (with its --episode-rate)"
     return line
 
