@@ -66,6 +66,10 @@ def register(app: typer.Typer) -> None:
         fqe_steps: Annotated[Optional[int], typer.Option(
             "--fqe-steps", help="Gradient steps of fitted Q evaluation (default: about 30 "
                                 "passes over the log, 1,500 to 6,000).")] = None,
+        fqe_refits: Annotated[Optional[int], typer.Option(
+            "--fqe-refits", help="Refits on resampled episodes behind FQE's interval, each a "
+                                 "fifth of the fit's steps (default 10; 0: one fit, the "
+                                 "interval then leaves the model's own error out).")] = None,
         workers: WorkersOption = None,
         ray_address: RayAddressOption = None,
         without: WithoutOption = None,
@@ -85,13 +89,17 @@ def register(app: typer.Typer) -> None:
         fmt = resolve_format(fmt)
         names = [b.strip() for b in baselines.split(",")]
         ope = None
-        if any(v is not None for v in (ope_names, propensity, fqe_steps)) or ope_gamma != 1.0:
+        if any(v is not None for v in (ope_names, propensity, fqe_steps, fqe_refits)) \
+                or ope_gamma != 1.0:
             if fqe_steps is not None and fqe_steps < 1:
                 raise AocError(f"--fqe-steps must be >= 1, got {fqe_steps}")
+            if fqe_refits is not None and (fqe_refits < 0 or fqe_refits == 1):
+                raise AocError(f"--fqe-refits must be 0 or at least 2, got {fqe_refits}")
             if not 0.0 < ope_gamma <= 1.0:
                 raise AocError(f"--ope-gamma must be in (0, 1], got {ope_gamma}")
             ope = OPESettings(parse_estimators(ope_names), gamma=ope_gamma,
-                              propensity=propensity, fqe_steps=fqe_steps, seed=seed)
+                              propensity=propensity, fqe_steps=fqe_steps, seed=seed,
+                              **({} if fqe_refits is None else {"fqe_refits": fqe_refits}))
         store = get_store()
         corpus = store.corpus(name)
         held_out = corpus if data == name else store.corpus(data)

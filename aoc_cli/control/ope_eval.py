@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from aoc_cli.control import ope
-from aoc_cli.control.ope_fqe import available, default_steps, fit_fqe
+from aoc_cli.control.ope_fqe import REFITS, available, bootstrap_fqe, default_steps, fit_fqe
 from aoc_cli.errors import AocError, BadSetting, NoRewards, param
 
 ESTIMATORS = ("pdwis", "wdr", "fqe")
@@ -40,12 +40,16 @@ class OPESettings:
     """``estimators`` of :data:`ESTIMATORS`; ``gamma`` the discount of the value estimated
     (1: the mean undiscounted return of an episode); ``propensity`` a column name (None: the
     ``propensity`` column when the log has one, else an imitation model); ``fqe_steps``
-    (None: :func:`aoc_cli.control.ope_fqe.default_steps`); bootstrap replicates; seed."""
+    (None: :func:`aoc_cli.control.ope_fqe.default_steps`); ``fqe_refits`` the refits behind
+    FQE's interval (:func:`aoc_cli.control.ope_fqe.bootstrap_fqe`; 0: one fit, its interval
+    resamples the start values only and leaves the model's own error out); bootstrap
+    replicates; seed."""
 
     estimators: tuple = ESTIMATORS
     gamma: float = 1.0
     propensity: str | None = None
     fqe_steps: int | None = None
+    fqe_refits: int = REFITS
     n_boot: int = ope.N_BOOTSTRAP
     seed: int = 0
 
@@ -119,27 +123,40 @@ def policy_value(log: ope.Log, observations, logged, propensity, policy, n_actio
     specs: dict = {}
     if "pdwis" in settings.estimators:
         specs["pdwis"] = ("pdwis", rho)
-    q = None
+    q, refitted = None, None
     if "fqe" in settings.estimators or "wdr" in settings.estimators:
         reason = available()
-        if reason is None:
+        if reason is not None:
+            out["notes"].append(reason)
+        elif "fqe" in settings.estimators and settings.fqe_refits > 1:
+            refitted = bootstrap_fqe(observations, logged, log.rewards, log.starts, probs,
+                                     settings.gamma, settings.fqe_steps, settings.fqe_refits,
+                                     seed=settings.seed, progress=progress)
+            q = refitted["q"]                                                 # (N, n)
+        else:
             q = fit_fqe(observations, logged, log.rewards, log.starts, probs, settings.gamma,
                         settings.fqe_steps, settings.seed, progress)          # (N, n)
-        else:
-            out["notes"].append(reason)
     if "wdr" in settings.estimators:
         if q is None:
             out["notes"].append("wdr: no Q model (needs fqe), so it equals pdwis")
             specs["wdr"] = ("wdr", rho, np.zeros(len(rho)), np.zeros(len(rho)))
         else:
             specs["wdr"] = ("wdr", rho, q[rows, logged], (probs * q).sum(1))
-    if "fqe" in settings.estimators and q is not None:
+    if "fqe" in settings.estimators and q is not None and refitted is None:
         first = log.starts[:-1]
         specs["fqe"] = ("mean", (probs[first] * q[first]).sum(1))
         out["notes"].append("fqe: the interval resamples episodes' start values of one fitted "
                             "Q model (the model's own error is not in it)")
     est = ope.bootstrap(log, specs, n_boot=settings.n_boot, seed=settings.seed)
     out["policy_value"] = {k: v.as_dict() for k, v in est.items()}
+    if refitted is not None:
+        out["policy_value"]["fqe"] = {k: refitted[k] for k in ("estimate", "low", "high")}
+        b, k, n = len(refitted["replicates"]), refitted["refit_steps"], refitted["steps"]
+        out["notes"].append(
+            f"fqe: the interval is the estimate +- 1.96 sd of {b} refits, each on the log's "
+            f"episodes resampled with replacement, {k:,} steps on from the full fit's "
+            f"{n:,}-step weights (the model's own sampling and training error is in it; cost "
+            f"{(n + b * k) / n:.1f}x one fit)")
     return out
 
 
@@ -188,7 +205,9 @@ def off_policy_values(data, logged: np.ndarray, policies: dict, settings: OPESet
     out = {"ope": {"estimators": list(settings.estimators), "gamma": settings.gamma,
                    "propensity": source, "bootstrap": settings.n_boot,
                    "fqe_steps": (settings.fqe_steps or default_steps(data.n_rows))
-                   if "fqe" in settings.estimators or "wdr" in settings.estimators else None},
+                   if "fqe" in settings.estimators or "wdr" in settings.estimators else None,
+                   "fqe_refits": settings.fqe_refits if "fqe" in settings.estimators
+                   else None},
            "behaviour_value": mean.as_dict(), "policies": {}, "ope_warnings": []}
     for i, (name, policy) in enumerate(policies.items()):
         try:

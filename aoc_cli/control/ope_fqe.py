@@ -18,6 +18,8 @@ at each logged step (one-hot for a deterministic one), actions (N,) int, rewards
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 
 from aoc_cli.errors import AocError
@@ -27,6 +29,10 @@ BATCH = 256
 LEARNING_RATE = 1e-3
 TARGET_UPDATE = 100
 HIDDEN = (64, 64)
+#: The bootstrap of refits (:func:`bootstrap_fqe`): how many, and the share of the full fit's
+#: steps each takes (``steps // REFIT_SHARE``).
+REFITS = 10
+REFIT_SHARE = 5
 
 
 def available() -> str | None:
@@ -64,6 +70,89 @@ def default_steps(n_rows: int) -> int:
     return int(np.clip(30 * n_rows // BATCH, 1500, 6000))
 
 
+class FQEFit:
+    """One DiscreteFQE model of ``policy`` on the log, trained by :meth:`train` (module
+    docstring); :meth:`snapshot` / :meth:`restore` keep and put back its weights and optimiser
+    state (a bootstrap refit starts from the full fit: :func:`bootstrap_fqe`)."""
+
+    def __init__(self, observations, actions, rewards, starts, policy, gamma: float = 1.0,
+                 seed: int = 0, batch: int = BATCH, learning_rate: float = LEARNING_RATE,
+                 target_update: int = TARGET_UPDATE):
+        reason = available()
+        if reason is not None:
+            raise AocError(reason)
+        # d3rlpy is the optional bench extra, torch a heavy import: both only when FQE runs
+        import d3rlpy
+        import torch
+        from d3rlpy.models.encoders import VectorEncoderFactory
+        from d3rlpy.ope import DiscreteFQE, FQEConfig
+
+        obs = np.asarray(observations, np.float64)
+        mu, sd = obs.mean(0), obs.std(0)
+        self.x = ((obs - mu) / np.where(sd > 0, sd, 1.0)).astype(np.float32)   # (N, d_o)
+        self.n_rows, self.n_actions = np.asarray(policy).shape
+        self.act = np.asarray(actions, np.int64)
+        self.rew = np.asarray(rewards, np.float32)
+        self.starts = np.asarray(starts, np.int64)
+        self.last = np.zeros(self.n_rows, bool)
+        self.last[self.starts[1:] - 1] = True
+        self.nxt = np.where(self.last, np.arange(self.n_rows), np.arange(self.n_rows) + 1)
+        cum = np.cumsum(np.asarray(policy, np.float64), axis=1)
+        self.cum = cum / cum[:, -1:]
+        self.batch = batch
+        d3rlpy.seed(seed)
+        torch.manual_seed(seed)
+        self.algo = _NextActions()
+        self.fqe = DiscreteFQE(algo=self.algo, config=FQEConfig(
+            batch_size=batch, gamma=float(gamma), learning_rate=learning_rate,
+            target_update_interval=target_update,
+            encoder_factory=VectorEncoderFactory(hidden_units=list(HIDDEN))), device=False)
+        self.fqe.create_impl((self.x.shape[1],), self.n_actions)
+        self.rng = np.random.default_rng(seed)
+
+    def train(self, steps: int, rows: np.ndarray | None = None, progress=None) -> None:
+        """``steps`` updates on mini-batches drawn from ``rows`` (a multiset of row indices:
+        a resampled log; None: every row once)."""
+        from d3rlpy.dataset import TransitionMiniBatch
+
+        batch, one = self.batch, np.ones((self.batch, 1), np.float32)
+        pool = None if rows is None else np.asarray(rows, np.int64)
+        for step in range(int(steps)):
+            if pool is None:
+                idx = self.rng.integers(0, self.n_rows, batch)
+            else:
+                idx = pool[self.rng.integers(0, len(pool), batch)]
+            j = self.nxt[idx]
+            # the evaluated policy's action at the next logged step (drawn if it is stochastic)
+            self.algo.actions = (self.cum[j] < self.rng.random((batch, 1))).sum(1).clip(
+                0, self.n_actions - 1)
+            self.fqe.update(TransitionMiniBatch(
+                observations=self.x[idx], actions=self.act[idx, None].astype(np.float32),
+                rewards=self.rew[idx, None], next_observations=self.x[j],
+                next_actions=np.zeros((batch, 1), np.float32),
+                terminals=self.last[idx, None].astype(np.float32), intervals=one,
+                transitions=[]))
+            if progress is not None and (step + 1) % 500 == 0:
+                progress(step + 1, steps)
+
+    def snapshot(self) -> dict:
+        """A copy of the model's weights, target weights and optimiser state."""
+        m = self.fqe.impl.modules
+        return copy.deepcopy({"q": m.q_funcs.state_dict(), "target": m.targ_q_funcs.state_dict(),
+                              "optim": m.optim.state_dict()})
+
+    def restore(self, state: dict) -> None:
+        m = self.fqe.impl.modules
+        m.q_funcs.load_state_dict(state["q"])
+        m.targ_q_funcs.load_state_dict(state["target"])
+        m.optim.load_state_dict(copy.deepcopy(state["optim"]))
+
+    def q(self, rows: np.ndarray | None = None) -> np.ndarray:
+        """(len(rows), n) Q_hat of the given rows (None: every row) and every action."""
+        x = self.x if rows is None else self.x[np.asarray(rows, np.int64)]
+        return q_table(self.fqe, x, self.n_actions)
+
+
 def fit_fqe(observations, actions, rewards, starts, policy, gamma: float = 1.0,
             steps: int | None = None, seed: int = 0, progress=None, batch: int = BATCH,
             learning_rate: float = LEARNING_RATE, target_update: int = TARGET_UPDATE
@@ -71,53 +160,68 @@ def fit_fqe(observations, actions, rewards, starts, policy, gamma: float = 1.0,
     """Q_hat (N, n) of ``policy`` by d3rlpy's DiscreteFQE on the log (module docstring).
     Observations are standardised here (by the log's mean and spread) before d3rlpy sees
     them. ``progress(done, total)`` after each block of steps."""
-    reason = available()
-    if reason is not None:
-        raise AocError(reason)
-    # d3rlpy is the optional bench extra, torch a heavy import: both only when FQE runs
-    import d3rlpy
-    import torch
-    from d3rlpy.dataset import TransitionMiniBatch
-    from d3rlpy.models.encoders import VectorEncoderFactory
-    from d3rlpy.ope import DiscreteFQE, FQEConfig
+    fit = FQEFit(observations, actions, rewards, starts, policy, gamma, seed, batch,
+                 learning_rate, target_update)
+    total = default_steps(fit.n_rows) if steps is None else int(steps)
+    fit.train(total, progress=progress)
+    return fit.q()
 
-    obs = np.asarray(observations, np.float64)
-    mu, sd = obs.mean(0), obs.std(0)
-    x = ((obs - mu) / np.where(sd > 0, sd, 1.0)).astype(np.float32)       # (N, d_o)
-    n_rows, n_actions = np.asarray(policy).shape
-    act = np.asarray(actions, np.int64)
-    rew = np.asarray(rewards, np.float32)
-    starts = np.asarray(starts, np.int64)
-    last = np.zeros(n_rows, bool)
-    last[starts[1:] - 1] = True
-    nxt = np.where(last, np.arange(n_rows), np.arange(n_rows) + 1)         # next logged row
-    cum = np.cumsum(np.asarray(policy, np.float64), axis=1)
-    cum /= cum[:, -1:]
 
-    d3rlpy.seed(seed)
-    torch.manual_seed(seed)
-    algo = _NextActions()
-    fqe = DiscreteFQE(algo=algo, config=FQEConfig(
-        batch_size=batch, gamma=float(gamma), learning_rate=learning_rate,
-        target_update_interval=target_update,
-        encoder_factory=VectorEncoderFactory(hidden_units=list(HIDDEN))), device=False)
-    fqe.create_impl((x.shape[1],), n_actions)
-    rng = np.random.default_rng(seed)
-    total = default_steps(n_rows) if steps is None else int(steps)
-    one = np.ones((batch, 1), np.float32)
-    for step in range(total):
-        idx = rng.integers(0, n_rows, batch)
-        j = nxt[idx]
-        # the evaluated policy's action at the next logged step (drawn if it is stochastic)
-        algo.actions = (cum[j] < rng.random((batch, 1))).sum(1).clip(0, n_actions - 1)
-        fqe.update(TransitionMiniBatch(
-            observations=x[idx], actions=act[idx, None].astype(np.float32),
-            rewards=rew[idx, None], next_observations=x[j],
-            next_actions=np.zeros((batch, 1), np.float32),
-            terminals=last[idx, None].astype(np.float32), intervals=one, transitions=[]))
-        if progress is not None and (step + 1) % 500 == 0:
-            progress(step + 1, total)
-    return q_table(fqe, x, n_actions)
+def refit_steps(steps: int) -> int:
+    """Gradient steps of one bootstrap refit: a fifth of the full fit's, at least 300."""
+    return max(300, int(steps) // REFIT_SHARE)
+
+
+def bootstrap_fqe(observations, actions, rewards, starts, policy, gamma: float = 1.0,
+                  steps: int | None = None, refits: int = REFITS, refit_step_count:
+                  int | None = None, seed: int = 0, progress=None) -> dict:
+    """The direct method with an interval that holds the fitted model's own error: Q_hat
+    (N, n) of the full fit, its estimate (the mean start value of the evaluated policy), and
+    ``refits`` refits, each on the log's episodes resampled with replacement, started from the
+    full fit's weights and trained ``refit_step_count`` more steps on the resample (a warm-
+    started bootstrap: a refit from scratch costs the full fit again, ``refits`` times). Each
+    refit's estimate is its resample's mean start value; the interval is the estimate
+    +- 1.96 x the refits' standard deviation (a normal bootstrap interval: with ~10 refits
+    their percentiles would be their extremes). Returns {"q", "estimate", "low", "high",
+    "replicates" (refits,), "steps", "refit_steps", "seconds"}."""
+    import time
+
+    started = time.perf_counter()
+    fit = FQEFit(observations, actions, rewards, starts, policy, gamma, seed)
+    total = default_steps(fit.n_rows) if steps is None else int(steps)
+    k = refit_steps(total) if refit_step_count is None else int(refit_step_count)
+    grand = total + refits * k
+    fit.train(total, progress=None if progress is None else
+              (lambda done, _t: progress(done, grand)))
+    q = fit.q()
+    policy = np.asarray(policy, np.float64)
+    first = fit.starts[:-1]
+    n_episodes = len(first)
+    estimate = float(np.mean((policy[first] * q[first]).sum(1)))
+    state = fit.snapshot()
+    lengths = np.diff(fit.starts)
+    rng = np.random.default_rng(seed + 1)
+    reps = np.empty(refits)
+    for b in range(refits):
+        counts = rng.multinomial(n_episodes, np.full(n_episodes, 1.0 / n_episodes))
+        chosen = np.repeat(np.arange(n_episodes), counts)                  # resampled episodes
+        rows = np.repeat(fit.starts[chosen], lengths[chosen]) + _offsets(lengths[chosen])
+        fit.restore(state)
+        fit.train(k, rows)
+        v0 = (policy[first] * fit.q(first)).sum(1)                          # (E,)
+        reps[b] = float(counts @ v0) / n_episodes
+        if progress is not None:
+            progress(total + (b + 1) * k, grand)
+    half = 1.96 * float(np.std(reps, ddof=1)) if refits > 1 else float("nan")
+    return {"q": q, "estimate": estimate, "low": estimate - half, "high": estimate + half,
+            "replicates": reps, "steps": total, "refit_steps": k,
+            "seconds": time.perf_counter() - started}
+
+
+def _offsets(lengths: np.ndarray) -> np.ndarray:
+    """(sum lengths,) 0..l-1 within each run of the given lengths."""
+    ends = np.cumsum(lengths)
+    return np.arange(int(ends[-1]) if len(ends) else 0) - np.repeat(ends - lengths, lengths)
 
 
 def q_table(fqe, x: np.ndarray, n_actions: int, block: int = 65536) -> np.ndarray:

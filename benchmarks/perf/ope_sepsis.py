@@ -5,9 +5,12 @@ its point estimate?
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/perf/ope_sepsis.py [--logs 10] [--episodes 5000]
         [--train-episodes 10000] [--store DIR] [--out results.json]
 
-Builds (once, in ``--store``) a corpus of ``--train-episodes`` clinician episodes, a value
-model with the paper's settings and ``--history-length 0`` (so AOC's decision depends on the
-state alone) and its index. AOC's policy is its decision in every state: each state's
+Builds (once, in ``--store``) a corpus of ``--train-episodes`` clinician episodes, its value
+model as ``aoc train NAME`` trains it with no flags (the task's own settings: fqe values,
+gamma 1, history 0, so AOC's decision depends on the state alone) and its index (``aoc index
+NAME``); a stored model trained with other settings is refused. AOC is the controller with the
+task's settings (``ControllerConfig.for_task("icu-sepsis")``: residual cap, support penalty),
+as ``aoc evaluate`` opens it. AOC's policy is its decision in every state: each state's
 observation decided by ``aoc_cli.control.evaluate`` (one-step episodes, the same code path as
 ``aoc evaluate``); on the first held-out log the script checks that ``aoc evaluate``'s own
 decisions are that policy's. BC is the training log's most frequent action per state (the
@@ -33,31 +36,45 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from aoc_cli.belief import BeliefConfig, train_model  # noqa: E402
 from aoc_cli.control import ControllerConfig  # noqa: E402
 from aoc_cli.control import ope  # noqa: E402
 from aoc_cli.control.evaluate import evaluate  # noqa: E402
-from aoc_cli.control.ope_eval import OPESettings, policy_value  # noqa: E402
+from aoc_cli.control.ope_eval import ESTIMATORS, OPESettings, parse_estimators  # noqa: E402
+from aoc_cli.control.ope_eval import policy_value  # noqa: E402
+from aoc_cli.control.ope_fqe import REFITS  # noqa: E402
 from aoc_cli.envs import collect  # noqa: E402
 from aoc_cli.envs.icu_sepsis import tables  # noqa: E402
 from aoc_cli.errors import AocError  # noqa: E402
 from aoc_cli.control import open_session  # noqa: E402
-from aoc_cli.corpus_index import build_index  # noqa: E402
+from aoc_cli.experiments.sepsis import train_aoc  # noqa: E402
 from aoc_cli.store import CorpusData, Store  # noqa: E402
 from aoc_cli.threads import one_thread  # noqa: E402
 
 
+#: The value model's settings ``aoc train NAME`` takes for icu-sepsis (Task.training).
+TASK_VALUE = {"value": "fqe", "gamma": 1.0, "history_length": 0}
+
+
 def prepare(store: Store, train_episodes: int):
-    """The training corpus, its value model (the paper's settings, no history) and index."""
+    """The training corpus, its value model and index, as ``aoc train NAME`` and ``aoc index
+    NAME`` build them with no flags (child processes on this store)."""
     try:
         corpus = store.corpus("train")
     except AocError:
         corpus = store.write("train", collect("icu-sepsis", episodes=train_episodes, seed=0)[0])
-    if not (corpus.models_dir / "default" / "weights.pt").exists():
-        train_model(corpus, BeliefConfig(history_length=0, threads=1, seed=0), "default")
+    config = corpus.models_dir / "default" / "config.json"
     if not (corpus.models_dir / "default" / "index").exists():
-        build_index(corpus, "default")
+        train_aoc(store.root, "train", seed=0)
+    got = json.loads(config.read_text())["config"]
+    if any(got[k] != v for k, v in TASK_VALUE.items()):
+        raise AocError(f"the stored model of {store.root}/train was trained with "
+                       f"{ {k: got[k] for k in TASK_VALUE} }, not the task's {TASK_VALUE}: "
+                       "delete it (or use another --store)")
     return corpus
+
+
+#: AOC's controller: the task's own settings (what ``aoc evaluate`` opens for icu-sepsis).
+CONTROLLER = ControllerConfig.for_task("icu-sepsis")
 
 
 def aoc_policy(store: Store, corpus, t) -> np.ndarray:
@@ -74,7 +91,7 @@ def aoc_policy(store: Store, corpus, t) -> np.ndarray:
         every = store.corpus("every-state")
     except AocError:
         every = store.write("every-state", data)
-    session = open_session(corpus, config=ControllerConfig())
+    session = open_session(corpus, config=CONTROLLER)
     _, res = evaluate(session, every, [], ope=OPESettings(estimators=()))
     policy = np.zeros(t.mdp.n_states, np.int64)
     policy[states] = res.decided
@@ -98,7 +115,12 @@ def main() -> None:
     ap.add_argument("--train-episodes", type=int, default=10000)
     ap.add_argument("--store", default="/tmp/aoc-ope-sepsis")
     ap.add_argument("--fqe-steps", type=int, default=None)
+    ap.add_argument("--fqe-refits", type=int, default=REFITS,
+                    help="refits behind FQE's interval (0: one fit, start values resampled)")
+    ap.add_argument("--estimators", default=",".join(ESTIMATORS))
     ap.add_argument("--out", default=None)
+    ap.add_argument("--no-check", dest="check", action="store_false",
+                    help="skip checking aoc evaluate's decisions on the first log")
     args = ap.parse_args()
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     store = Store(args.store)
@@ -108,7 +130,8 @@ def main() -> None:
     truth = {name: t.mdp.value(p) for name, p in policies.items()}
     truth["clinicians"] = t.mdp.value(t.clinicians)
     print("truth", json.dumps(truth), file=sys.stderr)
-    settings = OPESettings(fqe_steps=args.fqe_steps)
+    settings = OPESettings(estimators=parse_estimators(args.estimators),
+                           fqe_steps=args.fqe_steps, fqe_refits=args.fqe_refits)
     runs = []
     for i in range(args.logs):
         started = time.perf_counter()
@@ -122,8 +145,8 @@ def main() -> None:
         logged = np.asarray(held.actions, np.int64)
         log = ope.Log(held.episode_starts, held.rewards, 1.0)
         prop = held.column("propensity")
-        if i == 0:   # aoc evaluate's own decisions are the policy evaluated here
-            session = open_session(corpus, config=ControllerConfig())
+        if i == 0 and args.check:   # aoc evaluate's own decisions are the policy evaluated here
+            session = open_session(corpus, config=CONTROLLER)
             _, res = evaluate(session, held, [], ope=OPESettings(estimators=()))
             agree = float(np.mean(res.decided == policies["aoc"][s]))
             print(f"aoc evaluate's decisions = the state policy on {agree:.4f} of the steps",
@@ -135,7 +158,7 @@ def main() -> None:
                 rec = policy_value(log, held.observations, logged, prop, pol, held.n_actions,
                                    settings)
             runs.append({"log": i, "policy": pname, "truth": truth[pname], "ess": rec["ess"],
-                         **{k: v for k, v in rec["policy_value"].items()}})
+                         "notes": rec["notes"], **rec["policy_value"]})
         print(f"log {i}: {time.perf_counter() - started:.0f} s", file=sys.stderr)
         if args.out:
             Path(args.out).write_text(json.dumps({"truth": truth, "runs": runs}, indent=1))

@@ -63,6 +63,33 @@ def test_policy_value_is_the_estimators_on_the_decisions(sepsis):
                                                                     abs=1e-12)
 
 
+def test_fqe_interval_is_from_refits_and_says_so(sepsis):
+    pytest.importorskip("d3rlpy", reason="the bench extra (d3rlpy) is not installed")
+    _root, store, _ = sepsis
+    held = store.corpus("held")
+    settings = OPESettings(estimators=("fqe",), fqe_steps=300, fqe_refits=3)
+    summary, res = evaluate(_session(store), held, [], ope=settings)
+    e = summary["policy_value"]["fqe"]
+    assert e["low"] < e["estimate"] < e["high"]
+    assert summary["ope"]["fqe_refits"] == 3
+    note = [n for n in summary["ope"]["notes"] if n.startswith("fqe:")]
+    assert note == ["fqe: the interval is the estimate +- 1.96 sd of 3 refits, each on the "
+                    "log's episodes resampled with replacement, 300 steps on from the full "
+                    "fit's 300-step weights (the model's own sampling and training error is in "
+                    "it; cost 4.0x one fit)"]
+    one, _ = evaluate(_session(store), held, [], ope=OPESettings(
+        estimators=("fqe",), fqe_steps=300, fqe_refits=0))
+    assert any("start values of one fitted Q model" in n for n in one["ope"]["notes"])
+    assert one["policy_value"]["fqe"]["estimate"] == pytest.approx(e["estimate"], abs=1e-9)
+
+
+def test_fqe_refits_of_one_is_one_line(sepsis, capsys):
+    root, _store, _ = sepsis
+    code, out, err = _ope_cli(capsys, root, "held", "--fqe-refits", "1")
+    assert code == 2 and out == ""
+    assert err.strip().splitlines() == ["aoc: error: --fqe-refits must be 0 or at least 2, got 1"]
+
+
 def test_without_a_propensity_column_an_imitation_model_estimates_them(sepsis, tmp_path):
     _root, store, held = sepsis
     bare = type(held)(**{**held.__dict__, "columns": {}})
