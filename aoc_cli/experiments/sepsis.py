@@ -69,7 +69,7 @@ def references(tables) -> dict[str, dict]:
     out = {"clinicians": {**sp.exact(tables, tables.clinicians), "policy": None},
            "random": {**sp.exact(tables, tables.behaviour("random")), "policy": None}}
     for name, pol in (("modal", tables.modal()), ("one-step", one_step), ("optimal", optimal)):
-        out[name] = {**sp.exact(tables, pol), "policy": pol}
+        out[name] = {**sp.exact(tables, pol), **sp.inadmissible(tables, pol), "policy": pol}
     return out
 
 
@@ -116,6 +116,7 @@ def run_size(store, task: str, episodes: int, seed: int, cfg: dict, methods: lis
                "high": result["high"], "kind": result["kind"],
                "agree_one_step": None if policy is None
                else float(np.mean(policy[:sp.LIVE] == oracle[:sp.LIVE])),
+               **({} if policy is None else sp.inadmissible(tables, policy)),
                "seconds": seconds, **extra}
         rows.append(rec)
         if log is not None:
@@ -178,30 +179,35 @@ def summarise(rows: list[dict], refs: dict, methods: list[str]) -> list[dict]:
             ref = refs[method]
             out.append({"method": method, "episodes": None, "seeds": 0, "value": ref["value"],
                         "low": ref["low"], "high": ref["high"], "kind": "exact",
-                        "agree_one_step": None})
+                        "agree_one_step": None, "inadmissible_states": ref.get(
+                            "inadmissible_states")})
             continue
         for size in sizes:
             mine = [r for r in rows if r["method"] == method and r["episodes"] == size]
             if not mine:
                 continue
             agree = [r["agree_one_step"] for r in mine if r["agree_one_step"] is not None]
+            fatal = [r["inadmissible_states"] for r in mine if "inadmissible_states" in r]
             out.append({"method": method, "episodes": size, "seeds": len(mine),
                         "value": float(np.mean([r["value"] for r in mine])),
                         "low": float(np.mean([r["low"] for r in mine])),
                         "high": float(np.mean([r["high"] for r in mine])),
                         "kind": mine[0]["kind"],
-                        "agree_one_step": float(np.mean(agree)) if agree else None})
+                        "agree_one_step": float(np.mean(agree)) if agree else None,
+                        "inadmissible_states": float(np.mean(fatal)) if fatal else None})
     return out
 
 
 def markdown(summary: list[dict]) -> str:
-    lines = ["| method | episodes | seeds | value | 95% interval | kind | agrees with one-step |",
-             "| --- | --- | --- | --- | --- | --- | --- |"]
+    lines = ["| method | episodes | seeds | value | 95% interval | kind | agrees with one-step "
+             "| inadmissible doses (share of states) |",
+             "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     for s in summary:
         interval = "" if s["kind"] == "exact" else f"{s['low']:.3f} - {s['high']:.3f}"
         agree = "" if s["agree_one_step"] is None else f"{s['agree_one_step']:.2f}"
+        fatal = "" if s.get("inadmissible_states") is None else f"{s['inadmissible_states']:.3f}"
         lines.append(f"| {s['method']} | {s['episodes'] or 'tables'} | {s['seeds']} | "
-                     f"{s['value']:.4f} | {interval} | {s['kind']} | {agree} |")
+                     f"{s['value']:.4f} | {interval} | {s['kind']} | {agree} | {fatal} |")
     return "\n".join(lines) + "\n"
 
 

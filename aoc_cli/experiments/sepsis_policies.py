@@ -131,3 +131,17 @@ def exact(tables: SepsisTables, policy: np.ndarray) -> dict:
     """The exact value of a state policy (716,) in the tables' MDP."""
     value = tables.mdp.value(policy)
     return {"value": value, "low": value, "high": value, "kind": "exact"}
+
+
+def inadmissible(tables: SepsisTables, policy: np.ndarray) -> dict:
+    """How often a state policy (716,) leaves the clinicians' admissible doses: the share of
+    the live states where its dose is inadmissible, and the expected number of inadmissible
+    decisions per patient under it (its value in the same MDP with reward 1 for each
+    inadmissible (state, dose); under the ``terminate`` strategy every such decision is fatal,
+    so that is the probability that a patient dies of one)."""
+    mdp = tables.mdp
+    bad = ~tables.admissible                                               # (716, 25)
+    policy = np.asarray(policy, np.int64)
+    count = TabularMDP(mdp.P, bad.astype(np.float64), mdp.d0, mdp.terminal, mdp.gamma)
+    return {"inadmissible_states": float(np.mean(bad[np.arange(LIVE), policy[:LIVE]])),
+            "inadmissible_per_patient": count.value(policy)}

@@ -70,6 +70,26 @@ def test_a_state_policy_decides_each_live_state_once(tables):
     np.testing.assert_array_equal(pol[:713], tables.observations[:713, -1] > 5)
 
 
+def test_inadmissible_doses_are_counted_per_state_and_per_patient():
+    t = icu_sepsis.tables("terminate")
+    modal = t.modal()
+    assert sp.inadmissible(t, modal) == {"inadmissible_states": 0.0,
+                                         "inadmissible_per_patient": 0.0}
+    s0 = int(np.argmax(t.mdp.d0))
+    bad = modal.copy()
+    bad[s0] = int(np.flatnonzero(~t.admissible[s0])[0])
+    got = sp.inadmissible(t, bad)
+    assert got["inadmissible_states"] == pytest.approx(1 / 713, abs=1e-15)
+    # expected visits to s0 by hand: d0 (I - P_pi)^-1 over the live states; each is fatal here
+    live = np.flatnonzero(~t.mdp.terminal)
+    pi = t.mdp.as_stochastic(bad)
+    P_pi = np.einsum("sa,sat->st", pi, t.mdp.P)[np.ix_(live, live)]
+    visits = t.mdp.d0[live] @ np.linalg.inv(np.eye(len(live)) - P_pi)
+    assert got["inadmissible_per_patient"] == pytest.approx(visits[list(live).index(s0)],
+                                                            rel=1e-9)
+    assert t.mdp.value(bad) < t.mdp.value(modal)
+
+
 def test_run_writes_the_table_with_the_references_and_log_policies(tmp_path):
     report = run_sepsis(tmp_path / "out", tmp_path / "store", "tiny",
                         methods=["bc", "tabular", "clinicians", "one-step", "optimal"],
@@ -82,6 +102,7 @@ def test_run_writes_the_table_with_the_references_and_log_policies(tmp_path):
         assert by[m]["episodes"] == 300 and by[m]["kind"] == "exact"
         assert 0.7 < by[m]["value"] < by["optimal"]["value"]
         assert 0.0 <= by[m]["agree_one_step"] <= 1.0
+        assert 0.0 <= by[m]["inadmissible_states"] <= 1.0
     saved = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert saved["summary"] == report["summary"]
     md = (tmp_path / "out" / "summary.md").read_text()
