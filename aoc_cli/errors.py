@@ -67,7 +67,7 @@ def plain(text: str) -> str:
     return render(text, _library_param, _library_call)
 
 
-_param = param  # for the classes whose argument is called param
+_param = param  # for the classes whose argument is called param (CorpusExists, ModelExists)
 
 
 class AocError(Exception):
@@ -211,13 +211,11 @@ class NoRewards(AocError):
 
 
 class BadSetting(AocError):
-    """Setting ``param`` has a value it cannot take: ``value``, and ``why`` (the message,
-    marked; when it does not name ``param`` it follows the name: ``epsilon must be in (0, 1],
-    got 2``)."""
+    """Setting ``param`` has a value it cannot take: ``value``; ``why``: the message, with the
+    setting marked (``f"{param('epsilon')} must be in (0, 1], got {epsilon}"``)."""
 
     def __init__(self, param: str, value, why: str):
-        text = why if _OPEN in why else f"{_param(param)} {why}"
-        super().__init__(text, param)
+        super().__init__(why, param)
         self.value, self.why = value, why
 
 

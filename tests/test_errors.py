@@ -55,6 +55,27 @@ def test_no_library_message_names_a_flag_or_an_aoc_command():
         + "\n".join(found)
 
 
+def test_every_bad_setting_names_its_setting():
+    """``BadSetting(param, value, why)``: ``why`` marks ``param`` (``param('epsilon')``) or
+    says its name (``unknown device 'x'``), so the line cannot lose what it is about."""
+    found = []
+    for path in library_modules():
+        for node in ast.walk(ast.parse(path.read_text())):
+            if not (isinstance(node, ast.Call) and getattr(node.func, "id", "") == "BadSetting"):
+                continue
+            name, why = node.args[0], node.args[2]
+            marked = [ast.dump(c.args[0]) for c in ast.walk(why) if isinstance(c, ast.Call)
+                      and getattr(c.func, "id", "") == "param" and c.args]
+            words = " ".join(c.value for c in ast.walk(why)
+                             if isinstance(c, ast.Constant) and isinstance(c.value, str))
+            names = [name.body, name.orelse] if isinstance(name, ast.IfExp) else [name]
+            for one in names:  # ("a" if ... else "b"): both
+                said = isinstance(one, ast.Constant) and one.value.replace("_", " ") in words
+                if ast.dump(one) not in marked and not said:
+                    found.append(f"{path.relative_to(LIBRARY)}:{node.lineno}")
+    assert found == []
+
+
 def test_the_scan_finds_a_flag_and_a_command_in_a_message():
     # the scan above would find what it guards against
     bad = ast.parse('raise AocError(f"--epsilon must be > 0: run `aoc train {x}`")\n'
@@ -125,7 +146,7 @@ def test_marked_parameters_and_calls_read_as_python():
 def test_typed_errors_survive_pickling_with_their_data():
     # Ray carries a worker's error to the driver by pickling it
     for err in (CorpusNotFound("c", "/s", ["a"]), ModelMissing("c", "m", ["a"], mode="imitation"),
-                BadSetting("epsilon", 2.0, f"must be in (0, 1], got {2.0}")):
+                BadSetting("epsilon", 2.0, f"{param('epsilon')} must be in (0, 1], got 2.0")):
         back = pickle.loads(pickle.dumps(err))
         assert type(back) is type(err) and str(back) == str(err)
         assert back.__dict__ == err.__dict__

@@ -130,59 +130,62 @@ class BeliefConfig:
                              f", not {param('belief', self.belief)}")
         if self.critic_steps is not None and self.critic_steps < 1:
             raise BadSetting("critic_steps", self.critic_steps,
-                             f"must be >= 1, got {self.critic_steps}")
+                             f"{param('critic_steps')} must be >= 1, got {self.critic_steps}")
         if not self.critic_bc_weight >= 0:
             raise BadSetting("critic_bc_weight", self.critic_bc_weight,
-                             f"must be >= 0, got {self.critic_bc_weight}")
+                             f"{param('critic_bc_weight')} must be >= 0, got "
+                             f"{self.critic_bc_weight}")
         if not self.value:
-            raise BadSetting("value", self.value, "is empty: use return, mean-return, reward or a "
-                             "column name")
+            raise BadSetting("value", self.value, f"{param('value')} is empty: use return, "
+                             "mean-return, reward or a column name")
         if self.history_length < 0:
             raise BadSetting("history_length", self.history_length,
-                             f"must be >= 0, got {self.history_length}")
+                             f"{param('history_length')} must be >= 0, got {self.history_length}")
         if not 0.0 <= self.gamma <= 1.0:
             raise BadSetting("gamma", self.gamma,
-                             f"must be in [0, 1], got {self.gamma}")
+                             f"{param('gamma')} must be in [0, 1], got {self.gamma}")
         for name in ("belief_dim", "hidden", "batch_size", "max_epochs"):
             if getattr(self, name) < 1:
                 raise BadSetting(name, getattr(self, name),
-                                 f"must be >= 1, got {getattr(self, name)}")
+                                 f"{param(name)} must be >= 1, got {getattr(self, name)}")
         if not self.dynamics_weight >= 0:
             raise BadSetting("dynamics_weight", self.dynamics_weight,
-                             f"must be >= 0, got {self.dynamics_weight}")
+                             f"{param('dynamics_weight')} must be >= 0, got {self.dynamics_weight}")
         if self.dynamics_weight > 0 and self.mode != "value":
             raise BadSetting("dynamics_weight", self.dynamics_weight,
-                             f"needs {param('mode', 'value')} (the imitation belief b(o, h) "
-                             "has no action to predict the next observation from)")
+                             f"{param('dynamics_weight')} needs {param('mode', 'value')} (the "
+                             "imitation belief b(o, h) has no action to predict the next "
+                             "observation from)")
         if self.belief != "value" and self.mode != "value":
             raise BadSetting("belief", self.belief,
                              f"{param('belief', self.belief)} needs {param('mode', 'value')} "
                              "(the imitation belief is trained on the logged action)")
         if self.patience < 1:
             raise BadSetting("patience", self.patience,
-                             f"must be >= 1, got {self.patience}")
+                             f"{param('patience')} must be >= 1, got {self.patience}")
         if not self.weight_decay >= 0:
             raise BadSetting("weight_decay", self.weight_decay,
-                             f"must be >= 0, got {self.weight_decay}")
+                             f"{param('weight_decay')} must be >= 0, got {self.weight_decay}")
         if self.class_weight not in ("none", "balanced"):
             raise BadSetting("class_weight", self.class_weight,
                              f"unknown {param('class_weight')} {self.class_weight!r}: use none "
                              "or balanced")
         if not 0.0 <= self.label_smoothing < 1.0:
             raise BadSetting("label_smoothing", self.label_smoothing,
-                             f"must be in [0, 1), got {self.label_smoothing}")
+                             f"{param('label_smoothing')} must be in [0, 1), got "
+                             f"{self.label_smoothing}")
         if not 0.0 <= self.dropout < 1.0:
             raise BadSetting("dropout", self.dropout,
-                             f"must be in [0, 1), got {self.dropout}")
+                             f"{param('dropout')} must be in [0, 1), got {self.dropout}")
         if not self.lr > 0:
             raise BadSetting("lr", self.lr,
-                             f"must be > 0, got {self.lr}")
+                             f"{param('lr')} must be > 0, got {self.lr}")
         if not 0.0 < self.val_fraction < 1.0:
             raise BadSetting("val_fraction", self.val_fraction,
-                             f"must be in (0, 1), got {self.val_fraction}")
+                             f"{param('val_fraction')} must be in (0, 1), got {self.val_fraction}")
         if self.threads is not None and self.threads < 1:
             raise BadSetting("threads", self.threads,
-                             f"must be >= 1, got {self.threads}")
+                             f"{param('threads')} must be >= 1, got {self.threads}")
         if self.belief_activation not in ("tanh", "relu"):
             raise BadSetting("belief_activation", self.belief_activation,
                              f"unknown belief activation {self.belief_activation!r}: "

@@ -90,8 +90,8 @@ def fitted_q_values(observations: np.ndarray, actions: np.ndarray, rewards: np.n
     if n == 0:
         return np.zeros(0)
     if not 0.0 <= gamma <= 1.0:
-        raise BadSetting("gamma", gamma, f"must be in [0, 1] for {param('value', 'fqe')}, "
-                         f"got {gamma}")
+        raise BadSetting("gamma", gamma, f"{param('gamma')} must be in [0, 1] for "
+                         f"{param('value', 'fqe')}, got {gamma}")
     discrete = n_actions is not None
     x = _inputs(observations, actions, discrete)
     act = np.asarray(actions, np.int64).reshape(-1) if discrete else np.zeros(n, np.int64)

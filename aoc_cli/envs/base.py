@@ -142,7 +142,7 @@ def budget(steps: int | None, episodes: int | None, default_steps: int | None,
         raise AocError(f"give {param('steps')} or {param('episodes')}, not both")
     for name, value in (("steps", steps), ("episodes", episodes)):
         if value is not None and (isinstance(value, bool) or int(value) != value or value <= 0):
-            raise BadSetting(name, value, f"must be a positive integer, got {value}")
+            raise BadSetting(name, value, f"{param(name)} must be a positive integer, got {value}")
     if steps is None and episodes is None:
         steps, episodes = default_steps, (None if default_steps else default_episodes)
     return (None if steps is None else int(steps)), (None if episodes is None else int(episodes))

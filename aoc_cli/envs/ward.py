@@ -41,7 +41,7 @@ from gymnasium import spaces
 
 from aoc_cli.envs.base import Progress, Task, budget
 from aoc_cli.envs.render import step_series
-from aoc_cli.errors import BadSetting
+from aoc_cli.errors import BadSetting, param
 from aoc_cli.store import CorpusData, atomic_path
 
 GYM_ID = "aoc/Ward-v0"
@@ -181,7 +181,8 @@ def write_csv(out_dir, name: str = "ward", episodes: int = DEFAULT_EPISODES, see
     clinician, outcome) and ``<out_dir>/<name>-static.csv`` (one row per patient), atomically.
     Returns the two paths."""
     if episodes <= 0:
-        raise BadSetting("episodes", episodes, f"must be a positive integer, got {episodes}")
+        raise BadSetting("episodes", episodes,
+                         f"{param('episodes')} must be a positive integer, got {episodes}")
     sim = simulate(int(episodes), int(seed), progress)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

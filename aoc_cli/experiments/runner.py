@@ -95,15 +95,17 @@ def check(name: str, scale: str, seeds: int | None, episodes: int | None,
     if scale not in SCALES:
         raise AocError(f"unknown scale {scale!r}: use one of {', '.join(SCALES)}")
     if seeds is not None and seeds < 1:
-        raise BadSetting("seeds", seeds, f"must be >= 1, got {seeds}")
+        raise BadSetting("seeds", seeds, f"{param('seeds')} must be >= 1, got {seeds}")
     if episodes is not None and episodes < 1:
-        raise BadSetting("episodes", episodes, f"must be >= 1, got {episodes}")
+        raise BadSetting("episodes", episodes, f"{param('episodes')} must be >= 1, got {episodes}")
     if epsilon is not None:
         if name in ("epsilon", "two-gates"):
             raise BadSetting("epsilon", epsilon,
-                             f"does not apply to {name}: epsilon is what it varies")
+                             f"{param('epsilon')} does not apply to {name}: epsilon is what it "
+                             "varies")
         if not 0.0 < epsilon <= 1.0:
-            raise BadSetting("epsilon", epsilon, f"must be in (0, 1], got {epsilon}")
+            raise BadSetting("epsilon", epsilon,
+                             f"{param('epsilon')} must be in (0, 1], got {epsilon}")
     if methods:
         from aoc_cli.baselines import BASELINES
 
@@ -112,15 +114,17 @@ def check(name: str, scale: str, seeds: int | None, episodes: int | None,
             raise AocError(f"unknown method(s) {', '.join(unknown)}: use "
                            f"{', '.join([*AOC_METHODS, *BASELINES])}")
     if workers is not None and workers < 1:
-        raise BadSetting("workers", workers, f"must be >= 1, got {workers}")
+        raise BadSetting("workers", workers, f"{param('workers')} must be >= 1, got {workers}")
     if residual_cap is not None and not residual_cap > 0:
-        raise BadSetting("residual_cap", residual_cap, f"must be > 0, got {residual_cap}")
+        raise BadSetting("residual_cap", residual_cap,
+                         f"{param('residual_cap')} must be > 0, got {residual_cap}")
     if sizes is not None:
         if name not in SIZED:
-            raise BadSetting("sizes", sizes, f"applies to {' and '.join(SIZED)} (the data-size "
-                             f"sweeps), not to {name}")
+            raise BadSetting("sizes", sizes, f"{param('sizes')} applies to {' and '.join(SIZED)} "
+                             f"(the data-size sweeps), not to {name}")
         if not sizes or any(n < 100 for n in sizes):
-            raise BadSetting("sizes", sizes, f"must be row counts >= 100, got {sizes}")
+            raise BadSetting("sizes", sizes,
+                             f"{param('sizes')} must be row counts >= 100, got {sizes}")
 
 
 def sized(params: dict, sizes: list[int] | None) -> dict:

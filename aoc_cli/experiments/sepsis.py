@@ -225,7 +225,7 @@ def run_sepsis(out: Path, bench_store: Path, scale: str = "full", seeds: int | N
         raise BadSetting("methods", methods, f"{param('methods')}: unknown {', '.join(unknown)}; "
                          f"use {', '.join(METHODS)}")
     if seeds is not None and seeds < 1:
-        raise BadSetting("seeds", seeds, f"must be >= 1, got {seeds}")
+        raise BadSetting("seeds", seeds, f"{param('seeds')} must be >= 1, got {seeds}")
     cfg = SCALES[scale]
     sizes = list(sizes or cfg["sizes"])
     if any(s < 1 for s in sizes):

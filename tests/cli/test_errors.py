@@ -37,8 +37,12 @@ from aoc_cli.errors import (AocError, AocWarning, BadSetting, CorpusExists, Corp
     (IndexStale("c", "m", "default", {"model": "x"}, {"model": "y"}),
      "index 'default' was built from another version of corpus 'c' or model 'm': rebuild it "
      "with `aoc index c --model m`"),
-    (BadSetting("residual_cap", 0, "must be > 0, got 0"), "--residual-cap must be > 0, got 0"),
-    (BadSetting("max_epochs", 0, "must be >= 1, got 0"), "--epochs must be >= 1, got 0"),
+    (BadSetting("residual_cap", 0, f"{param('residual_cap')} must be > 0, got 0"),
+     "--residual-cap must be > 0, got 0"),
+    (BadSetting("max_epochs", 0, f"{param('max_epochs')} must be >= 1, got 0"),
+     "--epochs must be >= 1, got 0"),
+    (BadSetting("gamma", 1.5, f"{param('gamma')} must be in [0, 1] for {param('value', 'fqe')}, "
+                "got 1.5"), "--gamma must be in [0, 1] for --value fqe, got 1.5"),
     (BadSetting("belief", "critic", f"{param('belief', 'critic')} needs "
                 f"{param('mode', 'value')}"), "--belief critic needs --mode value"),
     (Locked("corpus 'c'", [12]), "corpus 'c' is being written by pid 12: wait until it has "
