@@ -183,14 +183,6 @@ RayAddressOption = Annotated[Optional[str], typer.Option(
                           "of starting a local one.")]
 
 
-def get_store():
-    """The corpus store at --store, else $AOC_STORE, else ./corpora
-    (:func:`aoc_cli.store.layout.store_root`)."""
-    from aoc_cli.store import Store
-
-    return Store.open(state.store)
-
-
 # -- flag values ---------------------------------------------------------------------------
 def _split(item: str, sep: str, flag: str, form: str) -> tuple[str, str]:
     key, found, value = item.rpartition(sep) if sep == ":" else item.partition(sep)
@@ -213,17 +205,14 @@ def parse_selection(items: list[str] | None, flag: str) -> dict[str, list[str]]:
     return out
 
 
-def parse_removal(corpus, without: list[str] | None, without_episodes: str | None):
-    """``--without`` / ``--without-episodes`` -> :class:`aoc_cli.control.whatif.Removal` or
-    None."""
-    from aoc_cli.control.whatif import removal
-
-    episodes = None
-    if without_episodes is not None:
-        episodes = [x.strip() for x in without_episodes.split(",") if x.strip()]
-        if not episodes:
-            raise AocError("--without-episodes expects ID[,ID...], got an empty list")
-    return removal(corpus, parse_selection(without, "--without"), episodes)
+def parse_episodes(text: str | None) -> list[str] | None:
+    """``--without-episodes "p1, p7"`` -> ``["p1", "p7"]``; an empty list is an AocError."""
+    if text is None:
+        return None
+    episodes = [x.strip() for x in text.split(",") if x.strip()]
+    if not episodes:
+        raise AocError("--without-episodes expects ID[,ID...], got an empty list")
+    return episodes
 
 
 def parse_rates(items: list[str] | None, flag: str) -> dict[str, float]:

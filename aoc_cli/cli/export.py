@@ -1,5 +1,5 @@
 """``aoc export NAME --to minari|d4rl|csv --out PATH``: a corpus out again, for the tools
-beside aoc (:func:`aoc_cli.formats.export`)."""
+beside aoc (:func:`aoc_cli.api.export`)."""
 
 from __future__ import annotations
 
@@ -10,9 +10,8 @@ from typing import Optional
 import typer
 
 from aoc_cli.cli.common import (CorpusArgument, ExcludeOption, FormatOption, OverwriteOption,
-                                SelectOption, choice, get_store, parse_selection)
+                                SelectOption, choice, parse_selection, state)
 from aoc_cli.errors import AocError
-from aoc_cli.formats import export as run_export
 from aoc_cli.report.output import ProgressBar, resolve_format, write_object
 
 
@@ -56,9 +55,11 @@ def register(app: typer.Typer) -> None:
         fmt: FormatOption = None,
     ) -> None:
         """Write corpus NAME as Minari, D4RL HDF5 or CSV; `aoc ingest` reads it back exactly."""
+        from aoc_cli import api  # here: keeps `aoc --help` and bad input from importing torch
+
         fmt = resolve_format(fmt)
         with ProgressBar(f"export {name}") as bar:
-            result = run_export(name, choice(to), out, store=get_store(),
+            result = api.export(name, choice(to), out, store=state.store,
                                 select=parse_selection(select, "--select"),
                                 exclude=parse_selection(exclude, "--exclude"),
                                 rows=parse_rows(rows),

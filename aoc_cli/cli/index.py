@@ -7,7 +7,7 @@ from typing import Annotated, List, Optional
 import typer
 
 from aoc_cli.cli.common import (CorpusArgument, FormatOption, IndexKind, ModelOption,
-                                StepCandidates, choice, get_store, parse_rates)
+                                StepCandidates, choice, parse_rates, state)
 from aoc_cli.errors import AocError
 from aoc_cli.report import ProgressBar, write_object
 from aoc_cli.settings import SMALL_LOG_ROWS
@@ -46,28 +46,17 @@ def register(app: typer.Typer) -> None:
         fmt: FormatOption = None,
     ) -> None:
         """Compute every row's belief and build the index the controller searches."""
-        from aoc_cli.corpus_index import build_index
+        from aoc_cli import api  # here: keeps `aoc --help` and bad input from importing torch
 
         if neighbours is not None and old_neighbours is not None \
                 and neighbours != old_neighbours:
             raise AocError("--neighbours and --candidates (its older name) differ: give one")
         rule = neighbours or old_neighbours or StepCandidates.auto
-        corpus = get_store().corpus(name)
         rates = parse_rates(episode_rate, "--episode-rate")
-        rates_s = parse_rates(subsample, "--subsample")
-        for key, rate in rates_s.items():
-            if rate > 1:
-                raise AocError(f"--subsample rates are <= 1 (got {rate} for {key}); use "
-                               "--episode-rate")
         with ProgressBar("index") as p:
-            ci = build_index(corpus, model, kind=choice(kind), index_id=index_id,
-                             episode_rates={**rates_s, **rates}, seed=seed, progress=p,
-                             candidates=choice(rule))
-        meta = ci.meta
-        write_object({
-            "corpus": corpus.name, "model": meta["model"], "index": meta["index_id"],
-            "kind": meta["kind"], "rows": meta["rows"], "belief_dim": meta["belief_dim"],
-            "k": meta["k"], "candidates": meta["candidates"],
-            "typical_residual": ci.typical_residual,
-            "build_seconds": meta["build_seconds"],
-        }, fmt, title=f"index {meta['index_id']} of {corpus.name}")
+            built = api.build_index(name, model, store=state.store, kind=choice(kind),
+                                    index_id=index_id, episode_rates=rates,
+                                    subsample=parse_rates(subsample, "--subsample"), seed=seed,
+                                    neighbours=choice(rule), progress=p)
+        meta = built.index.meta
+        write_object(built.summary(), fmt, title=f"index {meta['index_id']} of {built.corpus}")

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import typer
 
-from aoc_cli.cli.common import CorpusArgument, FormatOption, get_store
+from aoc_cli.cli.common import CorpusArgument, FormatOption, state
+from aoc_cli.report.output import message, resolve_format, write_object, write_records
+from aoc_cli.store.summary import space_text
 
 
 def register(app: typer.Typer) -> None:
@@ -14,12 +16,10 @@ def register(app: typer.Typer) -> None:
         fmt: FormatOption = None,
     ) -> None:
         """Rows, episodes, spaces, returns, tags and what has been built from corpus NAME."""
-        from aoc_cli.report.output import resolve_format, write_object, write_records
-        from aoc_cli.store import summarize
-        from aoc_cli.store.summary import space_text
+        from aoc_cli import api  # here: keeps `aoc --help` and bad input from importing torch
 
         resolved = resolve_format(fmt)
-        summary = summarize(get_store().corpus(name))
+        summary = api.info(name, store=state.store)
         if resolved != "table":
             write_object(summary, resolved)
             return
@@ -40,16 +40,14 @@ def register(app: typer.Typer) -> None:
     @app.command("ls")
     def ls(fmt: FormatOption = None) -> None:
         """List the corpora of the store."""
-        from aoc_cli.report.output import message, write_records
-        from aoc_cli.store import list_corpora
+        from aoc_cli import api  # here: keeps `aoc --help` and bad input from importing torch
 
-        store = get_store()
-        records = list_corpora(store)
+        root, records = api.corpora(store=state.store)
         if not records:
-            message(f"no corpora in {store.root}: create one with `aoc ingest` or `aoc collect`")
+            message(f"no corpora in {root}: create one with `aoc ingest` or `aoc collect`")
         write_records(records, fmt, columns=["name", "rows", "episodes", "observation", "action",
                                              "has_rewards", "models", "status"],
-                      title=str(store.root))
+                      title=str(root))
 
 
 def _source_text(source: dict) -> str:

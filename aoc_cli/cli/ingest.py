@@ -7,7 +7,8 @@ from typing import List, Optional
 
 import typer
 
-from aoc_cli.cli.common import FormatOption, get_store, parse_key_values
+from aoc_cli.cli.common import FormatOption, parse_key_values, state
+from aoc_cli.report.output import ProgressBar, resolve_format, write_object
 
 
 def _names(text: Optional[str]) -> Optional[list[str]]:
@@ -51,12 +52,10 @@ def register(app: typer.Typer) -> None:
         fmt: FormatOption = None,
     ) -> None:
         """Read a dataset (Minari, D4RL HDF5, d3rlpy, NPZ, CSV) into corpus NAME."""
-        from aoc_cli.formats import ReadOptions
-        from aoc_cli.formats import ingest as run_ingest
-        from aoc_cli.report.output import ProgressBar, resolve_format, write_object
+        from aoc_cli import api  # here: keeps `aoc --help` and bad input from importing torch
 
         resolve_format(fmt)
-        options = ReadOptions(
+        options = dict(
             tags=parse_key_values(tag, "--tag"), tag_columns=list(tag_column or []),
             reward_free=reward_free, drop_nonfinite=drop_nonfinite,
             discrete_actions=discrete_actions, columns_file=columns,
@@ -65,7 +64,7 @@ def register(app: typer.Typer) -> None:
             terminal_column=terminal_column, static=static,
         )
         with ProgressBar(f"ingest {name}") as bar:
-            options.progress = bar
-            result = run_ingest(path, name, store=get_store(), fmt=source_format,
-                                options=options, overwrite=overwrite, append=append)
+            result = api.ingest(path, name, store=state.store, fmt=source_format,
+                                options=options, overwrite=overwrite, append=append,
+                                progress=bar)
         write_object(result.summary(), fmt, title=f"ingested {name}")

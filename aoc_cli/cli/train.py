@@ -1,4 +1,5 @@
-"""`aoc train NAME`: learn the belief model of a corpus (value mode: AOC; imitation: ABC)."""
+"""`aoc train NAME`: learn the belief model of a corpus (value mode: AOC; imitation: ABC).
+Parses and prints only; the work is in :func:`aoc_cli.api.train`."""
 
 from __future__ import annotations
 
@@ -6,11 +7,10 @@ from typing import Annotated, Optional
 
 import typer
 
-from aoc_cli.belief import select, task_settings
-from aoc_cli.belief.config import CRITIC_STEP_SECONDS, BeliefConfig
-from aoc_cli.belief.data import prepare
+from aoc_cli.belief.config import BeliefConfig
 from aoc_cli.cli.common import (BeliefKind, BeliefMode, CorpusArgument, FormatOption, choice,
-                                get_store)
+                                state)
+from aoc_cli.report import train_view
 from aoc_cli.report.output import ProgressBar, message, resolve_format, write_object
 from aoc_cli.settings import SMALL_LOG_ROWS
 
@@ -102,119 +102,22 @@ def train(
     fmt: FormatOption = None,
 ) -> None:
     """Train the belief model b and linear head l of corpus NAME; print the final metrics."""
+    from aoc_cli import api  # here: keeps `aoc --help` and bad input from importing torch
+
     fmt = resolve_format(fmt)
-    given = {"mode": choice(mode) if mode is not None else None,
-             "belief": choice(belief) if belief is not None else None, "gamma": gamma,
-             "value": value, "dynamics_weight": dynamics_weight,
-             "history_length": history_length, "hidden": hidden, "weight_decay": weight_decay}
-    fixed = dict(critic_steps=critic_steps, critic_bc_weight=critic_bc_weight,
-                 belief_dim=belief_dim, max_epochs=epochs, batch_size=batch_size, lr=lr,
-                 patience=patience, val_fraction=val_fraction, seed=seed, threads=threads,
-                 dropout=dropout, class_weight=class_weight,
-                 label_smoothing=label_smoothing or 0.0)
-    _config(given, fixed)  # the flags checked before the store is read
-    corpus = get_store().corpus(name)
-    task, settings = task_settings.for_corpus(corpus, paper)
-    given, from_task = task_settings.resolve(given, settings)
-    searched = {k: given[k] for k in select.PAPER}
-    config = _config(given, fixed)
-    config = select.with_imitation_defaults(
-        corpus, config, {"label_smoothing": label_smoothing}, paper).validate()
-    if from_task:
-        message(task_settings.describe(task, from_task))
-    extra = {"task_settings": {"task": task, "settings": from_task}} if task else {}
-    from aoc_cli.store import check_name, writing_model
-
-    with writing_model(corpus.path, check_name(model, "model")):  # one writer per model id
-        metrics = _train(corpus, config, model, overwrite,
-                         select.open_settings(corpus, config, searched, paper),
-                         select.why_no_search(corpus, config, searched, paper), extra)
-    score = (f"val R^2 {metrics['val_r2']:.3f}" if "val_r2" in metrics
-             else f"val accuracy {metrics['val_accuracy']:.3f} (majority "
-                  f"{metrics['val_majority_accuracy']:.3f})")
-    unit = "steps" if metrics.get("belief") == "critic" else "epochs"
-    message(f"trained {name}/{model}: {metrics['mode']} ({metrics.get('belief', 'value')} "
-            f"belief), {metrics['epochs']} {unit} (best "
-            f"{metrics['best_epoch']}), {score}, {metrics['seconds']:.0f} s")
-    chosen = metrics.get("selection") if (metrics.get("selection") or {}).get("searched") \
-        else None
-    if chosen:
-        message("chose " + ", ".join(f"{k} {v}" for k, v in chosen["chosen"].items()
-                                     if k in chosen["searched"]) + " by " + chosen["why"])
-    if metrics.get("val_abc_accuracy") is not None:
-        auc = metrics.get("val_abc_auc")
-        message(f"ABC's own decisions on the validation episodes (k {metrics['val_abc_k']}): "
-                f"accuracy {metrics['val_abc_accuracy']:.3f}"
-                + ("" if auc is None else f", AUC {auc:.3f}"))
-    if label_smoothing is None and config.label_smoothing > 0:
-        message(f"label smoothing {config.label_smoothing:g} (the default for imitating "
-                "discrete actions on a small corpus; --label-smoothing 0 for the paper's)")
-    warning = select.baseline_check(metrics)
-    if warning:
-        message(f"[yellow]warning:[/] {warning}")
-    shown = metrics
-    if fmt == "table" and chosen:  # the candidates are in the JSON output and config.json
-        shown = {**metrics, "selection": ", ".join(f"{k} {v}" for k, v in
-                                                   chosen.get("chosen", {}).items())}
-    if not chosen and "selection" in metrics:
-        message(f"settings: {metrics['selection']['why']}")
-    if fmt == "table" and not chosen and "selection" in metrics:
-        shown = {**metrics, "selection": metrics["selection"]["why"]}
-    if fmt == "table" and "task_settings" in metrics:
-        own = metrics["task_settings"]
-        shown = {**shown, "task_settings": f"{own['task']}: " + (", ".join(
-            f"{k} {v}" for k, v in own["settings"].items()) or "none")}
-    write_object(shown, fmt, title=f"aoc train {name} --model {model}")
-
-
-def _config(given: dict, fixed: dict) -> BeliefConfig:
-    """The checked configuration of the settings ``given`` (None: not given; the paper's value
-    for a searched one) and the flags ``fixed``."""
-    searched = {k: given.get(k) for k in select.PAPER}
-    config = BeliefConfig(**{k: v for k, v in given.items()
-                             if v is not None and k not in select.PAPER}, **fixed)
-    return select.with_defaults(config, searched).validate()
-
-
-def _train(corpus, config: BeliefConfig, model: str, overwrite: bool, open_names: list[str],
-           defaults_note: str | None, extra: dict) -> dict:
-    """Check the inputs (and the corpus's content hash), then train with a progress bar;
-    with ``open_names``, choose those settings by validation first (aoc_cli.belief.select).
-    ``extra``: more entries of the saved metrics (the task's settings)."""
-    name = corpus.name
-    if config.mode == "value" and config.value == "fqe":
-        with ProgressBar(f"fitted Q evaluation of {name}", 1, transient=True) as bar:
-            prepared = prepare(corpus, config, model, overwrite, progress=bar)
-    else:
-        prepared = prepare(corpus, config, model, overwrite)
-    corpus.verify_content()  # the columns prepare read are cached: hashing reads nothing again
-    from aoc_cli.belief.train import train_model  # imports torch: only once the input is good
-
-    critic = config.belief == "critic"  # counted in gradient steps, not epochs
-    total = config.max_epochs
-    if critic:
-        total, rule = config.critic_steps_for(corpus.n_rows, len(prepared.train_rows))
-        seconds = total * CRITIC_STEP_SECONDS * config.batch_size / 500
-        message(f"training the critic: {total:,} gradient steps ({rule}), about "
-                f"{_duration(seconds)} at {CRITIC_STEP_SECONDS * config.batch_size / 500:.2g} s "
-                "a step on one CPU thread (--critic-steps or --epochs to bound it)")
-    with ProgressBar(f"training {name}/{model}", total, transient=True) as bar:
-        if open_names:
-            return select.select_and_train(corpus, config, open_names, model, overwrite,
-                                           prepared, bar, extra)
-        if defaults_note:
-            extra = {**extra, "selection": {"searched": [], "why": defaults_note}}
-        return train_model(corpus, config, model, overwrite=overwrite, progress=bar,
-                           prepared=prepared, extra=extra or None)
-
-
-def _duration(seconds: float) -> str:
-    """``40 s``, ``12 min``, ``1.5 h``."""
-    if seconds < 90:
-        return f"{max(1, round(seconds))} s"
-    if seconds < 90 * 60:
-        return f"{round(seconds / 60)} min"
-    return f"{seconds / 3600:.1f} h"
+    with ProgressBar("train", transient=True) as bar:
+        trained = api.train(
+            name, store=state.store, model=model, mode=choice(mode), belief=choice(belief),
+            gamma=gamma, value=value, dynamics_weight=dynamics_weight,
+            history_length=history_length, hidden=hidden, weight_decay=weight_decay,
+            label_smoothing=label_smoothing, critic_steps=critic_steps,
+            critic_bc_weight=critic_bc_weight, belief_dim=belief_dim, max_epochs=epochs,
+            batch_size=batch_size, lr=lr, patience=patience, val_fraction=val_fraction,
+            seed=seed, threads=threads, dropout=dropout, class_weight=class_weight,
+            paper=paper, overwrite=overwrite, progress=bar, log=message)
+    for line in train_view.notes(trained):
+        message(line)
+    write_object(train_view.shown(trained, fmt), fmt, title=f"aoc train {name} --model {model}")
 
 
 def register(app: typer.Typer) -> None:

@@ -29,9 +29,6 @@ Writes ``results.csv``, ``summary.json`` and ``summary.md`` to ``out``.
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -39,6 +36,7 @@ import numpy as np
 
 from aoc_cli.baselines import make_baseline
 from aoc_cli.baselines.offline_rl import OfflineRLConfig
+from aoc_cli.belief.fit import train_corpus
 from aoc_cli.control import ControllerConfig
 from aoc_cli.envs import collect, make_env
 from aoc_cli.envs.icu_sepsis import STRATEGIES
@@ -48,6 +46,7 @@ from aoc_cli.errors import AocError, BadSetting, param
 from aoc_cli.experiments import sepsis_policies as sp
 from aoc_cli.experiments.results import write_rows_csv
 from aoc_cli.control import open_session
+from aoc_cli.corpus_index import build_index
 from aoc_cli.store import DEFAULT_MODEL, Store, atomic_path
 
 SCALES = {
@@ -73,25 +72,13 @@ def references(tables) -> dict[str, dict]:
     return out
 
 
-def aoc_command(store_root: Path, *args: str) -> dict:
-    """Run ``aoc ARGS --format json`` on the store at ``store_root`` in a child process (the
-    command a user types, so its defaults are exactly theirs); its JSON output. A failure ->
-    AocError with the command's own message."""
-    env = {**os.environ, "AOC_STORE": str(store_root), "AOC_PROGRESS": "0"}
-    proc = subprocess.run([sys.executable, "-c", "from aoc_cli.cli.app import main; main()",
-                           *args, "--format", "json"], capture_output=True, text=True, env=env)
-    if proc.returncode != 0:
-        last = (proc.stderr.strip().splitlines() or ["no message"])[-1]
-        raise AocError(f"`aoc {' '.join(args)}` failed: {last}")
-    return json.loads(proc.stdout)
-
-
 def train_aoc(store_root: Path, name: str, seed: int = 0) -> dict:
-    """AOC as a user gets it: ``aoc train NAME --seed S`` with no other flag (the settings it
-    takes from the task or chooses from the log) and ``aoc index NAME``; the training
-    metrics."""
-    metrics = aoc_command(store_root, "train", name, "--seed", str(seed), "--overwrite")
-    aoc_command(store_root, "index", name)
+    """AOC as a user gets it: what ``aoc train NAME --seed S`` does with no other flag (the
+    settings it takes from the task or chooses from the log: the one training path,
+    :func:`aoc_cli.belief.fit.train_corpus`) and ``aoc index NAME``; the training metrics."""
+    corpus = Store.open(store_root).corpus(name)
+    metrics = train_corpus(corpus, seed=seed, overwrite=True).metrics
+    build_index(corpus)
     return metrics
 
 

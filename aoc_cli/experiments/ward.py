@@ -25,9 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from aoc_cli.belief import select
-from aoc_cli.belief.config import BeliefConfig
-from aoc_cli.belief.data import prepare
+from aoc_cli.belief.fit import train_corpus
 from aoc_cli.control import ControllerConfig, open_session
 from aoc_cli.control.evaluate import evaluate
 from aoc_cli.corpus_index import build_index
@@ -77,14 +75,9 @@ def run_split(store, data, split: int, patients: int, seed: int = 0) -> list[dic
     store.write(tr_name, data.select_episodes(~test), overwrite=True)
     store.write(te_name, data.select_episodes(test), overwrite=True)
     tr, te = store.corpus(tr_name), store.corpus(te_name)
-    given = {"history_length": None, "hidden": None, "weight_decay": None}
-    config = select.with_defaults(BeliefConfig(mode="imitation", threads=1, seed=split),
-                                  given).validate()
-    config = select.with_imitation_defaults(tr, config, {}).validate()
-    prepared = prepare(tr, config, DEFAULT_MODEL, True)
-    started = time.perf_counter()
-    metrics = select.select_and_train(tr, config, select.open_settings(tr, config, given),
-                                      DEFAULT_MODEL, True, prepared)
+    started = time.perf_counter()  # as `aoc train --mode imitation` trains (belief/fit.py)
+    metrics = train_corpus(tr, DEFAULT_MODEL, overwrite=True, mode="imitation", threads=1,
+                           seed=split).metrics
     build_index(tr, DEFAULT_MODEL)
     session = open_session(tr, DEFAULT_MODEL, config=ControllerConfig())
     summary, _res = evaluate(session, te, ["knn", "bc"])

@@ -177,21 +177,24 @@ def progress(transient: bool = False) -> Progress:
 class ProgressBar:
     """:class:`aoc_cli.progress.Progress` drawn as a rich bar on stderr (shown as
     :func:`progress` is): ``with ProgressBar("label") as p: work(..., progress=p)``; the
-    reports set the bar's count, total and label."""
+    reports set the bar's count, total and label. The bar is drawn from the first report on,
+    so work that fails its checks before reporting (bad input) draws none."""
 
     def __init__(self, label: str = "", total: float | None = None, transient: bool = False):
         self._bars, self._label, self._total = progress(transient), label, total
         self._task = None
 
     def __enter__(self) -> "ProgressBar":
-        self._bars.__enter__()
-        self._task = self._bars.add_task(self._label, total=self._total)
         return self
 
     def __exit__(self, *exc) -> None:
-        self._bars.__exit__(*exc)
+        if self._task is not None:
+            self._bars.__exit__(*exc)
 
     def __call__(self, done: float, total: float | None = None, label: str | None = None) -> None:
+        if self._task is None:
+            self._bars.__enter__()
+            self._task = self._bars.add_task(self._label, total=self._total)
         changes: dict = {"completed": done}
         if total is not None:
             changes["total"] = total

@@ -8,6 +8,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from aoc_cli.envs import TASKS  # noqa: E402
 from aoc_cli.store import atomic_path  # noqa: E402
 
 
@@ -69,3 +70,17 @@ def plot_bars(labels, means, stds, path, title: str = "", ylabel: str = "") -> N
     ax.set_title(title)
     ax.axhline(0, color="black", lw=0.6)
     save(fig, path)
+
+
+def plot_rollouts(env_name: str, results, path, noise_after: int | None = None) -> None:
+    """``aoc rollout --plot``: the trajectories of a built-in task that draws them (2-D
+    observations), else the residual and reward curves of every episode."""
+    from aoc_cli.envs import TASKS
+
+    task = TASKS.get(env_name)
+    if task is not None and hasattr(task, "plot_trajectories") and \
+            np.asarray(results[0].observations).shape[-1] == 2:
+        paths = [np.asarray(r.observations) for r in results]
+        task.plot_trajectories(paths, path, title=f"{env_name}: {len(paths)} rollouts")
+    else:
+        plot_rollout_curves(results, path, title=env_name, noise_after=noise_after)

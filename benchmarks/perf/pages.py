@@ -83,7 +83,7 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--screenshot", type=Path, default=None)
     args = ap.parse_args()
-    from aoc_cli.cli.explain_page import write_html
+    from aoc_cli.report.explain_pages import write_html
     from aoc_cli.control import explain_logged_step, read_audit_step, replay_decision
     from aoc_cli.control.explain import explain_decisions
     from aoc_cli.control import open_session

@@ -1,18 +1,22 @@
-"""`aoc explain ... --html FILE`: the decision page and the overview pages (the pages
-themselves are built in :mod:`aoc_cli.report.pages`)."""
+"""`aoc explain ... --html FILE`: the decision page of explained decisions and the overview
+page of an ``aoc evaluate --steps`` file, written (the pages themselves are built in
+:mod:`aoc_cli.report.pages`)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from aoc_cli.report import message
+from aoc_cli.control.explain import audit_band
+from aoc_cli.corpus_index import load_index
+from aoc_cli.errors import AocError
+from aoc_cli.report.html import check_html_path, write_page
+from aoc_cli.report.overview import audit_episode, steps_episodes
+from aoc_cli.report.pages import decision_page, overview_page
 
 
 def check_html(path: Path, store_root) -> None:
     """Refuse an --html path in the store, in a missing or unwritable folder, before any
     work."""
-    from aoc_cli.report.html import check_html_path
-
     check_html_path(path, store_root)
 
 
@@ -20,32 +24,19 @@ def write_html(path: Path, records: list[dict], corpus, session=None, audit=None
                episode: int = 0, step: int = 0) -> None:
     """The decision page of ``records``; with an audit log (and its session), the overview
     of its episode first, each step linked to its section."""
-    from aoc_cli.report.html import write_page
-    from aoc_cli.report.pages import decision_page
-
     episodes, typical = None, None
     if audit is not None and session is not None:
-        from aoc_cli.control.explain import audit_band
-        from aoc_cli.report.overview import audit_episode
-
         ep = audit_episode(corpus, audit, episode, upper=None)
         ep.upper = audit_band(session, ep.residual)
         episodes = [ep]
         t = session.index.typical
         typical = {"p50": t.p50, "p90": t.p90, "p99": t.p99}
     write_page(path, decision_page(records, corpus, episodes, typical, detail=step))
-    message(f"wrote {path}")
 
 
 def steps_overview(corpus, steps_file: Path, path: Path, model, index_id: str) -> None:
     """The overview page of an `aoc evaluate --steps` file, against the index's typical
     residual."""
-    from aoc_cli.report.html import write_page
-    from aoc_cli.report.overview import steps_episodes
-    from aoc_cli.report.pages import overview_page
-    from aoc_cli.errors import AocError
-    from aoc_cli.corpus_index import load_index
-
     if not Path(steps_file).is_file():
         raise AocError(f"no such steps file: {steps_file} (write one with `aoc evaluate "
                        f"{corpus.name} --data HELD_OUT --steps FILE`)")
@@ -53,4 +44,3 @@ def steps_overview(corpus, steps_file: Path, path: Path, model, index_id: str) -
     typical = {"p50": t.p50, "p90": t.p90, "p99": t.p99}
     episodes = steps_episodes(corpus, steps_file, typical)
     write_page(path, overview_page(corpus, episodes, typical, Path(steps_file).name))
-    message(f"wrote {path}")

@@ -1,0 +1,131 @@
+"""The API's entries that decide: open_session (a controller ready to act) and rollout (the
+controller, or a baseline, run in an environment)."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+from aoc_cli.api.common import StoreLike, open_store
+from aoc_cli.baselines import make_baseline
+from aoc_cli.control import (ControllerConfig, EpisodeResult, Session, model_free_session,
+                             rollout as _rollout)
+from aoc_cli.control import open_session as _open_session
+from aoc_cli.control.rollout import action_space_of
+from aoc_cli.control.run import reference_from_audit
+from aoc_cli.envs import make_env
+from aoc_cli.errors import AocError
+from aoc_cli.progress import Progress
+from aoc_cli.rows import row_selection
+from aoc_cli.store import Corpus
+from aoc_cli.store.paths import check_output
+
+#: Policies that need no model or index: they run on a corpus before anything is trained.
+MODEL_FREE = ("zero", "random")
+
+
+def collected_task(corpus: Corpus) -> str:
+    """The built-in task a corpus was collected from ("" for ingested data, or several
+    tasks): its controller settings are the defaults, as in ``aoc rollout --env TASK``."""
+    tasks = {src.get("task") for src in corpus.manifest.get("sources", [])
+             if src.get("kind") == "collect"}
+    return tasks.pop() if len(tasks) == 1 else ""
+
+
+def open_session(name: str, *, store: StoreLike = None, model: str | None = None,
+                 index_id: str = "default", env: str | None = None, seed: int = 0,
+                 select: dict[str, list[str]] | None = None,
+                 exclude: dict[str, list[str]] | None = None, candidates: int | None = None,
+                 epsilon: float | None = None, k: int | None = None,
+                 min_support: float | None = None, support_penalty: float | None = None,
+                 residual_cap: float | None = None, sampler: str | None = None) -> Session:
+    """A controller ready to act on corpus ``name``: its model ``model`` (default 'default',
+    else the latest), index ``index_id``, the rows of the tag selections ``select`` /
+    ``exclude`` ({tag: [values]}), and the controller settings (None: the task's, else the
+    paper's). ``env``: a built-in task or gymnasium id whose settings and action box apply
+    (default: the task the corpus was collected from, no narrower box).
+    ``session.controller.decide(observation (d_o,), history (L, d_o + d_a + 1))`` -> a
+    Decision (action, value, residual, supporting rows and weights)."""
+    corpus = open_store(store).corpus(name)
+    config = ControllerConfig.for_task(collected_task(corpus) if env is None else env,
+                                       candidates=candidates, epsilon=epsilon, k=k,
+                                       sampler=sampler, residual_cap=residual_cap,
+                                       min_support=min_support, support_penalty=support_penalty)
+    action_space = action_space_of(make_env(env)) if env is not None else None
+    return _open_session(corpus, model, index_id, config, row_selection(corpus, select, exclude),
+                         seed, action_space)
+
+
+@dataclass
+class RolledOut:
+    """Episodes run: one :class:`~aoc_cli.control.EpisodeResult` each (``.summary()`` a row)
+    and the summary over them (mean return, success, OOD flags, residuals)."""
+
+    corpus: str
+    env: str
+    policy: str
+    results: list[EpisodeResult]
+    summary: dict
+
+
+def rollout(name: str, env: str, *, store: StoreLike = None, episodes: int = 5,
+            policy: str = "aoc", model: str | None = None, index_id: str = "default",
+            candidates: int | None = None, epsilon: float | None = None, k: int | None = None,
+            min_support: float | None = None, support_penalty: float | None = None,
+            residual_cap: float | None = None, sampler: str = "uniform",
+            select: dict[str, list[str]] | None = None,
+            exclude: dict[str, list[str]] | None = None, seed: int = 0,
+            audit: str | os.PathLike | None = None, plot: str | os.PathLike | None = None,
+            noise_after: int | None = None, noise_std: float = 0.5,
+            ood_reference: str | os.PathLike | None = None,
+            progress: Progress | None = None) -> RolledOut:
+    """Run ``episodes`` episodes of ``env`` (a built-in task or a gymnasium id) with
+    ``policy`` (aoc, or a baseline: zero, random, 1nn, knn, bc, td3bc, cql, mpc, ...) acting
+    on corpus ``name``; episode i starts from seed ``seed + i``. The controller settings are
+    ``env``'s under those given (as :func:`open_session`). ``audit``: write every decision to
+    this HDF5 file; ``plot``: a PNG of the trajectories or the residual/reward curves;
+    ``noise_after``, ``noise_std``: disturb the actions after that step (a fraction of the
+    action range); ``ood_reference``: flag steps against the per-step band of this audit log
+    of clean rollouts."""
+    s = open_store(store)
+    if episodes < 1:
+        raise AocError(f"--episodes must be >= 1, got {episodes}")
+    for flag, path in (("--audit", audit), ("--plot", plot)):
+        if path is not None:
+            check_output(path, flag, s.root)
+    if noise_std != noise_std or noise_std < 0 or noise_std == float("inf"):
+        raise AocError(f"--noise-std must be a finite number >= 0, got {noise_std}")
+    corpus = s.corpus(name)
+    config = ControllerConfig.for_task(env, candidates=candidates, epsilon=epsilon, k=k,
+                                       sampler=sampler, residual_cap=residual_cap,
+                                       min_support=min_support,
+                                       support_penalty=support_penalty)
+    environment = make_env(env)
+    selection = row_selection(corpus, select, exclude)
+    action_space = action_space_of(environment)
+    if policy in MODEL_FREE:
+        session = model_free_session(corpus, action_space)
+    else:
+        session = _open_session(corpus, model, index_id, config, selection, seed, action_space)
+    baseline = None if policy == "aoc" else make_baseline(policy, session, environment,
+                                                           seed=seed)
+    reference = None
+    if ood_reference is not None:
+        if policy in MODEL_FREE:
+            raise AocError(f"--ood-reference needs the AOC controller's residuals; "
+                           f"--policy {policy} has none")
+        reference = reference_from_audit(session, ood_reference)
+    results, summary = _rollout(session, environment, episodes, seed=seed, policy=baseline,
+                                audit=str(audit) if audit else None, noise_after=noise_after,
+                                noise_std=noise_std, progress=progress, reference=reference)
+    if plot is not None:
+        _plot(env, results, Path(plot), noise_after)
+    return RolledOut(corpus.name, env, policy, results, summary)
+
+
+def _plot(env: str, results: list[EpisodeResult], path: Path, noise_after) -> None:
+    # here: matplotlib is imported only when a plot is asked for
+    from aoc_cli.report.plots import plot_rollouts
+
+    plot_rollouts(env, results, path, noise_after)

@@ -1,0 +1,96 @@
+"""The API's evaluate entry: decide every logged step of a corpus and score the decisions
+against what was logged (:mod:`aoc_cli.control.evaluate`; the chunks on Ray:
+:mod:`aoc_cli.control.evaluate_ray`)."""
+
+from __future__ import annotations
+
+import json
+import os
+from typing import Sequence
+
+from aoc_cli.api.common import StoreLike, open_store
+from aoc_cli.api.control import collected_task
+from aoc_cli.control import ControllerConfig, open_session
+from aoc_cli.control.evaluate import evaluate as _evaluate
+from aoc_cli.control.evaluate import step_records
+from aoc_cli.control.evaluate_ray import evaluate_on_ray
+from aoc_cli.control.ope_eval import OPESettings, parse_estimators
+from aoc_cli.control.whatif import removal as removal_of
+from aoc_cli.control.whatif import what_if_steps
+from aoc_cli.errors import AocError
+from aoc_cli.progress import Progress
+from aoc_cli.store import atomic_path
+
+
+def evaluate(name: str, data: str, *, store: StoreLike = None,
+             baselines: Sequence[str] = ("knn", "bc"),
+             steps_file: str | os.PathLike | None = None, model: str | None = None,
+             index_id: str = "default", candidates: int | None = None,
+             epsilon: float | None = None, k: int | None = None,
+             min_support: float | None = None, support_penalty: float | None = None,
+             exact: bool | None = None, seed: int = 0, ope: str | None = None,
+             propensity: str | None = None, ope_gamma: float = 1.0,
+             fqe_steps: int | None = None, fqe_refits: int | None = None,
+             workers: int | None = None,
+             address: str | None = None, without: dict[str, list[str]] | None = None,
+             without_episodes: list[str] | None = None,
+             progress: Progress | None = None) -> dict:
+    """Decide every logged step of corpus ``data`` (held-out episodes of the same spaces, or
+    ``name`` itself: each episode decided without its own rows) with corpus ``name``'s
+    controller (settings as :func:`~aoc_cli.api.open_session`) and score the decisions:
+    accuracy, AUC, calibration or value R^2, residuals, and ``baselines`` (knn, bc) on the
+    same steps. ``exact``: search the index exactly (None: up to the small-log bound, IVF
+    beyond). ``ope`` ("pdwis,wdr,fqe", "none"), ``propensity``, ``ope_gamma``, ``fqe_steps``,
+    ``fqe_refits`` (the bootstrap refits behind FQE's interval): offline policy evaluation of the decisions. ``workers`` / ``address``: chunks of episodes
+    as Ray tasks. ``without`` / ``without_episodes``: decide again without those rows and
+    report what changes (``summary["what_if"]``). ``steps_file``: one JSON record per step
+    written there. Returns the summary ``aoc evaluate`` prints (its ``ope_warnings``: what
+    the OPE could not do)."""
+    names = list(baselines)
+    settings = None
+    if any(v is not None for v in (ope, propensity, fqe_steps, fqe_refits)) \
+            or ope_gamma != 1.0:
+        if fqe_steps is not None and fqe_steps < 1:
+            raise AocError(f"--fqe-steps must be >= 1, got {fqe_steps}")
+        if fqe_refits is not None and (fqe_refits < 0 or fqe_refits == 1):
+            raise AocError(f"--fqe-refits must be 0 or at least 2, got {fqe_refits}")
+        if not 0.0 < ope_gamma <= 1.0:
+            raise AocError(f"--ope-gamma must be in (0, 1], got {ope_gamma}")
+        settings = OPESettings(parse_estimators(ope), gamma=ope_gamma, propensity=propensity,
+                               fqe_steps=fqe_steps, seed=seed,
+                               **({} if fqe_refits is None else {"fqe_refits": fqe_refits}))
+    s = open_store(store)
+    corpus = s.corpus(name)
+    held_out = corpus if data == name else s.corpus(data)
+    config = ControllerConfig.for_task(collected_task(corpus), candidates=candidates,
+                                       epsilon=epsilon, k=k, residual_cap=None,
+                                       min_support=min_support,
+                                       support_penalty=support_penalty)
+    removal = removal_of(corpus, without, without_episodes)
+    if removal is not None and (workers is not None or address is not None):
+        raise AocError("--without runs in one process: drop --workers / --ray-address")
+    session = open_session(corpus, model, index_id, config, seed=seed)
+    if progress is not None:
+        progress(0, held_out.n_rows, f"evaluate {name} on {data}")
+    if workers is None and address is None:
+        summary, res = _evaluate(session, held_out, names, seed=seed, progress=progress,
+                                 exact=exact, ope=settings)
+    else:  # the chunks of episodes as Ray tasks (aoc_cli.control.evaluate_ray)
+        if workers is not None and workers < 1:
+            raise AocError(f"--workers must be >= 1, got {workers}")
+        summary, res = evaluate_on_ray(s.root, name, data, session.model.id, index_id, config,
+                                       names, seed=seed, exact=exact, workers=workers,
+                                       address=address, progress=progress, ope=settings)
+    if removal is not None:  # the same steps decided again without the rows
+        if progress is not None:
+            progress(0, held_out.n_rows, f"without {removal.label}")
+        after_summary, after = _evaluate(session, held_out, [], seed=seed, progress=progress,
+                                         exact=exact, selection=removal.keep(None),
+                                         ope=OPESettings(estimators=()))
+        summary["what_if"] = what_if_steps(res, after, removal, corpus, after_summary)
+    if steps_file is not None:
+        with atomic_path(steps_file, suffix=".jsonl") as tmp:
+            with open(tmp, "w") as fh:
+                for rec in step_records(session, held_out, res):
+                    fh.write(json.dumps(rec) + "\n")
+    return summary

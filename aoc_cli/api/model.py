@@ -1,0 +1,86 @@
+"""The API's entries that build on a corpus: train (the belief model), build_index."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from aoc_cli.api.common import Log, StoreLike, open_store
+from aoc_cli.belief.config import BeliefConfig
+from aoc_cli.belief.fit import Trained, check_settings, train_corpus
+from aoc_cli.corpus_index import CorpusIndex
+from aoc_cli.corpus_index import build_index as _build_index
+from aoc_cli.errors import AocError
+from aoc_cli.progress import Progress
+
+_D = BeliefConfig()  # the paper's settings: the defaults of train()
+
+
+def train(name: str, *, store: StoreLike = None, model: str = "default",
+          mode: str | None = None, belief: str | None = None, value: str | None = None,
+          gamma: float | None = None, history_length: int | None = None,
+          dynamics_weight: float | None = None, hidden: int | None = None,
+          weight_decay: float | None = None, label_smoothing: float | None = None,
+          belief_dim: int = _D.belief_dim, max_epochs: int = _D.max_epochs,
+          batch_size: int = _D.batch_size, lr: float = _D.lr, patience: int = _D.patience,
+          val_fraction: float = _D.val_fraction, seed: int = _D.seed,
+          threads: int | None = None, dropout: float = _D.dropout,
+          class_weight: str = _D.class_weight, critic_steps: int | None = None,
+          critic_bc_weight: float = _D.critic_bc_weight, paper: bool = False,
+          overwrite: bool = False, progress: Progress | None = None,
+          log: Log | None = None) -> Trained:
+    """Train the belief model ``model`` of corpus ``name`` (``aoc train``): ``mode`` value
+    (AOC: b(o, a, h) predicts ``value``) or imitation (ABC: b(o, h) predicts the action).
+    Settings left None come from the task the corpus was collected from, then from validation
+    on a small log (history_length, hidden, weight_decay), then the paper's; ``paper``: the
+    paper's for all. The other arguments are :class:`~aoc_cli.belief.BeliefConfig`'s
+    (``belief_dim`` d_b, ``max_epochs``, ...). One writer per model id; ``overwrite``
+    replaces one. Returns :class:`~aoc_cli.belief.fit.Trained` (``.metrics`` as saved)."""
+    settings = dict(mode=mode, belief=belief, value=value, gamma=gamma,
+                    history_length=history_length, dynamics_weight=dynamics_weight,
+                    hidden=hidden, weight_decay=weight_decay, label_smoothing=label_smoothing,
+                    belief_dim=belief_dim, max_epochs=max_epochs, batch_size=batch_size, lr=lr,
+                    patience=patience, val_fraction=val_fraction, seed=seed, threads=threads,
+                    dropout=dropout, class_weight=class_weight, critic_steps=critic_steps,
+                    critic_bc_weight=critic_bc_weight)
+    check_settings(settings)  # bad settings fail before the store is read
+    corpus = open_store(store).corpus(name)
+    return train_corpus(corpus, model, paper=paper, overwrite=overwrite, progress=progress,
+                        log=log, **settings)
+
+
+@dataclass
+class Indexed:
+    """An index built: the corpus's name and the :class:`~aoc_cli.corpus_index.CorpusIndex`."""
+
+    corpus: str
+    index: CorpusIndex
+
+    def summary(self) -> dict:
+        """What ``aoc index`` prints."""
+        meta = self.index.meta
+        return {"corpus": self.corpus, "model": meta["model"], "index": meta["index_id"],
+                "kind": meta["kind"], "rows": meta["rows"], "belief_dim": meta["belief_dim"],
+                "k": meta["k"], "candidates": meta["candidates"],
+                "typical_residual": self.index.typical_residual,
+                "build_seconds": meta["build_seconds"]}
+
+
+def build_index(name: str, model: str | None = None, *, store: StoreLike = None,
+                kind: str = "auto", index_id: str = "default",
+                episode_rates: dict[str, float] | None = None,
+                subsample: dict[str, float] | None = None, seed: int = 0,
+                neighbours: str = "auto", progress: Progress | None = None) -> Indexed:
+    """Compute every row's belief under ``model`` (default 'default', else the latest) and
+    build the index (``kind`` auto|flat|hnsw|ivf) the controller searches. ``episode_rates``
+    {"TAG=VALUE": rate} derive an index ``index_id`` that repeats (rate > 1) or keeps a random
+    share (rate < 1) of those episodes; ``subsample``: rates of at most 1, the older form.
+    ``neighbours``: step 1's neighbour rows, auto|nearest|per_action."""
+    corpus = open_store(store).corpus(name)
+    for key, rate in (subsample or {}).items():
+        if rate > 1:
+            raise AocError(f"--subsample rates are <= 1 (got {rate} for {key}); use "
+                           "--episode-rate")
+    ci = _build_index(corpus, model, kind=kind, index_id=index_id,
+                      episode_rates={**(subsample or {}), **(episode_rates or {})}, seed=seed,
+                      progress=progress, candidates=neighbours)
+    return Indexed(corpus.name, ci)

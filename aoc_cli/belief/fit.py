@@ -1,0 +1,130 @@
+"""Train a corpus's belief model as ``aoc train`` does, in one call: the settings checked, the
+task's own settings under the ones given (:mod:`aoc_cli.belief.task_settings`), the small-log
+defaults and the choice of the settings left open by validation (:mod:`aoc_cli.belief.select`),
+one writer per model id, the inputs checked against the corpus's content hash, then training
+(:func:`aoc_cli.belief.train.train_model`). ``aoc train``, ``aoc bench ward`` and the
+icu-sepsis bench all train through :func:`train_corpus`.
+
+Settings are :class:`~aoc_cli.belief.config.BeliefConfig`'s fields. Those a task may set or
+validation may choose (:data:`OPEN`: mode, belief, gamma, value, dynamics_weight,
+history_length, hidden, weight_decay) and ``label_smoothing`` are None when not given; every
+other field defaults to the paper's value.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+from aoc_cli.belief import select, task_settings
+from aoc_cli.belief.config import CRITIC_STEP_SECONDS, BeliefConfig
+from aoc_cli.belief.data import prepare
+from aoc_cli.progress import Progress
+from aoc_cli.store import Corpus, check_name, writing_model
+
+#: Settings left to the task or to validation when None.
+OPEN = task_settings.FIELDS
+
+
+@dataclass
+class Trained:
+    """A trained model: its final ``metrics`` (as saved in models/<id>/), the ``config`` it was
+    trained with, and whether ``label_smoothing`` was left to the small-log default."""
+
+    corpus: str
+    model: str
+    metrics: dict
+    config: BeliefConfig
+    smoothing_by_default: bool
+
+
+def _split(settings: dict) -> tuple[dict, dict, float | None]:
+    given = {k: settings.get(k) for k in OPEN}
+    smoothing = settings.get("label_smoothing")
+    fixed = {k: v for k, v in settings.items() if k not in OPEN and k != "label_smoothing"}
+    return given, {**fixed, "label_smoothing": smoothing or 0.0}, smoothing
+
+
+def _config(given: dict, fixed: dict) -> BeliefConfig:
+    """The checked configuration of the settings ``given`` (None: not given; the paper's value
+    for a searched one) and the settings ``fixed``."""
+    searched = {k: given.get(k) for k in select.PAPER}
+    config = BeliefConfig(**{k: v for k, v in given.items()
+                             if v is not None and k not in select.PAPER}, **fixed)
+    return select.with_defaults(config, searched).validate()
+
+
+def check_settings(settings: dict) -> BeliefConfig:
+    """The settings checked before any corpus is read (an AocError names a bad one)."""
+    given, fixed, _ = _split(settings)
+    return _config(given, fixed)
+
+
+def train_corpus(corpus: Corpus, model: str = "default", *, paper: bool = False,
+                 overwrite: bool = False, progress: Progress | None = None,
+                 log: Callable[[str], None] | None = None, **settings) -> Trained:
+    """Train model ``model`` of ``corpus`` with ``settings`` (BeliefConfig fields; see the
+    module docstring); ``paper``: the paper's settings for everything not given (no task
+    settings, no selection). ``log``: the notes ``aoc train`` prints before training (the
+    task's settings taken, the critic's step budget). ``progress``: fitted Q evaluation, the
+    candidates tried, then the epochs (or critic steps)."""
+    note = log or (lambda _text: None)
+    given, fixed, smoothing = _split(settings)
+    _config(given, fixed)  # the settings checked before the task's are read
+    task, own = task_settings.for_corpus(corpus, paper)
+    given, from_task = task_settings.resolve(given, own)
+    searched = {k: given[k] for k in select.PAPER}
+    config = _config(given, fixed)
+    config = select.with_imitation_defaults(
+        corpus, config, {"label_smoothing": smoothing}, paper).validate()
+    if from_task:
+        note(task_settings.describe(task, from_task))
+    extra = {"task_settings": {"task": task, "settings": from_task}} if task else {}
+    with writing_model(corpus.path, check_name(model, "model")):  # one writer per model id
+        metrics = _train(corpus, config, model, overwrite,
+                         select.open_settings(corpus, config, searched, paper),
+                         select.why_no_search(corpus, config, searched, paper), extra,
+                         progress, note)
+    return Trained(corpus.name, model, metrics, config,
+                   smoothing is None and config.label_smoothing > 0)
+
+
+def _train(corpus, config: BeliefConfig, model: str, overwrite: bool, open_names: list[str],
+           defaults_note: str | None, extra: dict, progress: Progress | None,
+           note: Callable[[str], None]) -> dict:
+    """Check the inputs (and the corpus's content hash), then train; with ``open_names``,
+    choose those settings by validation first (aoc_cli.belief.select). ``extra``: more
+    entries of the saved metrics (the task's settings)."""
+    name = corpus.name
+    fqe = config.mode == "value" and config.value == "fqe"
+    if fqe and progress is not None:
+        progress(0, 1, f"fitted Q evaluation of {name}")
+    prepared = prepare(corpus, config, model, overwrite, progress=progress if fqe else None)
+    corpus.verify_content()  # the columns prepare read are cached: hashing reads nothing again
+    from aoc_cli.belief.train import train_model  # imports torch: only once the input is good
+
+    total = config.max_epochs
+    if config.belief == "critic":  # counted in gradient steps, not epochs
+        total, rule = config.critic_steps_for(corpus.n_rows, len(prepared.train_rows))
+        seconds = total * CRITIC_STEP_SECONDS * config.batch_size / 500
+        note(f"training the critic: {total:,} gradient steps ({rule}), about "
+             f"{duration(seconds)} at {CRITIC_STEP_SECONDS * config.batch_size / 500:.2g} s "
+             "a step on one CPU thread (--critic-steps or --epochs to bound it)")
+    if progress is not None:
+        progress(0, total, f"training {name}/{model}")
+    if open_names:
+        return select.select_and_train(corpus, config, open_names, model, overwrite,
+                                       prepared, progress, extra)
+    if defaults_note:
+        extra = {**extra, "selection": {"searched": [], "why": defaults_note}}
+    return train_model(corpus, config, model, overwrite=overwrite, progress=progress,
+                       prepared=prepared, extra=extra or None)
+
+
+def duration(seconds: float) -> str:
+    """``40 s``, ``12 min``, ``1.5 h``."""
+    if seconds < 90:
+        return f"{max(1, round(seconds))} s"
+    if seconds < 90 * 60:
+        return f"{round(seconds / 60)} min"
+    return f"{seconds / 3600:.1f} h"

@@ -1,0 +1,87 @@
+"""What ``aoc evaluate`` prints of an evaluation's summary (:func:`aoc_cli.api.evaluate`):
+JSON, one CSV row per method, or tables."""
+
+from __future__ import annotations
+
+from aoc_cli.report.output import write_object, write_records
+
+IMITATION_COLUMNS = ["method", "accuracy", "balanced_accuracy", "auc", "majority_accuracy",
+                     "mae", "r2"]
+VALUE_COLUMNS = ["method", "value_r2", "value_mae", "value_spearman", "agreement",
+                 "action_distance"]
+
+
+def _method_rows(summary: dict) -> list[dict]:
+    own = "abc" if summary["mode"] == "imitation" else "aoc"
+    flat = {k: v for k, v in summary.items() if not isinstance(v, (dict, list))}
+    rows = [{"method": own, **flat}]
+    for method, rec in summary["baselines"].items():
+        rows.append({"method": method, **rec})
+    return rows
+
+
+def _ope_rows(summary: dict) -> list[dict]:
+    """One row per policy: each estimator's estimate [low, high] and the ESS."""
+    def cell(e):
+        return None if e is None else f"{e['estimate']:.4f} [{e['low']:.4f}, {e['high']:.4f}]"
+
+    rows = [{"policy": "aoc", "ess": summary["ess"],
+             **{k: cell(v) for k, v in summary["policy_value"].items()}}]
+    for name, rec in summary["baselines"].items():
+        if "policy_value" in rec:
+            rows.append({"policy": name, "ess": rec["ess"],
+                         **{k: cell(v) for k, v in (rec["policy_value"] or {}).items()}})
+    rows.append({"policy": "behaviour", "mean_return": cell(summary["behaviour_value"])})
+    return rows
+
+
+def write_evaluation(summary: dict, fmt: str) -> None:
+    """Print an evaluation: JSON / JSONL whole, one CSV row per method, or tables (the run, the
+    methods against the log, the what-if, the OPE, the confusion and calibration)."""
+    if fmt in ("json", "jsonl"):
+        write_object(summary, fmt)
+        return
+    columns = IMITATION_COLUMNS if summary["mode"] == "imitation" else VALUE_COLUMNS
+    rows = _method_rows(summary)
+    present = [c for c in columns if any(r.get(c) is not None for r in rows)]
+    if fmt == "csv":
+        extra = ["steps", "extrapolating_share", "heterogeneity_share"]
+        for r in rows[1:]:
+            for c in extra:
+                r[c] = rows[0][c]
+        write_records(rows, "csv", columns=present + extra)
+        return
+    head = {k: summary[k] for k in ("mode", "corpus", "model", "data", "own_episode_left_out",
+                                    "steps", "episodes", "extrapolating_share",
+                                    "heterogeneity_share", "support_max", "search", "seconds",
+                                    "steps_per_second")}
+    res = summary["residual"]
+    head["residual p50 / p90 / p99"] = f"{res['p50']:.4g} / {res['p90']:.4g} / {res['p99']:.4g}"
+    head["typical residual"] = res["typical"]
+    write_object(head, "table", title=f"aoc evaluate {summary['corpus']} on {summary['data']}")
+    write_records(rows, "table", columns=present, title="decisions against the log")
+    if "what_if" in summary:
+        w = summary["what_if"]
+        head = {"without": f"{w['without']['label']} ({w['without']['rows']} rows, "
+                           f"{w['without']['episodes']} episodes)",
+                "steps": w["steps"], "decisions flipped": w["flipped"],
+                "flip share": w["flip_share"],
+                "steps whose subset lost a row": w["support_removed_steps"],
+                "residual change (mean)": w["residual_change"]["mean"]}
+        for key in ("value_change", "score_change"):
+            if key in w:
+                head[key.replace("_", " ") + " (mean / mean abs)"] = \
+                    f"{w[key]['mean']:.4g} / {w[key]['mean_abs']:.4g}"
+        head.update({f"{k} after": v for k, v in w["after"].items()})
+        write_object(head, "table", title="what if")
+    if "policy_value" in summary:
+        write_records(_ope_rows(summary), "table",
+                      title=f"policy value from the log alone (propensities: "
+                            f"{summary['ope']['propensity']})")
+    if "confusion" in summary:
+        n = len(summary["confusion"])
+        write_records([{"logged": i, **{f"decided {j}": summary["confusion"][i][j]
+                                        for j in range(n)}} for i in range(n)], "table",
+                      title="confusion (steps)")
+        write_records([b for b in summary["calibration"] if b["steps"]], "table",
+                      title="calibration (score of action 1, or the top score)")

@@ -1,0 +1,61 @@
+"""What ``aoc train`` prints of a trained model (:class:`aoc_cli.belief.fit.Trained`): the
+notes on stderr (the score, the settings chosen and why, ABC's own validation, a model no
+better than the trivial predictor) and the metrics table."""
+
+from __future__ import annotations
+
+from aoc_cli.belief import select
+from aoc_cli.belief.fit import Trained
+
+
+def _chosen(metrics: dict) -> dict | None:
+    return metrics.get("selection") if (metrics.get("selection") or {}).get("searched") \
+        else None
+
+
+def notes(trained: Trained) -> list[str]:
+    """The lines printed after training, in order (rich markup)."""
+    metrics, out = trained.metrics, []
+    score = (f"val R^2 {metrics['val_r2']:.3f}" if "val_r2" in metrics
+             else f"val accuracy {metrics['val_accuracy']:.3f} (majority "
+                  f"{metrics['val_majority_accuracy']:.3f})")
+    unit = "steps" if metrics.get("belief") == "critic" else "epochs"
+    out.append(f"trained {trained.corpus}/{trained.model}: {metrics['mode']} "
+               f"({metrics.get('belief', 'value')} belief), {metrics['epochs']} {unit} (best "
+               f"{metrics['best_epoch']}), {score}, {metrics['seconds']:.0f} s")
+    chosen = _chosen(metrics)
+    if chosen:
+        out.append("chose " + ", ".join(f"{k} {v}" for k, v in chosen["chosen"].items()
+                                        if k in chosen["searched"]) + " by " + chosen["why"])
+    if metrics.get("val_abc_accuracy") is not None:
+        auc = metrics.get("val_abc_auc")
+        out.append(f"ABC's own decisions on the validation episodes (k "
+                   f"{metrics['val_abc_k']}): accuracy {metrics['val_abc_accuracy']:.3f}"
+                   + ("" if auc is None else f", AUC {auc:.3f}"))
+    if trained.smoothing_by_default:
+        out.append(f"label smoothing {trained.config.label_smoothing:g} (the default for "
+                   "imitating discrete actions on a small corpus; --label-smoothing 0 for the "
+                   "paper's)")
+    warning = select.baseline_check(metrics)
+    if warning:
+        out.append(f"[yellow]warning:[/] {warning}")
+    if not chosen and "selection" in metrics:
+        out.append(f"settings: {metrics['selection']['why']}")
+    return out
+
+
+def shown(trained: Trained, fmt: str) -> dict:
+    """The metrics as printed: in a table, the selection and the task's settings as one line
+    each (the JSON output and config.json keep them whole)."""
+    metrics = shown = trained.metrics
+    chosen = _chosen(metrics)
+    if fmt == "table" and chosen:
+        shown = {**metrics, "selection": ", ".join(f"{k} {v}" for k, v in
+                                                   chosen.get("chosen", {}).items())}
+    if fmt == "table" and not chosen and "selection" in metrics:
+        shown = {**metrics, "selection": metrics["selection"]["why"]}
+    if fmt == "table" and "task_settings" in metrics:
+        own = metrics["task_settings"]
+        shown = {**shown, "task_settings": f"{own['task']}: " + (", ".join(
+            f"{k} {v}" for k, v in own["settings"].items()) or "none")}
+    return shown

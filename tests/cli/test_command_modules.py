@@ -1,0 +1,50 @@
+"""Every command module parses its options, makes one call of the library's API
+(aoc_cli/api/) and prints: the only import inside its functions is ``from aoc_cli import api``
+(there so that ``aoc --help`` and bad input import no torch), once per command."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+from aoc_cli.cli.app import COMMANDS
+
+CLI = Path(__file__).resolve().parents[2] / "aoc_cli" / "cli"
+
+
+def _inner_imports(tree: ast.AST) -> list[ast.AST]:
+    out = []
+    for fn in ast.walk(tree):
+        if isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            out += [n for n in ast.walk(fn) if isinstance(n, (ast.Import, ast.ImportFrom))]
+    return list({id(n): n for n in out}.values())
+
+
+def _commands(tree: ast.AST) -> list[ast.FunctionDef]:
+    """The functions registered as commands (decorated ``@app.command``, or passed to it)."""
+    named = {c.args[0].id for c in ast.walk(tree) if isinstance(c, ast.Call)
+             and isinstance(c.func, ast.Call) and ast.unparse(c.func.func) == "app.command"
+             and c.args and isinstance(c.args[0], ast.Name)}
+    return [f for f in ast.walk(tree) if isinstance(f, ast.FunctionDef) and (
+        f.name in named or any("app.command" in ast.unparse(d) for d in f.decorator_list))]
+
+
+@pytest.mark.parametrize("command", COMMANDS)
+def test_a_command_imports_only_the_api_inside_its_functions(command):
+    tree = ast.parse((CLI / f"{command}.py").read_text())
+    inner = _inner_imports(tree)
+    assert all(ast.unparse(n) == "from aoc_cli import api" for n in inner), \
+        [ast.unparse(n) for n in inner]
+    commands = _commands(tree)
+    assert commands and len(inner) <= len(commands)
+    for fn in commands:
+        calls = {ast.unparse(c.func) for c in ast.walk(fn) if isinstance(c, ast.Call)
+                 and ast.unparse(c.func).startswith("api.")}
+        assert len(calls) <= 1 or calls <= {"api.tasks", "api.collect"}, (fn.name, calls)
+
+
+def test_the_shared_modules_of_the_command_line_import_nothing_inside_functions():
+    for name in ("common.py",):
+        assert not _inner_imports(ast.parse((CLI / name).read_text())), name
