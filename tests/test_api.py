@@ -13,7 +13,7 @@ import pytest
 
 import aoc_cli
 from aoc_cli import api
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, BadSetting, ModelExists
 from aoc_cli.store import Store
 
 
@@ -45,7 +45,7 @@ def test_collect_writes_the_corpus_the_command_writes(tmp_path, aoc):
     assert Store(tmp_path / "cli").corpus("g").hash == done.corpus.hash
     with pytest.raises(AocError, match="already exists"):
         api.collect("two-gates", "g", store=tmp_path, episodes=10)
-    with pytest.raises(AocError, match="not both"):
+    with pytest.raises(BadSetting, match="give steps or episodes, not both"):
         api.collect("two-gates", "h", store=tmp_path, episodes=10, steps=100)
     assert not Store(tmp_path).exists("h")
 
@@ -108,9 +108,9 @@ def test_train_returns_the_metrics_it_saved_and_refuses_a_second_model_of_that_i
     assert saved["metrics"]["val_r2"] == done.metrics["val_r2"]
     assert built.summary()["rows"] == Store(store).corpus("g").n_rows
     assert built.summary()["model"] == "default"
-    with pytest.raises(AocError, match="exists"):
+    with pytest.raises(ModelExists):
         api.train("g", store=store, max_epochs=1, threads=1)
-    with pytest.raises(AocError, match="label-smoothing"):  # checked before the store is read
+    with pytest.raises(BadSetting, match="label_smoothing"):  # before the store is read
         api.train("no-such-corpus", store=store, label_smoothing=2.0)
 
 
@@ -145,8 +145,9 @@ def test_rollout_explain_and_evaluate_return_what_the_commands_print(trained, tm
     summary = api.evaluate("g", "g", store=store, baselines=["knn"])
     assert summary["steps"] == Store(store).corpus("g").n_rows
     assert set(summary["baselines"]) == {"knn"}
-    with pytest.raises(AocError, match="--episodes must be >= 1"):
+    with pytest.raises(BadSetting, match="^episodes must be >= 1") as bad:
         api.rollout("g", "two-gates", store=store, episodes=0)
+    assert bad.value.param == "episodes" and bad.value.value == 0
     with pytest.raises(AocError, match="give one of"):
         api.explain("g", store=store)
 
@@ -154,5 +155,6 @@ def test_rollout_explain_and_evaluate_return_what_the_commands_print(trained, tm
 def test_bench_refuses_an_output_folder_inside_the_store_and_an_unknown_scale(tmp_path):
     with pytest.raises(AocError, match="inside the corpus store"):
         api.bench("two-gates", store=tmp_path, out=tmp_path / "x")
-    with pytest.raises(AocError, match="unknown scale"):
+    with pytest.raises(BadSetting, match="'huge' is unknown") as bad:
         api.bench("two-gates", store=tmp_path / "s", scale="huge")
+    assert bad.value.param == "scale"

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Sequence
 
 from aoc_cli.api.common import Log, StoreLike, open_store
-from aoc_cli.errors import AocError
+from aoc_cli.errors import BadSetting
 from aoc_cli.experiments import ORDER, expected_seconds, run_experiment
 from aoc_cli.experiments.runner import SIZED, check
 from aoc_cli.experiments.sepsis import run_sepsis
@@ -41,7 +41,7 @@ def bench(experiment: str, *, store: StoreLike = None, scale: str = "full",
           epsilon: float | None = None, residual_cap: float | None = None,
           sizes: Sequence[int] | None = None, behaviour: str = "mix",
           bench_store: str | os.PathLike = "bench/store", workers: int | None = None,
-          address: str | None = None, progress: Progress | None = None,
+          ray_address: str | None = None, progress: Progress | None = None,
           log: Log | None = None) -> Benched:
     """Run ``experiment`` (pendulum-het, epsilon, k, maze-adapt, two-gates, lunar, ood, all,
     ward, icu-sepsis, icu-sepsis-terminate) at ``scale`` (full, quick: <= 15 min each, tiny:
@@ -52,15 +52,15 @@ def bench(experiment: str, *, store: StoreLike = None, scale: str = "full",
     ``bench_store`` and are reused. ``log``: the expected time, each experiment's outputs."""
     note = log or (lambda _text: None)
     if out is not None:
-        check_output(out, "--out", open_store(store).root, folder=True)
+        check_output(out, "out", open_store(store).root, folder=True)
     if scale not in SCALES:
-        raise AocError(f"unknown scale {scale!r}: use {', '.join(SCALES)}")
+        raise BadSetting("scale", scale, f"{scale!r} is unknown: use {', '.join(SCALES)}")
     chosen = list(methods) if methods else None
     sizes = list(sizes) if sizes is not None else None
     bench_store = Path(bench_store)
     if experiment == "ward":  # imitation on a log: splits, not rollouts (experiments/ward.py)
         if seeds is not None and seeds < 1:
-            raise AocError(f"--seeds (random patient splits) must be >= 1, got {seeds}")
+            raise BadSetting("seeds", seeds, f"(random patient splits) must be >= 1, got {seeds}")
         report = run_ward(Path(out) if out is not None else Path("bench/ward"), bench_store,
                           scale, seeds, log=note, progress=progress)
         note(f"ward: wrote {report['out']}/results.csv, summary.md, summary.json and ward.png "
@@ -92,7 +92,7 @@ def bench(experiment: str, *, store: StoreLike = None, scale: str = "full",
                                 epsilon=None if name in ("epsilon", "two-gates") else epsilon,
                                 residual_cap=residual_cap, sizes=sizes,
                                 behaviour=behaviour if name in SIZED else "mix",
-                                workers=workers, address=address)
+                                workers=workers, address=ray_address)
         for rec in report["summary"]:
             if rec["status"] != "ok":
                 note(f"{name}: {rec['method']} {rec['status']} ({rec['note']})")

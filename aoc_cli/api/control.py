@@ -15,7 +15,7 @@ from aoc_cli.control import open_session as _open_session
 from aoc_cli.control.rollout import action_space_of
 from aoc_cli.control.run import reference_from_audit
 from aoc_cli.envs import make_env
-from aoc_cli.errors import AocError
+from aoc_cli.errors import BadSetting, param
 from aoc_cli.progress import Progress
 from aoc_cli.rows import row_selection
 from aoc_cli.store import Corpus
@@ -90,12 +90,12 @@ def rollout(name: str, env: str, *, store: StoreLike = None, episodes: int = 5,
     of clean rollouts."""
     s = open_store(store)
     if episodes < 1:
-        raise AocError(f"--episodes must be >= 1, got {episodes}")
-    for flag, path in (("--audit", audit), ("--plot", plot)):
+        raise BadSetting("episodes", episodes, f"must be >= 1, got {episodes}")
+    for key, path in (("audit", audit), ("plot", plot)):
         if path is not None:
-            check_output(path, flag, s.root)
+            check_output(path, key, s.root)
     if noise_std != noise_std or noise_std < 0 or noise_std == float("inf"):
-        raise AocError(f"--noise-std must be a finite number >= 0, got {noise_std}")
+        raise BadSetting("noise_std", noise_std, f"must be a finite number >= 0, got {noise_std}")
     corpus = s.corpus(name)
     config = ControllerConfig.for_task(env, candidates=candidates, epsilon=epsilon, k=k,
                                        sampler=sampler, residual_cap=residual_cap,
@@ -113,8 +113,9 @@ def rollout(name: str, env: str, *, store: StoreLike = None, episodes: int = 5,
     reference = None
     if ood_reference is not None:
         if policy in MODEL_FREE:
-            raise AocError(f"--ood-reference needs the AOC controller's residuals; "
-                           f"--policy {policy} has none")
+            raise BadSetting("ood_reference", str(ood_reference),
+                             f"{param('ood_reference')} needs the AOC controller's residuals; "
+                             f"{param('policy', policy)} has none")
         reference = reference_from_audit(session, ood_reference)
     results, summary = _rollout(session, environment, episodes, seed=seed, policy=baseline,
                                 audit=str(audit) if audit else None, noise_after=noise_after,

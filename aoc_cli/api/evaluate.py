@@ -17,7 +17,7 @@ from aoc_cli.control.evaluate_ray import evaluate_on_ray
 from aoc_cli.control.ope_eval import OPESettings, parse_estimators
 from aoc_cli.control.whatif import removal as removal_of
 from aoc_cli.control.whatif import what_if_steps
-from aoc_cli.errors import AocError
+from aoc_cli.errors import BadSetting, param
 from aoc_cli.progress import Progress
 from aoc_cli.store import atomic_path
 
@@ -32,7 +32,7 @@ def evaluate(name: str, data: str, *, store: StoreLike = None,
              propensity: str | None = None, ope_gamma: float = 1.0,
              fqe_steps: int | None = None, fqe_refits: int | None = None,
              workers: int | None = None,
-             address: str | None = None, without: dict[str, list[str]] | None = None,
+             ray_address: str | None = None, without: dict[str, list[str]] | None = None,
              without_episodes: list[str] | None = None,
              progress: Progress | None = None) -> dict:
     """Decide every logged step of corpus ``data`` (held-out episodes of the same spaces, or
@@ -41,8 +41,8 @@ def evaluate(name: str, data: str, *, store: StoreLike = None,
     accuracy, AUC, calibration or value R^2, residuals, and ``baselines`` (knn, bc) on the
     same steps. ``exact``: search the index exactly (None: up to the small-log bound, IVF
     beyond). ``ope`` ("pdwis,wdr,fqe", "none"), ``propensity``, ``ope_gamma``, ``fqe_steps``,
-    ``fqe_refits`` (the bootstrap refits behind FQE's interval): offline policy evaluation of the decisions. ``workers`` / ``address``: chunks of episodes
-    as Ray tasks. ``without`` / ``without_episodes``: decide again without those rows and
+    ``fqe_refits`` (the bootstrap refits behind FQE's interval): offline policy evaluation
+    of the decisions. ``workers`` / ``ray_address``: chunks of episodes as Ray tasks. ``without`` / ``without_episodes``: decide again without those rows and
     report what changes (``summary["what_if"]``). ``steps_file``: one JSON record per step
     written there. Returns the summary ``aoc evaluate`` prints (its ``ope_warnings``: what
     the OPE could not do)."""
@@ -51,11 +51,12 @@ def evaluate(name: str, data: str, *, store: StoreLike = None,
     if any(v is not None for v in (ope, propensity, fqe_steps, fqe_refits)) \
             or ope_gamma != 1.0:
         if fqe_steps is not None and fqe_steps < 1:
-            raise AocError(f"--fqe-steps must be >= 1, got {fqe_steps}")
+            raise BadSetting("fqe_steps", fqe_steps, f"must be >= 1, got {fqe_steps}")
         if fqe_refits is not None and (fqe_refits < 0 or fqe_refits == 1):
-            raise AocError(f"--fqe-refits must be 0 or at least 2, got {fqe_refits}")
+            raise BadSetting("fqe_refits", fqe_refits,
+                             f"must be 0 or at least 2, got {fqe_refits}")
         if not 0.0 < ope_gamma <= 1.0:
-            raise AocError(f"--ope-gamma must be in (0, 1], got {ope_gamma}")
+            raise BadSetting("ope_gamma", ope_gamma, f"must be in (0, 1], got {ope_gamma}")
         settings = OPESettings(parse_estimators(ope), gamma=ope_gamma, propensity=propensity,
                                fqe_steps=fqe_steps, seed=seed,
                                **({} if fqe_refits is None else {"fqe_refits": fqe_refits}))
@@ -67,20 +68,21 @@ def evaluate(name: str, data: str, *, store: StoreLike = None,
                                        min_support=min_support,
                                        support_penalty=support_penalty)
     removal = removal_of(corpus, without, without_episodes)
-    if removal is not None and (workers is not None or address is not None):
-        raise AocError("--without runs in one process: drop --workers / --ray-address")
+    if removal is not None and (workers is not None or ray_address is not None):
+        raise BadSetting("without", without, f"{param('without')} runs in one process: drop "
+                         f"{param('workers')} / {param('ray_address')}")
     session = open_session(corpus, model, index_id, config, seed=seed)
     if progress is not None:
         progress(0, held_out.n_rows, f"evaluate {name} on {data}")
-    if workers is None and address is None:
+    if workers is None and ray_address is None:
         summary, res = _evaluate(session, held_out, names, seed=seed, progress=progress,
                                  exact=exact, ope=settings)
     else:  # the chunks of episodes as Ray tasks (aoc_cli.control.evaluate_ray)
         if workers is not None and workers < 1:
-            raise AocError(f"--workers must be >= 1, got {workers}")
+            raise BadSetting("workers", workers, f"must be >= 1, got {workers}")
         summary, res = evaluate_on_ray(s.root, name, data, session.model.id, index_id, config,
                                        names, seed=seed, exact=exact, workers=workers,
-                                       address=address, progress=progress, ope=settings)
+                                       address=ray_address, progress=progress, ope=settings)
     if removal is not None:  # the same steps decided again without the rows
         if progress is not None:
             progress(0, held_out.n_rows, f"without {removal.label}")

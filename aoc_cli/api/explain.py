@@ -16,7 +16,7 @@ from aoc_cli.control import (ControllerConfig, explain_logged_step, explain_quer
 from aoc_cli.control.explain import explain_decisions
 from aoc_cli.control.records import label_of
 from aoc_cli.control.whatif import removal as removal_of
-from aoc_cli.errors import AocError
+from aoc_cli.errors import AocError, BadSetting, param
 from aoc_cli.report.explain_pages import check_html, steps_overview, write_html
 from aoc_cli.store import action_labels
 
@@ -61,15 +61,18 @@ def explain(name: str, *, store: StoreLike = None, queries: str | os.PathLike | 
         check_html(Path(html), s.root)
     if steps_file is not None:
         if html is None or any(x is not None for x in (queries, audit, data)):
-            raise AocError("--steps FILE writes an overview page: give --html FILE and "
-                           "none of --input, --audit, --data")
+            raise BadSetting("steps_file", str(steps_file),
+                             f"{param('steps_file', 'FILE')} writes an overview page: give "
+                             f"{param('html', 'FILE')} and none of {param('queries')}, "
+                             f"{param('audit')}, {param('data')}")
         corpus = s.corpus(name)
         steps_overview(corpus, Path(steps_file), Path(html), model, index_id)
         return Explained(corpus.name, [], Path(html))
     if sum(x is not None for x in (queries, audit, data)) != 1:
-        raise AocError("give one of --input FILE|- (JSONL queries), --audit FILE --episode E "
-                       "--step T (a recorded decision) or --data CORPUS --episode E --step T "
-                       "(a logged step)")
+        raise AocError(f"give one of {param('queries', 'FILE|-')} (JSONL queries), "
+                       f"{param('audit', 'FILE')} {param('episode', 'E')} {param('step', 'T')} "
+                       f"(a recorded decision) or {param('data', 'CORPUS')} "
+                       f"{param('episode', 'E')} {param('step', 'T')} (a logged step)")
     corpus = s.corpus(name)
     config = ControllerConfig.for_task(collected_task(corpus), candidates=candidates,
                                        epsilon=epsilon, k=k, residual_cap=residual_cap,

@@ -9,7 +9,7 @@ from aoc_cli.belief.config import BeliefConfig
 from aoc_cli.belief.fit import Trained, check_settings, train_corpus
 from aoc_cli.corpus_index import CorpusIndex
 from aoc_cli.corpus_index import build_index as _build_index
-from aoc_cli.errors import AocError
+from aoc_cli.errors import BadSetting, param
 from aoc_cli.progress import Progress
 
 _D = BeliefConfig()  # the paper's settings: the defaults of train()
@@ -78,8 +78,8 @@ def build_index(name: str, model: str | None = None, *, store: StoreLike = None,
     corpus = open_store(store).corpus(name)
     for key, rate in (subsample or {}).items():
         if rate > 1:
-            raise AocError(f"--subsample rates are <= 1 (got {rate} for {key}); use "
-                           "--episode-rate")
+            raise BadSetting("subsample", rate, f"{param('subsample')} rates are <= 1 (got "
+                             f"{rate} for {key}); use {param('episode_rates')}")
     ci = _build_index(corpus, model, kind=kind, index_id=index_id,
                       episode_rates={**(subsample or {}), **(episode_rates or {})}, seed=seed,
                       progress=progress, candidates=neighbours)

@@ -60,7 +60,7 @@ def register(app: typer.Typer) -> None:
                 methods=[m.strip() for m in methods.split(",") if m.strip()] if methods else None,
                 out=out, epsilon=epsilon, residual_cap=residual_cap, sizes=_sizes(sizes),
                 behaviour=behaviour, bench_store=bench_store, workers=workers,
-                address=ray_address, progress=bar, log=message)
+                ray_address=ray_address, progress=bar, log=message)
         write_records(done.rows, fmt, columns=done.columns,
                       title=f"aoc bench {experiment} ({scale})")
 

@@ -10,6 +10,7 @@ import typer
 
 from aoc_cli.cli.common import (EpisodesOption, FormatOption, RayAddressOption, WorkersOption,
                                 state)
+from aoc_cli.errors import AocError
 from aoc_cli.report.output import ProgressBar, message, write_records
 
 LIST_COLUMNS = ["name", "gym_id", "horizon", "default_steps", "default_episodes", "policies",
@@ -51,13 +52,17 @@ def register(app: typer.Typer) -> None:
         """Run a built-in task's behaviour policies and store the data as a corpus."""
         from aoc_cli import api  # here: keeps `aoc --help` and bad input from importing torch
 
-        if list_tasks:
-            write_records(api.tasks(), fmt, columns=LIST_COLUMNS, title="built-in tasks")
+        if list_tasks or task is None:
+            tasks = api.tasks()
+            if task is None and not list_tasks:
+                raise AocError("give a task to collect (one of " + ", ".join(
+                    t["name"] for t in tasks) + "), or --list to see them")
+            write_records(tasks, fmt, columns=LIST_COLUMNS, title="built-in tasks")
             return
         with ProgressBar("collect") as bar:
             done = api.collect(task, name, store=state.store, steps=steps, episodes=episodes,
                                seed=seed, behaviour=behaviour, policy=policy,
-                               overwrite=overwrite, workers=workers, address=ray_address,
+                               overwrite=overwrite, workers=workers, ray_address=ray_address,
                                chunk=chunk, csv=csv_dir, progress=bar)
         if csv_dir is not None:
             message(f"wrote {done[0]} and {done[1]}: ingest them with `aoc ingest "

@@ -20,7 +20,8 @@ from aoc_cli.store import DEFAULT_INDEX
 
 #: Library parameters whose flag is not ``--`` + the name with dashes.
 FLAGS = {"max_epochs": "--epochs", "episode_rates": "--episode-rate", "fmt": "--from",
-         "tag_columns": "--tag-column", "tags": "--tag", "columns_file": "--columns"}
+         "tag_columns": "--tag-column", "tags": "--tag", "columns_file": "--columns",
+         "queries": "--input", "steps_file": "--steps"}
 
 #: Library calls whose command is not their name.
 COMMANDS = {"build_index": "index"}

@@ -83,7 +83,8 @@ def register(app: typer.Typer) -> None:
                 steps_file=steps_file, model=model, index_id=index_id, candidates=candidates,
                 epsilon=epsilon, k=k, min_support=min_support, support_penalty=support_penalty,
                 exact=exact, seed=seed, ope=ope_names, propensity=propensity, ope_gamma=ope_gamma,
-                fqe_steps=fqe_steps, fqe_refits=fqe_refits, workers=workers, address=ray_address,
+                fqe_steps=fqe_steps, fqe_refits=fqe_refits, workers=workers,
+                ray_address=ray_address,
                 without=parse_selection(without, "--without"),
                 without_episodes=parse_episodes(without_episodes), progress=bar)
         for text in summary.get("ope_warnings", []):

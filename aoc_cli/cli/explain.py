@@ -83,5 +83,6 @@ def _parse_action(text: str):
     try:
         values = [float(x) for x in text.split(",")]
     except ValueError:
-        raise AocError(f"--compare expects numbers (comma-separated for several dims), got {text!r}") from None
+        raise AocError(f"--compare expects numbers (comma-separated for several dims), "
+                       f"got {text!r}") from None
     return values if len(values) > 1 else values[0]

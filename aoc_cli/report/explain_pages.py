@@ -8,7 +8,7 @@ from pathlib import Path
 
 from aoc_cli.control.explain import audit_band
 from aoc_cli.corpus_index import load_index
-from aoc_cli.errors import AocError
+from aoc_cli.errors import BadInput, call
 from aoc_cli.report.html import check_html_path, write_page
 from aoc_cli.report.overview import audit_episode, steps_episodes
 from aoc_cli.report.pages import decision_page, overview_page
@@ -38,8 +38,9 @@ def steps_overview(corpus, steps_file: Path, path: Path, model, index_id: str) -
     """The overview page of an `aoc evaluate --steps` file, against the index's typical
     residual."""
     if not Path(steps_file).is_file():
-        raise AocError(f"no such steps file: {steps_file} (write one with `aoc evaluate "
-                       f"{corpus.name} --data HELD_OUT --steps FILE`)")
+        raise BadInput(steps_file, f"no such steps file: {steps_file} (write one with `"
+                       f"{call('evaluate', corpus.name, data='HELD_OUT', steps_file='FILE')}`)",
+                       param="steps_file")
     t = load_index(corpus, model, index_id).typical
     typical = {"p50": t.p50, "p90": t.p90, "p99": t.p99}
     episodes = steps_episodes(corpus, steps_file, typical)
