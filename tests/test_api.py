@@ -50,15 +50,6 @@ def test_collect_writes_the_corpus_the_command_writes(tmp_path, aoc):
     assert not Store(tmp_path).exists("h")
 
 
-def test_collect_in_chunks_in_one_process_takes_the_chunk_seeds(tmp_path):
-    whole = api.collect("two-gates", "w", store=tmp_path, episodes=6, seed=1, chunk=3,
-                        workers=None)
-    chunked = api.collect("two-gates", "c", store=tmp_path, episodes=6, seed=1, chunk=3,
-                          address=None, workers=1)
-    assert chunked.corpus.n_episodes == 6 and {r["chunk"] for r in chunked.summary} == {0, 1}
-    assert chunked.corpus.hash != whole.corpus.hash  # chunks are seeded apart
-
-
 def test_info_corpora_and_export_ingest_round_trip(tmp_path):
     store = tmp_path / "store"
     api.collect("two-gates", "g", store=store, episodes=8, seed=2)
