@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Sequence
 
 from aoc_cli.api.common import Log, StoreLike, open_store
-from aoc_cli.errors import BadSetting
+from aoc_cli.errors import BadSetting, param
 from aoc_cli.experiments import ORDER, expected_seconds, run_experiment
 from aoc_cli.experiments.runner import SIZED, check
 from aoc_cli.experiments.sepsis import run_sepsis
@@ -54,13 +54,15 @@ def bench(experiment: str, *, store: StoreLike = None, scale: str = "full",
     if out is not None:
         check_output(out, "out", open_store(store).root, folder=True)
     if scale not in SCALES:
-        raise BadSetting("scale", scale, f"{scale!r} is unknown: use {', '.join(SCALES)}")
+        raise BadSetting("scale", scale,
+                         f"{param('scale')} {scale!r} is unknown: use {', '.join(SCALES)}")
     chosen = list(methods) if methods else None
     sizes = list(sizes) if sizes is not None else None
     bench_store = Path(bench_store)
     if experiment == "ward":  # imitation on a log: splits, not rollouts (experiments/ward.py)
         if seeds is not None and seeds < 1:
-            raise BadSetting("seeds", seeds, f"(random patient splits) must be >= 1, got {seeds}")
+            raise BadSetting("seeds", seeds, f"{param('seeds')} (random patient splits) must be "
+                             f">= 1, got {seeds}")
         report = run_ward(Path(out) if out is not None else Path("bench/ward"), bench_store,
                           scale, seeds, log=note, progress=progress)
         note(f"ward: wrote {report['out']}/results.csv, summary.md, summary.json and ward.png "

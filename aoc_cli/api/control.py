@@ -90,12 +90,13 @@ def rollout(name: str, env: str, *, store: StoreLike = None, episodes: int = 5,
     of clean rollouts."""
     s = open_store(store)
     if episodes < 1:
-        raise BadSetting("episodes", episodes, f"must be >= 1, got {episodes}")
+        raise BadSetting("episodes", episodes, f"{param('episodes')} must be >= 1, got {episodes}")
     for key, path in (("audit", audit), ("plot", plot)):
         if path is not None:
             check_output(path, key, s.root)
     if noise_std != noise_std or noise_std < 0 or noise_std == float("inf"):
-        raise BadSetting("noise_std", noise_std, f"must be a finite number >= 0, got {noise_std}")
+        raise BadSetting("noise_std", noise_std, f"{param('noise_std')} must be a finite number "
+                         f">= 0, got {noise_std}")
     corpus = s.corpus(name)
     config = ControllerConfig.for_task(env, candidates=candidates, epsilon=epsilon, k=k,
                                        sampler=sampler, residual_cap=residual_cap,

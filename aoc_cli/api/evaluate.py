@@ -42,21 +42,25 @@ def evaluate(name: str, data: str, *, store: StoreLike = None,
     same steps. ``exact``: search the index exactly (None: up to the small-log bound, IVF
     beyond). ``ope`` ("pdwis,wdr,fqe", "none"), ``propensity``, ``ope_gamma``, ``fqe_steps``,
     ``fqe_refits`` (the bootstrap refits behind FQE's interval): offline policy evaluation
-    of the decisions. ``workers`` / ``ray_address``: chunks of episodes as Ray tasks. ``without`` / ``without_episodes``: decide again without those rows and
-    report what changes (``summary["what_if"]``). ``steps_file``: one JSON record per step
-    written there. Returns the summary ``aoc evaluate`` prints (its ``ope_warnings``: what
-    the OPE could not do)."""
+    of the decisions. ``workers`` / ``ray_address``: chunks of episodes as Ray tasks.
+    ``without`` / ``without_episodes``: decide again without those rows and report what
+    changes (``summary["what_if"]``). ``steps_file``: one JSON record per step written there.
+    Returns the summary ``aoc evaluate`` prints (its ``ope_warnings``: what the OPE could not
+    do)."""
     names = list(baselines)
     settings = None
     if any(v is not None for v in (ope, propensity, fqe_steps, fqe_refits)) \
             or ope_gamma != 1.0:
         if fqe_steps is not None and fqe_steps < 1:
-            raise BadSetting("fqe_steps", fqe_steps, f"must be >= 1, got {fqe_steps}")
+            raise BadSetting("fqe_steps", fqe_steps,
+                             f"{param('fqe_steps')} must be >= 1, got {fqe_steps}")
         if fqe_refits is not None and (fqe_refits < 0 or fqe_refits == 1):
             raise BadSetting("fqe_refits", fqe_refits,
-                             f"must be 0 or at least 2, got {fqe_refits}")
+                             f"{param('fqe_refits')} must be 0 or at least 2, got "
+                             f"{fqe_refits}")
         if not 0.0 < ope_gamma <= 1.0:
-            raise BadSetting("ope_gamma", ope_gamma, f"must be in (0, 1], got {ope_gamma}")
+            raise BadSetting("ope_gamma", ope_gamma,
+                             f"{param('ope_gamma')} must be in (0, 1], got {ope_gamma}")
         settings = OPESettings(parse_estimators(ope), gamma=ope_gamma, propensity=propensity,
                                fqe_steps=fqe_steps, seed=seed,
                                **({} if fqe_refits is None else {"fqe_refits": fqe_refits}))
@@ -79,7 +83,7 @@ def evaluate(name: str, data: str, *, store: StoreLike = None,
                                  exact=exact, ope=settings)
     else:  # the chunks of episodes as Ray tasks (aoc_cli.control.evaluate_ray)
         if workers is not None and workers < 1:
-            raise BadSetting("workers", workers, f"must be >= 1, got {workers}")
+            raise BadSetting("workers", workers, f"{param('workers')} must be >= 1, got {workers}")
         summary, res = evaluate_on_ray(s.root, name, data, session.model.id, index_id, config,
                                        names, seed=seed, exact=exact, workers=workers,
                                        address=ray_address, progress=progress, ope=settings)

@@ -37,7 +37,8 @@ def check_request(task: str | None, name: str | None, *, steps: int | None = Non
     behaviour, a policy the task lets one choose, a corpus name, positive counts, rows or
     episodes but not both); else an AocError."""
     if task is None:
-        raise BadSetting("task", None, f"must name a built-in task: one of {', '.join(TASKS)}")
+        raise BadSetting("task", None, f"{param('task')} must name a built-in task: one of "
+                         f"{', '.join(TASKS)}")
     t = get_task(task)
     if behaviour not in t.behaviours:
         raise BadSetting("behaviour", behaviour, f"{param('behaviour')} {behaviour!r}: task "
@@ -50,12 +51,11 @@ def check_request(task: str | None, name: str | None, *, steps: int | None = Non
         raise BadSetting("policy", policy, f"{param('policy')} {policy!r}: task {task!r} has "
                          f"{' or '.join(t.policies)}")
     if name is None:
-        raise BadSetting("name", None, f"give the corpus name: "
-                         f"{call('collect', task, name='NAME')}")
+        raise AocError(f"give the corpus name: {call('collect', task, name='NAME')}", "name")
     for key, value in (("steps", steps), ("episodes", episodes), ("workers", workers),
                        ("chunk", chunk)):
         if value is not None and value <= 0:
-            raise BadSetting(key, value, f"must be a positive integer, got {value}")
+            raise BadSetting(key, value, f"{param(key)} must be a positive integer, got {value}")
     if steps is not None and episodes is not None:
         raise BadSetting("steps", steps, f"give {param('steps')} or {param('episodes')}, not "
                          "both")
