@@ -170,11 +170,12 @@ def test_a_second_run_reuses_the_stored_artefacts(tmp_path, bench_store):
 def test_residual_cap_reaches_every_aoc_session_and_is_recorded(tmp_path, bench_store,
                                                                   monkeypatch):
     from aoc_cli.experiments import maze
-    from aoc_cli.errors import AocError
+    from aoc_cli.errors import BadSetting
 
-    with pytest.raises(AocError, match="residual-cap"):
+    with pytest.raises(BadSetting, match="residual_cap must be > 0") as err:
         run_experiment("two-gates", "tiny", out=tmp_path / "bad", store=bench_store,
                        residual_cap=0.0)
+    assert (err.value.param, err.value.value) == ("residual_cap", 0.0)
     configs = []
     real = maze.session
 
