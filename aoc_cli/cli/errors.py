@@ -92,23 +92,26 @@ def message(err: AocError) -> str:
     return line + hint(err)
 
 
-def show_warning(message, category, filename, lineno, file=None, line=None) -> None:
-    """:func:`warnings.showwarning` of the command line: an :class:`AocWarning` as one line
-    ``aoc: warning: ...`` on stderr; any other warning as Python shows it."""
-    if isinstance(message, AocWarning):
-        print(f"aoc: warning: {text(message.marked)}", file=sys.stderr)
-    elif issubclass(category, AocWarning):
-        print(f"aoc: warning: {message}", file=sys.stderr)
-    else:  # as Python's own warnings.showwarning does
-        (file or sys.stderr).write(warnings.formatwarning(message, category, filename, lineno,
-                                                          line))
+def warning_line(message) -> str:
+    """The line of a library warning: ``aoc: warning: ...`` with flags for its parameters."""
+    text = message.marked if isinstance(message, AocWarning) else str(message)
+    return f"aoc: warning: {render(text, flag, command)}"
 
 
 @contextlib.contextmanager
 def showing_warnings() -> Iterator[None]:
-    """Within: every :class:`AocWarning` is shown (each time, not once per place) by
-    :func:`show_warning`; the previous filters and display come back after."""
+    """Within: every :class:`AocWarning` is shown (each time, not once per place) as one line
+    on stderr (:func:`warning_line`); every other warning goes where it went before (Python's
+    display, or a test runner's record). Filters and display come back after."""
+    other = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, AocWarning):
+            print(warning_line(message), file=sys.stderr)
+        else:
+            other(message, category, filename, lineno, file, line)
+
     with warnings.catch_warnings():
         warnings.simplefilter("always", AocWarning)
-        warnings.showwarning = show_warning
+        warnings.showwarning = show
         yield

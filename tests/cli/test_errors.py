@@ -5,7 +5,7 @@ import warnings
 
 import pytest
 
-from aoc_cli.cli.errors import message, show_warning, showing_warnings
+from aoc_cli.cli.errors import message, showing_warnings
 from aoc_cli.errors import (AocError, AocWarning, BadSetting, CorpusExists, CorpusNotFound,
                             Damaged, IndexMissing, IndexStale, Locked, ModelExists, ModelMissing,
                             ModelStale, call, param, warn)
@@ -82,9 +82,9 @@ def test_a_library_warning_is_one_line_each_time_it_is_given(capsys):
     assert str(seen[0].message) == "append=True: creating it"
 
 
-def test_other_warnings_are_shown_as_python_shows_them(capsys):
-    show_warning(DeprecationWarning("old"), DeprecationWarning, "f.py", 3)
-    show_warning(AocWarning("plain"), AocWarning, "f.py", 3)
-    err = capsys.readouterr().err
-    assert "f.py:3: DeprecationWarning: old" in err
-    assert err.endswith("aoc: warning: plain\n")
+def test_other_warnings_go_where_they_went_before(capsys):
+    with pytest.warns(DeprecationWarning, match="old"):  # the handler before: pytest's record
+        with showing_warnings():
+            warnings.warn("old", DeprecationWarning)
+            warnings.warn(AocWarning("plain"))
+    assert capsys.readouterr().err == "aoc: warning: plain\n"
