@@ -12,18 +12,37 @@ else ``./corpora``). ``progress=``: an :class:`aoc_cli.progress.Progress` callab
 a function of one line of text, for the notes a command prints on stderr. Errors are
 :class:`aoc_cli.errors.AocError`. The ``aoc`` commands parse their options, make one call
 here and print what it returns (aoc_cli/cli/); docs/design.md, "Library API", lists them.
-The entries live in data.py (ingest, collect, info, verify, export), model.py (train,
-build_index), control.py (open_session, rollout), explain.py, evaluate.py and bench.py.
+The entries live in data.py (ingest, info, verify, export), collect.py (collect, tasks),
+model.py (train, build_index), control.py (open_session, rollout), explain.py, evaluate.py and
+bench.py, each loaded when its entry is first used.
 """
 
-from aoc_cli.api.bench import Benched, bench
-from aoc_cli.api.control import RolledOut, open_session, rollout
-from aoc_cli.api.data import (Verified, collect, corpora, export, info, ingest, tasks,
-                              verify)
-from aoc_cli.api.evaluate import evaluate
-from aoc_cli.api.explain import Explained, explain
-from aoc_cli.api.model import Indexed, build_index, train
+from __future__ import annotations
 
-__all__ = ["Benched", "Explained", "Indexed", "RolledOut", "Verified", "bench", "build_index",
-           "collect", "corpora", "evaluate", "explain", "export", "info", "ingest",
-           "open_session", "rollout", "tasks", "train", "verify"]
+import importlib
+
+#: Where each public name lives; loaded on first use (PEP 562), so that a command imports only
+#: what its entry needs (``aoc info`` no torch, FAISS or matplotlib).
+_WHERE = {
+    "ingest": "data", "tasks": "collect", "collect": "collect", "info": "data", "corpora": "data",
+    "verify": "data", "export": "data", "Verified": "data",
+    "train": "model", "build_index": "model", "Indexed": "model",
+    "open_session": "control", "rollout": "control", "RolledOut": "control",
+    "explain": "explain", "Explained": "explain",
+    "evaluate": "evaluate",
+    "bench": "bench", "Benched": "bench",
+}
+
+__all__ = sorted(_WHERE)
+
+
+def __getattr__(name: str):
+    if name in _WHERE:
+        value = getattr(importlib.import_module(f"aoc_cli.api.{_WHERE[name]}"), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'aoc_cli.api' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_WHERE))

@@ -1,5 +1,5 @@
-"""The API's entries that bring data in and out of the store: ingest, collect (and the task
-list), info, the corpus list, verify, export."""
+"""The API's entries that bring data in and out of the store: ingest, info, the corpus list,
+verify, export (collect: :mod:`aoc_cli.api.collect`)."""
 
 from __future__ import annotations
 
@@ -9,8 +9,6 @@ from pathlib import Path
 from typing import Sequence
 
 from aoc_cli.api.common import StoreLike, open_store
-from aoc_cli.envs import TASKS
-from aoc_cli.envs.into_store import Collected, check_request, collect_corpus, collect_csv
 from aoc_cli.formats import ExportResult, IngestResult, ReadOptions
 from aoc_cli.formats import export as _export
 from aoc_cli.formats import ingest as _ingest
@@ -34,35 +32,6 @@ def ingest(path: str | os.PathLike, name: str, *, store: StoreLike = None,
         options.progress = progress
     return _ingest(path, name, store=open_store(store), fmt=fmt, options=options,
                    overwrite=overwrite, append=append)
-
-
-def tasks() -> list[dict]:
-    """One row per built-in task (name, gym id, horizon, default size, policies, success):
-    what ``aoc collect --list`` prints."""
-    return [t.describe() for t in TASKS.values()]
-
-
-def collect(task: str | None, name: str | None, *, store: StoreLike = None,
-            steps: int | None = None, episodes: int | None = None, seed: int = 0,
-            behaviour: str = "mix", policy: str | None = None, overwrite: bool = False,
-            workers: int | None = None, ray_address: str | None = None,
-            chunk: int | None = None, csv: str | os.PathLike | None = None,
-            progress: Progress | None = None) -> Collected | tuple[Path, Path]:
-    """Run built-in ``task``'s behaviour policies (``behaviour`` mix or replay; ``policy``:
-    icu-sepsis's one policy) for ``steps`` rows or ``episodes`` episodes (default the task's)
-    and write corpus ``name``: a :class:`~aoc_cli.envs.into_store.Collected` (the corpus, one
-    summary row per policy). ``workers`` / ``ray_address``: seeded chunks of ``chunk`` rows
-    as Ray tasks. ``csv`` (ward): write the log as the two CSV files ``csv/name.csv`` and
-    ``csv/name-static.csv`` instead, and return their paths. Same seed, same corpus."""
-    t = check_request(task, name, steps=steps, episodes=episodes, behaviour=behaviour,
-                      policy=policy, workers=workers, chunk=chunk)
-    s = open_store(store)
-    if csv is not None:
-        return collect_csv(s, t, csv, name, steps=steps, episodes=episodes, seed=seed)
-    return collect_corpus(s, t, name, steps=steps, episodes=episodes, seed=seed,
-                          behaviour=behaviour, policy=policy, overwrite=overwrite,
-                          workers=workers, ray_address=ray_address, chunk=chunk,
-                          progress=progress)
 
 
 def info(name: str, *, store: StoreLike = None) -> dict:
