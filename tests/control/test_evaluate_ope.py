@@ -83,6 +83,19 @@ def test_fqe_interval_is_from_refits_and_says_so(sepsis):
     assert one["policy_value"]["fqe"]["estimate"] == pytest.approx(e["estimate"], abs=1e-9)
 
 
+def test_cli_fqe_refits_reach_the_estimator(sepsis, capsys):
+    pytest.importorskip("d3rlpy", reason="the bench extra (d3rlpy) is not installed")
+    root, _store, _ = sepsis
+    code, out, _err = run_in_process(capsys, "--store", str(root), "evaluate", "icu", "--data",
+                                     "held", "--baselines", "none", "--ope", "fqe",
+                                     "--fqe-steps", "200", "--fqe-refits", "2", "-f", "json")
+    assert code == 0
+    doc = json.loads(out)
+    assert doc["ope"]["fqe_refits"] == 2
+    assert any(n.startswith("fqe: the interval is the estimate +- 1.96 sd of 2 refits")
+               for n in doc["ope"]["notes"])
+
+
 def test_fqe_refits_of_one_is_one_line(sepsis, capsys):
     root, _store, _ = sepsis
     code, out, err = _ope_cli(capsys, root, "held", "--fqe-refits", "1")
