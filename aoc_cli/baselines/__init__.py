@@ -55,7 +55,7 @@ def make_baseline(name: str, session, env=None, seed: int = 0, **options):
     pre-trained ``agent=``/``model=``). Unknown name, a missing optional package (pip install
     -e .[bench]) or a missing bc model -> AocError.
     """
-    from aoc_cli.baselines.neighbours import NearestNeighbourController, default_k
+    from aoc_cli.baselines.neighbours import NearestNeighbourController, knn_k
 
     if name == "zero":
         from aoc_cli.baselines.simple import ZeroPolicy
@@ -66,7 +66,7 @@ def make_baseline(name: str, session, env=None, seed: int = 0, **options):
 
         return RandomPolicy(session, env, seed)
     if name in ("1nn", "knn", "1nn-belief", "knn-belief"):
-        k = 1 if name.startswith("1nn") else default_k(session)
+        k = 1 if name.startswith("1nn") else knn_k(session)
         space = "belief" if name.endswith("-belief") else "raw"
         return NearestNeighbourController(session, env, k=k, space=space, seed=seed, name=name)
     if name == "bc":

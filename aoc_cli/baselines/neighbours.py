@@ -10,8 +10,8 @@ with no residual filter (no epsilon) and no hull: the neighbours are averaged wh
 they surround the query. ``x`` is either the raw feature map of
 :mod:`aoc_cli.baselines.features` (standardised o, a, flattened history) or the AOC belief
 ``b(o, a, h)``, searched in the session's own index. ``v^c`` is the value target of the AOC
-session's model (the same v as AOC). k = 1 for 1NN; kNN uses the controller's k
-(default 2 (d_b + 1), as AOC).
+session's model (the same v as AOC). k = 1 for 1NN; kNN uses :func:`knn_k` (the controller's
+k, else the paper's 2 (d_b + 1)).
 """
 
 from __future__ import annotations
@@ -20,13 +20,17 @@ import numpy as np
 
 from aoc_cli.baselines.common import ActionSpace, corpus_values
 from aoc_cli.baselines.features import RawFeatures
-from aoc_cli.decompose import default_k as paper_k
+from aoc_cli.decompose import default_k
 from aoc_cli.index import BeliefIndex, IndexConfig
 
 
-def default_k(session) -> int:
+def knn_k(session) -> int:
+    """kNN's k: the controller's ``config.k`` when set (``--k``), else the paper's
+    k = 2 (d_b + 1) -- the k rule without the index's own widening for imitation of discrete
+    actions (:func:`aoc_cli.decompose.default_k` with no rarest-action share), as the paper
+    runs Shah and Xie's kNN."""
     k = session.controller.config.k
-    return int(k) if k is not None else paper_k(session.model.d_b)
+    return int(k) if k is not None else default_k(session.model.d_b)
 
 
 class NearestNeighbourController:

@@ -122,7 +122,7 @@ def abc_validation(actions: np.ndarray, n_actions: int, k: int | None = None):
     import torch
 
     from aoc_cli.metrics import auc
-    from aoc_cli.decompose import decompose, default_k
+    from aoc_cli.decompose import decompose, per_action_k
     from aoc_cli.index import BeliefIndex
     from aoc_cli.index.strata import PerAction
 
@@ -137,7 +137,7 @@ def abc_validation(actions: np.ndarray, n_actions: int, k: int | None = None):
         n_tr = len(data.train_rows)
         a_tr, y = actions[data.train_rows], actions[data.val_rows]
         search = PerAction(BeliefIndex.build(b[:n_tr], kind="flat"), a_tr)
-        kk = k if k is not None else len(search.masks) * default_k(b.shape[1])
+        kk = k if k is not None else per_action_k(b.shape[1], len(search.masks))
         dec = decompose(b[:n_tr], b[n_tr:], k=kk, index=search)
         scores = abc_scores(dec.rows, dec.weights, a_tr, n_actions)
         return {"val_abc_accuracy": float(np.mean(scores.argmax(1) == y)),

@@ -46,9 +46,8 @@ class ControllerConfig:
     """z: rank the candidates that pass by v_hat - z sigma_v / sqrt(support) (sigma_v the std
     of the corpus values; aoc_cli.control.support.penalised) instead of v_hat. None: v_hat."""
     k: int | None = None
-    """Nearest corpus beliefs per query; None = the index's (``index.json`` ``k``): 2 (d_b + 1),
-    or for an imitation model of discrete actions (d_b + 1) / the rarest action's share,
-    between 2 (d_b + 1) and 16 (d_b + 1) (aoc_cli.decompose.default_k)."""
+    """Nearest corpus beliefs per query; None = the index's (``index.json`` ``k``, set by the k
+    rule when it was built: aoc_cli.decompose.k_rule)."""
     sampler: str = "uniform"
     """uniform (in a box action space) | bc (a behaviour-cloning model plus Gaussian noise)."""
     bc_model: str = "bc"

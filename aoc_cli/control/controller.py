@@ -115,6 +115,12 @@ class Controller:
         self.value_std = float(np.std(values)) if values is not None and len(values) else 1.0
         self.row_episode = row_episodes(corpus.episode_starts)
 
+    @property
+    def k(self) -> int:
+        """Neighbours per query: ``config.k`` when set (``--k``), else the k the index was
+        built with (the k rule, :mod:`aoc_cli.decompose.k_rule`)."""
+        return int(self.config.k) if self.config.k is not None else int(self.index.k)
+
     # -- candidates ------------------------------------------------------------------------
     def sample_candidates(self, observation: np.ndarray, history: History) -> np.ndarray:
         """(K, d_a) float candidates, or (n,) int: every action of a discrete space."""
@@ -156,7 +162,7 @@ class Controller:
         # one observation and one history broadcast to the n candidates (the GRU runs once)
         with one_thread():
             beliefs = self.model.beliefs(observation[None, :], candidates, history)
-            dec = self.index.decompose(beliefs, k=self.config.k, selection=self._rows(selection))
+            dec = self.index.decompose(beliefs, k=self.k, selection=self._rows(selection))
         residual = np.asarray(dec.residual, dtype=np.float64)
         value = np.asarray(dec.value, dtype=np.float64)
         # every candidate's support only where a rule reads it (a few ms for K = 100)
@@ -219,7 +225,7 @@ class Controller:
     def _imitate(self, observation: np.ndarray, history: History,
                  selection: np.ndarray | None = None) -> Decision:
         belief = self.model.beliefs(observation[None], None, history)
-        dec = self.index.decompose(belief, k=self.config.k, selection=self._rows(selection))
+        dec = self.index.decompose(belief, k=self.k, selection=self._rows(selection))
         rows = _trim(dec.rows[0], dec.rows[0])
         weights = _trim(dec.weights[0], dec.rows[0])
         actions = self.corpus_actions[rows]

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from aoc_cli.control.controller import support_disagreement
+from aoc_cli.decompose import subset_size
 from aoc_cli.errors import AocError, NoRewards, call
 from aoc_cli.index.strata import candidate_search
 from aoc_cli.settings import SMALL_LOG_ROWS
@@ -147,14 +148,15 @@ def search_structure(index, vectors, exact: bool | None, seed: int = 0):
 class KNNBaseline:
     """The k nearest corpus rows on standardised inputs (imitation: the observation; value:
     the observation and the encoded action; exact search up to EXACT_MAX_ROWS rows, IVF
-    beyond), k = d_b + 1 (as many rows as ABC's subset may use). Imitation: the neighbours'
+    beyond), k = d_b + 1 (:func:`aoc_cli.decompose.subset_size`: as many rows as ABC's subset
+    may use; not the index's k). Imitation: the neighbours'
     action shares (discrete) or mean action; value: their mean value for the logged action,
     and for discrete actions the best of the actions."""
 
     def __init__(self, ctx: "EvalContext"):
         from aoc_cli.index import BeliefIndex
 
-        self.k = ctx.model.d_b + 1
+        self.k = subset_size(ctx.model.d_b)
         self.extra = ctx.max_episode_length if ctx.own else 0
         obs = np.asarray(ctx.corpus.observations, np.float64)
         self.mean, self.std = obs.mean(0), np.where(obs.std(0) > 1e-9, obs.std(0), 1.0)
@@ -247,7 +249,7 @@ class EvalContext:
         self.step1 = candidate_search(self.search, self.index.candidates, self.index.strata,
                                       split)
         self.history_length = model.history_length
-        self.k = self.config.k if self.config.k is not None else self.index.k
+        self.k = self.session.controller.k
         self.discrete, self.n_actions = corpus.discrete, corpus.n_actions
         self.corpus_actions = np.asarray(corpus.actions)
         self.corpus_episode = corpus.episode_of(np.arange(corpus.n_rows))

@@ -5,7 +5,6 @@
 """
 
 from aoc_cli.corpus_index.build import (
-    SMALL_MAX_ROWS,
     TYPICAL_SAMPLE,
     build_index,
     load_index,
@@ -14,6 +13,7 @@ from aoc_cli.corpus_index.build import (
     typical_residual,
 )
 from aoc_cli.corpus_index.index import CorpusIndex, TypicalResidual
+from aoc_cli.decompose.k_rule import SMALL_MAX_ROWS
 
 __all__ = [
     "SMALL_MAX_ROWS",

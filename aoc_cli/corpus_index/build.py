@@ -24,13 +24,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from aoc_cli.corpus_index.index import CorpusIndex
-from aoc_cli.decompose import default_k, rarest_share
+from aoc_cli.decompose.k_rule import index_k
 from aoc_cli.errors import AocError, BadSetting, IndexMissing, IndexStale, call, param
 from aoc_cli.index import BeliefIndex
 from aoc_cli.index.strata import NEAREST, PER_ACTION
 from aoc_cli.progress import Progress
 from aoc_cli.rows import episode_multiplicity
-from aoc_cli.settings import SMALL_LOG_ROWS
 from aoc_cli.store import (DEFAULT_INDEX, Corpus, atomic_dir, derived, index_dir, model_dir,
                            writing_model)
 
@@ -39,24 +38,13 @@ if TYPE_CHECKING:
 
 #: Rows sampled to measure the corpus's typical residual (leave-those-rows-out).
 TYPICAL_SAMPLE = 500
-#: Up to this many rows an imitation index of discrete actions takes the nearest rows of each
-#: action (:data:`aoc_cli.settings.SMALL_LOG_ROWS`).
-SMALL_MAX_ROWS = SMALL_LOG_ROWS
 
 
 def neighbours(corpus: Corpus, model, candidates: str = "auto") -> tuple[int, str]:
-    """The default neighbours per query of ``model`` on ``corpus`` and where they come from
-    (docs/design.md, "Candidates of every action"):
-
-    * the paper's k = 2 (d_b + 1) nearest rows ("nearest");
-    * an imitation model of discrete actions on a small corpus (at most
-      :data:`SMALL_MAX_ROWS` rows): the paper's 2 (d_b + 1) nearest rows *of each action*
-      present, k = n 2 (d_b + 1) ("per_action", :mod:`aoc_cli.index.strata`);
-    * the same on a larger corpus: the k = (d_b + 1) / the rarest action's share nearest rows
-      (:func:`aoc_cli.decompose.default_k`).
-
-    ``candidates``: "auto" (that rule), "nearest" (the paper's k) or "per_action" (discrete
-    actions only)."""
+    """The default neighbours per query of ``model`` on ``corpus`` and where they come from:
+    the k rule, :func:`aoc_cli.decompose.k_rule.index_k` (docs/design.md, "Candidates of every
+    action"), once ``candidates`` is checked: "auto" (that rule), "nearest" (the paper's k) or
+    "per_action" (discrete actions only)."""
     if candidates not in ("auto", NEAREST, PER_ACTION):
         raise BadSetting("neighbours", candidates,
                          f"unknown {param('neighbours')} {candidates!r}: use auto, {NEAREST} or "
@@ -66,13 +54,7 @@ def neighbours(corpus: Corpus, model, candidates: str = "auto") -> tuple[int, st
                          f"{param('neighbours', PER_ACTION)} needs discrete actions; corpus "
                          f"{corpus.name!r} has continuous ones")
     imitation = model.mode == "imitation" and bool(corpus.discrete) and corpus.n_rows > 0
-    if candidates == PER_ACTION or (candidates == "auto" and imitation
-                                    and corpus.n_rows <= SMALL_MAX_ROWS):
-        n = int(np.count_nonzero(np.bincount(np.asarray(corpus.actions, dtype=np.int64))))
-        return max(n, 1) * default_k(model.d_b), PER_ACTION
-    if candidates == "auto" and imitation:
-        return default_k(model.d_b, rarest_share(corpus.actions)), NEAREST
-    return default_k(model.d_b), NEAREST
+    return index_k(model.d_b, corpus, imitation, candidates)
 
 
 def load_model(corpus: Corpus, model_id: str | None) -> BeliefModel:

@@ -5,7 +5,8 @@ four steps (neighbours, exact corpus residual and projection, minimal corpus sub
 a whole batch of queries at once; see `engine.py`, which reads top to bottom.
 """
 
-from aoc_cli.decompose.engine import DecomposeConfig, Decomposition, decompose, default_k, \
-    rarest_share
+from aoc_cli.decompose.engine import DecomposeConfig, Decomposition, decompose
+from aoc_cli.decompose.k_rule import default_k, index_k, per_action_k, rarest_share, subset_size
 
-__all__ = ["DecomposeConfig", "Decomposition", "decompose", "default_k", "rarest_share"]
+__all__ = ["DecomposeConfig", "Decomposition", "decompose", "default_k", "index_k",
+           "per_action_k", "rarest_share", "subset_size"]

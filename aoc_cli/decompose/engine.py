@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from aoc_cli.decompose.hull import minimal_subset
+from aoc_cli.decompose.k_rule import default_k
 from aoc_cli.decompose.minnorm import min_norm_point
 from aoc_cli.decompose.reference import caratheodory, lifted_nnls_weights, reference_weights
 from aoc_cli.errors import AocError
@@ -75,35 +76,10 @@ class Decomposition:
     pivots: int = 0
 
 
-#: The most neighbours :func:`default_k` asks for, as a multiple of d_b + 1.
-MAX_K_FACTOR = 16
 #: A full minimal subset (d + 1 rows) sets the residual to 0 only when step 2's residual is at
 #: most this share of the neighbourhood's radius (the compiled loop certifies in-hull points to
 #: minnorm.ABS_TOL = 3e-8 of it).
 FULL_TOL = 1e-6
-
-
-def default_k(d_b: int, rarest_share: float | None = None) -> int:
-    """Neighbours per query: the paper's k = 2 (d_b + 1) (twice the size of a minimal corpus
-    subset). With ``rarest_share`` (discrete imitation: the share of the corpus rows that
-    hold its rarest action), at least (d_b + 1) / rarest_share, so that a neighbourhood at the
-    corpus's base rates holds a full minimal subset's worth (d_b + 1) of rows of every action,
-    and at most 16 (d_b + 1). Balanced binary actions give the paper's k; ward's treatment
-    (11% of rows, d_b = 20) gives 191. Imitation logs of up to 20,000 rows take the nearest
-    rows of each action instead (docs/design.md, "Candidates of every action")."""
-    d1 = int(d_b) + 1
-    k = 2 * d1
-    if rarest_share is not None and rarest_share > 0:
-        k = min(max(k, int(np.ceil(d1 / float(rarest_share)))), MAX_K_FACTOR * d1)
-    return k
-
-
-def rarest_share(actions: np.ndarray) -> float | None:
-    """The share of the rows (N,) of discrete ``actions`` that hold the rarest action present
-    (None for no rows): what :func:`default_k` scales the imitation k by."""
-    counts = np.bincount(np.asarray(actions, dtype=np.int64))
-    counts = counts[counts > 0]
-    return float(counts.min() / counts.sum()) if len(counts) else None
 
 
 def decompose(

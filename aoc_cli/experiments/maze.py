@@ -95,7 +95,7 @@ def start_probe(session) -> dict:
     history = HistoryBuffer(session.model.history_length, 2, 2, False).history()
     # the start observation and the empty history broadcast to the moves (the GRU runs once)
     beliefs = ctl.model.beliefs(np.zeros((1, 2), np.float32), moves, history)
-    dec = session.index.decompose(beliefs, k=ctl.config.k, selection=ctl.selection)
+    dec = session.index.decompose(beliefs, k=ctl.k, selection=ctl.selection)
     out = {}
     for j, name in enumerate(START_PROBES):
         nearest = dec.neighbours[j][dec.neighbours[j] >= 0]

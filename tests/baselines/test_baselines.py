@@ -13,7 +13,7 @@ from aoc_cli.baselines import (
     extra_missing,
     make_baseline,
 )
-from aoc_cli.baselines.neighbours import NearestNeighbourController, default_k
+from aoc_cli.baselines.neighbours import NearestNeighbourController, knn_k
 from aoc_cli.cli.errors import message
 from aoc_cli.errors import AocError, ModelMissing
 from tests.baselines.conftest import replay_history
@@ -53,7 +53,7 @@ def _brute_force(points: np.ndarray, query: np.ndarray, k: int) -> np.ndarray:
 @pytest.mark.parametrize("space", ["raw", "belief"])
 def test_neighbour_values_are_the_mean_value_of_the_true_nearest_rows(session, space, rng):
     s, env = session
-    k = default_k(s)
+    k = knn_k(s)
     ctl = NearestNeighbourController(s, env, k=k, space=space)
     corpus = s.corpus
     row = 321
