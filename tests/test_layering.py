@@ -163,3 +163,64 @@ def test_the_module_map_of_the_design_lists_the_stages_in_this_order():
     named = [name.rstrip("/").removesuffix(".py") for name in entries[1]]
     assert named == [s for s in STAGES if (ROOT / s).exists() or (ROOT / f"{s}.py").exists()]
     assert low == LOW
+
+
+#: Imports of aoc_cli modules inside functions in the library (every module outside cli/), at
+#: most this many: each keeps torch or FAISS off a path that must not load it (``import
+#: aoc_cli.control``, choosing training settings, listing the experiments), with its reason in
+#: a ``# lazy:`` comment on the line or just above the block (docs/design.md, "Module map").
+LIBRARY_INNER_IMPORTS = 9
+#: The same in cli/: a command imports its library when it runs, so ``aoc --help`` stays quick
+#: (issue 22 leaves one ``from aoc_cli import api`` per command).
+CLI_INNER_IMPORTS = 69
+
+
+def _inner_imports(path: Path) -> list[tuple[int, bool]]:
+    """(line, explained) of each import of an aoc_cli module inside a function of ``path``:
+    explained when a ``# lazy:`` comment is on its line or above its block of imports."""
+    source = path.read_text()
+    lines = source.splitlines()
+    tree = ast.parse(source)
+    imports = [n for f in ast.walk(tree) if isinstance(f, (ast.FunctionDef, ast.AsyncFunctionDef))
+               for n in ast.walk(f) if isinstance(n, (ast.Import, ast.ImportFrom))]
+    import_lines = {i for n in imports for i in range(n.lineno, n.end_lineno + 1)}
+    out = []
+    for node in {id(n): n for n in imports}.values():
+        names = [a.name for a in node.names] if isinstance(node, ast.Import) else [node.module or ""]
+        if not (getattr(node, "level", 0) or any(n.startswith("aoc_cli") for n in names)):
+            continue
+        above = node.lineno - 1
+        while above in import_lines or (above > 0 and not lines[above - 1].strip()):
+            above -= 1
+        own = " ".join(lines[node.lineno - 1:node.end_lineno])
+        out.append((node.lineno, "# lazy:" in own
+                    or (above > 0 and lines[above - 1].strip().startswith("# lazy:"))))
+    return sorted(out)
+
+
+def _inner(cli: bool) -> list[tuple[str, bool]]:
+    return [(f"{path.relative_to(ROOT.parent)}:{line}", explained)
+            for path in sorted(ROOT.rglob("*.py")) if (path.parts[-2] == "cli") == cli
+            for line, explained in _inner_imports(path)]
+
+
+def test_the_library_imports_inside_functions_only_at_the_torch_and_faiss_edge():
+    found = _inner(cli=False)
+    listing = "\n".join(where for where, _ in found)
+    assert len(found) <= LIBRARY_INNER_IMPORTS, f"{len(found)} imports inside functions:\n{listing}"
+    unexplained = [where for where, explained in found if not explained]
+    assert not unexplained, "no `# lazy:` reason:\n" + "\n".join(unexplained)
+
+
+def test_the_commands_import_inside_functions_no_more_than_before():
+    found = _inner(cli=True)
+    assert len(found) <= CLI_INNER_IMPORTS, "\n".join(where for where, _ in found)
+
+
+def test_the_inner_import_count_sees_a_lazy_import_and_its_reason(tmp_path):
+    module = tmp_path / "m.py"
+    module.write_text("def f():\n    # lazy: torch\n    import torch\n"
+                      "    from aoc_cli.belief import train_model\n"
+                      "    from aoc_cli.index import BeliefIndex\n\n"
+                      "def g():\n    from aoc_cli.store import Store\n    return Store\n")
+    assert _inner_imports(module) == [(4, True), (5, True), (8, False)]

@@ -26,8 +26,13 @@ mpc        MPPI (pytorch-mppi) over a learned dynamics model (``pip install -e .
 
 from __future__ import annotations
 
+from aoc_cli.baselines.bc import BehaviourCloning
 from aoc_cli.baselines.common import ActionSpace, MissingExtra
 from aoc_cli.baselines.features import RawFeatures
+from aoc_cli.baselines.mpc import MPCPolicy
+from aoc_cli.baselines.neighbours import NearestNeighbourController, knn_k
+from aoc_cli.baselines.offline_rl import OfflineRLPolicy
+from aoc_cli.baselines.simple import RandomPolicy, ZeroPolicy
 from aoc_cli.errors import AocError
 
 #: name -> one-line description (the order in tables).
@@ -55,31 +60,19 @@ def make_baseline(name: str, session, env=None, seed: int = 0, **options):
     pre-trained ``agent=``/``model=``). Unknown name, a missing optional package (pip install
     -e .[bench]) or a missing bc model -> AocError.
     """
-    from aoc_cli.baselines.neighbours import NearestNeighbourController, knn_k
-
     if name == "zero":
-        from aoc_cli.baselines.simple import ZeroPolicy
-
         return ZeroPolicy(session, env, seed)
     if name == "random":
-        from aoc_cli.baselines.simple import RandomPolicy
-
         return RandomPolicy(session, env, seed)
     if name in ("1nn", "knn", "1nn-belief", "knn-belief"):
         k = 1 if name.startswith("1nn") else knn_k(session)
         space = "belief" if name.endswith("-belief") else "raw"
         return NearestNeighbourController(session, env, k=k, space=space, seed=seed, name=name)
     if name == "bc":
-        from aoc_cli.baselines.bc import BehaviourCloning
-
         return BehaviourCloning(session, env, seed, **options)
     if name in ("td3bc", "cql", "bcq"):
-        from aoc_cli.baselines.offline_rl import OfflineRLPolicy
-
         return OfflineRLPolicy(name, session, env, seed, **options)
     if name == "mpc":
-        from aoc_cli.baselines.mpc import MPCPolicy
-
         return MPCPolicy(session, env, seed, **options)
     raise AocError(f"unknown policy {name!r}: use aoc or one of {', '.join(BASELINES)}")
 

@@ -23,7 +23,7 @@ BC_MODEL = "bc"
 
 def load_bc_model(corpus, model_id: str = BC_MODEL):
     """The imitation-mode model ``model_id`` of ``corpus``, or AocError saying how to train it."""
-    from aoc_cli.belief import list_models, load_model
+    from aoc_cli.belief import list_models, load_model  # lazy: torch, for the bc model only
 
     if model_id not in list_models(corpus):
         raise ModelMissing(corpus.name, model_id, list_models(corpus), mode="imitation",

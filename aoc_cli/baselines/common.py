@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from aoc_cli.control.controller import action_bounds, candidate_actions
 from aoc_cli.errors import AocError, call
 
 
@@ -30,8 +31,6 @@ class ActionSpace:
     """The corpus's action space at control time: bounds of a box, or n discrete actions."""
 
     def __init__(self, session, env=None):
-        from aoc_cli.control.controller import action_bounds
-
         corpus = session.corpus
         self.discrete = bool(corpus.discrete)
         self.n_actions = corpus.n_actions
@@ -66,8 +65,6 @@ class ActionSpace:
 
     def candidates(self, rng: np.random.Generator, count: int) -> np.ndarray:
         """The controller's candidates: K uniform in a box, or every discrete action."""
-        from aoc_cli.control.controller import candidate_actions
-
         return candidate_actions(rng, count, self.low, self.high,
                                  self.n_actions if self.discrete else None)
 

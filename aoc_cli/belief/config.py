@@ -240,3 +240,24 @@ class BeliefConfig:
             raise AocError(f"unknown belief setting {unknown[0]!r}: the settings are "
                            f"{', '.join(sorted(known))}")
         return cls(**{k: v for k, v in data.items() if k in known})
+
+
+@dataclass(frozen=True)
+class FQEConfig:
+    """Fitted Q evaluation's settings (recorded in the model's ``config.json`` value spec;
+    ``--value fqe``, :mod:`aoc_cli.belief.fqe`)."""
+
+    iterations: int = 30
+    """Backups: values reach this many steps back from an episode's end."""
+    steps: int = 300
+    """Gradient steps per backup (at least two epochs of the distinct inputs)."""
+    hidden: int = 128
+    batch_size: int = 1024
+    lr: float = 3e-3
+    final_lr: float = 3e-4
+    """Learning rate of the last ``final_iterations`` backups (the values settle)."""
+    final_iterations: int = 3
+    seed: int = 0
+
+    def to_dict(self) -> dict:
+        return asdict(self)

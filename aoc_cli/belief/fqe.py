@@ -27,36 +27,15 @@ of its estimators computes.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
-
 import numpy as np
 import torch
 from torch import nn
 
+from aoc_cli.belief.config import FQEConfig
 from aoc_cli.errors import BadSetting, param
 
 #: Rows of the forward passes that compute the targets.
 _EVAL_BATCH = 65536
-
-
-@dataclass(frozen=True)
-class FQEConfig:
-    """Fitted Q evaluation's settings (recorded in the model's ``config.json`` value spec)."""
-
-    iterations: int = 30
-    """Backups: values reach this many steps back from an episode's end."""
-    steps: int = 300
-    """Gradient steps per backup (at least two epochs of the distinct inputs)."""
-    hidden: int = 128
-    batch_size: int = 1024
-    lr: float = 3e-3
-    final_lr: float = 3e-4
-    """Learning rate of the last ``final_iterations`` backups (the values settle)."""
-    final_iterations: int = 3
-    seed: int = 0
-
-    def to_dict(self) -> dict:
-        return asdict(self)
 
 
 def next_rows(episode_starts: np.ndarray, n_rows: int) -> np.ndarray:

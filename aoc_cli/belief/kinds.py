@@ -24,8 +24,13 @@ import time
 import numpy as np
 import torch
 
+from aoc_cli.belief.artefact import save_model
 from aoc_cli.belief.config import BeliefConfig
-from aoc_cli.belief.model import BeliefNet, Normalisation
+from aoc_cli.belief.critic import fit_critic
+from aoc_cli.belief.data import report
+from aoc_cli.belief.inputs import encode_corpus, network_dims, pick_device
+from aoc_cli.belief.model import BeliefNet, Encoder, Normalisation
+from aoc_cli.belief.targets import value_spec
 
 #: Rows per forward pass when computing beliefs for the head fit.
 _BATCH = 65536
@@ -84,13 +89,6 @@ def train_critic_model(corpus, config: BeliefConfig, model_id: str, data,
     (saved in the model's config), fit the head, write the model; final metrics (those of
     every model, plus ``val_td_loss``, ``val_q_mean`` and ``critic_steps_rule``; ``extra``
     merged in)."""
-    from aoc_cli.belief.artefact import save_model
-    from aoc_cli.belief.critic import fit_critic
-    from aoc_cli.belief.data import report
-    from aoc_cli.belief.model import Encoder
-    from aoc_cli.belief.targets import value_spec
-    from aoc_cli.belief.inputs import encode_corpus, network_dims, pick_device
-
     started = time.perf_counter()
     steps, rule = config.critic_steps_for(corpus.n_rows, len(data.train_rows))
     config = dataclasses.replace(config, critic_steps=steps)

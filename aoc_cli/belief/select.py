@@ -32,11 +32,13 @@ majority action (discrete) or the mean (continuous, value) on the held-out episo
 
 from __future__ import annotations
 
+import time
 from dataclasses import replace
 
 import numpy as np
 
 from aoc_cli.belief.config import BeliefConfig
+from aoc_cli.metrics import auc
 from aoc_cli.settings import SMALL_LOG_ROWS
 
 #: Up to this many rows the settings are chosen by validation (aoc_cli.settings).
@@ -119,12 +121,11 @@ def abc_validation(actions: np.ndarray, n_actions: int, k: int | None = None):
     takes them for the training rows, the nearest rows of each action, unless k is given).
     Returns ``val_abc_accuracy``, ``val_abc_auc``, ``val_abc_k``. ``actions`` (N,) the
     corpus's discrete actions."""
+    # lazy: torch and FAISS, for the validation hook; choosing settings must not load them
     import torch
 
-    from aoc_cli.metrics import auc
     from aoc_cli.decompose import decompose, per_action_k
-    from aoc_cli.index import BeliefIndex
-    from aoc_cli.index.strata import PerAction
+    from aoc_cli.index import BeliefIndex, PerAction
 
     actions = np.asarray(actions, dtype=np.int64)
 
@@ -168,9 +169,7 @@ def select_and_train(corpus, config: BeliefConfig, open_names: list[str], model_
     configuration as ``model_id``; the final metrics, with ``selection`` (what was tried and
     why the winner was chosen). ``progress`` (:mod:`aoc_cli.progress`): each candidate tried
     as a label (its settings and loss), then the final training's epochs."""
-    import time
-
-    from aoc_cli.belief.train import train_model
+    from aoc_cli.belief.train import train_model  # lazy: torch; settings are checked first
 
     started = time.perf_counter()
     best = config

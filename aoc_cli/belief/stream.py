@@ -33,8 +33,10 @@ import h5py
 import numpy as np
 import torch
 
+from aoc_cli.belief.artefact import check_corpus, save_model
 from aoc_cli.belief.config import BeliefConfig
 from aoc_cli.belief.data import EarlyStopping, report, split_episodes
+from aoc_cli.belief.inputs import build_net, encode_corpus, network_dims, pick_device
 from aoc_cli.belief.model import _STD_FLOOR, Encoder, Normalisation, _stats
 from aoc_cli.belief.objective import Objective
 from aoc_cli.belief.targets import value_spec, value_targets
@@ -84,8 +86,6 @@ def block_inputs(cols: Columns, encoder: Encoder, a: int, b: int, history_length
                  use_action: bool, device: torch.device):
     """(inputs, offset): rows [a, b) encoded with their history windows; row r is local row
     r - offset of ``inputs`` (a :class:`aoc_cli.belief.inputs.CorpusInputs`)."""
-    from aoc_cli.belief.inputs import encode_corpus
-
     lo = max(0, a - history_length)
     obs, act, rew = cols.read(lo, b)
     view = SimpleNamespace(observations=obs, actions=act, rewards=rew,
@@ -108,8 +108,6 @@ def blocks(starts: np.ndarray, block_rows: int = BLOCK_ROWS) -> list[tuple[int, 
 def write_row_beliefs(model, corpus, path: str | Path, progress=None) -> Path:
     """Beliefs (N, d_b) float32 of every row written to the ``.npy`` file ``path`` in
     batches (module docstring); ``progress``: rows done (:mod:`aoc_cli.progress`)."""
-    from aoc_cli.belief.artefact import check_corpus
-
     check_corpus(model, corpus)
     path = Path(path)
     n, cols = corpus.n_rows, Columns(corpus)
@@ -206,8 +204,6 @@ def train_streaming(corpus, config: BeliefConfig, model_id: str = DEFAULT_MODEL,
     """Train like :func:`aoc_cli.belief.train.train_model`, streaming blocks of rows
     (module docstring); writes the model (unless ``save`` is false) and returns its metrics
     (``extra`` merged in)."""
-    from aoc_cli.belief.inputs import pick_device
-
     started = time.perf_counter()
     config.validate()
     if config.class_weight != "none" or config.label_smoothing > 0:
@@ -238,9 +234,6 @@ def _train_streaming(corpus, config: BeliefConfig, model_id: str, cols: Columns,
                      values, train_eps, val_eps, device: torch.device, threads: int,
                      started: float, progress, save: bool, extra: dict | None) -> dict:
     """train_streaming's work, in its thread context."""
-    from aoc_cli.belief.artefact import save_model
-    from aoc_cli.belief.inputs import build_net, network_dims
-
     starts = cols.starts
     dims = network_dims(corpus, config.mode)
     classify = config.mode == "imitation" and dims["discrete"]

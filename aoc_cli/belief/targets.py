@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from aoc_cli.belief.config import REWARD_TARGETS
+from aoc_cli.belief.config import REWARD_TARGETS, FQEConfig
 from aoc_cli.errors import BadSetting, NoRewards, param
 
 #: Padded cells allowed per group of episodes of similar length (beyond 4x the real rows).
@@ -84,7 +84,7 @@ def value_targets(corpus, value: str, gamma: float, progress=None) -> np.ndarray
         if value == "reward":
             v = np.asarray(rewards, dtype=np.float64).copy()
         elif value == "fqe":
-            from aoc_cli.belief.fqe import fitted_q_values
+            from aoc_cli.belief.fqe import fitted_q_values  # lazy: torch, for fqe targets only
 
             v = fitted_q_values(corpus.observations, corpus.actions, rewards,
                                 corpus.episode_starts, gamma,
@@ -117,8 +117,6 @@ def value_spec(value: str, gamma: float) -> dict:
     """How v was computed, as recorded in the model's config.json."""
     spec: dict = {"target": value}
     if value == "fqe":
-        from aoc_cli.belief.fqe import FQEConfig
-
         spec["gamma"] = gamma
         spec["definition"] = ("the logged behaviour's Q(o, a) by fitted Q evaluation "
                               "(SARSA targets through the log's next steps)")

@@ -23,6 +23,7 @@ so ``--belief critic`` there keeps the critic's own default.
 
 from __future__ import annotations
 
+from aoc_cli.envs import TASKS, collected_task
 from aoc_cli.errors import AocError
 
 #: The settings a task may set: each is a flag of ``aoc train`` that is None when not given.
@@ -35,8 +36,6 @@ KEYS = ("all", "value", "critic", "reward", "dynamics", "imitation")
 def for_corpus(corpus, paper: bool = False) -> tuple[str, dict]:
     """(the built-in task ``corpus`` was collected from or ``""``, that task's training
     settings, keyed as ``Task.training``); no settings with ``paper`` or without a task."""
-    from aoc_cli.envs import TASKS, collected_task
-
     task = collected_task(corpus)
     if paper or task not in TASKS:
         return task, {}

@@ -17,11 +17,13 @@ from aoc_cli.belief.config import BeliefConfig
 from aoc_cli.belief.data import EarlyStopping, TrainingData, prepare, report
 from aoc_cli.belief.inputs import (CorpusInputs, build_net, encode_corpus, network_dims,
                                    pick_device)
+from aoc_cli.belief.kinds import refit_value_head, train_critic_model
 from aoc_cli.belief.model import Encoder, Normalisation
 from aoc_cli.belief.objective import Objective
+from aoc_cli.belief.stream import streams, train_streaming
 from aoc_cli.belief.targets import value_spec
-from aoc_cli.threads import thread_limits
 from aoc_cli.store import DEFAULT_MODEL
+from aoc_cli.threads import thread_limits
 
 #: Rows per forward pass when evaluating (no gradients).
 EVAL_BATCH = 65536
@@ -56,8 +58,8 @@ def _evaluate(net, inputs: CorpusInputs, rows: torch.Tensor, y: torch.Tensor, ob
         return objective.metrics(net, torch.cat(beliefs), torch.cat(outs), y, rows)
 
 
-def train_model(corpus, config: BeliefConfig, model_id: str = DEFAULT_MODEL, overwrite: bool = False,
-                progress=None, prepared: TrainingData | None = None, save: bool = True,
+def train_model(corpus, config: BeliefConfig, model_id: str = DEFAULT_MODEL,
+                overwrite: bool = False, progress=None, prepared: TrainingData | None = None, save: bool = True,
                 extra: dict | None = None, inspect=None) -> dict:
     """Learn b and l on ``corpus`` and write ``corpus.models_dir/<model_id>/``; final metrics.
 
@@ -71,8 +73,6 @@ def train_model(corpus, config: BeliefConfig, model_id: str = DEFAULT_MODEL, ove
     weights, eval mode), the encoded corpus and the split; its dict is merged into the metrics
     (the model selection's validation of the decomposition, aoc_cli.belief.select).
     """
-    from aoc_cli.belief.stream import streams, train_streaming
-
     if streams(corpus, config):  # a large corpus: trained a block of rows at a time
         return train_streaming(corpus, config, model_id, overwrite, progress, save=save,
                                extra=extra)
@@ -82,8 +82,6 @@ def train_model(corpus, config: BeliefConfig, model_id: str = DEFAULT_MODEL, ove
     threads = config.resolved_threads()
     with thread_limits(torch=threads if device.type == "cpu" else None):
         if config.belief == "critic":  # its own training (aoc_cli.belief.kinds)
-            from aoc_cli.belief.kinds import train_critic_model
-
             return train_critic_model(corpus, config, model_id, data, progress, extra)
         return _train(corpus, config, model_id, data, device, threads, started, progress, save,
                       extra, inspect)
@@ -107,8 +105,6 @@ def _train(corpus, config: BeliefConfig, model_id: str, data: TrainingData,
     if inspect is not None:
         metrics.update(inspect(net, problem.inputs, data))
     if config.belief == "reward":
-        from aoc_cli.belief.kinds import refit_value_head
-
         problem.norm, head = refit_value_head(net, problem.inputs, data.values, data.train_rows,
                                               data.val_rows, problem.norm, device)
         metrics["val_reward_r2"] = metrics.pop("val_r2")

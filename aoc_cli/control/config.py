@@ -4,6 +4,9 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
+from aoc_cli.envs import TASKS
+from aoc_cli.errors import AocError
+
 
 @dataclass
 class ControllerConfig:
@@ -70,15 +73,11 @@ class ControllerConfig:
         """The settings for ``task``: the ``flags`` given (None: not given) over the built-in
         task's own settings (``Task.controller``; none for another name, an ingested corpus's
         ``""`` or None) over the paper's defaults; checked."""
-        from aoc_cli.envs import TASKS
-
         settings = dict(getattr(TASKS.get(task), "controller", None) or {}) if task else {}
         settings.update({k: v for k, v in flags.items() if v is not None})
         return cls(**settings).check()
 
     def check(self) -> "ControllerConfig":
-        from aoc_cli.errors import AocError
-
         if not 0.0 < self.epsilon <= 1.0:
             raise AocError(f"epsilon must be in (0, 1], got {self.epsilon}", "epsilon")
         if self.candidates < 1:

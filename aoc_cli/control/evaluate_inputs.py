@@ -7,9 +7,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aoc_cli.control.controller import support_disagreement
+from aoc_cli.belief.config import REWARD_TARGETS
+from aoc_cli.belief.targets import value_targets
+from aoc_cli.control.controller import action_bounds, support_disagreement
+from aoc_cli.control.rollout import check_same_spaces
 from aoc_cli.decompose import subset_size
 from aoc_cli.errors import AocError, NoRewards, call
+from aoc_cli.index import BeliefIndex
 from aoc_cli.index.strata import candidate_search
 from aoc_cli.settings import SMALL_LOG_ROWS
 
@@ -19,14 +23,11 @@ BASELINES = ("knn", "bc")
 
 def check_inputs(corpus, data, mode: str, baselines, value_target: str | None) -> list[str]:
     """Refuse held-out data the model cannot score; return the baselines as a list."""
-    from aoc_cli.belief.config import REWARD_TARGETS
-
     if mode == "value" and value_target in REWARD_TARGETS and not data.has_rewards:
         raise NoRewards(data.name, "a value-mode model",
                         f"corpus {data.name!r} has no rewards: a value-mode model (target "
                         f"{value_target!r}) cannot be scored on it; evaluate an imitation-mode "
                         f"model ({call('train', mode='imitation')}) or one trained on a column")
-    from aoc_cli.control.rollout import check_same_spaces
 
     check_same_spaces(corpus, data, "evaluate it")
     if data.n_rows == 0 or data.n_episodes == 0:
@@ -133,8 +134,6 @@ class BatchSearch:
 
 def _exact(vectors: np.ndarray):
     """An exact (flat) index over ``vectors``, rows numbered 0..n-1."""
-    from aoc_cli.index import BeliefIndex
-
     return BeliefIndex.build(np.ascontiguousarray(vectors, dtype=np.float32), kind="flat")
 
 
@@ -154,8 +153,6 @@ class KNNBaseline:
     and for discrete actions the best of the actions."""
 
     def __init__(self, ctx: "EvalContext"):
-        from aoc_cli.index import BeliefIndex
-
         self.k = subset_size(ctx.model.d_b)
         self.extra = ctx.max_episode_length if ctx.own else 0
         obs = np.asarray(ctx.corpus.observations, np.float64)
@@ -261,8 +258,6 @@ class EvalContext:
         if self.discrete:
             self.majority = int(np.bincount(self.corpus_actions, minlength=self.n_actions).argmax())
         else:
-            from aoc_cli.control.controller import action_bounds
-
             self.low, self.high = action_bounds(corpus.action_space, self.corpus_actions)
             self.span = np.maximum(self.high - self.low, 1e-12)
         values = self.index.values
@@ -272,8 +267,6 @@ class EvalContext:
             if self.own:
                 self.data_values = np.asarray(model.values, np.float64)
             else:
-                from aoc_cli.belief.targets import value_targets
-
                 spec = model.meta.get("value") or {}
                 self.data_values = value_targets(data, spec.get("target", "return"),
                                                  float(spec.get("gamma", 0.99)))

@@ -19,16 +19,15 @@ import numpy as np
 
 from aoc_cli.control.evaluate import (CHUNK_STEPS, chunk_size, chunks, merge, score_episodes,
                                       summarise)
+from aoc_cli.control.evaluate_inputs import EvalContext
 from aoc_cli.control.ope_eval import add_ope, wanted
+from aoc_cli.control.session import open_session
 from aoc_cli.parallel import capacity, map_chunks, start_ray
+from aoc_cli.store import Store
 from aoc_cli.threads import one_thread
 
 
 def _context(spec: dict):
-    from aoc_cli.control.evaluate_inputs import EvalContext
-    from aoc_cli.control.session import open_session
-    from aoc_cli.store import Store
-
     store = Store.open(spec["store"])
     corpus = store.corpus(spec["name"])
     data = corpus if spec["data"] == spec["name"] else store.corpus(spec["data"])
@@ -38,8 +37,6 @@ def _context(spec: dict):
 
 
 def _score(spec: dict, groups: list) -> list:
-    from aoc_cli.threads import one_thread
-
     with one_thread():
         ctx = _context(spec)
         return [score_episodes(ctx, group) for group in groups]

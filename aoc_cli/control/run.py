@@ -11,10 +11,11 @@ import numpy as np
 
 from aoc_cli.control.config import ControllerConfig
 from aoc_cli.control.controller import Decision
-from aoc_cli.control.monitor import OODMonitor, band_limits
-from aoc_cli.control.records import decision_record, label_of, write_audit
-from aoc_cli.control.rollout import (EpisodeResult, Policy, check_same_spaces, check_spaces,
-                                     run_episode, summarize)
+from aoc_cli.control.monitor import OODMonitor, band_limits, reference_band
+from aoc_cli.control.records import (decision_record, episode_ids, label_of, read_audit_residuals,
+                                     write_audit)
+from aoc_cli.control.rollout import (EpisodeResult, HistoryBuffer, Policy, check_same_spaces,
+                                     check_spaces, run_episode, summarize)
 from aoc_cli.errors import AocError, BadInput, call
 from aoc_cli.progress import Progress
 from aoc_cli.store import action_labels
@@ -69,7 +70,8 @@ def explain_query(session: Session, observation, history, action=None,
     several actions side by side (``compare``); ``selection`` an (N,) bool row mask instead
     of the controller's own; ``removal`` (:func:`aoc_cli.control.whatif.removal`): each also
     re-decided without those rows (the record's ``what_if``)."""
-    from aoc_cli.control.explain import explain_decisions  # torch edge: attributions
+    # lazy: torch (explain's attributions); importing aoc_cli.control must not load it
+    from aoc_cli.control.explain import explain_decisions
 
     ctl = session.controller
     if compare:
@@ -125,7 +127,6 @@ def explain_logged_step(session: Session, data, episode: int, step: int,
         records += explain_query(session, observation, history, action=logged,
                                  selection=selection, removal=removal)
     records[0]["logged_action"] = logged
-    from aoc_cli.control.records import episode_ids
 
     records[0].update(label_of(action_labels(corpus.action_space), logged,
                                "logged_action_label"))
@@ -156,8 +157,6 @@ def _as_candidates(corpus, actions: list) -> np.ndarray:
 def reference_from_audit(session: Session, path) -> np.ndarray:
     """(T,) OOD reference band from the residuals of a clean rollout's audit log, recorded
     with this session's corpus and model (:func:`aoc_cli.control.monitor.reference_band`)."""
-    from aoc_cli.control.records import read_audit_residuals
-
     meta, runs = read_audit_residuals(path)
     if meta.get("corpus_hash") != session.corpus.hash or \
             meta.get("model_hash") != session.model.hash:
@@ -170,8 +169,6 @@ def reference_from_audit(session: Session, path) -> np.ndarray:
 def session_reference_band(session: Session, runs) -> np.ndarray:
     """(T,) reference band from clean runs' per-step residuals, with the session's sigmas and
     the same floor and minimum (the corpus's typical p50 / p99 residual) as its running band."""
-    from aoc_cli.control.monitor import reference_band
-
     floor, minimum = band_limits(session)
     return reference_band(runs, sigmas=session.controller.config.ood_sigmas, floor=floor,
                           minimum=minimum)
@@ -203,8 +200,6 @@ def _numbers(value, what: str) -> np.ndarray:
 
 def parse_query(line: str, lineno: int, corpus, history_length: int):
     """One JSONL query -> (observation (d_o,), one-row History, action or None)."""
-    from aoc_cli.control.rollout import HistoryBuffer
-
     try:
         q = json.loads(line)
     except json.JSONDecodeError as err:

@@ -58,8 +58,8 @@ def neighbours(corpus: Corpus, model, candidates: str = "auto") -> tuple[int, st
 
 
 def load_model(corpus: Corpus, model_id: str | None) -> BeliefModel:
-    """The model to index or control with (torch is imported only here, when one is loaded)."""
-    from aoc_cli.belief import load_model as load
+    """The model to index or control with."""
+    from aoc_cli.belief import load_model as load  # lazy: torch, only once a model is loaded
 
     return load(corpus, model_id)
 
@@ -79,7 +79,7 @@ def build_index(corpus: Corpus, model_id: str | None = None, kind: str = "auto",
 
     Built in a temporary folder beside the index folder (new beliefs staged in it) and
     swapped in only when everything succeeded (:mod:`aoc_cli.store.derived`)."""
-    from aoc_cli.belief.stream import write_row_beliefs
+    from aoc_cli.belief.stream import write_row_beliefs  # lazy: torch (a model is loaded)
 
     episode_rates = {**(resample or {}), **(subsample or {}), **(episode_rates or {})}
     model = load_model(corpus, model_id)
@@ -147,7 +147,8 @@ def typical_residual(ci: CorpusIndex, seed: int = 0) -> dict:
             "p99": float(np.quantile(r, 0.99)), "sample": int(len(sample)), "k": ci.k}
 
 
-def load_index(corpus: Corpus, model_id: str | None = None, index_id: str = DEFAULT_INDEX) -> CorpusIndex:
+def load_index(corpus: Corpus, model_id: str | None = None,
+               index_id: str = DEFAULT_INDEX) -> CorpusIndex:
     """Load a built index, refusing one built from another corpus or model, or damaged."""
     model = load_model(corpus, model_id)
     out = index_dir(corpus.path, model.id, index_id)

@@ -18,8 +18,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from aoc_cli.envs import collect, get_task
 from aoc_cli.envs.base import budget
 from aoc_cli.parallel import map_chunks
+from aoc_cli.store.writer import concat
 
 #: Rows (or episodes) per chunk.
 CHUNK_STEPS = 100_000
@@ -42,8 +44,6 @@ def plan(task, steps: int | None, episodes: int | None, chunk_steps: int = CHUNK
 
 def _collect_chunk(task: str, seed: int, i: int, part: dict, behaviour: str = "mix",
                    policy: str | None = None):
-    from aoc_cli.envs import collect
-
     data, summary = collect(task, seed=chunk_seed(seed, i), behaviour=behaviour, policy=policy,
                             **part)
     if data.episode_ids is not None:  # unique across chunks: the chunk's index in front
@@ -57,9 +57,6 @@ def collect_chunked(task: str, steps: int | None = None, episodes: int | None = 
                     progress=None, behaviour: str = "mix", policy: str | None = None):
     """(CorpusData, summary): the chunks' episodes in chunk order and each chunk's per-policy
     summary (with its ``chunk`` and ``seed``); ``progress(done_chunks, chunks)``."""
-    from aoc_cli.envs import get_task
-    from aoc_cli.store.writer import concat
-
     parts = plan(get_task(task), steps, episodes, chunk_steps, chunk_episodes)
     results = [None] * len(parts)
     if workers is None and address is None:

@@ -42,6 +42,7 @@ from gymnasium import spaces
 from aoc_cli.envs.base import Progress, Task, budget
 from aoc_cli.envs.render import step_series
 from aoc_cli.errors import BadSetting, param
+from aoc_cli.formats import ReadOptions, read_dataset
 from aoc_cli.store import CorpusData, atomic_path
 
 GYM_ID = "aoc/Ward-v0"
@@ -194,8 +195,6 @@ def write_csv(out_dir, name: str = "ward", episodes: int = DEFAULT_EPISODES, see
 
 def read_options(static: Path):
     """The ingest options that read the two files (as the README's ``aoc ingest`` line)."""
-    from aoc_cli.formats import ReadOptions
-
     return ReadOptions(id_column="patient", time_column="hour", static=Path(static),
                        discrete_actions=True, tag_columns=["clinician"], reward_free=True)
 
@@ -204,8 +203,6 @@ def collect_data(steps: int | None = None, episodes: int | None = None, seed: in
                  progress: Progress | None = None) -> tuple[CorpusData, list[dict]]:
     """``episodes`` patient stays (or as many as hold ``steps`` rows, cut to exactly that
     many), written as CSV and read back as ``aoc ingest --static`` reads them."""
-    from aoc_cli.formats import read_dataset
-
     steps, episodes = budget(steps, episodes, None, DEFAULT_EPISODES)
     n = episodes if episodes is not None else int(np.ceil(steps / STAY[0]))
     with tempfile.TemporaryDirectory(prefix=".aoc-ward-") as tmp:

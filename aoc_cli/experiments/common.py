@@ -5,9 +5,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from aoc_cli.belief import BeliefConfig
+from aoc_cli.control import ControllerConfig, open_session
 from aoc_cli.experiments.methods import Runner
 from aoc_cli.experiments.prepare import Artefacts
 from aoc_cli.control.rollout import action_space_of
+from aoc_cli.envs import make_env
 from aoc_cli.store import DEFAULT_INDEX, DEFAULT_MODEL
 
 SCALES = ("tiny", "quick", "full")
@@ -47,9 +50,6 @@ def session(corpus, env, task: str | None = None, model_id: str = DEFAULT_MODEL,
             index_id: str = DEFAULT_INDEX, seed: int = 0, selection=None, **config):
     """An AOC session on ``corpus``: ControllerConfig fields ``config`` over the task's own
     controller settings (as `aoc rollout --env TASK` uses them) over the paper's defaults."""
-    from aoc_cli.control import ControllerConfig
-    from aoc_cli.control import open_session
-
     return open_session(corpus, model_id, index_id, ControllerConfig.for_task(task, **config),
                         selection, seed, action_space_of(env))
 
@@ -57,8 +57,6 @@ def session(corpus, env, task: str | None = None, model_id: str = DEFAULT_MODEL,
 def belief_config(scale: dict, mode: str = "value", seed: int = 0, **overrides):
     """The belief model of a scale: the paper's network, the scale's epoch budget, and any
     other BeliefConfig field in ``overrides``."""
-    from aoc_cli.belief import BeliefConfig
-
     return BeliefConfig(mode=mode, max_epochs=int(scale["epochs"]),
                         patience=int(scale.get("patience", 10)), seed=int(seed),
                         threads=int(scale.get("threads", 1)), **overrides)
@@ -67,8 +65,6 @@ def belief_config(scale: dict, mode: str = "value", seed: int = 0, **overrides):
 def make_task_env(task: str, scale: dict):
     """The task's evaluation environment; a scale's ``max_steps`` shortens its episodes (tiny
     runs only: the paper's horizons otherwise)."""
-    from aoc_cli.envs import make_env
-
     if scale.get("max_steps"):
         return make_env(task, max_episode_steps=int(scale["max_steps"]))
     return make_env(task)

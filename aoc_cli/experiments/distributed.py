@@ -17,6 +17,9 @@ Imported only when a run asks for workers: the single-machine path never imports
 from __future__ import annotations
 
 from aoc_cli.experiments.cells import Cell, CellResult, failed_result, run_cell
+from aoc_cli.experiments.common import Context
+from aoc_cli.experiments.methods import Budget, Runner
+from aoc_cli.experiments.prepare import Artefacts
 from aoc_cli.parallel import as_completed, capacity, error_text, start_ray
 
 
@@ -30,10 +33,6 @@ def _threads() -> None:
 
 def worker_context(spec: dict):
     """The Context of a worker: the run's settings, this worker's own artefacts and runner."""
-    from aoc_cli.experiments.common import Context
-    from aoc_cli.experiments.methods import Budget, Runner
-    from aoc_cli.experiments.prepare import Artefacts
-
     lines: list[str] = []
     runner = _RUNNERS.get(repr(spec["budget"]))
     if runner is None:  # kept per worker process: black-box models are trained once per seed

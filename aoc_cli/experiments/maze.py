@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from aoc_cli.control import HistoryBuffer
+from aoc_cli.envs import TASKS
 from aoc_cli.experiments import paper
 from aoc_cli.experiments.cells import Cell, Plan
 from aoc_cli.experiments.common import Context, belief_config, make_task_env, session
@@ -86,8 +88,6 @@ def start_probe(session) -> dict:
     (pi1's weight in its minimal corpus subset). Explains maze-adapt's gate shares: re-sampling
     changes the nearest entries, the decision follows v_hat among candidates that pass.
     """
-    from aoc_cli.control import HistoryBuffer
-
     ctl, corpus = session.controller, session.corpus
     codes, labels = corpus.tag("policy")
     pi1 = codes == labels.index("pi1")
@@ -113,8 +113,6 @@ def _index_id(rate: float) -> str:
 
 
 def _plot(ctx: Context, task: str, results, name: str, title: str) -> None:
-    from aoc_cli.envs import TASKS
-
     path = ctx.out / name
     TASKS[task].plot_trajectories([np.asarray(r.observations)[:, :2] for r in results], path,
                                   title=title)

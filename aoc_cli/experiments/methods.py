@@ -13,6 +13,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from aoc_cli.baselines import MissingExtra, extra_missing, make_baseline
+from aoc_cli.baselines.mpc import MPCConfig
+from aoc_cli.baselines.offline_rl import OfflineRLConfig
+from aoc_cli.control import rollout
 from aoc_cli.errors import AocError
 from aoc_cli.progress import stage
 
@@ -68,9 +71,6 @@ class Runner:
         options = {}
         key = (session.corpus.hash, session.model.history_length, method, seed)
         if method in ("td3bc", "cql", "mpc"):
-            from aoc_cli.baselines.mpc import MPCConfig
-            from aoc_cli.baselines.offline_rl import OfflineRLConfig
-
             b = self.budget
             if method == "mpc":
                 options["config"] = MPCConfig(epochs=b.mpc_epochs, samples=b.mpc_samples,
@@ -98,8 +98,6 @@ class Runner:
             noise_after: int | None = None, noise_std: float = 0.0,
             label: str = "") -> MethodRun:
         """Roll out ``method`` for ``episodes`` episodes; a missing extra -> status skipped."""
-        from aoc_cli.control import rollout
-
         missing = extra_missing(method)
         if missing is not None:
             return MethodRun(method, status="skipped",

@@ -32,6 +32,7 @@ from aoc_cli.experiments.methods import row_values
 from aoc_cli.experiments.results import result_row
 from aoc_cli.control.monitor import flags_against
 from aoc_cli.control.run import session_reference_band
+from aoc_cli.report.plots import plot_rollout_curves, plt, save
 from aoc_cli.store import DEFAULT_MODEL
 
 #: The clean reference rollouts of bench seed s use the episode seeds of bench seed s + this.
@@ -98,8 +99,6 @@ def _curves(results) -> dict:
 def plot_ood(curves: dict, T: int, path, title: str, reference=None) -> None:
     """Mean residual (with the mean 3-sigma band edge, shaded) and mean reward per step;
     ``reference`` (T,), the reference band, dashed."""
-    from aoc_cli.report.plots import plt, save
-
     fig, (ax_r, ax_res) = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
     for label, c in curves.items():
         t = np.arange(len(c["reward"]))
@@ -139,8 +138,6 @@ def _prepare(ctx: Context, scale: dict, prep: tuple):
 
 
 def _run(ctx: Context, scale: dict, cell: Cell, corpus) -> dict:
-    from aoc_cli.report.plots import plot_rollout_curves
-
     spec, seed = scale["tasks"][cell.args[0]], cell.seed
     task, T = spec["task"], int(spec["T"])
     env = make_task_env(task, spec)

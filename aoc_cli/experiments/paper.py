@@ -9,6 +9,8 @@ random-start task too, marked, because that is the task aoc treats as the real t
 
 from __future__ import annotations
 
+from aoc_cli.decompose import default_k
+
 _PENDULUM_ROWS = (100_000, 300_000, 600_000)
 _PENDULUM = {
     "aoc": ((-1.39, 1.39), (-1.25, 0.40), (-0.60, 0.08)),
@@ -63,8 +65,6 @@ def epsilon(value: float):
 
 def k(value: int, d_b: int = 20):
     """The paper's figure for k (its k = 20 is its 2 (d_b + 1)-like default)."""
-    from aoc_cli.decompose import default_k
-
     if int(value) == default_k(d_b):
         return K[20]
     return K.get(int(value))

@@ -28,6 +28,7 @@ from aoc_cli.experiments.common import Context, belief_config, make_task_env, se
 from aoc_cli.experiments.methods import DATA, data_values, row_values
 from aoc_cli.experiments.results import result_row
 from aoc_cli.decompose import default_k
+from aoc_cli.rows import row_selection
 from aoc_cli.store import DEFAULT_MODEL
 
 TASKS = ("pendulum-het", "pendulum-het-upright")
@@ -67,8 +68,6 @@ def _variant(ctx: Context, method: str, corpus, env, task: str, seed: int):
     """The session of aoc's other rows: ORACLE (the normal system's rows only) or a belief row
     (aoc-dynamics, aoc-critic, aoc-reward: its own model and index, bench/beliefs.py)."""
     if method == ORACLE:
-        from aoc_cli.rows import row_selection
-
         normal = row_selection(corpus, {"system": ["normal"]})
         return session(corpus, env, task, seed=seed, selection=normal, **ctx.aoc_config)
     return belief_session(ctx, method, corpus, env, task, seed)

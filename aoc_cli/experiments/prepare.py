@@ -22,6 +22,8 @@ from dataclasses import asdict
 from pathlib import Path
 
 from aoc_cli.belief import BeliefConfig
+from aoc_cli.corpus_index import build_index, load_index
+from aoc_cli.envs import TASKS, collect, replay
 from aoc_cli.errors import AocError
 from aoc_cli.progress import stage
 from aoc_cli.store import DEFAULT_INDEX, Store, model_dir
@@ -39,8 +41,6 @@ def corpus_name(task: str, rows: int | None = None, episodes: int | None = None,
 def _same_policies(corpus, task: str, behaviour: str = "mix") -> bool:
     """Whether the corpus was collected with the task's current behaviour policies (a corpus
     of an earlier behaviour mix, e.g. other noise levels, is collected again)."""
-    from aoc_cli.envs import TASKS, replay
-
     known = TASKS.get(task)
     if known is None or "policy" not in corpus.manifest.get("tags", {}):
         return True
@@ -68,8 +68,6 @@ class Artefacts:
     # -- corpus ----------------------------------------------------------------------------
     def corpus(self, task: str, rows: int | None = None, episodes: int | None = None,
                seed: int = 0):
-        from aoc_cli.envs import TASKS, collect
-
         behaviour = self.behaviour if self.behaviour in TASKS[task].behaviours else "mix"
         name = corpus_name(task, rows, episodes, seed, behaviour)
         if self.store.exists(name):
@@ -91,7 +89,7 @@ class Artefacts:
     # -- models ----------------------------------------------------------------------------
     def model(self, corpus, model_id: str, config: BeliefConfig):
         """Train ``model_id`` with ``config`` unless an identical one exists."""
-        from aoc_cli.belief import train_model
+        from aoc_cli.belief import train_model  # lazy: torch; listing experiments must not
 
         path = model_dir(corpus.path, model_id) / "config.json"
         if path.is_file():
@@ -114,8 +112,6 @@ class Artefacts:
     # -- indexes ---------------------------------------------------------------------------
     def index(self, corpus, model_id: str, index_id: str = DEFAULT_INDEX,
               resample: dict | None = None, seed: int = 0):
-        from aoc_cli.corpus_index import build_index, load_index
-
         try:
             ci = load_index(corpus, model_id, index_id)
             built = ci.meta.get("episode_rates", ci.meta.get("resample")) or {}

@@ -14,6 +14,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from aoc_cli.baselines import BASELINES
 from aoc_cli.experiments import lunar, maze, ood, paper, pendulum, plots
 from aoc_cli.experiments.execute import execute
 from aoc_cli.experiments.common import SCALES, Context
@@ -107,8 +108,6 @@ def check(name: str, scale: str, seeds: int | None, episodes: int | None,
             raise BadSetting("epsilon", epsilon,
                              f"{param('epsilon')} must be in (0, 1], got {epsilon}")
     if methods:
-        from aoc_cli.baselines import BASELINES
-
         unknown = [m for m in methods if m not in AOC_METHODS and m not in BASELINES]
         if unknown:
             raise AocError(f"unknown method(s) {', '.join(unknown)}: use "

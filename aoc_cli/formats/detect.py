@@ -7,6 +7,8 @@ import os
 from pathlib import Path
 
 from aoc_cli.errors import AocError, param
+from aoc_cli.formats.common import open_h5
+from aoc_cli.formats.d3rlpy import is_d3rlpy
 from aoc_cli.formats.minari import data_folder, datasets_root
 
 FORMATS = ("minari", "d4rl", "d3rlpy", "npz", "csv")
@@ -30,9 +32,6 @@ def _is_hdf5(path: Path) -> bool:
 
 def detect_format(path: str | os.PathLike) -> str:
     """One of :data:`FORMATS` for ``path``; an AocError when it is missing or unknown."""
-    from aoc_cli.formats.common import open_h5
-    from aoc_cli.formats.d3rlpy import is_d3rlpy
-
     p = Path(path)
     if not p.exists():
         if data_folder(path) is not None:

@@ -15,7 +15,12 @@ import numpy as np
 
 from aoc_cli.errors import AocError, param
 from aoc_cli.formats.common import ReadOptions, observed_bounds
+from aoc_cli.formats.csv import read_csv
+from aoc_cli.formats.d3rlpy import read_d3rlpy
+from aoc_cli.formats.d4rl import read_d4rl
 from aoc_cli.formats.detect import FORMATS, detect_format
+from aoc_cli.formats.minari import read_minari
+from aoc_cli.formats.npz import read_npz
 from aoc_cli.store import CorpusData, Store, check_name, writing_corpus
 from aoc_cli.store.corpus import all_finite
 
@@ -28,8 +33,6 @@ def read_dataset(path: str | os.PathLike, fmt: str | None = None,
     non-finite check (an AocError naming the first bad row) or, with ``drop_nonfinite``, the
     removal of every episode holding a NaN/inf observation, action or reward.
     """
-    from aoc_cli.formats import csv, d3rlpy, d4rl, minari, npz
-
     options = options or ReadOptions()
     if fmt is None:
         fmt = detect_format(path)
@@ -37,8 +40,8 @@ def read_dataset(path: str | os.PathLike, fmt: str | None = None,
         raise AocError(f"unknown format {fmt!r}: use {param('fmt')} {'|'.join(FORMATS)}")
     elif fmt != "minari" and not Path(path).exists():
         raise AocError(f"no such file or folder: {path}; check the path")
-    reader = {"minari": minari.read_minari, "d4rl": d4rl.read_d4rl,
-              "d3rlpy": d3rlpy.read_d3rlpy, "npz": npz.read_npz, "csv": csv.read_csv}[fmt]
+    reader = {"minari": read_minari, "d4rl": read_d4rl, "d3rlpy": read_d3rlpy, "npz": read_npz,
+              "csv": read_csv}[fmt]
     data = reader(Path(path) if fmt != "minari" else path, options)
     if data.n_rows == 0:
         raise AocError(f"{path} has zero rows: nothing to store")

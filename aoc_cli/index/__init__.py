@@ -9,5 +9,6 @@ map back to corpus rows (`row_of`); `save` / `load` persist atomically.
 
 from aoc_cli.index.belief_index import BeliefIndex, Selection
 from aoc_cli.index.config import IndexConfig
+from aoc_cli.index.strata import PerAction
 
-__all__ = ["BeliefIndex", "IndexConfig", "Selection"]
+__all__ = ["BeliefIndex", "IndexConfig", "PerAction", "Selection"]

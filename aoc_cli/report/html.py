@@ -16,6 +16,7 @@ from pathlib import Path
 
 from aoc_cli.errors import BadInput, param
 from aoc_cli.store import atomic_path
+from aoc_cli.store.paths import check_output
 
 STYLE = """
 body{font:14px/1.45 system-ui,-apple-system,"Segoe UI",Roboto,sans-serif;color:#1d2330;
@@ -69,8 +70,6 @@ def page(title: str, body: str) -> str:
 
 def check_html_path(path, store_root) -> Path:
     """``html`` (a page's path): outside the store, in a folder that exists and can be written."""
-    from aoc_cli.store.paths import check_output
-
     path = check_output(path, "html", store_root)
     parent = Path(path).resolve().parent
     try:  # a probe: access() says yes to root where the file system says no (/proc, ro mounts)

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from aoc_cli.errors import AocError, BadInput, call
 from aoc_cli.report.html import esc, num
 from aoc_cli.report.svg import chart
 
@@ -95,8 +96,6 @@ def audit_episode(corpus, path, episode: int, upper: np.ndarray) -> Episode:
 def steps_episodes(corpus, path, typical: dict) -> list[Episode]:
     """The episodes of an ``aoc evaluate --steps`` file; a step is flagged when its residual is
     above the corpus's typical p99 (the band drawn: p50 to p99)."""
-    from aoc_cli.errors import AocError, BadInput, call
-
     by: dict[int, list[dict]] = {}
     with open(path) as fh:
         for n, line in enumerate(fh, 1):

@@ -66,8 +66,10 @@ def test_fitted_q_is_reproducible():
 
 def test_value_fqe_of_a_corpus_and_its_recorded_definition(tmp_path, monkeypatch):
     import aoc_cli.belief.fqe as fqe
+    import aoc_cli.belief.targets as targets
 
-    monkeypatch.setattr(fqe, "FQEConfig", lambda: SMALL)
+    monkeypatch.setattr(fqe, "FQEConfig", lambda: SMALL)       # the settings run
+    monkeypatch.setattr(targets, "FQEConfig", lambda: SMALL)   # the settings recorded
     obs, act, rew, starts, truth = two_step_log()
     n = len(act)
     data = CorpusData(observations=obs, actions=act, rewards=rew.astype(np.float32),
