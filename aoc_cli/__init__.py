@@ -20,7 +20,7 @@ __all__ = ["AocError", "__version__", *API]
 
 def __getattr__(name: str):
     if name in API:
-        from aoc_cli import api
+        from aoc_cli import api  # lazy: import aoc_cli loads no entry (tests/test_api.py)
 
         return getattr(api, name)
     raise AttributeError(f"module 'aoc_cli' has no attribute {name!r}")

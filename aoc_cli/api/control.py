@@ -18,7 +18,7 @@ from aoc_cli.envs import make_env
 from aoc_cli.errors import BadSetting, param
 from aoc_cli.progress import Progress
 from aoc_cli.rows import row_selection
-from aoc_cli.store import Corpus
+from aoc_cli.store import DEFAULT_INDEX, Corpus
 from aoc_cli.store.paths import check_output
 
 #: Policies that need no model or index: they run on a corpus before anything is trained.
@@ -34,7 +34,7 @@ def collected_task(corpus: Corpus) -> str:
 
 
 def open_session(name: str, *, store: StoreLike = None, model: str | None = None,
-                 index_id: str = "default", env: str | None = None, seed: int = 0,
+                 index_id: str = DEFAULT_INDEX, env: str | None = None, seed: int = 0,
                  select: dict[str, list[str]] | None = None,
                  exclude: dict[str, list[str]] | None = None, candidates: int | None = None,
                  epsilon: float | None = None, k: int | None = None,
@@ -70,7 +70,7 @@ class RolledOut:
 
 
 def rollout(name: str, env: str, *, store: StoreLike = None, episodes: int = 5,
-            policy: str = "aoc", model: str | None = None, index_id: str = "default",
+            policy: str = "aoc", model: str | None = None, index_id: str = DEFAULT_INDEX,
             candidates: int | None = None, epsilon: float | None = None, k: int | None = None,
             min_support: float | None = None, support_penalty: float | None = None,
             residual_cap: float | None = None, sampler: str = "uniform",
@@ -127,7 +127,6 @@ def rollout(name: str, env: str, *, store: StoreLike = None, episodes: int = 5,
 
 
 def _plot(env: str, results: list[EpisodeResult], path: Path, noise_after) -> None:
-    # here: matplotlib is imported only when a plot is asked for
-    from aoc_cli.report.plots import plot_rollouts
+    from aoc_cli.report.plots import plot_rollouts  # lazy: matplotlib, for --plot only
 
     plot_rollouts(env, results, path, noise_after)

@@ -19,13 +19,13 @@ from aoc_cli.control.whatif import removal as removal_of
 from aoc_cli.control.whatif import what_if_steps
 from aoc_cli.errors import BadSetting, param
 from aoc_cli.progress import Progress
-from aoc_cli.store import atomic_path
+from aoc_cli.store import DEFAULT_INDEX, atomic_path
 
 
 def evaluate(name: str, data: str, *, store: StoreLike = None,
              baselines: Sequence[str] = ("knn", "bc"),
              steps_file: str | os.PathLike | None = None, model: str | None = None,
-             index_id: str = "default", candidates: int | None = None,
+             index_id: str = DEFAULT_INDEX, candidates: int | None = None,
              epsilon: float | None = None, k: int | None = None,
              min_support: float | None = None, support_penalty: float | None = None,
              exact: bool | None = None, seed: int = 0, ope: str | None = None,

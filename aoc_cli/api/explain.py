@@ -18,7 +18,7 @@ from aoc_cli.control.records import label_of
 from aoc_cli.control.whatif import removal as removal_of
 from aoc_cli.errors import AocError, BadSetting, param
 from aoc_cli.report.explain_pages import check_html, steps_overview, write_html
-from aoc_cli.store import action_labels
+from aoc_cli.store import DEFAULT_INDEX, action_labels
 
 
 @dataclass
@@ -34,7 +34,7 @@ class Explained:
 def explain(name: str, *, store: StoreLike = None, queries: str | os.PathLike | None = None,
             audit: str | os.PathLike | None = None, data: str | None = None,
             episode: int = 0, step: int = 0, compare: list | None = None,
-            model: str | None = None, index_id: str = "default",
+            model: str | None = None, index_id: str = DEFAULT_INDEX,
             candidates: int | None = None, epsilon: float | None = None, k: int | None = None,
             min_support: float | None = None, support_penalty: float | None = None,
             residual_cap: float | None = None, seed: int = 0,

@@ -11,11 +11,12 @@ from aoc_cli.corpus_index import CorpusIndex
 from aoc_cli.corpus_index import build_index as _build_index
 from aoc_cli.errors import BadSetting, param
 from aoc_cli.progress import Progress
+from aoc_cli.store import DEFAULT_INDEX, DEFAULT_MODEL
 
 _D = BeliefConfig()  # the paper's settings: the defaults of train()
 
 
-def train(name: str, *, store: StoreLike = None, model: str = "default",
+def train(name: str, *, store: StoreLike = None, model: str = DEFAULT_MODEL,
           mode: str | None = None, belief: str | None = None, value: str | None = None,
           gamma: float | None = None, history_length: int | None = None,
           dynamics_weight: float | None = None, hidden: int | None = None,
@@ -66,7 +67,7 @@ class Indexed:
 
 
 def build_index(name: str, model: str | None = None, *, store: StoreLike = None,
-                kind: str = "auto", index_id: str = "default",
+                kind: str = "auto", index_id: str = DEFAULT_INDEX,
                 episode_rates: dict[str, float] | None = None,
                 subsample: dict[str, float] | None = None, seed: int = 0,
                 neighbours: str = "auto", progress: Progress | None = None) -> Indexed:

@@ -20,7 +20,7 @@ from aoc_cli.belief import select, task_settings
 from aoc_cli.belief.config import CRITIC_STEP_SECONDS, BeliefConfig
 from aoc_cli.belief.data import prepare
 from aoc_cli.progress import Progress
-from aoc_cli.store import Corpus, check_name, writing_model
+from aoc_cli.store import DEFAULT_MODEL, Corpus, check_name, writing_model
 
 #: Settings left to the task or to validation when None.
 OPEN = task_settings.FIELDS
@@ -60,7 +60,7 @@ def check_settings(settings: dict) -> BeliefConfig:
     return _config(given, fixed)
 
 
-def train_corpus(corpus: Corpus, model: str = "default", *, paper: bool = False,
+def train_corpus(corpus: Corpus, model: str = DEFAULT_MODEL, *, paper: bool = False,
                  overwrite: bool = False, progress: Progress | None = None,
                  log: Callable[[str], None] | None = None, **settings) -> Trained:
     """Train model ``model`` of ``corpus`` with ``settings`` (BeliefConfig fields; see the
@@ -101,7 +101,7 @@ def _train(corpus, config: BeliefConfig, model: str, overwrite: bool, open_names
         progress(0, 1, f"fitted Q evaluation of {name}")
     prepared = prepare(corpus, config, model, overwrite, progress=progress if fqe else None)
     corpus.verify_content()  # the columns prepare read are cached: hashing reads nothing again
-    from aoc_cli.belief.train import train_model  # imports torch: only once the input is good
+    from aoc_cli.belief.train import train_model  # lazy: torch, once the input is good
 
     total = config.max_epochs
     if config.belief == "critic":  # counted in gradient steps, not epochs

@@ -18,6 +18,7 @@ from aoc_cli.errors import warn
 from aoc_cli.report import ProgressBar, resolve_format
 from aoc_cli.report.evaluate_view import write_evaluation
 from aoc_cli.settings import SMALL_LOG_ROWS
+from aoc_cli.store import DEFAULT_INDEX
 
 
 def register(app: typer.Typer) -> None:
@@ -34,7 +35,7 @@ def register(app: typer.Typer) -> None:
         steps_file: Annotated[Optional[Path], typer.Option(
             "--steps", help="Write one JSON record per step to this JSONL file.")] = None,
         model: ModelOption = None,
-        index_id: IndexOption = "default",
+        index_id: IndexOption = DEFAULT_INDEX,
         candidates: CandidatesOption = None,
         epsilon: EpsilonOption = None,
         k: KOption = None,

@@ -17,6 +17,7 @@ from aoc_cli.cli.common import (CandidatesOption, CorpusArgument, EpsilonOption,
 from aoc_cli.errors import AocError
 from aoc_cli.report import message, resolve_format
 from aoc_cli.report.explain_view import write_explained
+from aoc_cli.store import DEFAULT_INDEX
 
 
 def register(app: typer.Typer) -> None:
@@ -39,7 +40,7 @@ def register(app: typer.Typer) -> None:
             "--compare", help="Actions to explain side by side, e.g. --compare 0 --compare 1 "
                               "or --compare 0.5,-1.")] = None,
         model: ModelOption = None,
-        index_id: IndexOption = "default",
+        index_id: IndexOption = DEFAULT_INDEX,
         candidates: CandidatesOption = None,
         epsilon: EpsilonOption = None,
         k: KOption = None,

@@ -11,6 +11,7 @@ from aoc_cli.cli.common import (CorpusArgument, FormatOption, IndexKind, ModelOp
 from aoc_cli.errors import AocError
 from aoc_cli.report import ProgressBar, write_object
 from aoc_cli.settings import SMALL_LOG_ROWS
+from aoc_cli.store import DEFAULT_INDEX
 
 
 def register(app: typer.Typer) -> None:
@@ -23,7 +24,7 @@ def register(app: typer.Typer) -> None:
             help="The nearest-neighbour index (auto: flat for small corpora).")] = IndexKind.auto,
         index_id: Annotated[str, typer.Option(
             "--index", "--index-id",
-            help="Name of the index (derived indexes need their own).")] = "default",
+            help="Name of the index (derived indexes need their own).")] = DEFAULT_INDEX,
         episode_rate: Annotated[Optional[List[str]], typer.Option(
             "--episode-rate", "--resample",
             help="TAG=VALUE:RATE, a derived index keeping whole episodes of that tag value: "

@@ -15,6 +15,7 @@ from aoc_cli.cli.common import (CandidatesOption, CorpusArgument, EpisodesOption
                                 SupportPenaltyOption, choice, parse_selection, state)
 from aoc_cli.report import (ProgressBar, message, resolve_format, write_object,
                             write_records)
+from aoc_cli.store import DEFAULT_INDEX
 
 
 def register(app: typer.Typer) -> None:
@@ -26,7 +27,7 @@ def register(app: typer.Typer) -> None:
         episodes: EpisodesOption = 5,
         policy: PolicyOption = PolicyName.aoc,
         model: ModelOption = None,
-        index_id: IndexOption = "default",
+        index_id: IndexOption = DEFAULT_INDEX,
         candidates: CandidatesOption = None,
         epsilon: EpsilonOption = None,
         k: KOption = None,

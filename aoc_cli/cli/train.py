@@ -13,6 +13,7 @@ from aoc_cli.cli.common import (BeliefKind, BeliefMode, CorpusArgument, FormatOp
 from aoc_cli.report import train_view
 from aoc_cli.report.output import ProgressBar, message, resolve_format, write_object
 from aoc_cli.settings import SMALL_LOG_ROWS
+from aoc_cli.store import DEFAULT_MODEL
 
 #: Flag defaults are the config's (the paper's) defaults.
 _D = BeliefConfig()
@@ -21,7 +22,7 @@ _D = BeliefConfig()
 def train(
     name: CorpusArgument,
     model: Annotated[str, typer.Option(
-        "--model", help="Model id to write (models/<ID>/ of the corpus).")] = "default",
+        "--model", help="Model id to write (models/<ID>/ of the corpus).")] = DEFAULT_MODEL,
     mode: Annotated[Optional[BeliefMode], typer.Option(
         "--mode", case_sensitive=False,
         help="value: b(o, a, h) predicts v (AOC); imitation: b(o, h) predicts the action "

@@ -1,8 +1,8 @@
 """The k rule: how many nearest corpus rows a query searches in step 1 of the decomposition
-(the rows its weights are found among). Its one home: the index records the k it is built with
-(:func:`index_k`, through :func:`aoc_cli.corpus_index.neighbours`), a decomposition given no k falls back to the
-paper's, training's validation decomposes as the index will, and the baselines that use
-another k say so by calling these functions with their own arguments
+(the rows its weights are found among). Its one home: the index records the k it is built
+with (:func:`index_k`, through :func:`aoc_cli.corpus_index.neighbours`), a decomposition given
+no k falls back to the paper's, training's validation decomposes as the index will, and the
+baselines that use another k say so by calling these functions with their own arguments
 (:func:`aoc_cli.baselines.neighbours.knn_k`, evaluate's kNN baseline).
 
 * the paper's k = 2 (d_b + 1): twice the size of a minimal corpus subset (:func:`default_k`);

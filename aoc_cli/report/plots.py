@@ -75,8 +75,6 @@ def plot_bars(labels, means, stds, path, title: str = "", ylabel: str = "") -> N
 def plot_rollouts(env_name: str, results, path, noise_after: int | None = None) -> None:
     """``aoc rollout --plot``: the trajectories of a built-in task that draws them (2-D
     observations), else the residual and reward curves of every episode."""
-    from aoc_cli.envs import TASKS
-
     task = TASKS.get(env_name)
     if task is not None and hasattr(task, "plot_trajectories") and \
             np.asarray(results[0].observations).shape[-1] == 2:

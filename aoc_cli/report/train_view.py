@@ -4,8 +4,12 @@ better than the trivial predictor) and the metrics table."""
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from aoc_cli.belief import select
-from aoc_cli.belief.fit import Trained
+
+if TYPE_CHECKING:  # an annotation only: aoc --help (which imports this view) loads no training
+    from aoc_cli.belief.fit import Trained
 
 
 def _chosen(metrics: dict) -> dict | None:

@@ -125,7 +125,7 @@ def stage_control(store, rows: int, steps: int, recall_steps: int) -> dict:
     buf = HistoryBuffer(model.history_length, corpus.observation_dim, 1, False)
     obs, _ = env.reset(seed=1)
     times, queries, found = [], [], []
-    k = ctl.config.k
+    k = ctl.k  # the k rule: --k, else the index's
     for step in range(steps):
         h = buf.history()
         t0 = time.perf_counter()
