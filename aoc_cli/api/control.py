@@ -14,23 +14,15 @@ from aoc_cli.control import (ControllerConfig, EpisodeResult, Session, model_fre
 from aoc_cli.control import open_session as _open_session
 from aoc_cli.control.rollout import action_space_of
 from aoc_cli.control.run import reference_from_audit
-from aoc_cli.envs import make_env
+from aoc_cli.envs import collected_task, make_env
 from aoc_cli.errors import BadSetting, param
 from aoc_cli.progress import Progress
 from aoc_cli.rows import row_selection
-from aoc_cli.store import DEFAULT_INDEX, Corpus
+from aoc_cli.store import DEFAULT_INDEX
 from aoc_cli.store.paths import check_output
 
 #: Policies that need no model or index: they run on a corpus before anything is trained.
 MODEL_FREE = ("zero", "random")
-
-
-def collected_task(corpus: Corpus) -> str:
-    """The built-in task a corpus was collected from ("" for ingested data, or several
-    tasks): its controller settings are the defaults, as in ``aoc rollout --env TASK``."""
-    tasks = {src.get("task") for src in corpus.manifest.get("sources", [])
-             if src.get("kind") == "collect"}
-    return tasks.pop() if len(tasks) == 1 else ""
 
 
 def open_session(name: str, *, store: StoreLike = None, model: str | None = None,

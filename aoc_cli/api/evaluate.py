@@ -9,7 +9,7 @@ import os
 from typing import Sequence
 
 from aoc_cli.api.common import StoreLike, open_store
-from aoc_cli.api.control import collected_task
+from aoc_cli.envs import collected_task
 from aoc_cli.control import ControllerConfig, open_session
 from aoc_cli.control.evaluate import evaluate as _evaluate
 from aoc_cli.control.evaluate import step_records

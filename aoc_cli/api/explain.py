@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from aoc_cli.api.common import StoreLike, open_store
-from aoc_cli.api.control import collected_task
+from aoc_cli.envs import collected_task
 from aoc_cli.control import (ControllerConfig, explain_logged_step, explain_query, open_session,
                              parse_query, read_audit_step, replay_decision)
 from aoc_cli.control.explain import explain_decisions

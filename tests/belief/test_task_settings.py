@@ -55,6 +55,22 @@ def test_the_collected_task_is_read_from_the_manifest(upright):
     assert task_settings.for_corpus(upright.corpus("file")) == ("", {})
 
 
+def test_a_corpus_of_mixed_sources_has_no_task_for_training_nor_control():
+    """One rule for training and control: a corpus appended from a task and a file (or from two
+    tasks) takes the defaults in both, never one task's settings in one and not the other."""
+    from types import SimpleNamespace
+
+    from aoc_cli.api import control as api_control, evaluate as api_evaluate, explain as api_explain
+    mixed = SimpleNamespace(manifest={"sources": [
+        {"kind": "collect", "task": "pendulum-het-upright"}, {"kind": "ingest", "path": "x.npz"}]})
+    two = SimpleNamespace(manifest={"sources": [
+        {"kind": "collect", "task": "maze"}, {"kind": "collect", "task": "lunar"}]})
+    one = SimpleNamespace(manifest={"sources": [
+        {"kind": "collect", "task": "maze"}, {"kind": "collect", "task": "maze"}]})
+    assert all(m.collected_task is collected_task for m in (api_control, api_evaluate, api_explain))
+    assert [collected_task(c) for c in (mixed, two, one)] == ["", "", "maze"]
+
+
 def test_aoc_train_takes_records_and_shows_the_tasks_gamma(aoc, upright):
     code, out, err = aoc("train", "up", *QUICK)
     assert code == 0, err
