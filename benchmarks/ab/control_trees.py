@@ -91,15 +91,16 @@ def main() -> None:
     args = ap.parse_args()
     sys.path.insert(0, os.path.abspath(args.new))
     sys.path.insert(0, os.path.join(os.path.abspath(args.new), "benchmarks", "perf"))
-    from control import parse_size, prepare  # noqa: E402  (the new tree's benchmark helpers)
+    import _harness as h  # noqa: E402  (the new tree's benchmark harness)
+    from control import prepare  # noqa: E402  (the corpus, model and index, through the API)
 
     from aoc_cli.store import Store  # noqa: E402
 
     store_dir = args.store or tempfile.mkdtemp(prefix="aoc-bench-trees-")
     print(f"{'rows':>8} {'old ms':>8} {'new ms':>8} {'new/old':>8} {'paired':>7} {'rounds':>6} "
           f"{'same decisions':>15} {'load':>5}")
-    for size in args.sizes.split(","):
-        name = prepare(Store(store_dir), parse_size(size))
+    for rows in h.sizes(args.sizes):
+        name = prepare(Store(store_dir), rows)
         medians: dict = {"old": [], "new": []}
         reference = None
         same = True
@@ -112,9 +113,9 @@ def main() -> None:
                 reference = decisions if reference is None else reference
                 same &= bool(np.array_equal(decisions, reference, equal_nan=True))
         old, new = 1e3 * np.median(medians["old"]), 1e3 * np.median(medians["new"])
-        paired = float(np.median(np.array(medians["new"]) / np.array(medians["old"])))
-        print(f"{parse_size(size):>8} {old:>8.2f} {new:>8.2f} {new / old:>8.2f} {paired:>7.2f} "
-              f"{args.rounds:>6} {str(same):>15} {os.getloadavg()[0]:>5.2f}", flush=True)
+        paired = h.paired(h.Runs(medians["old"]), h.Runs(medians["new"]))
+        print(f"{rows:>8} {old:>8.2f} {new:>8.2f} {new / old:>8.2f} {paired:>7.2f} "
+              f"{args.rounds:>6} {str(same):>15} {h.load():>5.2f}", flush=True)
         for arm in ("old", "new"):
             rounds = " ".join(f"{1e3 * m:.2f}" for m in medians[arm])
             print(f"{'':>8} {arm} rounds (median ms each): {rounds}", flush=True)

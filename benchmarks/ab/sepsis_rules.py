@@ -22,19 +22,15 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
-
-from aoc_cli.control import ControllerConfig, open_session  # noqa: E402
-from aoc_cli.envs.icu_sepsis import STRATEGIES, tables  # noqa: E402
-from aoc_cli.experiments import sepsis_policies as sp  # noqa: E402
-from aoc_cli.store import Store  # noqa: E402
-from aoc_cli.threads import one_thread  # noqa: E402
+from aoc_cli.control import ControllerConfig, open_session
+from aoc_cli.envs.icu_sepsis import STRATEGIES, tables
+from aoc_cli.experiments import sepsis_policies as sp
+from aoc_cli.store import DEFAULT_MODEL, Store
+from aoc_cli.threads import one_thread
 
 
 def rules(task: str) -> dict:
@@ -50,7 +46,7 @@ def main() -> None:
     ap.add_argument("--store", required=True)
     ap.add_argument("--corpus", required=True)
     ap.add_argument("--task", default="icu-sepsis", choices=sorted(STRATEGIES))
-    ap.add_argument("--model", default="default")
+    ap.add_argument("--model", default=DEFAULT_MODEL)
     args = ap.parse_args()
     t = tables(STRATEGIES[args.task])
     corpus = Store(args.store).corpus(args.corpus)

@@ -21,21 +21,20 @@ y_i = base + A a_i with a_i uniform in [-1, 1]^2 and A a random (20, 2) matrix o
   mem x         memory of the beliefs + index + querying, in units of the belief array:
                 (belief array + peak resident growth while building and querying) / belief array
 
-Usage: .venv/bin/python benchmarks/perf/decompose.py --sizes 100k,600k,10M
+One row per size (``work``: the 100 queries of a batch; ``median_s``: ms per batch in seconds).
+
+Usage: .venv/bin/python benchmarks/perf/decompose.py --sizes 100k,600k,10M [-f json]
 """
 
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 import time
 
+import _harness as h
+
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-
-from aoc_cli.threads import wait_passively  # noqa: E402
-
-wait_passively()  # OpenMP threads wait passively, as under the aoc command (aoc_cli/threads.py)
 
 import faiss  # noqa: E402
 import numpy as np  # noqa: E402
@@ -45,12 +44,6 @@ from aoc_cli.index import BeliefIndex, IndexConfig  # noqa: E402
 
 D = 20
 K = 42
-
-
-def parse_size(text: str) -> int:
-    text = text.strip().lower()
-    mult = {"k": 1_000, "m": 1_000_000}.get(text[-1], 1)
-    return int(float(text.rstrip("km")) * mult)
 
 
 def generate(n: int, seed: int = 0, centres: int = 2000) -> np.ndarray:
@@ -194,7 +187,8 @@ def run(n: int, args) -> dict:
         bt = torch.from_numpy(beliefs)
         paper_s = float(np.median([paper_procedure(bt, q) for q in batches[: args.paper_batches]]))
     ms = float(np.median(times) * 1e3)
-    return dict(
+    return h.row(
+        f"{n} rows", len(batches[0]), h.Runs(times, cpu, [None] * len(times)), unit="queries",
         rows=n,
         kind=index.kind,
         gen_s=gen_s,
@@ -208,6 +202,7 @@ def run(n: int, args) -> dict:
         speedup=paper_s * 1e3 / ms,
         mem_ratio=mem_ratio,
         plain_ms=float(np.median(plain) * 1e3) if plain else float("nan"),
+        ratio=float(np.median(plain) * 1e3) / ms if plain else float("nan"),
         inside=full,
         support=support,
         fallbacks=fallbacks,
@@ -215,7 +210,7 @@ def run(n: int, args) -> dict:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = h.parser(__doc__)
     parser.add_argument("--sizes", default="100k,600k", help="comma-separated corpus sizes, e.g. 100k,600k,10M")
     parser.add_argument("--kind", default="auto", choices=["auto", "flat", "hnsw", "ivf"])
     parser.add_argument("--batches", type=int, default=20, help="distinct control steps per size")
@@ -230,23 +225,9 @@ def main(argv=None) -> int:
     parser.add_argument("--cache", default="", help="folder to keep generated beliefs and built indexes in")
     args = parser.parse_args(argv)
     faiss.omp_set_num_threads(args.threads)
-    print(f"# d={D} k={K} batch=100 spread={args.spread} threads={args.threads} load={os.getloadavg()[0]:.1f}")
-    print(f"# {' '.join(sys.argv)}")
-    header = (
-        f"{'rows':>10} {'kind':>5} {'build s':>8} {'ms/batch':>9} {'p90 ms':>7} {'cpu ms':>7} {'recall':>7} {'min rec':>7}"
-        f" {'paper ms':>9} {'speed-up':>9} {'mem x':>6} {'inside':>6} {'supp':>5} {'fallb':>5}"
-        f" {'no-ix ms':>8} {'ratio':>5}"
-    )
-    print(header)
-    for size in args.sizes.split(","):
-        r = run(parse_size(size), args)
-        print(
-            f"{r['rows']:>10} {r['kind']:>5} {r['build_s']:>8.1f} {r['ms']:>9.2f} {r['p90_ms']:>7.2f} {r['cpu_ms']:>7.2f}"
-            f" {r['recall']:>7.4f} {r['min_recall']:>7.3f} {r['paper_ms']:>9.0f} {r['speedup']:>9.0f}"
-            f" {r['mem_ratio']:>6.2f} {r['inside']:>6.2f} {r['support']:>5.1f} {r['fallbacks']:>5}"
-            f" {r['plain_ms']:>8.2f} {r['plain_ms'] / r['ms']:>5.2f}",
-            flush=True,
-        )
+    print(f"# d={D} k={K} batch=100 spread={args.spread} threads={args.threads} "
+          f"load={h.load():.1f}\n# {' '.join(sys.argv)}", file=sys.stderr)
+    h.emit([run(n, args) for n in h.sizes(args.sizes)], args.format)
     return 0
 
 

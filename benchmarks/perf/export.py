@@ -5,26 +5,30 @@ rewards, two tags, one numeric column, 1000-step episodes with ids) written out 
     .venv/bin/python benchmarks/perf/export.py [--rows 1000000] [--repeats 5] [--other-rows 100000]
 
 Goal: >= 1M rows/s to D4RL HDF5 on the 1M-row corpus. Reported: the median of ``--repeats``
-runs of the library call (``aoc_cli.formats.export``) and of the command (``aoc export`` in a
+runs of the library call (``aoc_cli.export``) and of the command (``aoc export`` in a
 fresh process, its start and imports included), each run's time, and the rows a second; then,
 on ``--other-rows`` rows (Minari and CSV write row by row through Python: minari's writer per
 episode, the csv module per line), the same for Minari and CSV, and the read back
-(``aoc ingest``) of each export with its content hash checked against the corpus's.
+(``aoc_cli.ingest``) of each export with its content hash checked against the corpus's
+(``read_back_s``, ``same_hash``).
 """
 
 from __future__ import annotations
 
-import argparse
-import os
 import shutil
-import statistics
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
-import numpy as np
+import _harness as h
+
+h.omp_threads(1)
+
+import numpy as np  # noqa: E402
+
+import aoc_cli  # noqa: E402
+from aoc_cli.store import (CorpusData, Store, box_space,  # noqa: E402
+                           episode_starts_from_lengths)
 
 
 def corpus_data(rows: int, d_o: int = 17, d_a: int = 6, episode: int = 1000, seed: int = 0):
@@ -56,80 +60,57 @@ def corpus_data(rows: int, d_o: int = 17, d_a: int = 6, episode: int = 1000, see
         episode_ids=[f"e{i:05d}" for i in range(len(lengths))], source={"kind": "benchmark"})
 
 
-def time_library(store, name: str, fmt: str, out: Path, repeats: int) -> list[float]:
-    from aoc_cli.formats import export
-
-    times = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        export(name, fmt, out, store=store, overwrite=True)
-        times.append(time.perf_counter() - t)
-    return times
+def time_library(store, name: str, fmt: str, out: Path, repeats: int) -> h.Runs:
+    return h.repeat(lambda _: aoc_cli.export(name, fmt, out, store=store, overwrite=True),
+                    repeats)
 
 
-def time_cli(store_root: Path, name: str, fmt: str, out: Path, repeats: int) -> list[float]:
-    exe = [sys.executable, "-c", "from aoc_cli.cli.app import main; main()"]
-    times = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        subprocess.run(exe + ["--store", str(store_root), "export", name, "--to", fmt, "--out",
-                              str(out), "--overwrite", "-f", "json"],
-                       check=True, capture_output=True)
-        times.append(time.perf_counter() - t)
-    return times
+def time_cli(store_root: Path, name: str, fmt: str, out: Path, repeats: int) -> h.Runs:
+    return h.interleave({"cli": lambda _: h.aoc(
+        ["export", name, "--to", fmt, "--out", str(out), "--overwrite", "-f", "json"],
+        store=store_root)}, repeats)["cli"]
 
 
 def read_back(store, name: str, out: Path) -> tuple[float, bool]:
     """Seconds to ingest ``out`` and whether its content hash is the corpus's."""
-    from aoc_cli.formats import ingest
-
-    t = time.perf_counter()
-    ingest(out, f"{name}-back", store=store, overwrite=True)
-    seconds = time.perf_counter() - t
+    _, seconds, _ = h.timed(lambda: aoc_cli.ingest(out, f"{name}-back", store=store,
+                                                   overwrite=True))
     return seconds, store.corpus(f"{name}-back").hash == store.corpus(name).hash
 
 
-def report(label: str, rows: int, times: list[float]) -> None:
-    med = statistics.median(times)
-    print(f"{label}: median {med:.3f} s ({rows / med / 1e6:.2f}M rows/s); runs "
-          + ", ".join(f"{t:.3f}" for t in times))
-
-
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = h.parser(__doc__, repeats=5)
     parser.add_argument("--rows", type=int, default=1_000_000)
     parser.add_argument("--other-rows", type=int, default=100_000)
-    parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--dir", type=Path, default=None,
                         help="Working folder (default: a temporary one, removed after).")
     args = parser.parse_args()
-    from aoc_cli.store import Store
-
     work = Path(args.dir or tempfile.mkdtemp(prefix="aoc-export-bench-"))
     try:
         store = Store(work / "store")
         store.write("big", corpus_data(args.rows), overwrite=True)
         store.write("small", corpus_data(args.other_rows, seed=1), overwrite=True)
         out = work / "out"
-        print(f"corpus: {args.rows} rows, 17-d observations, 6-d actions, 2 tags, 1 column")
-        report("d4rl, library", args.rows,
-               time_library(store, "big", "d4rl", out / "big.hdf5", args.repeats))
-        report("d4rl, aoc export (process)", args.rows,
-               time_cli(store.root, "big", "d4rl", out / "big.hdf5", args.repeats))
+        print(f"corpus: {args.rows} rows, 17-d observations, 6-d actions, 2 tags, 1 column",
+              file=sys.stderr)
+        rows = [h.row("d4rl, library", args.rows,
+                      time_library(store, "big", "d4rl", out / "big.hdf5", args.repeats)),
+                h.row("d4rl, aoc export (process)", args.rows,
+                      time_cli(store.root, "big", "d4rl", out / "big.hdf5", args.repeats))]
         seconds, same = read_back(store, "big", out / "big.hdf5")
-        print(f"d4rl, read back: {seconds:.3f} s, same content hash: {same}")
+        rows[-1].update(read_back_s=seconds, same_hash=same)
         paths = {"minari": out / "small-v0", "csv": out / "small.csv", "d4rl":
                  out / "small.hdf5"}
         for fmt, path in paths.items():
-            report(f"{fmt}, library, {args.other_rows} rows", args.other_rows,
-                   time_library(store, "small", fmt, path, max(1, args.repeats // 2)))
+            runs = time_library(store, "small", fmt, path, max(1, args.repeats // 2))
             seconds, same = read_back(store, "small", path)
-            print(f"{fmt}, read back: {seconds:.3f} s, same content hash: {same}")
+            rows.append(h.row(f"{fmt}, library", args.other_rows, runs, read_back_s=seconds,
+                              same_hash=same))
+        h.emit(rows, args.format)
     finally:
         if args.dir is None:
             shutil.rmtree(work, ignore_errors=True)
 
 
 if __name__ == "__main__":
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
     main()

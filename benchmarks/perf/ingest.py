@@ -7,23 +7,26 @@ Goal: >= 1M rows/s for ingest; < 1 s for the histories (L = 4) of 100k random ro
 The generated data are smooth random walks within 1000-step episodes (like logged control
 trajectories: consecutive observations are close), actions uniform in [-1, 1], rewards normal;
 an episode ends every 1000 rows, alternately by a terminal and a timeout. The source file is
-written uncompressed (as a file straight from a simulator's logger would be). Reported: the
-median of ``--repeats`` runs, and each run's time.
+written uncompressed (as a file straight from a simulator's logger would be). Rows: the
+library call (``aoc_cli.ingest``), the command (``aoc ingest`` in a fresh process), the history
+lookups cold (open the corpus + look up) and warm; the median of ``--repeats`` runs, and each
+run's time.
 """
 
 from __future__ import annotations
 
-import argparse
 import os
-import statistics
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
+import _harness as h
 import h5py
 import numpy as np
+
+import aoc_cli
+from aoc_cli.formats.ingest import read_dataset
+from aoc_cli.store import Store
 
 
 def generate(path: Path, rows: int, d_o: int = 17, d_a: int = 6, episode: int = 1000,
@@ -50,55 +53,32 @@ def generate(path: Path, rows: int, d_o: int = 17, d_a: int = 6, episode: int = 
 
 
 def time_ingest(src: Path, store_root: Path, repeats: int,
-                float_opts: dict | None = None) -> list[float]:
-    """Seconds to ingest ``src``; with ``float_opts``, to read it and write it with those
-    dataset options for the float columns (Store.write's ``float_opts``)."""
-    from aoc_cli.formats import ingest
-    from aoc_cli.formats.ingest import read_dataset
-    from aoc_cli.store import Store
-
+                float_opts: dict | None = None) -> h.Runs:
+    """Runs of ingesting ``src`` (the API entry); with ``float_opts``, of reading it and
+    writing it with those dataset options for the float columns (Store.write's
+    ``float_opts``, no API entry has them)."""
     store = Store(store_root)
-    times = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        if float_opts is None:
-            ingest(src, "bench", store=store, overwrite=True)
-        else:
-            store.write("bench", read_dataset(src, None, None), overwrite=True,
-                        float_opts=float_opts)
-        times.append(time.perf_counter() - t)
-    return times
+    if float_opts is None:
+        return h.repeat(lambda _: aoc_cli.ingest(src, "bench", store=store, overwrite=True),
+                        repeats)
+    return h.repeat(lambda _: store.write("bench", read_dataset(src, None, None),
+                                          overwrite=True, float_opts=float_opts), repeats)
 
 
-def time_cli(src: Path, store_root: Path, repeats: int) -> list[float]:
-    exe = [sys.executable, "-c", "from aoc_cli.cli.app import main; main()"]
-    times = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        subprocess.run(exe + ["--store", str(store_root), "ingest", str(src), "--name",
-                              "bench-cli", "--overwrite", "-f", "json"],
-                       check=True, capture_output=True)
-        times.append(time.perf_counter() - t)
-    return times
-
-
-def time_history(store_root: Path, repeats: int, lookups: int = 100_000, length: int = 4):
+def time_history(store_root: Path, repeats: int, lookups: int = 100_000,
+                 length: int = 4) -> tuple[h.Runs, h.Runs]:
     """(cold: open the corpus and look up, warm: a second lookup on the open corpus)."""
-    from aoc_cli.store import Store
-
     rng = np.random.default_rng(1)
-    cold, warm = [], []
+    cold, warm = h.Runs(), h.Runs()
     for _ in range(repeats):
         rows = rng.integers(0, Store(store_root).corpus("bench").n_rows, lookups)
-        t = time.perf_counter()
-        corpus = Store(store_root).corpus("bench")
-        h = corpus.history(rows, length)
-        cold.append(time.perf_counter() - t)
+        corpus, wall, cpu = h.timed(lambda: Store(store_root).corpus("bench"))
+        hist, wall2, cpu2 = h.timed(lambda: corpus.history(rows, length))
+        cold.add(wall + wall2, cpu + cpu2)
         rows = rng.integers(0, corpus.n_rows, lookups)
-        t = time.perf_counter()
-        h = corpus.history(rows, length)
-        warm.append(time.perf_counter() - t)
-        assert h.observations.shape == (lookups, length, corpus.observation_dim)
+        hist, wall, cpu = h.timed(lambda: corpus.history(rows, length))
+        warm.add(wall, cpu)
+        assert hist.observations.shape == (lookups, length, corpus.observation_dim)
     return cold, warm
 
 
@@ -112,19 +92,19 @@ def compare_compression(src: Path, root: Path, repeats: int) -> list[dict]:
     }
     out = []
     for label, opts in settings.items():
-        times = time_ingest(src, root / label.replace(" ", "_"), repeats, float_opts=opts)
-        size = (root / label.replace(" ", "_") / "bench" / "corpus.h5").stat().st_size
-        cold, warm = time_history(root / label.replace(" ", "_"), repeats)
-        out.append({"float columns": label, "ingest s": statistics.median(times),
-                    "size MB": size / 1e6, "history cold s": statistics.median(cold),
-                    "history warm s": statistics.median(warm)})
+        folder = root / label.replace(" ", "_")
+        runs = time_ingest(src, folder, repeats, float_opts=opts)
+        cold, warm = time_history(folder, repeats)
+        size = (folder / "bench" / "corpus.h5").stat().st_size
+        out.append(h.row(f"float columns {label}", None, runs, size_mb=size / 1e6,
+                         history_cold_s=cold.median, history_warm_s=warm.median))
     return out
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = h.parser(__doc__, repeats=5)
     parser.add_argument("--rows", type=int, default=1_000_000)
-    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--lookups", type=int, default=100_000, help="history lookups")
     parser.add_argument("--compare-compression", action="store_true")
     parser.add_argument("--workdir", type=Path, default=None,
                         help="where to write the file and store (default: a temporary folder)")
@@ -135,30 +115,20 @@ def main() -> None:
         generate(src, args.rows)
         print(f"source: {args.rows} rows, {src.stat().st_size / 1e6:.0f} MB, "
               f"{os.cpu_count()} cores", file=sys.stderr)
-        times = time_ingest(src, tmp / "store", args.repeats)
-        cli = time_cli(src, tmp / "store", max(3, args.repeats // 2))
-        cold, warm = time_history(tmp / "store", args.repeats)
-        med = statistics.median(times)
-        print("| measure | median | runs |")
-        print("| --- | --- | --- |")
-        print(f"| ingest (library call), s | {med:.3f} ({args.rows / med / 1e6:.2f} M rows/s) | "
-              + ", ".join(f"{t:.3f}" for t in times) + " |")
-        med_cli = statistics.median(cli)
-        print(f"| `aoc ingest` (whole process), s | {med_cli:.3f} "
-              f"({args.rows / med_cli / 1e6:.2f} M rows/s) | "
-              + ", ".join(f"{t:.3f}" for t in cli) + " |")
-        print(f"| history of 100k random rows, L=4, cold (open corpus + lookup), s | "
-              f"{statistics.median(cold):.3f} | " + ", ".join(f"{t:.3f}" for t in cold) + " |")
-        print(f"| history of 100k random rows, L=4, warm, s | {statistics.median(warm):.3f} | "
-              + ", ".join(f"{t:.3f}" for t in warm) + " |")
+        rows = [h.row("ingest (library call)", args.rows,
+                      time_ingest(src, tmp / "store", args.repeats))]
+        cli = h.interleave({"cli": lambda _: h.aoc(
+            ["ingest", str(src), "--name", "bench-cli", "--overwrite", "-f", "json"],
+            store=tmp / "store")}, max(3, args.repeats // 2))["cli"]
+        rows.append(h.row("aoc ingest (whole process)", args.rows, cli))
+        cold, warm = time_history(tmp / "store", args.repeats, args.lookups)
+        rows.append(h.row(f"history of {args.lookups} random rows, L=4, cold (open corpus + "
+                          "lookup)", args.lookups, cold, unit="lookups"))
+        rows.append(h.row(f"history of {args.lookups} random rows, L=4, warm", args.lookups,
+                          warm, unit="lookups"))
         if args.compare_compression:
-            rows = compare_compression(src, tmp / "cmp", args.repeats)
-            print()
-            print("| float columns | ingest s | corpus.h5 MB | history cold s | history warm s |")
-            print("| --- | --- | --- | --- | --- |")
-            for r in rows:
-                print(f"| {r['float columns']} | {r['ingest s']:.3f} | {r['size MB']:.0f} | "
-                      f"{r['history cold s']:.3f} | {r['history warm s']:.3f} |")
+            rows += compare_compression(src, tmp / "cmp", args.repeats)
+        h.emit(rows, args.format)
 
 
 if __name__ == "__main__":

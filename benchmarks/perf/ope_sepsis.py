@@ -3,7 +3,7 @@ logs of clinician episodes, does each estimator's 95% interval cover the truth, 
 its point estimate?
 
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/perf/ope_sepsis.py [--logs 10] [--episodes 5000]
-        [--train-episodes 10000] [--store DIR] [--out results.json]
+        [--train-episodes 10000] [--store DIR] [--out results.json] [-f json]
 
 Builds (once, in ``--store``) a corpus of ``--train-episodes`` clinician episodes, its value
 model as ``aoc train NAME`` trains it with no flags (the task's own settings: fqe values,
@@ -25,16 +25,16 @@ mean error, mean |error|, mean interval width, mean ESS.
 
 from __future__ import annotations
 
-import argparse
 import json
-import os
 import sys
 import time
 from pathlib import Path
 
-import numpy as np
+import _harness as h
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+h.omp_threads(1)
+
+import numpy as np  # noqa: E402
 
 from aoc_cli.control import ControllerConfig  # noqa: E402
 from aoc_cli.control import ope  # noqa: E402
@@ -42,12 +42,10 @@ from aoc_cli.control.evaluate import evaluate  # noqa: E402
 from aoc_cli.control.ope_eval import ESTIMATORS, OPESettings, parse_estimators  # noqa: E402
 from aoc_cli.control.ope_eval import policy_value  # noqa: E402
 from aoc_cli.control.ope_fqe import REFITS  # noqa: E402
-from aoc_cli.envs import collect  # noqa: E402
 from aoc_cli.envs.icu_sepsis import tables  # noqa: E402
 from aoc_cli.errors import AocError  # noqa: E402
 from aoc_cli.control import open_session  # noqa: E402
-from aoc_cli.experiments.sepsis import train_aoc  # noqa: E402
-from aoc_cli.store import CorpusData, Store  # noqa: E402
+from aoc_cli.store import DEFAULT_MODEL, CorpusData, Store, model_dir  # noqa: E402
 from aoc_cli.threads import one_thread  # noqa: E402
 
 
@@ -56,15 +54,11 @@ TASK_VALUE = {"value": "fqe", "gamma": 1.0, "history_length": 0}
 
 
 def prepare(store: Store, train_episodes: int):
-    """The training corpus, its value model and index, as ``aoc train NAME`` and ``aoc index
-    NAME`` build them with no flags (child processes on this store)."""
-    try:
-        corpus = store.corpus("train")
-    except AocError:
-        corpus = store.write("train", collect("icu-sepsis", episodes=train_episodes, seed=0)[0])
-    config = corpus.models_dir / "default" / "config.json"
-    if not (corpus.models_dir / "default" / "index").exists():
-        train_aoc(store.root, "train", seed=0)
+    """The training corpus, its value model and index, as ``aoc collect``, ``aoc train NAME``
+    and ``aoc index NAME`` build them with no flags (their API entries, on this store)."""
+    corpus = h.corpus_ready(store, "train", "icu-sepsis", episodes=train_episodes, seed=0,
+                            train=dict(seed=0), index={})
+    config = model_dir(corpus.path, DEFAULT_MODEL) / "config.json"
     got = json.loads(config.read_text())["config"]
     if any(got[k] != v for k, v in TASK_VALUE.items()):
         raise AocError(f"the stored model of {store.root}/train was trained with "
@@ -109,7 +103,7 @@ def bc_policy(corpus, t) -> np.ndarray:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = h.parser(__doc__)
     ap.add_argument("--logs", type=int, default=10)
     ap.add_argument("--episodes", type=int, default=5000)
     ap.add_argument("--train-episodes", type=int, default=10000)
@@ -122,7 +116,6 @@ def main() -> None:
     ap.add_argument("--no-check", dest="check", action="store_false",
                     help="skip checking aoc evaluate's decisions on the first log")
     args = ap.parse_args()
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
     store = Store(args.store)
     t = tables("mean")
     corpus = prepare(store, args.train_episodes)
@@ -136,11 +129,7 @@ def main() -> None:
     for i in range(args.logs):
         started = time.perf_counter()
         name = f"held{i}"
-        try:
-            held = store.corpus(name)
-        except AocError:
-            held = store.write(name, collect("icu-sepsis", episodes=args.episodes,
-                                             seed=1000 + i)[0])
+        held = h.corpus_ready(store, name, "icu-sepsis", episodes=args.episodes, seed=1000 + i)
         s = held.column("state").astype(np.int64)
         logged = np.asarray(held.actions, np.int64)
         log = ope.Log(held.episode_starts, held.rewards, 1.0)
@@ -177,7 +166,7 @@ def main() -> None:
                          "mean_abs_error": round(float(np.abs(e - truth[pname]).mean()), 4),
                          "width": round(float(width), 4),
                          "ess": round(float(np.mean([x["ess"] for x in r])), 1)})
-    print(json.dumps(rows, indent=1))
+    h.emit(rows, args.format)
 
 
 if __name__ == "__main__":

@@ -34,26 +34,11 @@ import sys
 import time
 from pathlib import Path
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+import _harness as h
+
+h.omp_threads(1)
 
 STAGES = ("ingest", "train", "index", "control")
-
-
-def parse_size(text: str) -> int:
-    text = text.strip().lower()
-    mult = {"k": 1_000, "m": 1_000_000}.get(text[-1], 1)
-    return int(float(text.rstrip("km")) * mult)
-
-
-def memory() -> dict:
-    """VmHWM and VmRSS of this process, MB."""
-    out = {}
-    for line in Path("/proc/self/status").read_text().splitlines():
-        key, _, value = line.partition(":")
-        if key in ("VmHWM", "VmRSS"):
-            out[key] = int(value.split()[0]) / 1024
-    return out
 
 
 def name_of(rows: int) -> str:
@@ -61,29 +46,32 @@ def name_of(rows: int) -> str:
 
 
 def stage_ingest(store, rows: int) -> dict:
-    from aoc_cli.envs import collect
+    import aoc_cli
 
-    data, _ = collect("pendulum-het", steps=rows, seed=0)
-    corpus = store.write(name_of(rows), data, overwrite=True)
+    corpus = aoc_cli.collect("pendulum-het", name_of(rows), store=store, steps=rows, seed=0,
+                             overwrite=True).corpus
     return {"rows": corpus.n_rows, "episodes": corpus.n_episodes}
 
 
 def stage_train(store, rows: int) -> dict:
+    """The library's training call, not the API entry: ``aoc_cli.train`` first checks the
+    corpus's content hash, reading every column, which at 10M rows would change the peak
+    memory this stage has always measured (the training alone)."""
     from aoc_cli.belief import BeliefConfig, train_model
     from aoc_cli.belief.stream import streams
+    from aoc_cli.store import DEFAULT_MODEL
 
     corpus = store.corpus(name_of(rows))
     cfg = BeliefConfig(seed=0, max_epochs=1, patience=1, threads=1)
-    m = train_model(corpus, cfg, "default", overwrite=True)
+    m = train_model(corpus, cfg, DEFAULT_MODEL, overwrite=True)
     return {"streamed": streams(corpus, cfg), "val_r2": m.get("val_r2"),
             "train_rows": m.get("train_rows")}
 
 
 def stage_index(store, rows: int) -> dict:
-    from aoc_cli.corpus_index import build_index
+    import aoc_cli
 
-    corpus = store.corpus(name_of(rows))
-    ci = build_index(corpus, "default")
+    ci = aoc_cli.build_index(name_of(rows), store=store).index
     return {"kind": ci.index.kind, "build_seconds": ci.meta["build_seconds"]}
 
 
@@ -110,42 +98,29 @@ def stage_control(store, rows: int, steps: int, recall_steps: int) -> dict:
     import numpy as np
     import torch
 
-    from aoc_cli.control import HistoryBuffer
-    from aoc_cli.control import open_session
-    from aoc_cli.envs import make_env
+    import aoc_cli
 
     torch.set_num_threads(1)
     faiss.omp_set_num_threads(1)
-    corpus = store.corpus(name_of(rows))
-    t0 = time.perf_counter()
-    session = open_session(corpus)
-    open_s = time.perf_counter() - t0
+    session, open_s, _ = h.timed(lambda: aoc_cli.open_session(name_of(rows), store=store))
     ctl, model, index = session.controller, session.model, session.index
-    env = make_env("pendulum-het")
-    buf = HistoryBuffer(model.history_length, corpus.observation_dim, 1, False)
-    obs, _ = env.reset(seed=1)
     times, queries, found = [], [], []
     k = ctl.k  # the k rule: --k, else the index's
-    for step in range(steps):
-        h = buf.history()
-        t0 = time.perf_counter()
-        d = ctl.decide(obs, h)
-        times.append(time.perf_counter() - t0)
-        if step < recall_steps:  # outside the timing: the same beliefs and neighbours
-            b = model.beliefs(np.asarray(obs, np.float32)[None], d.candidates, h)
-            dec = index.decompose(b, k=k)
+
+    def decide(obs, hist):
+        d, wall, _ = h.timed(lambda: ctl.decide(obs, hist))
+        times.append(wall)
+        if len(times) <= recall_steps:  # outside the timing: the same beliefs and neighbours
+            b = model.beliefs(np.asarray(obs, np.float32)[None], d.candidates, hist)
             queries.append(b)
-            found.append(dec.neighbours)
-        nxt, r, term, trunc, _ = env.step(np.asarray(d.action, np.float32))
-        buf.push(obs, d.action, r)
-        obs = nxt
-        if term or trunc:
-            buf.reset()
-            obs, _ = env.reset()
+            found.append(index.decompose(b, k=k).neighbours)
+        return d
+
+    h.drive(session, "pendulum-het", steps, decide)
     ms = np.asarray(times) * 1000
     out = {"steps": steps, "step_ms": float(np.median(ms)), "p90_ms": float(np.percentile(ms, 90)),
            "first_ms": float(ms[0]), "open_seconds": open_s, "kind": index.index.kind,
-           "steps_peak_mb": memory()["VmHWM"]}  # before the recall reads every belief
+           "steps_peak_mb": h.memory()["VmHWM"]}  # before the recall reads every belief
     if not queries:
         return out
     q = np.concatenate(queries).astype(np.float32)
@@ -167,15 +142,15 @@ def run_stage(stage: str, store_dir: str, rows: int, steps: int, recall_steps: i
     from aoc_cli.store import Store
 
     store = Store.open(store_dir)
-    base = memory()
+    base = h.memory()
     t0 = time.perf_counter()
     if stage == "control":
         out = stage_control(store, rows, steps, recall_steps)
     else:
         out = {"ingest": stage_ingest, "train": stage_train, "index": stage_index}[stage](
             store, rows)
-    out.update(seconds=time.perf_counter() - t0, peak_mb=memory()["VmHWM"],
-               base_mb=base["VmRSS"], load=os.getloadavg()[0])
+    out.update(seconds=time.perf_counter() - t0, peak_mb=h.memory()["VmHWM"],
+               base_mb=base["VmRSS"], load=h.load())
     print("RESULT " + json.dumps(out), flush=True)
 
 
@@ -198,7 +173,7 @@ def sizes_of(store_dir: str, rows: int) -> dict:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = h.parser(__doc__, rows=False)  # its record: STORE/scale.json
     ap.add_argument("--sizes", default="1m,3m,10m")
     ap.add_argument("--store", required=True, help="store folder; results in STORE/scale.json")
     ap.add_argument("--steps", type=int, default=200)
@@ -214,8 +189,7 @@ def main() -> None:
     record = Path(args.store) / "scale.json"
     results = json.loads(record.read_text()) if record.is_file() else {}
     redo = {s for s in args.redo.split(",") if s}
-    for size in args.sizes.split(","):
-        rows = parse_size(size)
+    for rows in h.sizes(args.sizes):
         done = results.setdefault(str(rows), {})
         for stage in STAGES:
             if stage in done and stage not in redo:

@@ -2,14 +2,15 @@
 pendulum-het figures (does the history identify the dynamics?).
 
     .venv/bin/python benchmarks/perf/train.py time    [--rows 100000] [--repeats 3] [--threads 2]
+                                                     [-f json]
     .venv/bin/python benchmarks/perf/train.py figures [--rows 100000] [--seed 0] [--threads 2]
 
 ``time``: collect ``--rows`` pendulum-het rows (collect seed = run index), store them, and train
 the default value-mode model (L = 4, d_b = 20, batch 500, Adam 1e-3, patience 10) to early stop
-with the library call ``train_model``; reported: the median and every run's wall seconds, CPU
-seconds of the process (all threads; on a machine shared with other work the wall time grows,
-the CPU time much less), epochs and validation R^2. Goal: <= 120 s for 100k rows on this
-machine.
+through the API (``aoc_cli.train(..., paper=True)``, as ``aoc train --paper``); reported: the
+median and every run's wall seconds, CPU seconds of the process (all threads; on a machine
+shared with other work the wall time grows, the CPU time much less), epochs and validation
+R^2. Goal: <= 120 s for 100k rows on this machine.
 
 ``figures``: one corpus (collect seed ``--seed``), the default model with L = 4 and the same
 model with L = 0; reports the validation R^2 of each, and the accuracy of a logistic probe that
@@ -22,54 +23,41 @@ an imitation-mode model (L = 4), whose target, the action, does depend on the sy
 
 from __future__ import annotations
 
-import argparse
 import json
-import shutil
-import statistics
 import sys
 import tempfile
-import time
-from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT))
+import _harness as h
+import numpy as np
 
-import numpy as np  # noqa: E402
-
-from aoc_cli.threads import wait_passively  # noqa: E402
-
-wait_passively()  # OpenMP threads wait passively, as under the aoc command (aoc_cli/threads.py)
-
-from aoc_cli.belief import (BeliefConfig, episode_rows, load_model, logistic_probe,  # noqa: E402
-                            split_episodes, train_model)
-from aoc_cli.envs import collect  # noqa: E402
-from aoc_cli.store import Store, box_space  # noqa: E402
+import aoc_cli
+from aoc_cli.belief import episode_rows, load_model, logistic_probe, split_episodes
+from aoc_cli.belief.config import BeliefConfig
+from aoc_cli.store import Store, box_space
 
 
 def pendulum_corpus(store: Store, name: str, rows: int, seed: int):
-    data, _summary = collect("pendulum-het", steps=rows, seed=seed)
-    return store.write(name, data)
+    return aoc_cli.collect("pendulum-het", name, store=store, steps=rows, seed=seed).corpus
 
 
 def run_time(args) -> None:
-    runs = []
+    runs, epochs, r2 = h.Runs(), [], []
     with tempfile.TemporaryDirectory() as tmp:
         store = Store(tmp)
         for seed in range(args.repeats):
-            corpus = pendulum_corpus(store, f"p{seed}", args.rows, seed)
-            t0, c0 = time.perf_counter(), time.process_time()
-            m = train_model(corpus, BeliefConfig(threads=args.threads), "default")
-            runs.append({"seconds": time.perf_counter() - t0,
-                         "cpu_seconds": time.process_time() - c0, "epochs": m["epochs"],
-                         "best_epoch": m["best_epoch"], "val_r2": m["val_r2"]})
-            print(json.dumps(runs[-1]), flush=True)
-    med = statistics.median(r["seconds"] for r in runs)
-    cpu = statistics.median(r["cpu_seconds"] for r in runs)
-    print(f"rows {args.rows}: median {med:.1f} s to early stop over {len(runs)} runs "
-          f"(median CPU time of the process {cpu:.1f} s); "
-          f"seconds {[round(r['seconds'], 1) for r in runs]}, epochs "
-          f"{[r['epochs'] for r in runs]}, val R^2 {[round(r['val_r2'], 3) for r in runs]}, "
-          f"s/epoch {[round(r['seconds'] / r['epochs'], 2) for r in runs]}")
+            name = pendulum_corpus(store, f"p{seed}", args.rows, seed).name
+            # the paper's settings (BeliefConfig's defaults), as `aoc train --paper`
+            m, wall, cpu = h.timed(lambda: aoc_cli.train(name, store=store, paper=True,
+                                                         threads=args.threads).metrics)
+            runs.add(wall, cpu, m)
+            epochs.append(m["epochs"])
+            r2.append(m["val_r2"])
+            print(json.dumps({"seconds": wall, "cpu_seconds": cpu, "epochs": m["epochs"],
+                              "best_epoch": m["best_epoch"], "val_r2": m["val_r2"]}),
+                  file=sys.stderr, flush=True)
+    h.emit([h.row("train to early stop", args.rows, runs, epochs=epochs, val_r2=r2,
+                  s_per_epoch=[round(w / e, 2) for w, e in zip(runs.wall, epochs)])],
+           args.format)
 
 
 def system_probe(corpus, features: np.ndarray, config: BeliefConfig) -> float:
@@ -83,15 +71,20 @@ def system_probe(corpus, features: np.ndarray, config: BeliefConfig) -> float:
 
 def run_figures(args) -> None:
     with tempfile.TemporaryDirectory() as tmp:
-        corpus = pendulum_corpus(Store(tmp), "p", args.rows, args.seed)
+        store = Store(tmp)
+        corpus = pendulum_corpus(store, "p", args.rows, args.seed)
+
+        def train(name: str, model: str, **settings) -> dict:  # the paper's settings but these
+            return aoc_cli.train(name, store=store, model=model, paper=True,
+                                 threads=args.threads, overwrite=True, **settings).metrics
+
         out = {"rows": corpus.n_rows, "episodes": corpus.n_episodes}
         for L in (4, 0):
             config = BeliefConfig(history_length=L, threads=args.threads)
-            t0 = time.perf_counter()
-            m = train_model(corpus, config, f"L{L}")
+            m, seconds, _ = h.timed(lambda: train("p", f"L{L}", history_length=L))
             beliefs = load_model(corpus, f"L{L}").row_beliefs(corpus)
             out[f"L{L}"] = {"val_r2": m["val_r2"], "epochs": m["epochs"],
-                            "seconds": time.perf_counter() - t0,
+                            "seconds": seconds,
                             "probe_beliefs": system_probe(corpus, beliefs, config)}
             print(json.dumps({f"L{L}": out[f"L{L}"]}), flush=True)
         oa = np.concatenate([corpus.observations, corpus.actions], axis=1)
@@ -107,16 +100,15 @@ def run_figures(args) -> None:
         data.observations = np.concatenate(
             [data.observations, system[:, None].astype(np.float32)], axis=1)
         data.observation_space = box_space(4)
-        oracle = Store(tmp).write("oracle", data)
+        store.write("oracle", data)
         for L in (4, 0):
-            m = train_model(oracle, BeliefConfig(history_length=L, threads=args.threads), "o")
+            m = train("oracle", "o", history_length=L)
             out[f"L{L}_with_true_system"] = {"val_r2": m["val_r2"], "epochs": m["epochs"]}
             print(json.dumps({f"L{L}_with_true_system": out[f"L{L}_with_true_system"]}),
                   flush=True)
-            shutil.rmtree(oracle.models_dir / "o")
         # Diagnostic 2: imitation-mode beliefs (the action depends on the system).
         config = BeliefConfig(mode="imitation", threads=args.threads)
-        m = train_model(corpus, config, "imitation")
+        m = train("p", "imitation", mode="imitation")
         beliefs = load_model(corpus, "imitation").row_beliefs(corpus)
         out["imitation_L4"] = {"val_r2": m["val_r2"], "epochs": m["epochs"],
                                "probe_beliefs": system_probe(corpus, beliefs, config)}
@@ -124,10 +116,9 @@ def run_figures(args) -> None:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = h.parser(__doc__, repeats=3)
     ap.add_argument("what", choices=["time", "figures"])
     ap.add_argument("--rows", type=int, default=100_000)
-    ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--threads", type=int, default=2)
     args = ap.parse_args()
