@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from aoc_cli.control import ope
-from aoc_cli.control.ope_fqe import REFITS, available, bootstrap_fqe, default_steps, fit_fqe
+from aoc_cli.control.ope_fqe import REFITS, available, default_steps, fqe_policies
 from aoc_cli.errors import AocError, BadSetting, NoRewards, param
 
 ESTIMATORS = ("pdwis", "wdr", "fqe")
@@ -43,7 +43,8 @@ class OPESettings:
     (None: :func:`aoc_cli.control.ope_fqe.default_steps`); ``fqe_refits`` the refits behind
     FQE's interval (:func:`aoc_cli.control.ope_fqe.bootstrap_fqe`; 0: one fit, its interval
     resamples the start values only and leaves the model's own error out); bootstrap
-    replicates; seed."""
+    replicates; seed; ``fqe_schedule`` FQE's learning rate, "constant" (d3rlpy's) or
+    "cosine" (:meth:`aoc_cli.control.ope_ensemble.FQEEnsemble.train`)."""
 
     estimators: tuple = ESTIMATORS
     gamma: float = 1.0
@@ -52,6 +53,7 @@ class OPESettings:
     fqe_refits: int = REFITS
     n_boot: int = ope.N_BOOTSTRAP
     seed: int = 0
+    fqe_schedule: str = "constant"
 
 
 def parse_estimators(text: str | None) -> tuple:
@@ -113,9 +115,11 @@ def _as_probs(policy: np.ndarray, n_actions: int) -> np.ndarray:
 
 
 def policy_value(log: ope.Log, observations, logged, propensity, policy, n_actions: int,
-                 settings: OPESettings, progress=None) -> dict:
+                 settings: OPESettings, progress=None, fqe: dict | None | str = "fit") -> dict:
     """One policy's ``policy_value`` {estimator: Estimate dict}, ``ess`` and notes.
-    ``policy`` (N,) decisions or (N, n) probabilities at the logged steps."""
+    ``policy`` (N,) decisions or (N, n) probabilities at the logged steps; ``fqe`` its direct
+    method (one entry of :func:`fqe_values`, computed with the other policies'; "fit": fitted
+    here for this policy alone)."""
     probs = _as_probs(policy, n_actions)                          # (N, n)
     rows = np.arange(len(logged))
     rho = ope.ratios(probs[rows, logged], propensity)
@@ -123,41 +127,52 @@ def policy_value(log: ope.Log, observations, logged, propensity, policy, n_actio
     specs: dict = {}
     if "pdwis" in settings.estimators:
         specs["pdwis"] = ("pdwis", rho)
-    q, refitted = None, None
-    if "fqe" in settings.estimators or "wdr" in settings.estimators:
-        reason = available()
-        if reason is not None:
-            out["notes"].append(reason)
-        elif "fqe" in settings.estimators and settings.fqe_refits > 1:
-            refitted = bootstrap_fqe(observations, logged, log.rewards, log.starts, probs,
-                                     settings.gamma, settings.fqe_steps, settings.fqe_refits,
-                                     seed=settings.seed, progress=progress)
-            q = refitted["q"]                                                 # (N, n)
-        else:
-            q = fit_fqe(observations, logged, log.rewards, log.starts, probs, settings.gamma,
-                        settings.fqe_steps, settings.seed, progress)          # (N, n)
+    if isinstance(fqe, str):
+        fqe = fqe_values(log, observations, logged, [probs], settings, progress)[0]
+    q = None if fqe is None else fqe["q"]                                     # (N, n)
+    if fqe is not None and fqe.get("note"):
+        out["notes"].append(fqe["note"])
+    refitted = q is not None and len(fqe["replicates"]) > 1
     if "wdr" in settings.estimators:
         if q is None:
             out["notes"].append("wdr: no Q model (needs fqe), so it equals pdwis")
             specs["wdr"] = ("wdr", rho, np.zeros(len(rho)), np.zeros(len(rho)))
         else:
             specs["wdr"] = ("wdr", rho, q[rows, logged], (probs * q).sum(1))
-    if "fqe" in settings.estimators and q is not None and refitted is None:
+    if "fqe" in settings.estimators and q is not None and not refitted:
         first = log.starts[:-1]
         specs["fqe"] = ("mean", (probs[first] * q[first]).sum(1))
         out["notes"].append("fqe: the interval resamples episodes' start values of one fitted "
                             "Q model (the model's own error is not in it)")
     est = ope.bootstrap(log, specs, n_boot=settings.n_boot, seed=settings.seed)
     out["policy_value"] = {k: v.as_dict() for k, v in est.items()}
-    if refitted is not None:
-        out["policy_value"]["fqe"] = {k: refitted[k] for k in ("estimate", "low", "high")}
-        b, k, n = len(refitted["replicates"]), refitted["refit_steps"], refitted["steps"]
+    if refitted and "fqe" in settings.estimators:
+        out["policy_value"]["fqe"] = {k: fqe[k] for k in ("estimate", "low", "high")}
+        b, k, n = len(fqe["replicates"]), fqe["refit_steps"], fqe["steps"]
         out["notes"].append(
             f"fqe: the interval is the estimate +- 1.96 sd of {b} refits, each on the log's "
             f"episodes resampled with replacement, {k:,} steps on from the full fit's "
             f"{n:,}-step weights (the model's own sampling and training error is in it; cost "
             f"{(n + b * k) / n:.1f}x one fit)")
     return out
+
+
+def fqe_values(log: ope.Log, observations, logged, policies: list, settings: OPESettings,
+               progress=None) -> list:
+    """The direct method for each policy (N, n) at once
+    (:func:`aoc_cli.control.ope_fqe.fqe_policies`: one batched ensemble), when an estimator
+    needs it: with refits when FQE is asked for and ``settings.fqe_refits`` > 1. Each entry
+    None (no estimator needs a Q model) or a record; without d3rlpy, a record with ``q`` None
+    and the reason as its ``note``."""
+    if "fqe" not in settings.estimators and "wdr" not in settings.estimators:
+        return [None] * len(policies)
+    reason = available()
+    if reason is not None:
+        return [{"q": None, "note": reason, "replicates": ()} for _ in policies]
+    refits = settings.fqe_refits if "fqe" in settings.estimators else 0
+    return fqe_policies(observations, logged, log.rewards, log.starts, policies,
+                        settings.gamma, settings.fqe_steps, refits if refits > 1 else 0,
+                        seed=settings.seed, progress=progress, schedule=settings.fqe_schedule)
 
 
 def warnings_for(name: str, rec: dict, n_episodes: int) -> list[str]:
@@ -209,10 +224,12 @@ def off_policy_values(data, logged: np.ndarray, policies: dict, settings: OPESet
                    "fqe_refits": settings.fqe_refits if "fqe" in settings.estimators
                    else None},
            "behaviour_value": mean.as_dict(), "policies": {}, "ope_warnings": []}
-    for i, (name, policy) in enumerate(policies.items()):
+    probs = {name: _as_probs(p, data.n_actions) for name, p in policies.items()}
+    fqes = fqe_values(log, data.observations, logged, list(probs.values()), settings, progress)
+    for i, ((name, policy), fqe) in enumerate(zip(probs.items(), fqes)):
         try:
             rec = policy_value(log, data.observations, logged, propensity, policy,
-                               data.n_actions, settings, progress)
+                               data.n_actions, settings, progress, fqe=fqe)
         except AocError as err:
             if i == 0:          # the first policy is the one asked about: its error is the run's
                 raise AocError(f"policy {name!r}: {err.marked}") from None

@@ -8,8 +8,13 @@ distribution per step), so the mini-batches are drawn here (numpy, one draw of B
 instead of d3rlpy's per-transition sampler) and the next action of each drawn transition is
 the evaluated policy's at the next logged step, handed to FQE through :class:`_NextActions`;
 a stochastic policy's next action is drawn from its distribution there (an unbiased target).
-The update itself is d3rlpy's (``DiscreteFQE.update``). The last step of an episode, ended or
-truncated, is terminal (no bootstrap past the log).
+The update itself is d3rlpy's (``DiscreteFQE.update``, :meth:`FQEFit.train`). The last step
+of an episode, ended or truncated, is terminal (no bootstrap past the log).
+
+``aoc evaluate`` runs :func:`fqe_policies`: every policy's fit, then every refit, trained at
+once as a batched ensemble of d3rlpy's networks (:mod:`aoc_cli.control.ope_ensemble`; each
+member equal to its own ``DiscreteFQE.update`` training to float rounding, checked by
+tests/control/test_ope_ensemble.py), ~2x less CPU than one fit after another.
 
 Shapes: observations (N, d_o) float, ``policy`` (N, n) probabilities of the evaluated policy
 at each logged step (one-hot for a deterministic one), actions (N,) int, rewards (N,),
@@ -22,6 +27,7 @@ import copy
 
 import numpy as np
 
+from aoc_cli.control.ope_ensemble import FQEEnsemble
 from aoc_cli.errors import AocError
 
 #: FQE settings: mini-batch, learning rate, target network sync, hidden layers.
@@ -97,8 +103,7 @@ class FQEFit:
         self.last = np.zeros(self.n_rows, bool)
         self.last[self.starts[1:] - 1] = True
         self.nxt = np.where(self.last, np.arange(self.n_rows), np.arange(self.n_rows) + 1)
-        cum = np.cumsum(np.asarray(policy, np.float64), axis=1)
-        self.cum = cum / cum[:, -1:]
+        self.cum = cumulative(policy)
         self.batch = batch
         d3rlpy.seed(seed)
         torch.manual_seed(seed)
@@ -142,7 +147,10 @@ class FQEFit:
                               "optim": m.optim.state_dict()})
 
     def restore(self, state: dict) -> None:
+        """Put back a :meth:`snapshot` (or an ensemble member's state, with its step count)."""
         m = self.fqe.impl.modules
+        if "count" in state:
+            self.fqe._grad_step = int(state["count"])
         m.q_funcs.load_state_dict(state["q"])
         m.targ_q_funcs.load_state_dict(state["target"])
         m.optim.load_state_dict(copy.deepcopy(state["optim"]))
@@ -175,47 +183,82 @@ def refit_steps(steps: int) -> int:
 def bootstrap_fqe(observations, actions, rewards, starts, policy, gamma: float = 1.0,
                   steps: int | None = None, refits: int = REFITS, refit_step_count:
                   int | None = None, seed: int = 0, progress=None) -> dict:
-    """The direct method with an interval that holds the fitted model's own error: Q_hat
-    (N, n) of the full fit, its estimate (the mean start value of the evaluated policy), and
-    ``refits`` refits, each on the log's episodes resampled with replacement, started from the
-    full fit's weights and trained ``refit_step_count`` more steps on the resample (a warm-
-    started bootstrap: a refit from scratch costs the full fit again, ``refits`` times). Each
-    refit's estimate is its resample's mean start value; the interval is the estimate
-    +- 1.96 x the refits' standard deviation (a normal bootstrap interval: with ~10 refits
-    their percentiles would be their extremes). Returns {"q", "estimate", "low", "high",
-    "replicates" (refits,), "steps", "refit_steps", "seconds"}."""
+    """:func:`fqe_policies` of one policy."""
+    return fqe_policies(observations, actions, rewards, starts, [policy], gamma, steps, refits,
+                        refit_step_count, seed, progress)[0]
+
+
+def fqe_policies(observations, actions, rewards, starts, policies: list, gamma: float = 1.0,
+                 steps: int | None = None, refits: int = REFITS,
+                 refit_step_count: int | None = None, seed: int = 0, progress=None,
+                 schedule: str = "constant") -> list:
+    """The direct method for each of P policies on one log, with an interval that holds the
+    fitted model's own error. Per policy: Q_hat (N, n) of the full fit, its estimate (the mean
+    start value of the policy), and ``refits`` refits, each on the log's episodes resampled
+    with replacement, started from the full fit's weights and trained ``refit_step_count``
+    more steps on the resample (a warm-started bootstrap: a refit from scratch costs the full
+    fit again, ``refits`` times). Each refit's estimate is its resample's mean start value;
+    the interval is the estimate +- 1.96 x the refits' standard deviation (a normal bootstrap
+    interval: with ~10 refits their percentiles would be their extremes). The P fits train
+    as one ensemble, then the P x ``refits`` refits as another
+    (:class:`aoc_cli.control.ope_ensemble.FQEEnsemble`: each member d3rlpy's DiscreteFQE
+    update, batched); every policy's fit starts from the same d3rlpy initialisation and
+    the policies' refits see the same resamples. ``progress(done, total)`` in member-steps;
+    ``schedule`` the learning rate's over the fit and over each refit
+    (:meth:`aoc_cli.control.ope_ensemble.FQEEnsemble.train`).
+    Returns per policy {"q", "estimate", "low", "high", "replicates" (refits,), "bagged"
+    (the refits' mean start value over the whole log's episodes), "steps", "refit_steps",
+    "seconds"}."""
     import time
 
     started = time.perf_counter()
-    fit = FQEFit(observations, actions, rewards, starts, policy, gamma, seed)
+    policies = [np.asarray(p, np.float64) for p in policies]
+    P = len(policies)
+    fit = FQEFit(observations, actions, rewards, starts, policies[0], gamma, seed)
+    cums = np.stack([fit.cum] + [cumulative(p) for p in policies[1:]])      # (P, N, n)
     total = default_steps(fit.n_rows) if steps is None else int(steps)
     k = refit_steps(total) if refit_step_count is None else int(refit_step_count)
-    grand = total + refits * k
-    fit.train(total, progress=None if progress is None else
-              (lambda done, _t: progress(done, grand)))
-    q = fit.q()
-    policy = np.asarray(policy, np.float64)
+    grand = P * total + (P * refits * k if refits > 1 else 0)
+    tick = (lambda base, m: None) if progress is None else \
+        (lambda base, m: lambda done: progress(base + m * done, grand))
+    ens = FQEEnsemble(fit, [fit.snapshot()] * P, [fit.fqe._grad_step] * P)
+    ens.train(total, cums, np.arange(P), [None] * P, fit.rng, progress=tick(0, P),
+              schedule=schedule)
     first = fit.starts[:-1]
     n_episodes = len(first)
-    estimate = float(np.mean((policy[first] * q[first]).sum(1)))
-    state = fit.snapshot()
-    lengths = np.diff(fit.starts)
-    rng = np.random.default_rng(seed + 1)
-    reps = np.empty(refits)
-    for b in range(refits):
-        counts = rng.multinomial(n_episodes, np.full(n_episodes, 1.0 / n_episodes))
-        chosen = np.repeat(np.arange(n_episodes), counts)                  # resampled episodes
-        rows = np.repeat(fit.starts[chosen], lengths[chosen]) + _offsets(lengths[chosen])
-        fit.restore(state)
-        fit.train(k, rows)
-        v0 = (policy[first] * fit.q(first)).sum(1)                          # (E,)
-        reps[b] = float(counts @ v0) / n_episodes
-        if progress is not None:
-            progress(total + (b + 1) * k, grand)
-    half = 1.96 * float(np.std(reps, ddof=1)) if refits > 1 else float("nan")
-    return {"q": q, "estimate": estimate, "low": estimate - half, "high": estimate + half,
-            "replicates": reps, "steps": total, "refit_steps": k,
-            "seconds": time.perf_counter() - started}
+    q = ens.q()                                                             # (P, N, n)
+    out = [{"q": q[i], "estimate": float(np.mean((policies[i][first] * q[i][first]).sum(1))),
+            "low": float("nan"), "high": float("nan"), "replicates": np.empty(0),
+            "bagged": float("nan"), "steps": total, "refit_steps": 0} for i in range(P)]
+    if refits > 1:
+        lengths = np.diff(fit.starts)
+        rng = np.random.default_rng(seed + 1)
+        counts = rng.multinomial(n_episodes, np.full(n_episodes, 1.0 / n_episodes),
+                                 size=refits)                               # (refits, E)
+        pools = []
+        for c in counts:
+            chosen = np.repeat(np.arange(n_episodes), c)                    # resampled episodes
+            pools.append(np.repeat(fit.starts[chosen], lengths[chosen]) + _offsets(lengths[chosen]))
+        boot = ens.repeat(refits)                       # member i * refits + b: policy i, refit b
+        boot.train(k, cums, np.repeat(np.arange(P), refits), pools * P, fit.rng,
+                   progress=tick(P * total, P * refits), schedule=schedule)
+        q0 = boot.q(first).reshape(P, refits, n_episodes, -1)               # (P, refits, E, n)
+        for i, rec in enumerate(out):
+            v0 = (policies[i][first][None] * q0[i]).sum(2)                  # (refits, E)
+            reps = (counts * v0).sum(1) / n_episodes
+            half = 1.96 * float(np.std(reps, ddof=1))
+            rec.update(low=rec["estimate"] - half, high=rec["estimate"] + half, replicates=reps,
+                       bagged=float(v0.mean()), refit_steps=k)
+    seconds = time.perf_counter() - started
+    for rec in out:
+        rec["seconds"] = seconds
+    return out
+
+
+def cumulative(policy: np.ndarray) -> np.ndarray:
+    """(N, n) cumulative probabilities of a policy (N, n), each row ending at 1."""
+    cum = np.cumsum(np.asarray(policy, np.float64), axis=1)
+    return cum / cum[:, -1:]
 
 
 def _offsets(lengths: np.ndarray) -> np.ndarray:

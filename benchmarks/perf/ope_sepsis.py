@@ -40,7 +40,7 @@ from aoc_cli.control import ControllerConfig  # noqa: E402
 from aoc_cli.control import ope  # noqa: E402
 from aoc_cli.control.evaluate import evaluate  # noqa: E402
 from aoc_cli.control.ope_eval import ESTIMATORS, OPESettings, parse_estimators  # noqa: E402
-from aoc_cli.control.ope_eval import policy_value  # noqa: E402
+from aoc_cli.control.ope_eval import fqe_values, policy_value  # noqa: E402
 from aoc_cli.control.ope_fqe import REFITS  # noqa: E402
 from aoc_cli.envs.icu_sepsis import tables  # noqa: E402
 from aoc_cli.errors import AocError  # noqa: E402
@@ -112,6 +112,8 @@ def main() -> None:
     ap.add_argument("--fqe-refits", type=int, default=REFITS,
                     help="refits behind FQE's interval (0: one fit, start values resampled)")
     ap.add_argument("--estimators", default=",".join(ESTIMATORS))
+    ap.add_argument("--fqe-schedule", default="constant", choices=["constant", "cosine"],
+                    help="FQE's learning rate over the fit and each refit")
     ap.add_argument("--out", default=None)
     ap.add_argument("--no-check", dest="check", action="store_false",
                     help="skip checking aoc evaluate's decisions on the first log")
@@ -124,7 +126,8 @@ def main() -> None:
     truth["clinicians"] = t.mdp.value(t.clinicians)
     print("truth", json.dumps(truth), file=sys.stderr)
     settings = OPESettings(estimators=parse_estimators(args.estimators),
-                           fqe_steps=args.fqe_steps, fqe_refits=args.fqe_refits)
+                           fqe_steps=args.fqe_steps, fqe_refits=args.fqe_refits,
+                           fqe_schedule=args.fqe_schedule)
     runs = []
     for i in range(args.logs):
         started = time.perf_counter()
@@ -142,19 +145,33 @@ def main() -> None:
                   file=sys.stderr)
         at_steps = {"aoc": policies["aoc"][s], "bc": policies["bc"][s],
                     "clinicians": t.clinicians[s]}
-        for pname, pol in at_steps.items():
+        probs = {k: (np.eye(held.n_actions)[p] if p.ndim == 1 else p)
+                 for k, p in at_steps.items()}
+        with one_thread():       # every policy's FQE in one ensemble, as aoc evaluate does
+            fqes = fqe_values(log, held.observations, logged, list(probs.values()), settings)
+        mean_return = float(log.returns().mean())
+        for (pname, pol), fqe in zip(probs.items(), fqes):
             with one_thread():
                 rec = policy_value(log, held.observations, logged, prop, pol, held.n_actions,
-                                   settings)
+                                   settings, fqe=fqe)
+            extra = {}
+            if fqe is not None and len(fqe.get("replicates", ())) > 1:
+                extra = {"fqe_bagged": fqe["bagged"], "fqe_replicates": list(fqe["replicates"]),
+                         "fqe_seconds": fqe["seconds"]}
             runs.append({"log": i, "policy": pname, "truth": truth[pname], "ess": rec["ess"],
-                         "notes": rec["notes"], **rec["policy_value"]})
+                         "mean_return": mean_return, "notes": rec["notes"],
+                         **rec["policy_value"], **extra})
         print(f"log {i}: {time.perf_counter() - started:.0f} s", file=sys.stderr)
         if args.out:
             Path(args.out).write_text(json.dumps({"truth": truth, "runs": runs}, indent=1))
     rows = []
     for pname in at_steps:
-        for est in ("pdwis", "wdr", "fqe"):
+        for est in ("pdwis", "wdr", "fqe", "fqe_bagged"):
             r = [x for x in runs if x["policy"] == pname and est in x]
+            if est == "fqe_bagged":     # the refits' mean as the point, FQE's interval around it
+                half = [(x["fqe"]["high"] - x["fqe"]["low"]) / 2 for x in r]
+                r = [{**x, est: {"estimate": x[est], "low": x[est] - h, "high": x[est] + h}}
+                     for x, h in zip(r, half)]
             if not r:
                 continue
             e = np.array([x[est]["estimate"] for x in r])

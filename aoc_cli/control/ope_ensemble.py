@@ -1,0 +1,216 @@
+"""Many fitted Q evaluations trained at once: d3rlpy's DiscreteFQE update, batched over an
+ensemble of members that share one log.
+
+Why: one DiscreteFQE update of icu-sepsis's network (48 -> 64 -> 64 -> 25, batch 256) costs
+~1.7 ms, nearly all of it per-call overhead (Python, autograd, Adam's per-tensor loop), not
+arithmetic; :func:`aoc_cli.control.ope_fqe.bootstrap_fqe` runs a fit and 10 refits per
+policy, three policies an ``aoc evaluate``: ~48,000 updates, ~80 s of a 45,000-step
+evaluation. Stacking the members' weights along a leading dimension (``torch.bmm``) costs
+one update's overhead for all of them.
+
+Each member is d3rlpy's DiscreteFQE, not a re-design of it: its network is the one d3rlpy
+built and initialised (:class:`aoc_cli.control.ope_fqe.FQEFit`: a ``VectorEncoder`` of ReLU
+layers, then a linear head), read from and written back to the d3rlpy modules (weights,
+target weights, Adam's moments, the step count); an update is DiscreteFQEImpl.inner_update's:
+Huber loss of Q(s_t, a_t) against r_t + gamma Q_target(s_{t+1}, a') (1 - terminal_t), the
+mean over the mini-batch, one torch Adam step with d3rlpy's settings (Adam is elementwise, so
+stacked members do not interact), then the target network synced when the member's step count
+(before it rises) is a multiple of the interval, as d3rlpy does. Each member draws its
+mini-batch and next actions from its own generator exactly as ``FQEFit.train`` does, so a
+member started from a fit's state reproduces that fit's d3rlpy training to float rounding
+(tests/control/test_ope_ensemble.py checks it against d3rlpy's own update).
+
+Shapes: M members; layer l's weights (M, d_in, d_out), biases (M, 1, d_out); a mini-batch
+(M, B, d_o) of observations; Q (M, B, n).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+class FQEEnsemble:
+    """M members on the log of ``fit`` (an :class:`aoc_cli.control.ope_fqe.FQEFit`: its
+    standardised observations, actions, rewards, next rows, terminals, mini-batch size, gamma,
+    target interval and Adam settings). Member m starts from ``states[m]`` (an
+    ``FQEFit.snapshot()``) at step count ``counts[m]`` (the d3rlpy model's ``_grad_step``).
+    :meth:`train` takes what each member evaluates and where it draws its rows."""
+
+    def __init__(self, fit, states: list, counts: list):
+        import torch
+
+        self.fit, self.M = fit, len(states)
+        self.counts = np.asarray(counts, np.int64)
+        keys = list(states[0]["q"])
+        self.keys = keys
+        self.is_bias = [k.endswith("bias") for k in keys]
+        if self.is_bias != [False, True] * (len(keys) // 2) or not all(
+                k.endswith("weight") for k, b in zip(keys, self.is_bias) if not b):
+            raise ValueError(f"not a stack of linear layers: {keys}")
+        stack = lambda sd: [torch.stack([s[k] for s in sd]).detach().clone() for k in keys]
+        self.params = [_bmm(p, b).requires_grad_(True)
+                       for p, b in zip(stack([s["q"] for s in states]), self.is_bias)]
+        self.target = [_bmm(p, b) for p, b in zip(stack([s["target"] for s in states]),
+                                                  self.is_bias)]
+        group = fit.fqe.impl.modules.optim.optim.param_groups[0]
+        self.optim = torch.optim.Adam(self.params, lr=group["lr"], betas=group["betas"],
+                                      eps=group["eps"], weight_decay=group["weight_decay"],
+                                      amsgrad=group["amsgrad"])
+        moments = [s["optim"]["optim"]["state"] for s in states]
+        if all(len(m) for m in moments):
+            if len({float(m[0]["step"]) for m in moments}) != 1:
+                raise ValueError("an ensemble's members must share Adam's step count")
+            for i, (p, b) in enumerate(zip(self.params, self.is_bias)):
+                self.optim.state[p] = {"step": moments[0][i]["step"].clone(), **{
+                    key: _bmm(torch.stack([m[i][key] for m in moments]), b)
+                    for key in ("exp_avg", "exp_avg_sq")}}
+        elif any(len(m) for m in moments):
+            raise ValueError("an ensemble's members must all be fresh or all trained")
+        self.gamma = float(fit.fqe.config.gamma)
+        self.interval = int(fit.fqe.config.target_update_interval)
+        self.x = torch.from_numpy(fit.x)                                     # (N, d_o)
+
+    def repeat(self, r: int) -> "FQEEnsemble":
+        """A new ensemble of M * r members, each member here r times in a row (weights,
+        target, Adam's moments, step count): the warm starts of r refits per member."""
+        import copy
+
+        out = copy.copy(self)
+        out.M = self.M * r
+        out.counts = np.repeat(self.counts, r)
+        rep = lambda t: t.detach().repeat_interleave(r, dim=0).clone()
+        out.params = [rep(p).requires_grad_(True) for p in self.params]
+        out.target = [rep(t) for t in self.target]
+        old = self.optim
+        out.optim = type(old)(out.params, **{k: v for k, v in old.defaults.items()})
+        for p, q in zip(self.params, out.params):
+            if p in old.state:
+                out.optim.state[q] = {"step": old.state[p]["step"].clone(),
+                                      **{k: rep(old.state[p][k])
+                                         for k in ("exp_avg", "exp_avg_sq")}}
+        return out
+
+    def _forward(self, layers: list, x):
+        """(M, B, n) Q of every action for observations x (M, B, d_o): linear layers with a
+        ReLU after each but the last (d3rlpy's VectorEncoder, then its linear head)."""
+        import torch
+
+        pairs = list(zip(layers[0::2], layers[1::2]))
+        h = x
+        for i, (w, b) in enumerate(pairs):
+            h = torch.baddbmm(b, h, w)
+            if i < len(pairs) - 1:
+                h = torch.relu(h)
+        return h
+
+    def train(self, steps: int, cums: np.ndarray, policy_of: np.ndarray, pools: list,
+              rng: np.random.Generator, draw=None, progress=None,
+              schedule: str = "constant") -> None:
+        """``steps`` updates of every member (module docstring). Member m evaluates the
+        policy of cumulative probabilities ``cums[policy_of[m]]`` ((P, N, n) in all) and draws
+        its B rows uniformly from ``pools[m]`` (a multiset of row indices; None: every row),
+        with ``rng``. ``draw()`` -> (rows (M, B), next actions (M, B)) replaces that draw
+        (the tests replay d3rlpy's). ``progress(done)`` every 100 steps. ``schedule``
+        "constant" (d3rlpy's default) or "cosine": the learning rate annealed from its value to
+        0 over these ``steps`` (torch's CosineAnnealingLR, which d3rlpy's
+        CosineAnnealingLRFactory makes), so that the last weights are not one noisy step."""
+        import torch
+
+        fit, B = self.fit, self.fit.batch
+        if draw is None:
+            draw = _sampler(fit, cums, np.asarray(policy_of, np.int64), pools, rng, self.M)
+        act = torch.from_numpy(fit.act)
+        rew = torch.from_numpy(fit.rew)
+        alive = torch.from_numpy(1.0 - fit.last.astype(np.float32))
+        nxt = torch.from_numpy(fit.nxt)
+        group = self.optim.param_groups[0]
+        lr0 = group["lr"]
+        if schedule not in ("constant", "cosine"):
+            raise ValueError(f"unknown learning rate schedule {schedule!r}")
+        for step in range(int(steps)):
+            if schedule == "cosine":
+                group["lr"] = lr0 * 0.5 * (1.0 + np.cos(np.pi * step / int(steps)))
+            idx_np, a_next = draw()
+            idx = torch.from_numpy(idx_np)
+            with torch.no_grad():
+                q_next = self._forward(self.target, self.x[nxt[idx]])        # (M, B, n)
+                q_next = q_next.gather(2, torch.from_numpy(a_next)[..., None])[..., 0]
+                y = rew[idx] + self.gamma * q_next * alive[idx]              # (M, B)
+            q = self._forward(self.params, self.x[idx]).gather(2, act[idx][..., None])[..., 0]
+            diff = y - q
+            huber = torch.where(diff.detach().abs() < 1.0, 0.5 * diff ** 2, diff.abs() - 0.5)
+            loss = huber.mean(1).sum()      # each member's mean; the members do not interact
+            self.optim.zero_grad()
+            loss.backward()
+            self.optim.step()
+            sync = self.counts % self.interval == 0
+            if sync.any():                  # after the step, as DiscreteFQEImpl.inner_update
+                keep = torch.from_numpy(sync)
+                with torch.no_grad():
+                    for t, p in zip(self.target, self.params):
+                        t[keep] = p[keep]
+            self.counts += 1
+            if progress is not None and (step + 1) % 100 == 0:
+                progress(step + 1)
+        group["lr"] = lr0
+
+    def state(self, m: int) -> dict:
+        """Member m as an ``FQEFit.snapshot()`` (for ``FQEFit.restore``), with its step
+        count under ``count``."""
+        import copy
+
+        opt = copy.deepcopy(self.fit.fqe.impl.modules.optim.state_dict())
+        opt["optim"]["state"] = {
+            i: {"step": self.optim.state[p]["step"].clone(),
+                **{key: _unbmm(self.optim.state[p][key], m, b)
+                   for key in ("exp_avg", "exp_avg_sq")}}
+            for i, (p, b) in enumerate(zip(self.params, self.is_bias)) if p in self.optim.state}
+        return {"q": {k: _unbmm(p, m, b) for k, p, b in zip(self.keys, self.params, self.is_bias)},
+                "target": {k: _unbmm(p, m, b)
+                           for k, p, b in zip(self.keys, self.target, self.is_bias)},
+                "optim": opt, "count": int(self.counts[m])}
+
+    def q(self, rows: np.ndarray | None = None, block: int = 8192) -> np.ndarray:
+        """(M, len(rows), n) every member's Q_hat of the given rows (None: every row) and
+        every action."""
+        import torch
+
+        rows = np.arange(self.fit.n_rows) if rows is None else np.asarray(rows, np.int64)
+        out = np.empty((self.M, len(rows), self.fit.n_actions))
+        with torch.no_grad():
+            for lo in range(0, len(rows), block):
+                x = self.x[torch.from_numpy(rows[lo:lo + block])]
+                out[:, lo:lo + len(x)] = self._forward(
+                    self.params, x.expand(self.M, -1, -1)).double().numpy()
+        return out
+
+
+def _sampler(fit, cums: np.ndarray, policy_of: np.ndarray, pools: list, rng, M: int):
+    """draw() -> (rows (M, B), next actions (M, B)): member m's B rows uniform over its pool,
+    the next action of each drawn from member m's policy at the row's next logged step."""
+    pools = [np.arange(fit.n_rows) if p is None else np.asarray(p, np.int64) for p in pools]
+    if len(pools) != M or len(policy_of) != M:
+        raise ValueError(f"{len(pools)} pools and {len(policy_of)} policies for {M} members")
+    flat = np.concatenate(pools)
+    lens = np.array([len(p) for p in pools], np.int64)[:, None]             # (M, 1)
+    offsets = np.concatenate([[0], np.cumsum(lens[:-1, 0])])[:, None]       # (M, 1)
+    pol = policy_of[:, None]
+    B, n = fit.batch, fit.n_actions
+
+    def draw():
+        rows = flat[offsets + (rng.random((M, B)) * lens).astype(np.int64)]   # (M, B)
+        u = rng.random((M, B, 1))
+        nxt_a = (cums[pol, fit.nxt[rows]] < u).sum(2).clip(0, n - 1)         # (M, B)
+        return rows, nxt_a
+
+    return draw
+
+
+def _bmm(p, bias: bool):
+    """Stacked torch-layout parameters (M, out, in) / (M, out) -> (M, in, out) / (M, 1, out)."""
+    return (p[:, None, :] if bias else p.transpose(1, 2)).contiguous().clone()
+
+
+def _unbmm(p, m: int, bias: bool):
+    """Member m of a stacked (M, in, out) weight or (M, 1, out) bias, in torch's layout."""
+    return (p[m, 0] if bias else p[m].transpose(0, 1)).detach().clone().contiguous()
