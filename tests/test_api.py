@@ -40,6 +40,20 @@ def test_the_package_re_exports_every_entry_of_the_api():
         aoc_cli.no_such_entry  # noqa: B018
 
 
+def test_importing_the_api_modules_first_hides_no_entry():
+    """A submodule import binds its name in the package: were a module named after an entry,
+    ``import aoc_cli.api.<that module>`` before the entry's first use would turn the entry into
+    a module. Checked in a fresh interpreter, every module imported before any entry is used."""
+    probe = ("import importlib, pkgutil, types\nimport aoc_cli.api as api\n"
+             "for m in pkgutil.iter_modules(api.__path__):\n"
+             "    importlib.import_module('aoc_cli.api.' + m.name)\n"
+             "print(sorted(n for n in api.__all__ if isinstance(getattr(api, n), types.ModuleType)"
+             " or not (callable(getattr(api, n)))))")
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                         check=True).stdout
+    assert out.strip() == "[]"
+
+
 def test_collect_writes_the_corpus_the_command_writes(tmp_path, aoc):
     done = api.collect("two-gates", "g", store=tmp_path, episodes=10, seed=4)
     assert done.corpus.n_episodes == 10 and done.task == "two-gates"

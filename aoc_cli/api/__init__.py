@@ -12,9 +12,11 @@ else ``./corpora``). ``progress=``: an :class:`aoc_cli.progress.Progress` callab
 a function of one line of text, for the notes a command prints on stderr. Errors are
 :class:`aoc_cli.errors.AocError`. The ``aoc`` commands parse their options, make one call
 here and print what it returns (aoc_cli/cli/); docs/design.md, "Library API", lists them.
-The entries live in data.py (ingest, info, verify, export), collect.py (collect, tasks),
-model.py (train, build_index), control.py (open_session, rollout), explain.py, evaluate.py and
-bench.py, each loaded when its entry is first used.
+The entries live in data.py (ingest, info, verify, export), collection.py (collect, tasks),
+model.py (train, build_index), control.py (open_session, rollout), explanation.py, evaluation.py
+and experiment.py (bench), each loaded when its entry is first used. No module here is named
+after an entry: importing a submodule binds its name in this package, which would hide the
+entry of that name.
 """
 
 from __future__ import annotations
@@ -24,13 +26,13 @@ import importlib
 #: Where each public name lives; loaded on first use (PEP 562), so that a command imports only
 #: what its entry needs (``aoc info`` no torch, FAISS or matplotlib).
 _WHERE = {
-    "ingest": "data", "tasks": "collect", "collect": "collect", "info": "data", "corpora": "data",
+    "ingest": "data", "tasks": "collection", "collect": "collection", "info": "data", "corpora": "data",
     "verify": "data", "export": "data", "Verified": "data",
     "train": "model", "build_index": "model", "Indexed": "model",
     "open_session": "control", "rollout": "control", "RolledOut": "control",
-    "explain": "explain", "Explained": "explain",
-    "evaluate": "evaluate",
-    "bench": "bench", "Benched": "bench",
+    "explain": "explanation", "Explained": "explanation",
+    "evaluate": "evaluation",
+    "bench": "experiment", "Benched": "experiment",
 }
 
 __all__ = sorted(_WHERE)

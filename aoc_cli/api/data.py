@@ -1,5 +1,5 @@
 """The API's entries that bring data in and out of the store: ingest, info, the corpus list,
-verify, export (collect: :mod:`aoc_cli.api.collect`)."""
+verify, export (collect: :mod:`aoc_cli.api.collection`)."""
 
 from __future__ import annotations
 

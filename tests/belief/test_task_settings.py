@@ -67,7 +67,7 @@ def test_a_corpus_of_mixed_sources_has_no_task_for_training_nor_control():
         {"kind": "collect", "task": "maze"}, {"kind": "collect", "task": "lunar"}]})
     one = SimpleNamespace(manifest={"sources": [
         {"kind": "collect", "task": "maze"}, {"kind": "collect", "task": "maze"}]})
-    for entry in ("control", "evaluate", "explain"):
+    for entry in ("control", "evaluation", "explanation"):
         assert importlib.import_module(f"aoc_cli.api.{entry}").collected_task is collected_task
     assert [collected_task(c) for c in (mixed, two, one)] == ["", "", "maze"]
 
