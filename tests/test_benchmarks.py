@@ -94,3 +94,21 @@ def test_export_benchmark_reads_every_export_back_as_the_same_corpus():
     assert all(r["same_hash"] is True for r in rows[1:])
     # the command's process (start, imports, write) takes longer than the library call
     assert rows[1]["median_s"] > rows[0]["median_s"]
+
+
+def test_corpus_ready_makes_each_missing_piece_once_through_the_api(tmp_path):
+    """The store of the perf scripts: the corpus, model and index as aoc collect, aoc train
+    and aoc index make them, and nothing made again when present."""
+    from aoc_cli.belief import list_models
+    from aoc_cli.store import DEFAULT_INDEX, DEFAULT_MODEL, index_dir
+
+    h = _harness()
+    settings = dict(train=dict(paper=True, seed=0, max_epochs=1, patience=1, threads=1),
+                    index={})
+    corpus = h.corpus_ready(tmp_path, "p", "pendulum-het", steps=400, seed=0, **settings)
+    assert corpus.n_rows == 400 and list_models(corpus) == [DEFAULT_MODEL]
+    built = index_dir(corpus.path, DEFAULT_MODEL, DEFAULT_INDEX)
+    stamps = {p: p.stat().st_mtime_ns for p in (corpus.path / "corpus.h5", built)}
+    again = h.corpus_ready(tmp_path, "p", "pendulum-het", steps=400, seed=0, **settings)
+    assert again.hash == corpus.hash
+    assert {p: p.stat().st_mtime_ns for p in stamps} == stamps

@@ -33,7 +33,7 @@ wait_passively()  # OpenMP threads wait passively, as under the aoc command (aoc
 
 from aoc_cli.envs.pendulum_het import swingup_action  # noqa: E402
 from aoc_cli.control import open_session  # noqa: E402
-from aoc_cli.store import Store  # noqa: E402
+from aoc_cli.store import DEFAULT_INDEX, Store  # noqa: E402
 
 
 def main() -> None:
@@ -60,7 +60,7 @@ def main() -> None:
     rows, sign = rows[keep], np.sign(acts[keep])
     cand = np.linspace(-2, 2, 41, dtype=np.float32)[:, None]
     for m in args.models.split(","):
-        s = open_session(corpus, m, "default")
+        s = open_session(corpus, m, DEFAULT_INDEX)
         hist_len = s.model.history_length
         hull, head, q_sign = [], [], []
         q_head = s.model.meta.get("critic", {}).get("q_head")

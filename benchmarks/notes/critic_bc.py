@@ -37,11 +37,10 @@ def main() -> None:
     from aoc_cli.belief.data import prepare
     from aoc_cli.belief.inputs import encode_corpus
     from aoc_cli.belief.model import Encoder, Normalisation
-    from aoc_cli.envs import collect
-    from aoc_cli.store import Store
+    import aoc_cli
 
-    store = Store(tempfile.mkdtemp())
-    corpus = store.write("p", collect("pendulum-het", steps=args.rows, seed=0)[0])
+    corpus = aoc_cli.collect("pendulum-het", "p", store=tempfile.mkdtemp(), steps=args.rows,
+                             seed=0).corpus
     for w in (float(x) for x in args.weights.split(",")):
         config = BeliefConfig(belief="critic", history_length=args.history, hidden=args.hidden,
                               critic_steps=args.steps, critic_bc_weight=w, threads=1)

@@ -30,14 +30,14 @@ from aoc_cli.control.config import ControllerConfig  # noqa: E402
 from aoc_cli.control.rollout import run_episode  # noqa: E402
 from aoc_cli.envs import make_env  # noqa: E402
 from aoc_cli.control import open_session  # noqa: E402
-from aoc_cli.store import Store  # noqa: E402
+from aoc_cli.store import DEFAULT_INDEX, DEFAULT_MODEL, Store  # noqa: E402
 
 
 def main() -> None:
     p = argparse.ArgumentParser()
     p.add_argument("--store", default="bench/store")
     p.add_argument("--corpus", default="pendulum-het-upright-100000r-s0")
-    p.add_argument("--model", default="default")
+    p.add_argument("--model", default=DEFAULT_MODEL)
     p.add_argument("--value", default="return")
     p.add_argument("--gamma", type=float, default=0.99)
     p.add_argument("--env", default="pendulum-het-upright")
@@ -45,7 +45,7 @@ def main() -> None:
     p.add_argument("--seed", type=int, default=10000)
     args = p.parse_args()
     corpus = Store.open(args.store).corpus(args.corpus)
-    session = open_session(corpus, args.model, "default",
+    session = open_session(corpus, args.model, DEFAULT_INDEX,
                            config=ControllerConfig.for_task(args.env), seed=args.seed)
     values = value_targets(corpus, args.value, args.gamma)
     session.index.values = values

@@ -22,21 +22,17 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
-
-from aoc_cli.belief.fqe import FQEConfig, fitted_q_values  # noqa: E402
-from aoc_cli.control import ControllerConfig, open_session  # noqa: E402
-from aoc_cli.envs.icu_sepsis import tables  # noqa: E402
-from aoc_cli.experiments import sepsis_policies as sp  # noqa: E402
-from aoc_cli.store import Store  # noqa: E402
-from aoc_cli.threads import one_thread  # noqa: E402
+from aoc_cli.belief.fqe import FQEConfig, fitted_q_values
+from aoc_cli.control import ControllerConfig, open_session
+from aoc_cli.envs.icu_sepsis import tables
+from aoc_cli.experiments import sepsis_policies as sp
+from aoc_cli.store import DEFAULT_MODEL, Store, model_dir
+from aoc_cli.threads import one_thread
 
 VAL_SHARE = 0.3
 
@@ -53,7 +49,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--store", required=True)
     ap.add_argument("--corpus", required=True)
-    ap.add_argument("--model", default="default")
+    ap.add_argument("--model", default=DEFAULT_MODEL)
     ap.add_argument("--variant", action="append", default=[])
     ap.add_argument("--references", action="store_true")
     args = ap.parse_args()
@@ -76,7 +72,7 @@ def main() -> None:
     seen[s[tr], act[tr]] = True
     ok = seen[s[va], act[va]]
     q_exact = t.mdp.q_values(t.clinicians)
-    stored = corpus.models_dir / args.model / "values.npy"
+    stored = model_dir(corpus.path, args.model) / "values.npy"
 
     def by_pair(rows_q, rows):
         table = np.zeros((t.mdp.n_states, 25))
