@@ -41,15 +41,17 @@ def bench(experiment: str, *, store: StoreLike = None, scale: str = "full",
           epsilon: float | None = None, residual_cap: float | None = None,
           sizes: Sequence[int] | None = None, behaviour: str = "mix",
           bench_store: str | os.PathLike = "bench/store", workers: int | None = None,
-          ray_address: str | None = None, progress: Progress | None = None,
-          log: Log | None = None) -> Benched:
+          ray_address: str | None = None, source: str = "ward",
+          progress: Progress | None = None, log: Log | None = None) -> Benched:
     """Run ``experiment`` (pendulum-het, epsilon, k, maze-adapt, two-gates, lunar, ood, all,
     ward, icu-sepsis, icu-sepsis-terminate) at ``scale`` (full, quick: <= 15 min each, tiny:
     seconds) with ``seeds`` seeds (ward: patient splits) and ``episodes`` per evaluation;
     ``methods``: a subset of the methods; ``sizes``: rows per corpus (pendulum-het, lunar) or
     episodes per log (icu-sepsis). Writes results.csv, summary.md, summary.json and plots to
     ``out`` (default bench/EXPERIMENT; ``all``: out/EXPERIMENT); corpora and models go to
-    ``bench_store`` and are reused. ``log``: the expected time, each experiment's outputs."""
+    ``bench_store`` and are reused. ``source``: ward's log, ``ward`` (the simulated ward) or
+    ``medkit`` (medkit-learn's ward simulator; the ``medkit`` extra). ``log``: the expected
+    time, each experiment's outputs."""
     note = log or (lambda _text: None)
     if out is not None:
         check_output(out, "out", open_store(store).root, folder=True)
@@ -59,13 +61,16 @@ def bench(experiment: str, *, store: StoreLike = None, scale: str = "full",
     chosen = list(methods) if methods else None
     sizes = list(sizes) if sizes is not None else None
     bench_store = Path(bench_store)
+    if source != "ward" and experiment != "ward":
+        raise BadSetting("source", source, f"{param('source')} is ward's alone (the log it "
+                         f"reads), not {experiment}'s")
     if experiment == "ward":  # imitation on a log: splits, not rollouts (experiments/ward.py)
         if seeds is not None and seeds < 1:
             raise BadSetting("seeds", seeds, f"{param('seeds')} (random patient splits) must be "
                              f">= 1, got {seeds}")
         report = run_ward(Path(out) if out is not None else Path("bench/ward"), bench_store,
-                          scale, seeds, log=note, progress=progress)
-        note(f"ward: wrote {report['out']}/results.csv, summary.md, summary.json and ward.png "
+                          scale, seeds, log=note, progress=progress, source=source)
+        note(f"ward ({source}): wrote {report['out']}/results.csv, summary.md, summary.json and ward.png "
              f"in {duration(report['seconds'])}")
         return Benched(experiment, scale, report["summary"], None)
     if experiment in ("icu-sepsis", "icu-sepsis-terminate"):  # exact values (sepsis.py)

@@ -43,6 +43,10 @@ def register(app: typer.Typer) -> None:
                                        "improves, as the paper's replay buffers)."),
         bench_store: Path = typer.Option(Path("bench/store"), "--bench-store",
                                          help="Store for the bench's corpora and models."),
+        source: str = typer.Option(
+            "ward", "--source", help="ward: the log, ward (the simulated ward task) or medkit "
+                                     "(medkit-learn's ward simulator, learned from real ward "
+                                     "data as in the paper; pip install -e '.[medkit]')."),
         workers: WorkersOption = None,
         ray_address: RayAddressOption = None,
         fmt: FormatOption = None,
@@ -60,7 +64,7 @@ def register(app: typer.Typer) -> None:
                 methods=[m.strip() for m in methods.split(",") if m.strip()] if methods else None,
                 out=out, epsilon=epsilon, residual_cap=residual_cap, sizes=_sizes(sizes),
                 behaviour=behaviour, bench_store=bench_store, workers=workers,
-                ray_address=ray_address, progress=bar, log=message)
+                ray_address=ray_address, source=source, progress=bar, log=message)
         write_records(done.rows, fmt, columns=done.columns,
                       title=f"aoc bench {experiment} ({scale})")
 

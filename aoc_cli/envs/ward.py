@@ -166,7 +166,8 @@ def _fmt(v) -> str:
     return str(v)
 
 
-def _write_table(path: Path, table: dict[str, np.ndarray]) -> None:
+def write_table(path: Path, table: dict[str, np.ndarray]) -> None:
+    """One CSV file of the columns ``table`` (name -> (n,) array), written atomically."""
     names = list(table)
     with atomic_path(path, suffix=".csv") as tmp:
         with open(tmp, "w", newline="") as fh:
@@ -188,8 +189,8 @@ def write_csv(out_dir, name: str = "ward", episodes: int = DEFAULT_EPISODES, see
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     steps, static = out / f"{name}.csv", out / f"{name}-static.csv"
-    _write_table(steps, sim["rows"])
-    _write_table(static, sim["static"])
+    write_table(steps, sim["rows"])
+    write_table(static, sim["static"])
     return steps, static
 
 
