@@ -9,8 +9,8 @@ Builds (once, in ``--store``) a corpus of ``--train-episodes`` clinician episode
 model as ``aoc train NAME`` trains it with no flags (the task's own settings: fqe values,
 gamma 1, history 0, so AOC's decision depends on the state alone) and its index (``aoc index
 NAME``); a stored model trained with other settings is refused. AOC is the controller with the
-task's settings (``ControllerConfig.for_task("icu-sepsis")``: residual cap, support penalty),
-as ``aoc evaluate`` opens it. AOC's policy is its decision in every state: each state's
+task's settings (residual cap, support penalty), as ``aoc evaluate`` opens it
+(``aoc_cli.open_session``). AOC's policy is its decision in every state: each state's
 observation decided by ``aoc_cli.control.evaluate`` (one-step episodes, the same code path as
 ``aoc evaluate``); on the first held-out log the script checks that ``aoc evaluate``'s own
 decisions are that policy's. BC is the training log's most frequent action per state (the
@@ -36,7 +36,8 @@ h.omp_threads(1)
 
 import numpy as np  # noqa: E402
 
-from aoc_cli.control import ControllerConfig  # noqa: E402
+import aoc_cli  # noqa: E402
+
 from aoc_cli.control import ope  # noqa: E402
 from aoc_cli.control.evaluate import evaluate  # noqa: E402
 from aoc_cli.control.ope_eval import ESTIMATORS, OPESettings, parse_estimators  # noqa: E402
@@ -44,7 +45,6 @@ from aoc_cli.control.ope_eval import fqe_values, policy_value  # noqa: E402
 from aoc_cli.control.ope_fqe import REFITS  # noqa: E402
 from aoc_cli.envs.icu_sepsis import tables  # noqa: E402
 from aoc_cli.errors import AocError  # noqa: E402
-from aoc_cli.control import open_session  # noqa: E402
 from aoc_cli.store import DEFAULT_MODEL, CorpusData, Store, model_dir  # noqa: E402
 from aoc_cli.threads import one_thread  # noqa: E402
 
@@ -67,10 +67,6 @@ def prepare(store: Store, train_episodes: int):
     return corpus
 
 
-#: AOC's controller: the task's own settings (what ``aoc evaluate`` opens for icu-sepsis).
-CONTROLLER = ControllerConfig.for_task("icu-sepsis")
-
-
 def aoc_policy(store: Store, corpus, t) -> np.ndarray:
     """(716,) AOC's decision in every state (terminal states: 0), by aoc's evaluate."""
     states = np.flatnonzero(~t.mdp.terminal)
@@ -85,7 +81,7 @@ def aoc_policy(store: Store, corpus, t) -> np.ndarray:
         every = store.corpus("every-state")
     except AocError:
         every = store.write("every-state", data)
-    session = open_session(corpus, config=CONTROLLER)
+    session = aoc_cli.open_session(corpus.name, store=store)  # the task's controller settings
     _, res = evaluate(session, every, [], ope=OPESettings(estimators=()))
     policy = np.zeros(t.mdp.n_states, np.int64)
     policy[states] = res.decided
@@ -138,7 +134,7 @@ def main() -> None:
         log = ope.Log(held.episode_starts, held.rewards, 1.0)
         prop = held.column("propensity")
         if i == 0 and args.check:   # aoc evaluate's own decisions are the policy evaluated here
-            session = open_session(corpus, config=CONTROLLER)
+            session = aoc_cli.open_session(corpus.name, store=store)
             _, res = evaluate(session, held, [], ope=OPESettings(estimators=()))
             agree = float(np.mean(res.decided == policies["aoc"][s]))
             print(f"aoc evaluate's decisions = the state policy on {agree:.4f} of the steps",

@@ -158,12 +158,14 @@ def sizes_of(store_dir: str, rows: int) -> dict:
     """Bytes of the corpus's float arrays and of the belief array."""
     import h5py
 
-    path = Path(store_dir) / name_of(rows)
+    from aoc_cli.store import DEFAULT_MODEL, Store, model_dir
+
+    path = Store.open(store_dir).path(name_of(rows))
     out = {}
     with h5py.File(path / "corpus.h5", "r") as f:
         out["corpus_float_mb"] = sum(f[k].size * f[k].dtype.itemsize for k in
                                      ("observations", "actions", "rewards") if k in f) / 2**20
-    beliefs = path / "models" / "default" / "beliefs.npy"
+    beliefs = model_dir(path, DEFAULT_MODEL) / "beliefs.npy"
     if beliefs.is_file():
         import numpy as np
 
