@@ -119,10 +119,7 @@ class FQEEnsemble:
         fit, B = self.fit, self.fit.batch
         if draw is None:
             draw = _sampler(fit, cums, np.asarray(policy_of, np.int64), pools, rng, self.M)
-        act = torch.from_numpy(fit.act)
-        rew = torch.from_numpy(fit.rew)
-        alive = torch.from_numpy(1.0 - fit.last.astype(np.float32))
-        nxt = torch.from_numpy(fit.nxt)
+        alive = 1.0 - fit.last.astype(np.float32)                            # (N,)
         group = self.optim.param_groups[0]
         lr0 = group["lr"]
         if schedule not in ("constant", "cosine"):
@@ -130,13 +127,14 @@ class FQEEnsemble:
         for step in range(int(steps)):
             if schedule == "cosine":
                 group["lr"] = lr0 * 0.5 * (1.0 + np.cos(np.pi * step / int(steps)))
-            idx_np, a_next = draw()
-            idx = torch.from_numpy(idx_np)
-            with torch.no_grad():
-                q_next = self._forward(self.target, self.x[nxt[idx]])        # (M, B, n)
+            idx, a_next = draw()                                             # (M, B) each
+            with torch.no_grad():           # (numpy gathers: cheaper than torch's indexing)
+                q_next = self._forward(self.target, torch.from_numpy(fit.x[fit.nxt[idx]]))
                 q_next = q_next.gather(2, torch.from_numpy(a_next)[..., None])[..., 0]
-                y = rew[idx] + self.gamma * q_next * alive[idx]              # (M, B)
-            q = self._forward(self.params, self.x[idx]).gather(2, act[idx][..., None])[..., 0]
+                y = torch.from_numpy(fit.rew[idx]) + self.gamma * q_next * torch.from_numpy(
+                    alive[idx])                                              # (M, B)
+            q = self._forward(self.params, torch.from_numpy(fit.x[idx])).gather(
+                2, torch.from_numpy(fit.act[idx])[..., None])[..., 0]
             diff = y - q
             huber = torch.where(diff.detach().abs() < 1.0, 0.5 * diff ** 2, diff.abs() - 0.5)
             loss = huber.mean(1).sum()      # each member's mean; the members do not interact

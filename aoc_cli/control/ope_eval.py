@@ -22,7 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from aoc_cli.control import ope
-from aoc_cli.control.ope_fqe import REFITS, available, default_steps, fqe_policies
+from aoc_cli.control.ope_fqe import (REFITS, SCHEDULE, available, default_steps,
+                                      fqe_policies)
 from aoc_cli.errors import AocError, BadSetting, NoRewards, param
 
 ESTIMATORS = ("pdwis", "wdr", "fqe")
@@ -43,8 +44,9 @@ class OPESettings:
     (None: :func:`aoc_cli.control.ope_fqe.default_steps`); ``fqe_refits`` the refits behind
     FQE's interval (:func:`aoc_cli.control.ope_fqe.bootstrap_fqe`; 0: one fit, its interval
     resamples the start values only and leaves the model's own error out); bootstrap
-    replicates; seed; ``fqe_schedule`` FQE's learning rate, "constant" (d3rlpy's) or
-    "cosine" (:meth:`aoc_cli.control.ope_ensemble.FQEEnsemble.train`)."""
+    replicates; seed; ``fqe_schedule`` FQE's learning rate, "cosine" (annealed to 0 over the
+    fit and over each refit) or "constant" (d3rlpy's default)
+    (:meth:`aoc_cli.control.ope_ensemble.FQEEnsemble.train`)."""
 
     estimators: tuple = ESTIMATORS
     gamma: float = 1.0
@@ -53,7 +55,7 @@ class OPESettings:
     fqe_refits: int = REFITS
     n_boot: int = ope.N_BOOTSTRAP
     seed: int = 0
-    fqe_schedule: str = "constant"
+    fqe_schedule: str = SCHEDULE
 
 
 def parse_estimators(text: str | None) -> tuple:
@@ -150,8 +152,10 @@ def policy_value(log: ope.Log, observations, logged, propensity, policy, n_actio
         out["policy_value"]["fqe"] = {k: fqe[k] for k in ("estimate", "low", "high")}
         b, k, n = len(fqe["replicates"]), fqe["refit_steps"], fqe["steps"]
         out["notes"].append(
-            f"fqe: the interval is the estimate +- 1.96 sd of {b} refits, each on the log's "
-            f"episodes resampled with replacement, {k:,} steps on from the full fit's "
+            f"fqe: the estimate is the mean of {b} refits' start values (bagged; one fit's: "
+            f"{fqe['fit_estimate']:.4g}), the interval +- 1.96 sd of the refits' estimates, each "
+            f"refit on the log's episodes resampled with replacement, {k:,} steps on from the "
+            f"full fit's "
             f"{n:,}-step weights (the model's own sampling and training error is in it; cost "
             f"{(n + b * k) / n:.1f}x one fit)")
     return out

@@ -42,7 +42,7 @@ from aoc_cli.control import ope  # noqa: E402
 from aoc_cli.control.evaluate import evaluate  # noqa: E402
 from aoc_cli.control.ope_eval import ESTIMATORS, OPESettings, parse_estimators  # noqa: E402
 from aoc_cli.control.ope_eval import fqe_values, policy_value  # noqa: E402
-from aoc_cli.control.ope_fqe import REFITS  # noqa: E402
+from aoc_cli.control.ope_fqe import REFITS, SCHEDULE  # noqa: E402
 from aoc_cli.envs.icu_sepsis import tables  # noqa: E402
 from aoc_cli.errors import AocError  # noqa: E402
 from aoc_cli.store import DEFAULT_MODEL, CorpusData, Store, model_dir  # noqa: E402
@@ -108,7 +108,7 @@ def main() -> None:
     ap.add_argument("--fqe-refits", type=int, default=REFITS,
                     help="refits behind FQE's interval (0: one fit, start values resampled)")
     ap.add_argument("--estimators", default=",".join(ESTIMATORS))
-    ap.add_argument("--fqe-schedule", default="constant", choices=["constant", "cosine"],
+    ap.add_argument("--fqe-schedule", default=SCHEDULE, choices=["constant", "cosine"],
                     help="FQE's learning rate over the fit and each refit")
     ap.add_argument("--out", default=None)
     ap.add_argument("--no-check", dest="check", action="store_false",
@@ -152,8 +152,8 @@ def main() -> None:
                                    settings, fqe=fqe)
             extra = {}
             if fqe is not None and len(fqe.get("replicates", ())) > 1:
-                extra = {"fqe_bagged": fqe["bagged"], "fqe_replicates": list(fqe["replicates"]),
-                         "fqe_seconds": fqe["seconds"]}
+                extra = {"fqe_fit": fqe["fit_estimate"], "fqe_seconds": fqe["seconds"],
+                         "fqe_replicates": list(fqe["replicates"])}
             runs.append({"log": i, "policy": pname, "truth": truth[pname], "ess": rec["ess"],
                          "mean_return": mean_return, "notes": rec["notes"],
                          **rec["policy_value"], **extra})
@@ -162,9 +162,9 @@ def main() -> None:
             Path(args.out).write_text(json.dumps({"truth": truth, "runs": runs}, indent=1))
     rows = []
     for pname in at_steps:
-        for est in ("pdwis", "wdr", "fqe", "fqe_bagged"):
+        for est in ("pdwis", "wdr", "fqe", "fqe_fit"):
             r = [x for x in runs if x["policy"] == pname and est in x]
-            if est == "fqe_bagged":     # the refits' mean as the point, FQE's interval around it
+            if est == "fqe_fit":        # one fit's value as the point, FQE's interval around it
                 half = [(x["fqe"]["high"] - x["fqe"]["low"]) / 2 for x in r]
                 r = [{**x, est: {"estimate": x[est], "low": x[est] - h, "high": x[est] + h}}
                      for x, h in zip(r, half)]

@@ -31,10 +31,10 @@ def log():
     return obs, data, [p[data["state"]] for p in policies]
 
 
-def make(log, policy=0, seed=0):
+def make(log, policy=0, seed=0, cosine_steps=None):
     obs, data, policies = log
     return FQEFit(obs, data["action"], data["reward"], data["starts"], policies[policy],
-                  seed=seed)
+                  seed=seed, cosine_steps=cosine_steps)
 
 
 def replay(fits, pools):
@@ -61,6 +61,19 @@ def test_a_fresh_member_trains_as_d3rlpys_own_update(log):
     q_ref = ref.q()
     assert np.abs(q_ref).max() > 0.1              # it learned something
     assert np.abs(ens.q()[0] - q_ref).max() < TOL
+
+
+def test_the_cosine_schedule_is_d3rlpys_cosine_annealing(log):
+    """schedule="cosine" over n steps: d3rlpy's FQE with Adam under CosineAnnealingLR(T_max n)."""
+    with one_thread():
+        ref, twin = make(log, cosine_steps=230), make(log)
+        ref.train(230)
+        ens = FQEEnsemble(twin, [twin.snapshot()], [twin.fqe._grad_step])
+        ens.train(230, None, None, None, None, draw=replay([twin], [None]), schedule="cosine")
+        plain = make(log)
+        plain.train(230)
+    assert np.abs(ens.q()[0] - ref.q()).max() < TOL
+    assert np.abs(plain.q() - ref.q()).max() > 100 * TOL       # the schedule mattered
 
 
 def test_warm_started_members_each_match_their_own_d3rlpy_fit(log):
