@@ -131,7 +131,7 @@ def test_missing_and_stale_models_and_indexes_carry_their_names(tmp_path):
 
 def test_a_bad_setting_names_the_parameter_and_carries_the_value():
     with pytest.raises(BadSetting) as err:
-        BeliefConfig(critic_steps=0).validate()
+        BeliefConfig(critic_steps=0)
     assert (err.value.param, err.value.value) == ("critic_steps", 0)
     assert str(err.value) == "critic_steps must be >= 1, got 0"
 

@@ -51,16 +51,6 @@ def evaluate(name: str, data: str, *, store: StoreLike = None,
     settings = None
     if any(v is not None for v in (ope, propensity, fqe_steps, fqe_refits)) \
             or ope_gamma != 1.0:
-        if fqe_steps is not None and fqe_steps < 1:
-            raise BadSetting("fqe_steps", fqe_steps,
-                             f"{param('fqe_steps')} must be >= 1, got {fqe_steps}")
-        if fqe_refits is not None and (fqe_refits < 0 or fqe_refits == 1):
-            raise BadSetting("fqe_refits", fqe_refits,
-                             f"{param('fqe_refits')} must be 0 or at least 2, got "
-                             f"{fqe_refits}")
-        if not 0.0 < ope_gamma <= 1.0:
-            raise BadSetting("ope_gamma", ope_gamma,
-                             f"{param('ope_gamma')} must be in (0, 1], got {ope_gamma}")
         settings = OPESettings(parse_estimators(ope), gamma=ope_gamma, propensity=propensity,
                                fqe_steps=fqe_steps, seed=seed,
                                **({} if fqe_refits is None else {"fqe_refits": fqe_refits}))

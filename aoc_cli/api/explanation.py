@@ -100,7 +100,7 @@ def _recorded_step(corpus, audit: Path, episode: int, step: int, opened: dict,
     (records, the session)."""
     recorded = read_audit_step(audit, episode, step)
     meta = recorded["meta"]
-    config = ControllerConfig(**meta["config"]).check() if meta.get("config") \
+    config = ControllerConfig.from_dict(meta["config"], strict=False) if meta.get("config") \
         else opened["config"]
     session = open_session(corpus, meta.get("model", opened["model_id"]),
                            meta.get("index", opened["index_id"]), config, seed=opened["seed"])

@@ -15,34 +15,34 @@ reward: the MPPI state carries it as an extra coordinate, ``[o, r_prev]``.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 
 from aoc_cli.baselines.common import ActionSpace, require
 from aoc_cli.baselines.features import RawFeatures
 from aoc_cli.errors import AocError
+from aoc_cli.settings import Settings, setting
 from aoc_cli.threads import thread_limits
 
 
-@dataclass
-class MPCConfig:
+@dataclass(frozen=True)
+class MPCConfig(Settings):
     """Dynamics model and planner settings (pytorch-mppi's defaults where not stated)."""
 
-    hidden: int = 256
-    epochs: int = 30
-    batch_size: int = 512
-    lr: float = 1e-3
-    samples: int = 200
-    horizon: int = 15
-    #: Exploration noise std as a fraction of the action range.
-    noise: float = 0.25
-    lambda_: float = 1.0
-    seed: int = 0
-    threads: int = 2
+    label = "MPC"
 
-    def to_dict(self) -> dict:
-        return asdict(self)
+    hidden: int = setting(256, bounds=">= 1", help="Units of the dynamics model's layers.")
+    epochs: int = setting(30, bounds=">= 1", help="Epochs of the dynamics model.")
+    batch_size: int = setting(512, bounds=">= 1", help="Mini-batch rows.")
+    lr: float = setting(1e-3, bounds="> 0", help="Learning rate of the dynamics model.")
+    samples: int = setting(200, bounds=">= 1", help="MPPI's sampled action sequences.")
+    horizon: int = setting(15, bounds=">= 1", help="MPPI's planning horizon (steps).")
+    noise: float = setting(0.25, bounds="> 0",
+                           help="Exploration noise std as a fraction of the action range.")
+    lambda_: float = setting(1.0, bounds="> 0", help="MPPI's temperature.")
+    seed: int = setting(0, help="Seed of the model and the planner.")
+    threads: int = setting(2, bounds=">= 1", help="Torch threads while training.")
 
 
 def _transitions(corpus) -> np.ndarray:

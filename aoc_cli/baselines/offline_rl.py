@@ -22,13 +22,14 @@ d3rlpy. Models are trained in the process that uses them (no file is written).
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 
 from aoc_cli.baselines.common import ActionSpace, require
 from aoc_cli.baselines.features import RawFeatures
 from aoc_cli.errors import AocError
+from aoc_cli.settings import Settings, setting
 from aoc_cli.threads import thread_limits
 
 ALGOS = ("td3bc", "cql", "bcq")
@@ -38,22 +39,21 @@ ALGOS = ("td3bc", "cql", "bcq")
 DISCRETE = {"learning_rate": 3e-4, "target_update_interval": 1000}
 
 
-@dataclass
-class OfflineRLConfig:
+@dataclass(frozen=True)
+class OfflineRLConfig(Settings):
     """Training budget of the d3rlpy agents (d3rlpy's own defaults otherwise).
 
     ``steps`` gradient steps of batch ``batch_size``; the papers train 1M steps (TD3+BC) on
     D4RL, the bench uses far fewer (see docs/results.md for what that costs).
     """
 
-    steps: int = 20_000
-    batch_size: int = 256
-    gamma: float = 0.99
-    seed: int = 0
-    threads: int = 2
+    label = "offline RL"
 
-    def to_dict(self) -> dict:
-        return asdict(self)
+    steps: int = setting(20_000, bounds=">= 1", help="Gradient steps.")
+    batch_size: int = setting(256, bounds=">= 1", help="Mini-batch rows.")
+    gamma: float = setting(0.99, bounds="[0, 1]", help="Discount.")
+    seed: int = setting(0, help="Seed of the agent.")
+    threads: int = setting(2, bounds=">= 1", help="Torch threads while training.")
 
 
 def quiet_d3rlpy() -> None:

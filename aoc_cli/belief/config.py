@@ -9,9 +9,10 @@ of Examples", section "Optimization Procedure"
 from __future__ import annotations
 
 import os
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass
 
-from aoc_cli.errors import AocError, BadSetting, param
+from aoc_cli.errors import BadSetting, param
+from aoc_cli.settings import Settings, setting
 
 MODES = ("value", "imitation")
 #: What the value-mode belief b(o, a, h) is trained on (the linear head always maps it to the
@@ -35,8 +36,8 @@ CRITIC_STEP_SECONDS = 0.08
 REWARD_TARGETS = ("return", "mean-return", "reward", "fqe")
 
 
-@dataclass
-class BeliefConfig:
+@dataclass(frozen=True)
+class BeliefConfig(Settings):
     r"""How to learn the belief function b and the linear head l.
 
     Value mode (AOC), the paper's equation (algo_1)::
@@ -59,98 +60,111 @@ class BeliefConfig:
     4000 epochs; aoc stops early on the validation loss instead (``patience``, ``max_epochs``).
     """
 
-    mode: str = "value"
+    label = "belief"
+
+    mode: str = setting("value", choices=MODES,
+                        help="value: b(o, a, h) predicts v (AOC); imitation: b(o, h) predicts "
+                             "the action (ABC, reward-free data).")
     #: What the value-mode belief is trained on: one of BELIEFS (see there; aoc_cli.belief.kinds).
-    belief: str = "value"
+    belief: str = setting("value", choices=BELIEFS,
+                          help="Value mode: what the belief is trained on: value (regress the "
+                               "value target), critic (an offline TD3+BC critic's last hidden "
+                               "layer), reward (a model of the immediate reward) or dynamics "
+                               "(value + the o' - o head). The linear head maps every belief "
+                               "to the value target.")
     #: ``return`` (discounted return-to-go), ``mean-return``, ``reward`` or a column name.
-    value: str = "return"
-    gamma: float = 0.99
-    history_length: int = 4
-    belief_dim: int = 20
+    value: str = setting("return", help="Value target: return (discounted return-to-go), "
+                                        "mean-return, reward, fqe (the behaviour's Q by fitted "
+                                        "Q evaluation, bootstrapped through the log), or a "
+                                        "numeric corpus column.")
+    gamma: float = setting(0.99, bounds="[0, 1]",
+                           help="Discount of the value targets return and fqe.")
+    history_length: int = setting(4, bounds=">= 0",
+                                  help="Previous transitions of the episode the GRU reads "
+                                       "(0: no history).")
+    belief_dim: int = setting(20, bounds=">= 1", help="Belief dimension d_b.")
     #: Units of the GRU (one layer) and of the first two fully connected layers.
-    hidden: int = 128
+    hidden: int = setting(128, bounds=">= 1", help="Units of the GRU and hidden layers.")
     #: Value mode: weight of the auxiliary loss that makes b(o, a, h) also predict the change of
     #: observation o' - o through a second linear head (0 = the paper's objective exactly).
-    dynamics_weight: float = 0.0
+    dynamics_weight: float = setting(0.0, bounds=">= 0",
+                                     help="Value mode: weight of the auxiliary loss that makes "
+                                          "the belief also predict o' - o (0: the paper's "
+                                          "objective alone; the dynamics belief: "
+                                          f"{DEFAULT_DYNAMICS_WEIGHT:g} unless given).")
     #: ``critic``: gradient steps of the offline critic (TD3+BC, aoc_cli.belief.critic); None:
     #: :meth:`critic_steps_for` (10,000 at 100k rows and above, what the bench's full scale
     #: trains and docs/results.md measures: pendulum-het upright at 100k -0.051, lunar at 0.3M
     #: 265.8; fewer on a smaller corpus, and at most ``max_epochs`` passes over the training
     #: rows). The resolved count is what the saved model's config records.
-    critic_steps: int | None = None
+    critic_steps: int | None = setting(
+        None, bounds=">= 1", help="The critic belief: gradient steps.",
+        none=f"one per {CRITIC_STEPS_ROWS // CRITIC_STEPS} rows, between {CRITIC_STEPS_MIN} "
+             f"and {CRITIC_STEPS:,}, at most max_epochs passes over the training rows")
     #: ``critic``: weight of the behaviour-cloning term in the actor's loss (TD3+BC's 1 / alpha;
     #: 0 = plain TD3 as the reference code; see aoc_cli/belief/critic.py).
-    critic_bc_weight: float = 0.4
-    #: Activation of the belief layer: ``tanh`` (bounded, no dead units) or ``relu``.
-    belief_activation: str = "tanh"
-    lr: float = 1e-3
+    critic_bc_weight: float = setting(0.4, bounds=">= 0",
+                                      help="The critic belief: weight of the actor's "
+                                           "behaviour-cloning term (0: plain TD3).")
+    belief_activation: str = setting("tanh", choices=("tanh", "relu"),
+                                     help="Activation of the belief layer: tanh (bounded, no "
+                                          "dead units) or relu.")
+    lr: float = setting(1e-3, bounds="> 0", help="Adam learning rate.")
     #: L2 penalty of Adam (0: the paper's objective; ``aoc train`` may choose one on small
     #: corpora, aoc_cli.belief.select).
-    weight_decay: float = 0.0
-    #: Imitation, discrete actions: ``none`` or ``balanced`` (each action's cross-entropy
-    #: weighted by N / (n_actions * N_action) over the corpus rows, so a rare action counts as
-    #: much as a common one). The validation loss stays the plain cross-entropy.
-    class_weight: str = "none"
-    #: Imitation, discrete actions: label smoothing of the training cross-entropy (0: none).
-    label_smoothing: float = 0.0
-    #: Dropout after each of the two hidden fully connected layers (0: none, the paper's).
-    dropout: float = 0.0
-    batch_size: int = 500
-    max_epochs: int = 200
-    #: Stop after this many epochs without a validation-loss improvement of ``min_delta``.
-    patience: int = 10
-    min_delta: float = 1e-4
-    #: Share of the episodes held out for validation (split by episode, never by row).
-    val_fraction: float = 0.2
-    seed: int = 0
-    #: CPU threads for torch; ``None`` = every core this process may use.
-    threads: int | None = None
-    #: ``auto`` (a GPU when torch sees one, else CPU), ``cpu`` or ``cuda``.
-    device: str = "auto"
+    weight_decay: float = setting(0.0, bounds=">= 0", help="Adam's L2 penalty.")
+    #: Imitation, discrete actions: ``balanced`` weighs each action's cross-entropy by
+    #: N / (n_actions * N_action) over the corpus rows, so a rare action counts as much as a
+    #: common one. The validation loss stays the plain cross-entropy.
+    class_weight: str = setting("none", choices=("none", "balanced"),
+                                help="Imitation, discrete actions: none, or balanced (each "
+                                     "action's loss weighted by its rarity).")
+    label_smoothing: float = setting(0.0, bounds="[0, 1)",
+                                     help="Imitation, discrete actions: label smoothing of the "
+                                          "training loss (0: none, the paper's).")
+    dropout: float = setting(0.0, bounds="[0, 1)",
+                             help="Dropout after the two hidden layers while training (0: "
+                                  "none, the paper's).")
+    batch_size: int = setting(500, bounds=">= 1", help="Mini-batch rows.")
+    max_epochs: int = setting(200, bounds=">= 1",
+                              help="Maximum epochs (early stopping ends sooner; the critic "
+                                   "belief: at most this many passes over the training rows).")
+    patience: int = setting(10, bounds=">= 1",
+                            help="Stop after this many epochs without a better validation "
+                                 "loss.")
+    min_delta: float = setting(1e-4, bounds=">= 0",
+                               help="The smallest decrease of the validation loss that counts "
+                                    "as better.")
+    #: Split by episode, never by row.
+    val_fraction: float = setting(0.2, bounds="(0, 1)",
+                                  help="Share of episodes held out for validation.")
+    seed: int = setting(0, help="Seed of the split, initialisation and batches (reproducible "
+                                "on CPU).")
+    threads: int | None = setting(None, bounds=">= 1", help="CPU threads for torch.",
+                                  none="every core this process may use")
+    device: str = setting("auto", choices=("auto", "cpu", "cuda"),
+                          help="auto (a GPU when torch sees one, else CPU), cpu or cuda.")
 
     def __post_init__(self):
         # ``dynamics`` is the value belief with the auxiliary head: either spelling names it
         # (a model saved before --belief existed records only the weight).
         if self.belief == "value" and self.mode == "value" and self.dynamics_weight > 0:
-            self.belief = "dynamics"
+            object.__setattr__(self, "belief", "dynamics")
         elif self.belief == "dynamics" and self.dynamics_weight == 0:
-            self.dynamics_weight = DEFAULT_DYNAMICS_WEIGHT
+            object.__setattr__(self, "dynamics_weight", DEFAULT_DYNAMICS_WEIGHT)
+        super().__post_init__()
 
-    def validate(self) -> "BeliefConfig":
-        """Check every field; a :class:`BadSetting` names the setting to fix."""
-        if self.mode not in MODES:
-            raise BadSetting("mode", self.mode, f"unknown {param('mode')} {self.mode!r}: use value "
-                             "or imitation")
-        if self.belief not in BELIEFS:
-            raise BadSetting("belief", self.belief, f"unknown {param('belief')} {self.belief!r}: "
-                             f"use {', '.join(BELIEFS)}")
+    def check(self) -> "BeliefConfig":
+        """Check every field, then the fields together; a :class:`BadSetting` names the
+        setting to fix."""
+        super().check()
         if self.dynamics_weight > 0 and self.belief in ("critic", "reward"):
             raise BadSetting("dynamics_weight", self.dynamics_weight,
                              f"{param('dynamics_weight')} belongs to {param('belief', 'dynamics')}"
                              f", not {param('belief', self.belief)}")
-        if self.critic_steps is not None and self.critic_steps < 1:
-            raise BadSetting("critic_steps", self.critic_steps,
-                             f"{param('critic_steps')} must be >= 1, got {self.critic_steps}")
-        if not self.critic_bc_weight >= 0:
-            raise BadSetting("critic_bc_weight", self.critic_bc_weight,
-                             f"{param('critic_bc_weight')} must be >= 0, got "
-                             f"{self.critic_bc_weight}")
         if not self.value:
             raise BadSetting("value", self.value, f"{param('value')} is empty: use return, "
                              "mean-return, reward or a column name")
-        if self.history_length < 0:
-            raise BadSetting("history_length", self.history_length,
-                             f"{param('history_length')} must be >= 0, got {self.history_length}")
-        if not 0.0 <= self.gamma <= 1.0:
-            raise BadSetting("gamma", self.gamma,
-                             f"{param('gamma')} must be in [0, 1], got {self.gamma}")
-        for name in ("belief_dim", "hidden", "batch_size", "max_epochs"):
-            if getattr(self, name) < 1:
-                raise BadSetting(name, getattr(self, name),
-                                 f"{param(name)} must be >= 1, got {getattr(self, name)}")
-        if not self.dynamics_weight >= 0:
-            raise BadSetting("dynamics_weight", self.dynamics_weight,
-                             f"{param('dynamics_weight')} must be >= 0, got {self.dynamics_weight}")
         if self.dynamics_weight > 0 and self.mode != "value":
             raise BadSetting("dynamics_weight", self.dynamics_weight,
                              f"{param('dynamics_weight')} needs {param('mode', 'value')} (the "
@@ -160,40 +174,8 @@ class BeliefConfig:
             raise BadSetting("belief", self.belief,
                              f"{param('belief', self.belief)} needs {param('mode', 'value')} "
                              "(the imitation belief is trained on the logged action)")
-        if self.patience < 1:
-            raise BadSetting("patience", self.patience,
-                             f"{param('patience')} must be >= 1, got {self.patience}")
-        if not self.weight_decay >= 0:
-            raise BadSetting("weight_decay", self.weight_decay,
-                             f"{param('weight_decay')} must be >= 0, got {self.weight_decay}")
-        if self.class_weight not in ("none", "balanced"):
-            raise BadSetting("class_weight", self.class_weight,
-                             f"unknown {param('class_weight')} {self.class_weight!r}: use none "
-                             "or balanced")
-        if not 0.0 <= self.label_smoothing < 1.0:
-            raise BadSetting("label_smoothing", self.label_smoothing,
-                             f"{param('label_smoothing')} must be in [0, 1), got "
-                             f"{self.label_smoothing}")
-        if not 0.0 <= self.dropout < 1.0:
-            raise BadSetting("dropout", self.dropout,
-                             f"{param('dropout')} must be in [0, 1), got {self.dropout}")
-        if not self.lr > 0:
-            raise BadSetting("lr", self.lr,
-                             f"{param('lr')} must be > 0, got {self.lr}")
-        if not 0.0 < self.val_fraction < 1.0:
-            raise BadSetting("val_fraction", self.val_fraction,
-                             f"{param('val_fraction')} must be in (0, 1), got {self.val_fraction}")
-        if self.threads is not None and self.threads < 1:
-            raise BadSetting("threads", self.threads,
-                             f"{param('threads')} must be >= 1, got {self.threads}")
-        if self.belief_activation not in ("tanh", "relu"):
-            raise BadSetting("belief_activation", self.belief_activation,
-                             f"unknown belief activation {self.belief_activation!r}: "
-                             "use tanh or relu")
-        if self.device not in ("auto", "cpu", "cuda"):
-            raise BadSetting("device", self.device,
-                             f"unknown device {self.device!r}: use auto, cpu or cuda")
         return self
+
 
     def critic_steps_for(self, n_rows: int, n_train_rows: int) -> tuple[int, str]:
         """The critic's gradient steps on a corpus of ``n_rows`` rows (``n_train_rows`` of them
@@ -226,38 +208,23 @@ class BeliefConfig:
         except AttributeError:  # pragma: no cover - not Linux
             return max(1, os.cpu_count() or 1)
 
-    def to_dict(self) -> dict:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, data: dict, strict: bool = True) -> "BeliefConfig":
-        """The config of ``data``'s settings. ``strict``: a key that is no setting is an
-        AocError; False (a saved model's config, which may hold an older aoc's keys) ignores
-        it."""
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(data) - known)
-        if strict and unknown:
-            raise AocError(f"unknown belief setting {unknown[0]!r}: the settings are "
-                           f"{', '.join(sorted(known))}")
-        return cls(**{k: v for k, v in data.items() if k in known})
-
 
 @dataclass(frozen=True)
-class FQEConfig:
+class FQEConfig(Settings):
     """Fitted Q evaluation's settings (recorded in the model's ``config.json`` value spec;
     ``--value fqe``, :mod:`aoc_cli.belief.fqe`)."""
 
-    iterations: int = 30
-    """Backups: values reach this many steps back from an episode's end."""
-    steps: int = 300
-    """Gradient steps per backup (at least two epochs of the distinct inputs)."""
-    hidden: int = 128
-    batch_size: int = 1024
-    lr: float = 3e-3
-    final_lr: float = 3e-4
-    """Learning rate of the last ``final_iterations`` backups (the values settle)."""
-    final_iterations: int = 3
-    seed: int = 0
+    label = "fitted Q evaluation"
 
-    def to_dict(self) -> dict:
-        return asdict(self)
+    iterations: int = setting(30, bounds=">= 1", help="Backups: values reach this many steps "
+                                                      "back from an episode's end.")
+    steps: int = setting(300, bounds=">= 1", help="Gradient steps per backup (at least two "
+                                                  "epochs of the distinct inputs).")
+    hidden: int = setting(128, bounds=">= 1", help="Units of each hidden layer of the MLP.")
+    batch_size: int = setting(1024, bounds=">= 1", help="Mini-batch rows.")
+    lr: float = setting(3e-3, bounds="> 0", help="Learning rate.")
+    final_lr: float = setting(3e-4, bounds="> 0", help="Learning rate of the last "
+                                                       "final_iterations backups (the values "
+                                                       "settle).")
+    final_iterations: int = setting(3, bounds=">= 0", help="Backups at final_lr.")
+    seed: int = setting(0, help="Seed of the initialisation and batches.")

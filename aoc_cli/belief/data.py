@@ -52,7 +52,6 @@ def prepare(corpus, config: BeliefConfig, model_id: str, overwrite: bool,
             progress=None) -> TrainingData:
     """Check the request (config, model id, value target, split) and compute the targets;
     ``progress`` follows a target that takes a while (``fqe``'s backups)."""
-    config.validate()
     if model_dir(corpus.path, model_id).exists() and not overwrite:
         raise ModelExists(corpus.name, model_id)
     values = (value_targets(corpus, config.value, config.gamma, progress=progress)

@@ -51,7 +51,7 @@ def _config(given: dict, fixed: dict) -> BeliefConfig:
     searched = {k: given.get(k) for k in select.PAPER}
     config = BeliefConfig(**{k: v for k, v in given.items()
                              if v is not None and k not in select.PAPER}, **fixed)
-    return select.with_defaults(config, searched).validate()
+    return select.with_defaults(config, searched)
 
 
 def check_settings(settings: dict) -> BeliefConfig:
@@ -76,7 +76,7 @@ def train_corpus(corpus: Corpus, model: str = DEFAULT_MODEL, *, paper: bool = Fa
     searched = {k: given[k] for k in select.PAPER}
     config = _config(given, fixed)
     config = select.with_imitation_defaults(
-        corpus, config, {"label_smoothing": smoothing}, paper).validate()
+        corpus, config, {"label_smoothing": smoothing}, paper)
     if from_task:
         note(task_settings.describe(task, from_task))
     extra = {"task_settings": {"task": task, "settings": from_task}} if task else {}

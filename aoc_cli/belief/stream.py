@@ -205,7 +205,6 @@ def train_streaming(corpus, config: BeliefConfig, model_id: str = DEFAULT_MODEL,
     (module docstring); writes the model (unless ``save`` is false) and returns its metrics
     (``extra`` merged in)."""
     started = time.perf_counter()
-    config.validate()
     if config.class_weight != "none" or config.label_smoothing > 0:
         raise BadSetting("class_weight" if config.class_weight != "none" else "label_smoothing",
                          config.class_weight if config.class_weight != "none"

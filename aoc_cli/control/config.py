@@ -2,14 +2,14 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 from aoc_cli.envs import TASKS
-from aoc_cli.errors import AocError
+from aoc_cli.settings import Settings, setting
 
 
-@dataclass
-class ControllerConfig:
+@dataclass(frozen=True)
+class ControllerConfig(Settings):
     r"""Algorithm 1 of the paper (the Accountable Offline Controller).
 
     At each step, K candidate actions :math:`a^{(1..K)}` are sampled; each gets a belief
@@ -34,67 +34,64 @@ class ControllerConfig:
     action of the minimal corpus subset of :math:`b(o_t, h_t)`.
     """
 
-    candidates: int = 100
-    """K, candidate actions per step (a discrete space uses every action)."""
-    epsilon: float = 0.5
-    """Keep candidates whose residual is within this quantile of the K residuals, in (0, 1]."""
-    residual_cap: float | None = None
-    """c: also drop candidates whose residual exceeds c x the corpus's typical p90 residual
-    (None: no cap; ignored for an index built without ``typical_residual``)."""
-    min_support: float | None = None
-    """m: also drop candidates whose value is backed by fewer than m distinct episodes (the
-    support, :mod:`aoc_cli.control.support`); none has m: the best supported of those that
-    pass the residual filter. None: no minimum (the paper's rule)."""
-    support_penalty: float | None = None
-    """z: rank the candidates that pass by v_hat - z sigma_v / sqrt(support) (sigma_v the std
-    of the corpus values; aoc_cli.control.support.penalised) instead of v_hat. None: v_hat."""
-    k: int | None = None
-    """Nearest corpus beliefs per query; None = the index's (``index.json`` ``k``, set by the k
-    rule when it was built: aoc_cli.decompose.k_rule)."""
-    sampler: str = "uniform"
-    """uniform (in a box action space) | bc (a behaviour-cloning model plus Gaussian noise)."""
-    bc_model: str = "bc"
-    """Model id of the imitation-mode model used by the bc sampler."""
-    bc_noise: float = 0.2
-    """Standard deviation of the bc sampler's noise, as a fraction of the action range."""
-    min_weight: float = 0.05
-    """Supporting rows with at least this weight count when checking for disagreement."""
-    action_spread: float = 0.5
-    """Heterogeneity warning: supporting actions spread more than this fraction of the range."""
-    value_spread: float = 1.0
-    """Heterogeneity warning: supporting values spread more than this many corpus value stds."""
-    ood_warmup: int = 10
-    """Steps before the OOD monitor starts flagging."""
-    ood_sigmas: float = 3.0
-    """A step is flagged when its residual exceeds the running mean by this many stds."""
+    label = "controller"
+
+    candidates: int = setting(100, bounds=">= 1",
+                              help="K, candidate actions per step (a discrete space uses every "
+                                   "action).")
+    epsilon: float = setting(0.5, bounds="(0, 1]",
+                             help="Keep the candidates whose residual is within this quantile "
+                                  "of the K residuals.")
+    residual_cap: float | None = setting(
+        None, bounds="> 0", none="no cap",
+        help="c: also drop candidates whose residual exceeds c times the corpus's typical p90 "
+             "residual (ignored for an index built without a typical residual).")
+    #: None: no minimum (the paper's rule); none has m: the best supported of those that pass
+    #: the residual filter.
+    min_support: float | None = setting(
+        None, bounds=">= 1", none="no minimum",
+        help="Value mode: m, also drop candidates whose value is backed by fewer than m "
+             "distinct episodes (the support, aoc_cli.control.support).")
+    #: sigma_v the std of the corpus values (aoc_cli.control.support.penalised).
+    support_penalty: float | None = setting(
+        None, bounds=">= 0", none="rank by v_hat",
+        help="Value mode: z, rank the candidates that pass by v_hat - z sigma_v / "
+             "sqrt(support), a value shrunk by how many episodes back it.")
+    #: The index's ``k``: ``index.json``, set by the k rule when it was built
+    #: (aoc_cli.decompose.k_rule).
+    k: int | None = setting(
+        None, bounds=">= 1",
+        none="the index's: 2 (d_b + 1); an imitation model of discrete actions: at least "
+             "(d_b + 1) / the rarest action's share, up to 16 (d_b + 1)",
+        help="Nearest corpus beliefs per query.")
+    sampler: str = setting("uniform", choices=("uniform", "bc"),
+                           help="Candidates: uniform in the action box, or bc (a "
+                                "behaviour-cloning model + noise).")
+    bc_model: str = setting("bc", help="Model id of the imitation-mode model the bc sampler "
+                                       "uses.")
+    bc_noise: float = setting(0.2, bounds=">= 0",
+                              help="Standard deviation of the bc sampler's noise, as a "
+                                   "fraction of the action range.")
+    min_weight: float = setting(0.05, bounds=">= 0",
+                                help="Supporting rows with at least this weight count when "
+                                     "checking for disagreement.")
+    action_spread: float = setting(0.5, bounds=">= 0",
+                                   help="Heterogeneity warning: supporting actions spread "
+                                        "more than this fraction of the range.")
+    value_spread: float = setting(1.0, bounds=">= 0",
+                                  help="Heterogeneity warning: supporting values spread more "
+                                       "than this many corpus value stds.")
+    ood_warmup: int = setting(10, bounds=">= 0",
+                              help="Steps before the OOD monitor starts flagging.")
+    ood_sigmas: float = setting(3.0, bounds="> 0",
+                                help="A step is flagged when its residual exceeds the running "
+                                     "mean by this many stds.")
 
     @classmethod
     def for_task(cls, task: str | None, **flags) -> "ControllerConfig":
         """The settings for ``task``: the ``flags`` given (None: not given) over the built-in
         task's own settings (``Task.controller``; none for another name, an ingested corpus's
-        ``""`` or None) over the paper's defaults; checked."""
+        ``""`` or None) over the paper's defaults."""
         settings = dict(getattr(TASKS.get(task), "controller", None) or {}) if task else {}
         settings.update({k: v for k, v in flags.items() if v is not None})
-        return cls(**settings).check()
-
-    def check(self) -> "ControllerConfig":
-        if not 0.0 < self.epsilon <= 1.0:
-            raise AocError(f"epsilon must be in (0, 1], got {self.epsilon}", "epsilon")
-        if self.candidates < 1:
-            raise AocError(f"candidates must be >= 1, got {self.candidates}", "candidates")
-        if self.residual_cap is not None and not self.residual_cap > 0:
-            raise AocError(f"residual_cap must be > 0, got {self.residual_cap}", "residual_cap")
-        if self.min_support is not None and not self.min_support >= 1:
-            raise AocError(f"min_support must be >= 1 episode, got {self.min_support}",
-                           "min_support")
-        if self.support_penalty is not None and not self.support_penalty >= 0:
-            raise AocError(f"support_penalty must be >= 0, got {self.support_penalty}",
-                           "support_penalty")
-        if self.k is not None and self.k < 1:
-            raise AocError(f"k must be >= 1, got {self.k}", "k")
-        if self.sampler not in ("uniform", "bc"):
-            raise AocError(f"sampler {self.sampler!r} is unknown: use uniform or bc", "sampler")
-        return self
-
-    def to_dict(self) -> dict:
-        return asdict(self)
+        return cls(**settings)

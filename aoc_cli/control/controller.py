@@ -98,7 +98,7 @@ class Controller:
         self.corpus = corpus
         self.index = index
         self.model = index.model
-        self.config = (config or ControllerConfig()).check()
+        self.config = config or ControllerConfig()
         self.selection = selection
         self.bc_model = bc_model
         self.rng = np.random.default_rng(seed)

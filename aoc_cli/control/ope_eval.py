@@ -25,6 +25,7 @@ from aoc_cli.control import ope
 from aoc_cli.control.ope_fqe import (REFITS, SCHEDULE, available, default_steps,
                                       fqe_policies)
 from aoc_cli.errors import AocError, BadSetting, NoRewards, param
+from aoc_cli.settings import Settings, setting
 
 ESTIMATORS = ("pdwis", "wdr", "fqe")
 #: The propensity column looked for when none is named.
@@ -36,8 +37,8 @@ PROPENSITY_FLOOR = 1e-3
 ESS_WARN_SHARE = 0.01
 
 
-@dataclass
-class OPESettings:
+@dataclass(frozen=True)
+class OPESettings(Settings):
     """``estimators`` of :data:`ESTIMATORS`; ``gamma`` the discount of the value estimated
     (1: the mean undiscounted return of an episode); ``propensity`` a column name (None: the
     ``propensity`` column when the log has one, else an imitation model); ``fqe_steps``
@@ -48,14 +49,42 @@ class OPESettings:
     fit and over each refit) or "constant" (d3rlpy's default)
     (:meth:`aoc_cli.control.ope_ensemble.FQEEnsemble.train`)."""
 
-    estimators: tuple = ESTIMATORS
-    gamma: float = 1.0
-    propensity: str | None = None
-    fqe_steps: int | None = None
-    fqe_refits: int = REFITS
-    n_boot: int = ope.N_BOOTSTRAP
-    seed: int = 0
-    fqe_schedule: str = SCHEDULE
+    label = "offline policy evaluation"
+
+    estimators: tuple = setting(ESTIMATORS, param="ope",
+                                help="Offline policy evaluation of the decisions (value mode): "
+                                     "pdwis, wdr, fqe, comma-separated, or none.")
+    gamma: float = setting(1.0, bounds="(0, 1]", param="ope_gamma",
+                           help="Discount of the value the OPE estimates (1: the mean "
+                                "undiscounted return of an episode).")
+    propensity: str | None = setting(
+        None, none=f"{PROPENSITY_COLUMN!r} when the log has it, else an imitation model "
+                   "estimates them",
+        help="Corpus column of the behaviour's probability of each logged action.")
+    fqe_steps: int | None = setting(None, bounds=">= 1",
+                                    none="about 30 passes over the log, 1,500 to 6,000",
+                                    help="Gradient steps of fitted Q evaluation.")
+    fqe_refits: int = setting(REFITS, bounds=">= 0",
+                              help="Refits on resampled episodes behind FQE's interval, each a "
+                                   "fifth of the fit's steps (0: one fit, the interval then "
+                                   "leaves the model's own error out).")
+    n_boot: int = setting(ope.N_BOOTSTRAP, bounds=">= 1", help="Bootstrap replicates.")
+    seed: int = setting(0, help="Seed of the bootstrap and FQE.")
+    fqe_schedule: str = setting(SCHEDULE, choices=("cosine", "constant"),
+                                help="FQE's learning rate: cosine (annealed to 0 over the fit "
+                                     "and over each refit) or constant (d3rlpy's default).")
+
+    def check(self) -> "OPESettings":
+        super().check()
+        bad = [name for name in self.estimators if name not in ESTIMATORS]
+        if bad:
+            raise BadSetting("ope", bad[0], f"unknown {param('ope')} estimator {bad[0]!r}: "
+                             f"use {', '.join(ESTIMATORS)}")
+        if self.fqe_refits == 1:
+            raise BadSetting("fqe_refits", self.fqe_refits,
+                             f"{param('fqe_refits')} must be 0 or at least 2, got "
+                             f"{self.fqe_refits}")
+        return self
 
 
 def parse_estimators(text: str | None) -> tuple:

@@ -71,7 +71,7 @@ def open_session(corpus: Corpus, model_id: str | None = None, index_id: str = DE
                  seed: int = 0, action_space: dict | None = None) -> Session:
     """Load the model and index of ``corpus`` and build a controller; ``selection`` an (N,)
     bool row mask (:func:`aoc_cli.rows.row_selection`)."""
-    config = (config or ControllerConfig()).check()
+    config = config or ControllerConfig()
     index = load_index(corpus, model_id, index_id)
     bc_model = None
     if config.sampler == "bc" and index.model.mode == "value" and not corpus.discrete:

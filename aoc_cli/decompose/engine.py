@@ -26,11 +26,12 @@ from aoc_cli.errors import AocError
 from aoc_cli.index import BeliefIndex
 from aoc_cli.index.exact import nearest_rows
 from aoc_cli.index.faiss_kinds import check_queries
+from aoc_cli.settings import Settings, setting
 from aoc_cli.threads import single_threaded_blas
 
 
-@dataclass
-class DecomposeConfig:
+@dataclass(frozen=True)
+class DecomposeConfig(Settings):
     """How a query belief is decomposed over the corpus (paper defaults).
 
     k: neighbours per query; None means the paper's k = 2 (d_b + 1) (appendix "Finding the
@@ -44,11 +45,20 @@ class DecomposeConfig:
     reference: solve step 2 with the reference QP (piqp) instead of the batched solver.
     """
 
-    k: int | None = None
-    qp_tol: float = 1e-10
-    lp_start: bool = True
-    exchange_budget: int = 64
-    reference: bool = False
+    label = "decomposition"
+
+    k: int | None = setting(None, bounds=">= 1", none="2 (d_b + 1), at most the corpus's rows",
+                            help="Nearest corpus beliefs per query.")
+    qp_tol: float = setting(1e-10, bounds=">= 0",
+                            help="Relative optimality tolerance of step 2's QP.")
+    lp_start: bool = setting(True, help="Step 3 starts from the lifted-LP vertex.")
+    exchange_budget: int = setting(64, bounds=">= 0",
+                                   help="Volume-reducing vertex exchanges of step 3, at most.")
+    reference: bool = setting(False, help="Solve step 2 with the reference QP (piqp).")
+
+
+#: The paper's settings (a frozen config: shared by every call that gives none).
+_DEFAULT = DecomposeConfig()
 
 
 @dataclass
@@ -106,7 +116,7 @@ def decompose(
     them; the float32 beliefs it keeps are also reused (a float64 ``beliefs`` array is
     otherwise converted on every call). docs/benchmarks.md "decompose without an index".
     """
-    config = config or DecomposeConfig()
+    config = config or _DEFAULT
     beliefs, Y, values = _check_inputs(beliefs, queries, values)
     n_rows, d = beliefs.shape
     k = config.k if k is None else k

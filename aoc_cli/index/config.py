@@ -3,15 +3,15 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
-from aoc_cli.errors import AocError
+from aoc_cli.settings import Settings, setting
 
 KINDS = ("auto", "flat", "hnsw", "ivf")
 
 
-@dataclass
-class IndexConfig:
+@dataclass(frozen=True)
+class IndexConfig(Settings):
     """How the k nearest corpus beliefs of a query are found (step 1 of the decomposition).
 
     The index answers  N_k(y) = the k corpus rows c minimising ||b^c - y||_2  (the paper uses
@@ -38,22 +38,28 @@ class IndexConfig:
     seed: seeds k-means training and the random parts of re-sampling.
     """
 
-    kind: str = "auto"
-    auto_flat_max: int = 200_000
-    hnsw_m: int = 32
-    hnsw_ef_construction: int = 64
-    hnsw_ef_search: int = 128
-    ivf_nlist: int = 0
-    ivf_nprobe: int = 16
-    ivf_train_max: int = 200_000
-    pool_factor: float = 4.0
-    pool_min: int = 128
-    threads: int = 0
-    seed: int = 0
+    label = "index"
 
-    def __post_init__(self) -> None:
-        if self.kind not in KINDS:
-            raise AocError(f"unknown index kind {self.kind!r}; use one of {', '.join(KINDS)}")
+    kind: str = setting("auto", choices=KINDS,
+                        help="The nearest-neighbour index: flat (exact), hnsw (graph), ivf "
+                             "(inverted lists); auto: flat up to auto_flat_max rows, else ivf.")
+    auto_flat_max: int = setting(200_000, bounds=">= 0",
+                                 help="The largest corpus (rows) kind auto indexes flat.")
+    hnsw_m: int = setting(32, bounds=">= 2", help="HNSW graph degree.")
+    hnsw_ef_construction: int = setting(64, bounds=">= 1", help="HNSW beam width when built.")
+    hnsw_ef_search: int = setting(128, bounds=">= 1", help="HNSW beam width when searched.")
+    ivf_nlist: int = setting(0, bounds=">= 0",
+                             help="IVF inverted lists (0: sqrt(N) rounded down to a power of "
+                                  "two, at most 4096).")
+    ivf_nprobe: int = setting(16, bounds=">= 1", help="IVF lists visited per query.")
+    ivf_train_max: int = setting(200_000, bounds=">= 1",
+                                 help="Rows used to train the IVF coarse quantiser.")
+    pool_factor: float = setting(4.0, bounds="> 0",
+                                 help="Batched HNSW search: the pool is pool_factor k rows.")
+    pool_min: int = setting(128, bounds=">= 1",
+                            help="Batched HNSW search: the pool has at least this many rows.")
+    threads: int = setting(0, bounds=">= 0", help="FAISS OpenMP threads (0: FAISS's default).")
+    seed: int = setting(0, help="Seed of k-means training and of re-sampling.")
 
     def resolved_kind(self, n_rows: int) -> str:
         """The concrete kind used for a corpus of n_rows rows."""
@@ -69,14 +75,3 @@ class IndexConfig:
             return min(self.ivf_nlist, max(1, n_rows))
         target = math.sqrt(max(n_rows, 1))
         return int(min(4096, max(1, 2 ** math.floor(math.log2(max(target, 1.0))))))
-
-    @classmethod
-    def from_dict(cls, data: dict, strict: bool = True) -> "IndexConfig":
-        """The config of ``data``'s settings. ``strict``: a key that is no setting (a typo such
-        as ``kidn``) is an AocError; False (a saved index's config) ignores it."""
-        names = {f.name for f in fields(cls)}
-        unknown = sorted(set(data) - names)
-        if strict and unknown:
-            raise AocError(f"unknown index setting {unknown[0]!r}: the settings are "
-                           f"{', '.join(sorted(names))}")
-        return cls(**{key: value for key, value in data.items() if key in names})

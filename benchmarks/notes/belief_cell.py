@@ -27,6 +27,7 @@ import argparse
 import json
 import os
 import sys
+from dataclasses import replace
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
@@ -75,10 +76,9 @@ def main() -> None:
         scale["patience"] = args.patience
     config = model_config(scale, args.kind,
                           args.seed if args.train_seed is None else args.train_seed)
-    for name in ("value", "gamma", "history_length", "belief_dim", "hidden"):
-        if getattr(args, name) is not None:
-            setattr(config, name, getattr(args, name))
-    config.validate()
+    config = replace(config, **{name: getattr(args, name) for name in (
+        "value", "gamma", "history_length", "belief_dim", "hidden")
+        if getattr(args, name) is not None})
 
     def progress(done: int, total: int, label: str) -> None:
         """aoc_cli.progress's protocol: the epochs (or critic steps) done of the most."""

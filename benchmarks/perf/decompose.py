@@ -136,9 +136,8 @@ def run(n: int, args) -> dict:
     base_rss = rss_mb()
     reset_peak()
     t = time.perf_counter()
-    config = IndexConfig(kind=args.kind, threads=args.threads)
-    if args.nprobe:
-        config.ivf_nprobe = args.nprobe
+    config = IndexConfig(kind=args.kind, threads=args.threads,
+                         **({"ivf_nprobe": args.nprobe} if args.nprobe else {}))
     if cache and os.path.exists(cache + ".faiss"):
         index = BeliefIndex.load(cache + ".faiss", beliefs=beliefs)
         index.config = config  # search parameters of this run (nprobe, pool), not the saved ones

@@ -126,7 +126,7 @@ def test_the_config_names_the_belief_and_dynamics_is_the_weighted_head():
                       (dict(belief="critic", critic_steps=0), "--critic-steps"),
                       (dict(belief="critic", critic_bc_weight=-1), "--critic-bc-weight")):
         with pytest.raises(BadSetting) as err:
-            BeliefConfig(**bad).validate()
+            BeliefConfig(**bad)
         assert says in message(err.value)              # the command line's flags
         assert "--" not in str(err.value)              # the library's parameters
 

@@ -163,7 +163,7 @@ def test_residual_cap_falls_back_to_the_smallest_residual_when_none_pass(maze):
 def test_residual_cap_must_be_positive():
     # the library names its parameter (the command line shows --residual-cap)
     with pytest.raises(AocError, match="^residual_cap must be > 0"):
-        ControllerConfig(residual_cap=0.0).check()
+        ControllerConfig(residual_cap=0.0)
 
 
 def test_task_defaults_come_from_one_place():
@@ -182,7 +182,7 @@ def test_task_defaults_come_from_one_place():
     # the library names its parameter; the command line shows the flag
     assert err.value.for_command_line().startswith("--epsilon must be in")
     with pytest.raises(AocError, match="^residual_cap must be > 0") as err:
-        ControllerConfig(residual_cap=-1.0).check()
+        ControllerConfig(residual_cap=-1.0)
     assert err.value.for_command_line().startswith("--residual-cap must be > 0")
 
 

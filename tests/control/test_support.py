@@ -70,9 +70,9 @@ def test_the_penalty_shrinks_values_by_the_episodes_behind_them():
 
 def test_min_support_must_be_at_least_one_episode():
     with pytest.raises(AocError, match="min_support"):
-        ControllerConfig(min_support=0.5).check()
+        ControllerConfig(min_support=0.5)
     with pytest.raises(AocError, match="support_penalty"):
-        ControllerConfig(support_penalty=-1.0).check()
+        ControllerConfig(support_penalty=-1.0)
 
 
 def lucky_arm_data() -> CorpusData:

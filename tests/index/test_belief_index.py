@@ -199,7 +199,7 @@ def test_bad_resampling_and_search_input_raise():
         index.search(np.zeros((1, 4)), 3)
     with pytest.raises(AocError, match="NaN"):
         index.search(np.full((1, 3), np.nan), 3)
-    with pytest.raises(AocError, match="unknown index kind"):
+    with pytest.raises(AocError, match="unknown kind .lsh.: use auto, flat"):
         IndexConfig(kind="lsh")
     with pytest.raises(AocError, match="non-empty|no beliefs"):
         BeliefIndex.build(np.zeros((0, 3), dtype=np.float32))

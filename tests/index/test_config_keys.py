@@ -11,10 +11,10 @@ from aoc_cli.index.config import IndexConfig
 
 
 def test_an_unknown_index_setting_is_refused_with_its_name():
-    with pytest.raises(AocError, match=r"unknown index setting 'kidn'.*\bkind\b"):
+    with pytest.raises(AocError, match=r"unknown index setting kidn:.*\bkind\b"):
         IndexConfig.from_dict({"kidn": "hnsw"})
     beliefs = np.random.default_rng(0).normal(size=(50, 4)).astype(np.float32)
-    with pytest.raises(AocError, match="'kidn'"):
+    with pytest.raises(AocError, match=r"\bkidn\b"):
         BeliefIndex.build(beliefs, kidn="hnsw")
     assert BeliefIndex.build(beliefs, kind="flat").kind == "flat"
 
@@ -26,5 +26,5 @@ def test_a_saved_config_with_a_key_of_an_older_aoc_still_reads():
 
 
 def test_an_unknown_belief_setting_is_refused_with_its_name():
-    with pytest.raises(AocError, match="unknown belief setting 'hiden'"):
+    with pytest.raises(AocError, match="unknown belief setting hiden:"):
         BeliefConfig.from_dict({"hiden": 32})
