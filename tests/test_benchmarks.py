@@ -112,3 +112,14 @@ def test_corpus_ready_makes_each_missing_piece_once_through_the_api(tmp_path):
     again = h.corpus_ready(tmp_path, "p", "pendulum-het", steps=400, seed=0, **settings)
     assert again.hash == corpus.hash
     assert {p: p.stat().st_mtime_ns for p in stamps} == stamps
+
+
+def test_decompose_benchmark_with_exact_search_recalls_every_neighbour():
+    """A flat (exact) index finds the exact search's neighbours: recall 1 in every query."""
+    rows = _rows(_run(PERF / "decompose.py", "--sizes", "2k", "--kind", "flat", "--batches",
+                      "2", "--repeats", "2", "--paper-batches", "0", "--recall-batches", "2",
+                      "--threads", "1", "-f", "json"))
+    assert len(rows) == 1 and rows[0]["rows"] == 2000 and rows[0]["kind"] == "flat"
+    assert rows[0]["work"] == 100 and rows[0]["runs"] == 4  # 2 batches x 2 repeats
+    assert rows[0]["recall"] == 1.0 and rows[0]["min_recall"] == 1.0
+    assert rows[0]["ratio"] == pytest.approx(rows[0]["plain_ms"] / rows[0]["ms"])

@@ -168,8 +168,9 @@ def corpus_ready(store, name: str, task: str | None = None, *, steps: int | None
     """Corpus ``name`` of ``store`` (a Store or a folder), made as the commands make it, each
     step only when missing: ``aoc_cli.api.collect(task, ...)`` (``steps`` / ``episodes``,
     ``seed``); with ``train`` (``aoc_cli.api.train``'s settings), model ``model`` (default
-    DEFAULT_MODEL); with ``index`` (``aoc_cli.api.build_index``'s settings), its default
-    index (``rebuild_index``: built again even when present). Returns the Corpus."""
+    DEFAULT_MODEL); with ``index`` (``aoc_cli.api.build_index``'s settings), the index
+    ``index["index_id"]`` (default DEFAULT_INDEX) on that model (``rebuild_index``: built again
+    even when present). Returns the Corpus."""
     import aoc_cli
     from aoc_cli.belief import list_models
     from aoc_cli.store import DEFAULT_INDEX, DEFAULT_MODEL, Store, index_dir
