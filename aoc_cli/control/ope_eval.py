@@ -287,6 +287,11 @@ def wanted(settings: OPESettings | None, mode: str, data) -> bool:
                          "imitation model has no values to compare); use "
                          f"{param('ope', 'none')}")
     check_log(data)         # before any step is decided
+    columns = list(getattr(data, "manifest", {}).get("columns", []))
+    if settings.propensity is not None and settings.propensity not in columns:
+        raise BadSetting("propensity", settings.propensity,
+                         f"corpus {data.name!r} has no column {settings.propensity!r} for the "
+                         f"behaviour's propensities (columns: {', '.join(columns) or 'none'})")
     return True
 
 

@@ -16,8 +16,9 @@ and bc baselines), each case ``--repeats`` times, median reported, wall and CPU 
   step does not depend on the log's size);
 * ``distinct``: each distinct observation and history decided once, no OPE (``--ope none``);
 * ``distinct + pdwis``: with PDWIS for the controller and both baselines;
-* ``distinct + OPE``: with PDWIS, WDR and FQE (d3rlpy's DiscreteFQE, the default steps) for
-  the controller and both baselines: ``aoc evaluate``'s default.
+* ``distinct + OPE``: with PDWIS, WDR and FQE (d3rlpy's DiscreteFQE network, the default
+  steps: a fit and 10 refits per policy, all three policies' trained as one batched
+  ensemble) for the controller and both baselines: ``aoc evaluate``'s default.
 """
 
 from __future__ import annotations

@@ -159,6 +159,18 @@ def test_zero_propensity_of_a_logged_action_is_one_line(sepsis, capsys):
         "have a probability above 0 (1 such steps)"]
 
 
+def test_a_propensity_column_the_log_lacks_is_one_line_before_any_step_is_decided(sepsis,
+                                                                                 capsys):
+    root, _store, _ = sepsis
+    code, out, err = _ope_cli(capsys, root, "held", "--propensity", "nosuch")
+    assert code == 2 and out == ""
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(
+        "aoc: error: corpus 'held' has no column 'nosuch' for the behaviour's propensities "
+        "(columns: ")
+    assert "propensity" in lines[0] and "Traceback" not in err
+
+
 def test_a_policy_that_never_takes_the_logged_action_is_one_line(sepsis, capsys, tmp_path):
     root, store, held = sepsis
     steps = tmp_path / "steps.jsonl"          # the command's own decisions (its task settings)
