@@ -291,7 +291,8 @@ def wanted(settings: OPESettings | None, mode: str, data) -> bool:
     if settings.propensity is not None and settings.propensity not in columns:
         raise BadSetting("propensity", settings.propensity,
                          f"corpus {data.name!r} has no column {settings.propensity!r} for the "
-                         f"behaviour's propensities (columns: {', '.join(columns) or 'none'})")
+                         f"behaviour's propensities ({param('propensity')}; columns: "
+                         f"{', '.join(columns) or 'none'})")
     return True
 
 

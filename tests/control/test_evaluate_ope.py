@@ -167,7 +167,7 @@ def test_a_propensity_column_the_log_lacks_is_one_line_before_any_step_is_decide
     lines = err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith(
         "aoc: error: corpus 'held' has no column 'nosuch' for the behaviour's propensities "
-        "(columns: ")
+        "(--propensity; columns: ")
     assert "propensity" in lines[0] and "Traceback" not in err
 
 
