@@ -6,7 +6,7 @@ import sys
 
 from aoc_cli.baselines import make_baseline
 from aoc_cli.control import rollout
-from aoc_cli.control.rollout import action_space_of
+from aoc_cli.control.episodes import action_space_of
 from aoc_cli.envs import collect, make_env
 from aoc_cli.progress import stage, tracked
 from aoc_cli.control import model_free_session

@@ -12,7 +12,7 @@ from aoc_cli.baselines import make_baseline
 from aoc_cli.control import (ControllerConfig, EpisodeResult, Session, model_free_session,
                              rollout as _rollout)
 from aoc_cli.control import open_session as _open_session
-from aoc_cli.control.rollout import action_space_of
+from aoc_cli.control.episodes import action_space_of
 from aoc_cli.control.run import reference_from_audit
 from aoc_cli.envs import collected_task, make_env
 from aoc_cli.errors import BadSetting, param

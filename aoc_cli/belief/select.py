@@ -50,7 +50,7 @@ SEARCH: tuple[tuple[str, tuple], ...] = (
     ("weight_decay", (0.0, 1e-4, 1e-3)),
 )
 #: The paper's value of each searched setting (used when a setting is open and no search runs).
-PAPER = {"history_length": 4, "hidden": 128, "weight_decay": 0.0}
+PAPER = {name: BeliefConfig.__dataclass_fields__[name].default for name, _values in SEARCH}
 MARGIN = 0.01
 SEARCH_PATIENCE = 5
 #: How much better than the majority / mean the model must be not to be flagged.

@@ -8,6 +8,7 @@ from typing import Optional
 
 import typer
 
+import aoc_cli
 from aoc_cli.cli.common import (EpisodesOption, EpsilonOption, FormatOption, RayAddressOption,
                                 ResidualCapOption, WorkersOption, state)
 from aoc_cli.errors import AocError
@@ -52,14 +53,12 @@ def register(app: typer.Typer) -> None:
         fmt: FormatOption = None,
     ) -> None:
         """Run an experiment end to end; write results.csv, summary.md/json and PNGs."""
-        from aoc_cli import api  # here: keeps `aoc --help` and bad input from importing torch
-
         fmt = resolve_format(fmt)
         if quick and tiny:
             raise AocError("give --quick or --tiny, not both")
         scale = "tiny" if tiny else "quick" if quick else "full"
         with ProgressBar(f"bench {experiment}") as bar:
-            done = api.bench(
+            done = aoc_cli.bench(
                 experiment, store=state.store, scale=scale, seeds=seeds, episodes=episodes,
                 methods=[m.strip() for m in methods.split(",") if m.strip()] if methods else None,
                 out=out, epsilon=epsilon, residual_cap=residual_cap, sizes=_sizes(sizes),

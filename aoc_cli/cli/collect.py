@@ -8,6 +8,7 @@ from typing import Annotated, Optional
 
 import typer
 
+import aoc_cli
 from aoc_cli.cli.common import (EpisodesOption, FormatOption, RayAddressOption, WorkersOption,
                                 state)
 from aoc_cli.errors import AocError
@@ -50,20 +51,18 @@ def register(app: typer.Typer) -> None:
         fmt: FormatOption = None,
     ) -> None:
         """Run a built-in task's behaviour policies and store the data as a corpus."""
-        from aoc_cli import api  # here: keeps `aoc --help` and bad input from importing torch
-
         if list_tasks or task is None:
-            tasks = api.tasks()
+            tasks = aoc_cli.tasks()
             if task is None and not list_tasks:
                 raise AocError("give a task to collect (one of " + ", ".join(
                     t["name"] for t in tasks) + "), or --list to see them")
             write_records(tasks, fmt, columns=LIST_COLUMNS, title="built-in tasks")
             return
         with ProgressBar("collect") as bar:
-            done = api.collect(task, name, store=state.store, steps=steps, episodes=episodes,
-                               seed=seed, behaviour=behaviour, policy=policy,
-                               overwrite=overwrite, workers=workers, ray_address=ray_address,
-                               chunk=chunk, csv=csv_dir, progress=bar)
+            done = aoc_cli.collect(task, name, store=state.store, steps=steps, episodes=episodes,
+                                   seed=seed, behaviour=behaviour, policy=policy,
+                                   overwrite=overwrite, workers=workers, ray_address=ray_address,
+                                   chunk=chunk, csv=csv_dir, progress=bar)
         if csv_dir is not None:
             message(f"wrote {done[0]} and {done[1]}: ingest them with `aoc ingest "
                     f"{done[0]} --name {name} --id-column patient --time-column hour "

@@ -3,7 +3,9 @@ choices as enums (``--help`` lists them, shell completion offers them), flag par
 
 A command declares a shared option by its alias and its default, e.g.
 ``epsilon: EpsilonOption = None``, ``fmt: FormatOption = None``, ``seed: SeedOption = 0``;
-the flag's name and help text are the same in every command.
+the flag's name and help text are the same in every command. An option that mirrors a setting
+of a config dataclass takes its help, range, choices and default from the field
+(:mod:`aoc_cli.cli.fields`).
 """
 
 from __future__ import annotations
@@ -15,7 +17,11 @@ from typing import Annotated, List, Optional
 
 import typer
 
+from aoc_cli.belief.config import BeliefConfig
+from aoc_cli.cli.fields import TASK, choices_of, from_field
+from aoc_cli.control.config import ControllerConfig
 from aoc_cli.errors import AocError
+from aoc_cli.index.config import IndexConfig
 
 
 @dataclass
@@ -55,36 +61,12 @@ class PolicyName(str, Enum):
     mpc = "mpc"
 
 
-class SamplerName(str, Enum):
-    """``--sampler``: how the controller draws its K candidate actions."""
-
-    uniform = "uniform"
-    bc = "bc"
-
-
-class IndexKind(str, Enum):
-    """``--kind``: the nearest-neighbour index (auto: flat for small corpora)."""
-
-    auto = "auto"
-    flat = "flat"
-    hnsw = "hnsw"
-    ivf = "ivf"
-
-
-class BeliefMode(str, Enum):
-    """``--mode``: value (AOC, b(o, a, h) predicts v) or imitation (ABC, b(o, h) predicts a)."""
-
-    value = "value"
-    imitation = "imitation"
-
-
-class BeliefKind(str, Enum):
-    """``--belief``: what the value-mode belief is trained on (aoc_cli.belief.config.BELIEFS)."""
-
-    value = "value"
-    critic = "critic"
-    reward = "reward"
-    dynamics = "dynamics"
+#: The choices of a setting, from its field (``--help`` lists them).
+SamplerName = choices_of(ControllerConfig, "sampler")
+IndexKind = choices_of(IndexConfig, "kind")
+BeliefMode = choices_of(BeliefConfig, "mode")
+BeliefKind = choices_of(BeliefConfig, "belief")
+ClassWeight = choices_of(BeliefConfig, "class_weight")
 
 
 class StepCandidates(str, Enum):
@@ -116,35 +98,24 @@ IndexOption = Annotated[str, typer.Option(
     "--index", "--index-id", help="Index id: 'default' (every row once) or a derived index "
                                   "(re-sampled or sub-sampled rows).")]
 
-EpsilonOption = Annotated[Optional[float], typer.Option(
-    "--epsilon", help="Residual quantile of the candidates kept, in (0, 1] (default: the "
-                      "task's setting, else 0.5).")]
+EpsilonOption = Annotated[Optional[float], from_field(
+    ControllerConfig, "epsilon", given=TASK, annotated=True)]
 
-KOption = Annotated[Optional[int], typer.Option(
-    "--k", help="Nearest corpus beliefs per query (default: the index's, 2(d_b+1); an "
-                "imitation model of discrete actions: at least (d_b+1) / the rarest "
-                "action's share, up to 16(d_b+1)).")]
+KOption = Annotated[Optional[int], from_field(ControllerConfig, "k", given=TASK, annotated=True)]
 
-ResidualCapOption = Annotated[Optional[float], typer.Option(
-    "--residual-cap", help="Also drop candidates whose residual exceeds this many times the "
-                           "corpus's typical p90 residual (default: no cap).")]
+ResidualCapOption = Annotated[Optional[float], from_field(
+    ControllerConfig, "residual_cap", given=TASK, annotated=True)]
 
-MinSupportOption = Annotated[Optional[float], typer.Option(
-    "--min-support", help="Value mode: also drop candidates whose value is backed by fewer than "
-                          "this many distinct episodes (the support shown by aoc explain; "
-                          "default: the task's setting, else no minimum).")]
+MinSupportOption = Annotated[Optional[float], from_field(
+    ControllerConfig, "min_support", given=TASK, annotated=True)]
 
-SupportPenaltyOption = Annotated[Optional[float], typer.Option(
-    "--support-penalty", help="Value mode: rank candidates by v_hat - Z x the corpus values' std "
-                              "/ sqrt(support), a value shrunk by how many episodes back it "
-                              "(default: the task's setting, else v_hat).")]
+SupportPenaltyOption = Annotated[Optional[float], from_field(
+    ControllerConfig, "support_penalty", given=TASK, annotated=True)]
 
-CandidatesOption = Annotated[Optional[int], typer.Option(
-    "--candidates", "-K", help="Candidate actions per step (default: the task's, else 100).")]
+CandidatesOption = Annotated[Optional[int], from_field(
+    ControllerConfig, "candidates", "--candidates", "-K", given=TASK, annotated=True)]
 
-SamplerOption = Annotated[SamplerName, typer.Option(
-    "--sampler", case_sensitive=False,
-    help="Candidates: uniform in the action box, or bc (a behaviour-cloning model + noise).")]
+SamplerOption = Annotated[SamplerName, from_field(ControllerConfig, "sampler", annotated=True)]
 
 PolicyOption = Annotated[PolicyName, typer.Option(
     "--policy", case_sensitive=False,

@@ -9,11 +9,14 @@ from typing import Annotated, Optional
 
 import typer
 
+import aoc_cli
 from aoc_cli.cli.common import (CandidatesOption, CorpusArgument, EpsilonOption,
                                 FormatOption, IndexOption, KOption, MinSupportOption, ModelOption,
                                 RayAddressOption, SupportPenaltyOption, WithoutEpisodesOption,
                                 WithoutOption, WorkersOption, parse_episodes,
                                 parse_selection, state)
+from aoc_cli.cli.fields import from_field
+from aoc_cli.control.ope_eval import OPESettings
 from aoc_cli.errors import warn
 from aoc_cli.report import ProgressBar, resolve_format
 from aoc_cli.report.evaluate_view import write_evaluation
@@ -46,27 +49,15 @@ def register(app: typer.Typer) -> None:
                                   "built for the run (default: exact up to "
                                   f"{SMALL_LOG_ROWS:,} corpus rows, IVF beyond: ~10x faster, "
                                   "recall of the nearest rows ~0.9999).")] = None,
-        seed: Annotated[int, typer.Option(
-            "--seed", help="Seed of the candidates (value mode, continuous actions), the "
-                           "bootstrap and FQE.")] = 0,
-        ope_names: Annotated[Optional[str], typer.Option(
-            "--ope", help="Offline policy evaluation of the decisions (value mode): pdwis, "
-                          "wdr, fqe, comma-separated, or none (default: all three when the "
-                          "held-out log has rewards and discrete actions).")] = None,
-        propensity: Annotated[Optional[str], typer.Option(
-            "--propensity", help="Corpus column of the behaviour's probability of each "
-                                 "logged action (default: 'propensity' when the log has it, "
-                                 "else an imitation model estimates them).")] = None,
-        ope_gamma: Annotated[float, typer.Option(
-            "--ope-gamma", help="Discount of the value the OPE estimates (1: the mean "
-                                "undiscounted return of an episode).")] = 1.0,
-        fqe_steps: Annotated[Optional[int], typer.Option(
-            "--fqe-steps", help="Gradient steps of fitted Q evaluation (default: about 30 "
-                                "passes over the log, 1,500 to 6,000).")] = None,
-        fqe_refits: Annotated[Optional[int], typer.Option(
-            "--fqe-refits", help="Refits on resampled episodes behind FQE's interval, each a "
-                                 "fifth of the fit's steps (default 10; 0: one fit, the "
-                                 "interval then leaves the model's own error out).")] = None,
+        seed: int = from_field(OPESettings, "seed",
+                               more="Also of the candidates (value mode, continuous actions)."),
+        ope_names: Optional[str] = from_field(
+            OPESettings, "estimators",
+            given="{default} when the held-out log has rewards and discrete actions"),
+        propensity: Optional[str] = from_field(OPESettings, "propensity"),
+        ope_gamma: float = from_field(OPESettings, "gamma"),
+        fqe_steps: Optional[int] = from_field(OPESettings, "fqe_steps"),
+        fqe_refits: Optional[int] = from_field(OPESettings, "fqe_refits", given="{default}"),
         workers: WorkersOption = None,
         ray_address: RayAddressOption = None,
         without: WithoutOption = None,
@@ -75,11 +66,9 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Decide every logged step of a held-out corpus in batches and score the decisions
         (accuracy, AUC, calibration or value R^2; residuals; baselines on the same steps)."""
-        from aoc_cli import api  # here: keeps `aoc --help` and bad input from importing torch
-
         fmt = resolve_format(fmt)
         with ProgressBar("evaluate", transient=True) as bar:
-            summary = api.evaluate(
+            summary = aoc_cli.evaluate(
                 name, data, store=state.store, baselines=[b.strip() for b in baselines.split(",")],
                 steps_file=steps_file, model=model, index_id=index_id, candidates=candidates,
                 epsilon=epsilon, k=k, min_support=min_support, support_penalty=support_penalty,

@@ -9,6 +9,7 @@ from typing import Annotated, List, Optional
 
 import typer
 
+import aoc_cli
 from aoc_cli.cli.common import (CandidatesOption, CorpusArgument, EpsilonOption, FormatOption,
                                 IndexOption, KOption, MinSupportOption, ModelOption,
                                 ResidualCapOption, SupportPenaltyOption,
@@ -62,18 +63,16 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Explain decisions: from JSONL queries, a recorded step of an audit log, or a logged
         step of a corpus."""
-        from aoc_cli import api  # here: keeps `aoc --help` and bad input from importing torch
-
         fmt = resolve_format(fmt)
-        done = api.explain(name, store=state.store, queries=input, audit=audit, data=data,
-                           episode=episode, step=step,
-                           compare=[_parse_action(c) for c in compare or []], model=model,
-                           index_id=index_id, candidates=candidates, epsilon=epsilon, k=k,
-                           min_support=min_support, support_penalty=support_penalty,
-                           residual_cap=residual_cap, seed=seed,
-                           without=parse_selection(without, "--without"),
-                           without_episodes=parse_episodes(without_episodes), html=html,
-                           steps_file=steps_file)
+        done = aoc_cli.explain(name, store=state.store, queries=input, audit=audit, data=data,
+                               episode=episode, step=step,
+                               compare=[_parse_action(c) for c in compare or []], model=model,
+                               index_id=index_id, candidates=candidates, epsilon=epsilon, k=k,
+                               min_support=min_support, support_penalty=support_penalty,
+                               residual_cap=residual_cap, seed=seed,
+                               without=parse_selection(without, "--without"),
+                               without_episodes=parse_episodes(without_episodes), html=html,
+                               steps_file=steps_file)
         if done.html is not None:
             message(f"wrote {done.html}")
         if done.records:

@@ -9,6 +9,7 @@ from typing import Optional
 
 import typer
 
+import aoc_cli
 from aoc_cli.cli.common import (CorpusArgument, ExcludeOption, FormatOption, OverwriteOption,
                                 SelectOption, choice, parse_selection, state)
 from aoc_cli.errors import AocError
@@ -55,13 +56,11 @@ def register(app: typer.Typer) -> None:
         fmt: FormatOption = None,
     ) -> None:
         """Write corpus NAME as Minari, D4RL HDF5 or CSV; `aoc ingest` reads it back exactly."""
-        from aoc_cli import api  # here: keeps `aoc --help` and bad input from importing torch
-
         fmt = resolve_format(fmt)
         with ProgressBar(f"export {name}") as bar:
-            result = api.export(name, choice(to), out, store=state.store,
-                                select=parse_selection(select, "--select"),
-                                exclude=parse_selection(exclude, "--exclude"),
-                                rows=parse_rows(rows),
-                                overwrite=overwrite, static=static, progress=bar)
+            result = aoc_cli.export(name, choice(to), out, store=state.store,
+                                    select=parse_selection(select, "--select"),
+                                    exclude=parse_selection(exclude, "--exclude"),
+                                    rows=parse_rows(rows),
+                                    overwrite=overwrite, static=static, progress=bar)
         write_object(result.summary(), fmt, title=f"exported {name}")

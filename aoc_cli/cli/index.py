@@ -6,9 +6,12 @@ from typing import Annotated, List, Optional
 
 import typer
 
+import aoc_cli
 from aoc_cli.cli.common import (CorpusArgument, FormatOption, IndexKind, ModelOption,
                                 StepCandidates, choice, parse_rates, state)
+from aoc_cli.cli.fields import from_field
 from aoc_cli.errors import AocError
+from aoc_cli.index.config import IndexConfig
 from aoc_cli.report import ProgressBar, write_object
 from aoc_cli.settings import SMALL_LOG_ROWS
 from aoc_cli.store import DEFAULT_INDEX
@@ -19,9 +22,7 @@ def register(app: typer.Typer) -> None:
     def index_command(
         name: CorpusArgument,
         model: ModelOption = None,
-        kind: Annotated[IndexKind, typer.Option(
-            "--kind", case_sensitive=False,
-            help="The nearest-neighbour index (auto: flat for small corpora).")] = IndexKind.auto,
+        kind: IndexKind = from_field(IndexConfig, "kind"),
         index_id: Annotated[str, typer.Option(
             "--index", "--index-id",
             help="Name of the index (derived indexes need their own).")] = DEFAULT_INDEX,
@@ -33,8 +34,8 @@ def register(app: typer.Typer) -> None:
         subsample: Annotated[Optional[List[str]], typer.Option(
             "--subsample", help="TAG=VALUE:RATE, an episode rate of at most 1 (kept for "
                                 "older scripts; same as --episode-rate).")] = None,
-        seed: Annotated[int, typer.Option(
-            "--seed", help="Seed of sub-sampling and of the typical-residual sample.")] = 0,
+        seed: int = from_field(IndexConfig, "seed", more="Also of sub-sampling and of the "
+                                                         "typical-residual sample."),
         neighbours: Annotated[Optional[StepCandidates], typer.Option(
             "--neighbours", case_sensitive=False,
             help="Step 1's neighbour rows: auto (the nearest rows of each action for an "
@@ -47,17 +48,15 @@ def register(app: typer.Typer) -> None:
         fmt: FormatOption = None,
     ) -> None:
         """Compute every row's belief and build the index the controller searches."""
-        from aoc_cli import api  # here: keeps `aoc --help` and bad input from importing torch
-
         if neighbours is not None and old_neighbours is not None \
                 and neighbours != old_neighbours:
             raise AocError("--neighbours and --candidates (its older name) differ: give one")
         rule = neighbours or old_neighbours or StepCandidates.auto
         rates = parse_rates(episode_rate, "--episode-rate")
         with ProgressBar("index") as p:
-            built = api.build_index(name, model, store=state.store, kind=choice(kind),
-                                    index_id=index_id, episode_rates=rates,
-                                    subsample=parse_rates(subsample, "--subsample"), seed=seed,
-                                    neighbours=choice(rule), progress=p)
+            built = aoc_cli.build_index(name, model, store=state.store, kind=choice(kind),
+                                        index_id=index_id, episode_rates=rates,
+                                        subsample=parse_rates(subsample, "--subsample"), seed=seed,
+                                        neighbours=choice(rule), progress=p)
         meta = built.index.meta
         write_object(built.summary(), fmt, title=f"index {meta['index_id']} of {built.corpus}")

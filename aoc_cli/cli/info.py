@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import typer
 
+import aoc_cli
 from aoc_cli.cli.common import CorpusArgument, FormatOption, state
 from aoc_cli.report.output import message, resolve_format, write_object, write_records
 from aoc_cli.store.summary import space_text
@@ -16,10 +17,8 @@ def register(app: typer.Typer) -> None:
         fmt: FormatOption = None,
     ) -> None:
         """Rows, episodes, spaces, returns, tags and what has been built from corpus NAME."""
-        from aoc_cli import api  # here: keeps `aoc --help` and bad input from importing torch
-
         resolved = resolve_format(fmt)
-        summary = api.info(name, store=state.store)
+        summary = aoc_cli.info(name, store=state.store)
         if resolved != "table":
             write_object(summary, resolved)
             return
@@ -40,9 +39,7 @@ def register(app: typer.Typer) -> None:
     @app.command("ls")
     def ls(fmt: FormatOption = None) -> None:
         """List the corpora of the store."""
-        from aoc_cli import api  # here: keeps `aoc --help` and bad input from importing torch
-
-        root, records = api.corpora(store=state.store)
+        root, records = aoc_cli.corpora(store=state.store)
         if not records:
             message(f"no corpora in {root}: create one with `aoc ingest` or `aoc collect`")
         write_records(records, fmt, columns=["name", "rows", "episodes", "observation", "action",

@@ -7,6 +7,7 @@ from typing import List, Optional
 
 import typer
 
+import aoc_cli
 from aoc_cli.cli.common import FormatOption, parse_key_values, state
 from aoc_cli.report.output import ProgressBar, resolve_format, write_object
 
@@ -52,8 +53,6 @@ def register(app: typer.Typer) -> None:
         fmt: FormatOption = None,
     ) -> None:
         """Read a dataset (Minari, D4RL HDF5, d3rlpy, NPZ, CSV) into corpus NAME."""
-        from aoc_cli import api  # here: keeps `aoc --help` and bad input from importing torch
-
         resolve_format(fmt)
         options = dict(
             tags=parse_key_values(tag, "--tag"), tag_columns=list(tag_column or []),
@@ -64,7 +63,7 @@ def register(app: typer.Typer) -> None:
             terminal_column=terminal_column, static=static,
         )
         with ProgressBar(f"ingest {name}") as bar:
-            result = api.ingest(path, name, store=state.store, fmt=source_format,
-                                options=options, overwrite=overwrite, append=append,
-                                progress=bar)
+            result = aoc_cli.ingest(path, name, store=state.store, fmt=source_format,
+                                    options=options, overwrite=overwrite, append=append,
+                                    progress=bar)
         write_object(result.summary(), fmt, title=f"ingested {name}")

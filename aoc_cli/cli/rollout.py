@@ -8,11 +8,13 @@ from typing import Annotated, Optional
 
 import typer
 
+import aoc_cli
 from aoc_cli.cli.common import (CandidatesOption, CorpusArgument, EpisodesOption,
                                 EpsilonOption, ExcludeOption, FormatOption, IndexOption,
                                 KOption, MinSupportOption, ModelOption, PolicyName, PolicyOption,
-                                ResidualCapOption, SamplerName, SamplerOption, SelectOption,
+                                ResidualCapOption, SamplerOption, SelectOption,
                                 SupportPenaltyOption, choice, parse_selection, state)
+from aoc_cli.control.config import ControllerConfig
 from aoc_cli.report import (ProgressBar, message, resolve_format, write_object,
                             write_records)
 from aoc_cli.store import DEFAULT_INDEX
@@ -34,7 +36,7 @@ def register(app: typer.Typer) -> None:
         min_support: MinSupportOption = None,
         support_penalty: SupportPenaltyOption = None,
         residual_cap: ResidualCapOption = None,
-        sampler: SamplerOption = SamplerName.uniform,
+        sampler: SamplerOption = ControllerConfig.sampler,
         select: SelectOption = None,
         exclude: ExcludeOption = None,
         seed: Annotated[int, typer.Option(
@@ -53,11 +55,9 @@ def register(app: typer.Typer) -> None:
         fmt: FormatOption = None,
     ) -> None:
         """Run episodes; print returns, success, OOD flags and residuals."""
-        from aoc_cli import api  # here: keeps `aoc --help` and bad input from importing torch
-
         fmt = resolve_format(fmt)
         with ProgressBar("rollout", episodes) as p:
-            done = api.rollout(
+            done = aoc_cli.rollout(
                 name, env, store=state.store, episodes=episodes, policy=choice(policy),
                 model=model, index_id=index_id, candidates=candidates, epsilon=epsilon, k=k,
                 min_support=min_support, support_penalty=support_penalty,

@@ -1,5 +1,8 @@
 """`aoc train NAME`: learn the belief model of a corpus (value mode: AOC; imitation: ABC).
-Parses and prints only; the work is in :func:`aoc_cli.api.train`."""
+Parses and prints only; the work is in :func:`aoc_cli.api.train`. Every option but
+``--model``, ``--paper`` and ``--overwrite`` is a :class:`~aoc_cli.belief.config.BeliefConfig`
+setting: its help, range, choices and default come from the field (:mod:`aoc_cli.cli.fields`).
+"""
 
 from __future__ import annotations
 
@@ -7,114 +10,78 @@ from typing import Annotated, Optional
 
 import typer
 
+import aoc_cli
+from aoc_cli.belief import select
 from aoc_cli.belief.config import BeliefConfig
-from aoc_cli.cli.common import (BeliefKind, BeliefMode, CorpusArgument, FormatOption, choice,
-                                state)
+from aoc_cli.cli.common import (BeliefKind, BeliefMode, ClassWeight, CorpusArgument,
+                                FormatOption, choice, state)
+from aoc_cli.cli.fields import TASK, from_field
 from aoc_cli.report import train_view
 from aoc_cli.report.output import ProgressBar, message, resolve_format, write_object
 from aoc_cli.settings import SMALL_LOG_ROWS
 from aoc_cli.store import DEFAULT_MODEL
 
-#: Flag defaults are the config's (the paper's) defaults.
-_D = BeliefConfig()
+_SMALL = f"when imitating discrete actions on up to {SMALL_LOG_ROWS:,} rows"
+
+
+def _searched(name: str) -> str:
+    """The default shown for a setting chosen by validation on a small log."""
+    values = ", ".join(f"{v:g}" for v in dict(select.SEARCH)[name])
+    return f"the task's, else chosen by validation among {values} {_SMALL}, else {{default}}"
+
+
+def _option(name: str, *flags: str, given: str | None = None):
+    return from_field(BeliefConfig, name, *flags, given=given)
+
+
+_PAPER = ", ".join(f"{k} {v:g}" for k, v in {**select.PAPER, "label_smoothing": 0,
+                                              "gamma": BeliefConfig.gamma}.items())
 
 
 def train(
     name: CorpusArgument,
     model: Annotated[str, typer.Option(
         "--model", help="Model id to write (models/<ID>/ of the corpus).")] = DEFAULT_MODEL,
-    mode: Annotated[Optional[BeliefMode], typer.Option(
-        "--mode", case_sensitive=False,
-        help="value: b(o, a, h) predicts v (AOC); imitation: b(o, h) predicts the action "
-             "(ABC, reward-free data). Default: the task's (ward: imitation), else "
-             "value.")] = None,
-    belief: Annotated[Optional[BeliefKind], typer.Option(
-        "--belief", case_sensitive=False,
-        help="Value mode: what the belief is trained on: value (regress --value), critic (an "
-             "offline TD3+BC critic's last hidden layer), reward (a model of the immediate "
-             "reward) or dynamics (value + the o' - o head). The linear head maps every "
-             "belief to --value. Default: value.")] = None,
-    critic_steps: Optional[int] = typer.Option(
-        None, "--critic-steps", help="--belief critic: gradient steps (default: one per 10 "
-                                     "rows, between 500 and 10,000, at most --epochs passes "
-                                     "over the training rows)."),
-    critic_bc_weight: float = typer.Option(_D.critic_bc_weight, "--critic-bc-weight",
-                                           help="--belief critic: weight of the actor's "
-                                                "behaviour-cloning term (0: plain TD3)."),
-    value: Optional[str] = typer.Option(None, "--value",
-                                        help="Value target: return (discounted return-to-go, "
-                                             "the default), mean-return, reward, fqe (the "
-                                             "behaviour's Q by fitted Q evaluation, "
-                                             "bootstrapped through the log), or a numeric "
-                                             "corpus column."),
-    gamma: Optional[float] = typer.Option(
-        None, "--gamma", help="Discount of --value return and fqe (default: the task's: "
-                              "pendulum-het-upright 0.9; else 0.99)."),
-    history_length: Optional[int] = typer.Option(
-        None, "--history-length", help="Previous transitions of the episode the GRU reads "
-                                       "(0: no history; default: chosen by validation among "
-                                       "0, 1, 4 when imitating discrete actions on up to "
-                                       f"{SMALL_LOG_ROWS:,} rows; else the task's, or 4)."),
-    dynamics_weight: Optional[float] = typer.Option(None, "--dynamics-weight",
-                                          help="Value mode: weight of the auxiliary loss that "
-                                               "makes the belief also predict o' - o "
-                                               "(0: the paper's objective alone; "
-                                               "--belief dynamics: 1 unless given)."),
-    belief_dim: int = typer.Option(_D.belief_dim, "--belief-dim", help="Belief dimension d_b."),
-    hidden: Optional[int] = typer.Option(
-        None, "--hidden", help="Units of the GRU and hidden layers (default: chosen among 128, "
-                               "64, 256 when imitating discrete actions on small corpora, "
-                               "else 128)."),
-    weight_decay: Optional[float] = typer.Option(
-        None, "--weight-decay", help="Adam's L2 penalty (default: chosen among 0, 1e-4, 1e-3 "
-                                     "when imitating discrete actions on small corpora, "
-                                     "else 0)."),
-    dropout: float = typer.Option(_D.dropout, "--dropout",
-                                  help="Dropout after the two hidden layers while training "
-                                       "(0: none, the paper's)."),
-    class_weight: str = typer.Option(_D.class_weight, "--class-weight",
-                                     help="Imitation, discrete actions: none, or balanced "
-                                          "(each action's loss weighted by its rarity)."),
-    label_smoothing: Optional[float] = typer.Option(
-        None, "--label-smoothing", help="Imitation, discrete actions: label smoothing of the "
-                                        "training loss (0: none, the paper's; default: 0.1 "
-                                        f"on corpora of up to {SMALL_LOG_ROWS:,} rows, else 0)."),
-    paper: bool = typer.Option(False, "--paper", help="The paper's settings for everything "
-                                                      "not given (L 4, 128 units, no weight "
-                                                      "decay, no label smoothing, gamma "
-                                                      "0.99): no selection, not the task's "
-                                                      "own settings."),
-    epochs: int = typer.Option(_D.max_epochs, "--epochs", help="Maximum epochs (early stopping ends "
-                                                     "sooner; --belief critic: at most this "
-                                                     "many passes over the training rows)."),
-    batch_size: int = typer.Option(_D.batch_size, "--batch-size", help="Mini-batch rows."),
-    lr: float = typer.Option(_D.lr, "--lr", help="Adam learning rate."),
-    patience: int = typer.Option(_D.patience, "--patience",
-                                 help="Stop after this many epochs without a better "
-                                      "validation loss."),
-    val_fraction: float = typer.Option(_D.val_fraction, "--val-fraction",
-                                       help="Share of episodes held out for validation."),
-    seed: Annotated[int, typer.Option(
-        "--seed", help="Seed of the split, initialisation and batches (reproducible on "
-                       "CPU).")] = _D.seed,
-    threads: Optional[int] = typer.Option(None, "--threads",
-                                          help="CPU threads (default: all cores)."),
+    mode: Optional[BeliefMode] = _option("mode", given=TASK),
+    belief: Optional[BeliefKind] = _option("belief", given=TASK),
+    critic_steps: Optional[int] = _option("critic_steps"),
+    critic_bc_weight: float = _option("critic_bc_weight"),
+    value: Optional[str] = _option("value", given=TASK),
+    gamma: Optional[float] = _option("gamma", given=TASK),
+    history_length: Optional[int] = _option("history_length",
+                                            given=_searched("history_length")),
+    dynamics_weight: Optional[float] = _option("dynamics_weight", given=TASK),
+    belief_dim: int = _option("belief_dim"),
+    hidden: Optional[int] = _option("hidden", given=_searched("hidden")),
+    weight_decay: Optional[float] = _option("weight_decay", given=_searched("weight_decay")),
+    dropout: float = _option("dropout"),
+    class_weight: ClassWeight = _option("class_weight"),
+    label_smoothing: Optional[float] = _option(
+        "label_smoothing", given=f"{select.LABEL_SMOOTHING:g} {_SMALL}, else {{default}}"),
+    paper: bool = typer.Option(False, "--paper", help=f"The paper's settings for everything "
+                                                      f"not given ({_PAPER}): no selection, "
+                                                      "not the task's own settings."),
+    epochs: int = _option("max_epochs"),
+    batch_size: int = _option("batch_size"),
+    lr: float = _option("lr"),
+    patience: int = _option("patience"),
+    val_fraction: float = _option("val_fraction"),
+    seed: int = _option("seed"),
+    threads: Optional[int] = _option("threads"),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing model id."),
     fmt: FormatOption = None,
 ) -> None:
     """Train the belief model b and linear head l of corpus NAME; print the final metrics."""
-    from aoc_cli import api  # here: keeps `aoc --help` and bad input from importing torch
-
     fmt = resolve_format(fmt)
     with ProgressBar("train", transient=True) as bar:
-        trained = api.train(
+        trained = aoc_cli.train(
             name, store=state.store, model=model, mode=choice(mode), belief=choice(belief),
             gamma=gamma, value=value, dynamics_weight=dynamics_weight,
             history_length=history_length, hidden=hidden, weight_decay=weight_decay,
             label_smoothing=label_smoothing, critic_steps=critic_steps,
             critic_bc_weight=critic_bc_weight, belief_dim=belief_dim, max_epochs=epochs,
             batch_size=batch_size, lr=lr, patience=patience, val_fraction=val_fraction,
-            seed=seed, threads=threads, dropout=dropout, class_weight=class_weight,
+            seed=seed, threads=threads, dropout=dropout, class_weight=choice(class_weight),
             paper=paper, overwrite=overwrite, progress=bar, log=message)
     for line in train_view.notes(trained):
         message(line)

@@ -9,6 +9,7 @@ from typing import Annotated, List, Optional
 
 import typer
 
+import aoc_cli
 from aoc_cli.cli.common import FormatOption, state
 from aoc_cli.errors import AocError
 from aoc_cli.report.output import ProgressBar, message, write_records
@@ -23,10 +24,8 @@ def register(app: typer.Typer) -> None:
         fmt: FormatOption = None,
     ) -> None:
         """Check every file of the store against the checksums recorded when it was written."""
-        from aoc_cli import api  # here: keeps `aoc --help` and bad input from importing torch
-
         with ProgressBar("verify", transient=True) as bar:
-            done = api.verify(names, store=state.store, progress=bar)
+            done = aoc_cli.verify(names, store=state.store, progress=bar)
         if not done.corpora:
             message(f"no corpora in {done.root}: nothing to verify")
         write_records(done.rows, fmt, columns=["corpus", "file", "status", "detail"],

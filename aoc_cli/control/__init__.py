@@ -1,40 +1,51 @@
-"""The accountable controller: candidates, decisions, decision records, OOD monitor, rollouts."""
+"""The accountable controller: candidates, decisions, decision records, OOD monitor, rollouts.
 
-from aoc_cli.control.config import ControllerConfig
-from aoc_cli.control.controller import Controller, Decision
-from aoc_cli.control.monitor import OODMonitor, flags_against, reference_band
-from aoc_cli.control.records import decision_record, read_audit_step, write_audit
-from aoc_cli.control.rollout import EpisodeResult, HistoryBuffer, run_episode, summarize
-from aoc_cli.control.run import (
-    explain_logged_step,
-    explain_query,
-    parse_query,
-    replay_decision,
-    rollout,
-)
-from aoc_cli.control.session import ModelFreeSession, Session, model_free_session, open_session
+Names are imported lazily (PEP 562), so that reading the controller's settings
+(:mod:`aoc_cli.control.config`, as every CLI start does for its help) imports neither FAISS
+nor the environments. (Hence no submodule is named after a name it gives: importing a
+submodule binds its name in the package; the episode loop is ``episodes.py``, the
+``rollout`` function ``run.py``'s.)
+"""
 
-__all__ = [
-    "Controller",
-    "ControllerConfig",
-    "Decision",
-    "EpisodeResult",
-    "HistoryBuffer",
-    "ModelFreeSession",
-    "OODMonitor",
-    "Session",
-    "decision_record",
-    "explain_logged_step",
-    "explain_query",
-    "flags_against",
-    "model_free_session",
-    "open_session",
-    "parse_query",
-    "read_audit_step",
-    "reference_band",
-    "replay_decision",
-    "rollout",
-    "run_episode",
-    "summarize",
-    "write_audit",
-]
+from __future__ import annotations
+
+import importlib
+
+_WHERE = {
+    "Controller": "controller",
+    "ControllerConfig": "config",
+    "Decision": "controller",
+    "EpisodeResult": "episodes",
+    "HistoryBuffer": "episodes",
+    "ModelFreeSession": "session",
+    "OODMonitor": "monitor",
+    "Session": "session",
+    "decision_record": "records",
+    "explain_logged_step": "run",
+    "explain_query": "run",
+    "flags_against": "monitor",
+    "model_free_session": "session",
+    "open_session": "session",
+    "parse_query": "run",
+    "read_audit_step": "records",
+    "reference_band": "monitor",
+    "replay_decision": "run",
+    "rollout": "run",
+    "run_episode": "episodes",
+    "summarize": "episodes",
+    "write_audit": "records",
+}
+
+__all__ = sorted(_WHERE)
+
+
+def __getattr__(name: str):
+    if name not in _WHERE:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{_WHERE[name]}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(list(globals()) + __all__)

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from aoc_cli.envs import TASKS
 from aoc_cli.settings import Settings, setting
 
 
@@ -92,6 +91,10 @@ class ControllerConfig(Settings):
         """The settings for ``task``: the ``flags`` given (None: not given) over the built-in
         task's own settings (``Task.controller``; none for another name, an ingested corpus's
         ``""`` or None) over the paper's defaults."""
+        # the command line reads these fields' help at every start, before any task is known:
+        # lazy: gymnasium (the environments), for a task's settings only
+        from aoc_cli.envs import TASKS
+
         settings = dict(getattr(TASKS.get(task), "controller", None) or {}) if task else {}
         settings.update({k: v for k, v in flags.items() if v is not None})
         return cls(**settings)

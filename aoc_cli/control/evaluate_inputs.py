@@ -10,7 +10,7 @@ import numpy as np
 from aoc_cli.belief.config import REWARD_TARGETS
 from aoc_cli.belief.targets import value_targets
 from aoc_cli.control.controller import action_bounds, support_disagreement
-from aoc_cli.control.rollout import check_same_spaces
+from aoc_cli.control.episodes import check_same_spaces
 from aoc_cli.decompose import subset_size
 from aoc_cli.errors import AocError, NoRewards, call
 from aoc_cli.index import BeliefIndex

@@ -94,7 +94,7 @@ def label_of(labels: list[str] | None, action, key: str = "action_label") -> dic
 def write_audit(path, episodes: list, meta: dict, corpus=None) -> None:
     """Every decision of every episode in one HDF5 file (atomically).
 
-    ``episodes`` is a list of :class:`aoc_cli.control.rollout.EpisodeResult` run with
+    ``episodes`` is a list of :class:`aoc_cli.control.episodes.EpisodeResult` run with
     ``keep_decisions=True``; ``meta`` (corpus, hashes, controller config...) goes in the
     file's attributes as JSON.
     With ``corpus``, each step's supporting rows also carry their episodes' own ids

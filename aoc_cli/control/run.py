@@ -14,7 +14,7 @@ from aoc_cli.control.controller import Decision
 from aoc_cli.control.monitor import OODMonitor, band_limits, reference_band
 from aoc_cli.control.records import (decision_record, episode_ids, label_of, read_audit_residuals,
                                      write_audit)
-from aoc_cli.control.rollout import (EpisodeResult, HistoryBuffer, Policy, check_same_spaces,
+from aoc_cli.control.episodes import (EpisodeResult, HistoryBuffer, Policy, check_same_spaces,
                                      check_spaces, run_episode, summarize)
 from aoc_cli.errors import AocError, BadInput, call
 from aoc_cli.progress import Progress

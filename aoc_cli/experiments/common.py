@@ -9,7 +9,7 @@ from aoc_cli.belief import BeliefConfig
 from aoc_cli.control import ControllerConfig, open_session
 from aoc_cli.experiments.methods import Runner
 from aoc_cli.experiments.prepare import Artefacts
-from aoc_cli.control.rollout import action_space_of
+from aoc_cli.control.episodes import action_space_of
 from aoc_cli.envs import make_env
 from aoc_cli.store import DEFAULT_INDEX, DEFAULT_MODEL
 

@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from aoc_cli.control import rollout
-from aoc_cli.control.rollout import HistoryBuffer
+from aoc_cli.control.episodes import HistoryBuffer
 from aoc_cli.envs.icu_sepsis import STATE_DEATH, STATE_SURVIVAL, SepsisTables
 from aoc_cli.envs.tabular import TabularMDP, greedy
 

@@ -5,10 +5,28 @@ FAISS (exact "flat", approximate "hnsw" or "ivf", or "auto" by size); `search(qu
 selection)` returns the k nearest corpus rows, optionally restricted to a row mask or id list
 (FAISS ID selectors, no rebuild); `resample` / `subsample` build derived indexes whose positions
 map back to corpus rows (`row_of`); `save` / `load` persist atomically.
+
+Names are imported lazily (PEP 562), so that reading the index's settings
+(:mod:`aoc_cli.index.config`, as ``aoc index --help`` does) does not import FAISS.
 """
 
-from aoc_cli.index.belief_index import BeliefIndex, Selection
-from aoc_cli.index.config import IndexConfig
-from aoc_cli.index.strata import PerAction
+from __future__ import annotations
 
-__all__ = ["BeliefIndex", "IndexConfig", "PerAction", "Selection"]
+import importlib
+
+_WHERE = {"BeliefIndex": "belief_index", "IndexConfig": "config", "PerAction": "strata",
+          "Selection": "belief_index"}
+
+__all__ = sorted(_WHERE)
+
+
+def __getattr__(name: str):
+    if name not in _WHERE:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{_WHERE[name]}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(list(globals()) + __all__)

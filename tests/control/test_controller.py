@@ -33,7 +33,7 @@ def test_maze_controller_reaches_the_goal_and_chains_the_experts(maze):
     assert summary["success_rate"] >= 0.6, summary
     # supporting rows: pi1/pi2 before the wall, pi3/pi4 after it (by weight), on all 8 episodes
     env = make_env("maze")
-    from aoc_cli.control.rollout import run_episode
+    from aoc_cli.control.episodes import run_episode
 
     episodes = [run_episode(env, session.controller, session.model.history_length, maze, 0,
                             100 + i, keep_decisions=True) for i in range(8)]
@@ -78,7 +78,7 @@ def test_select_restricts_supporting_rows_to_the_tag(maze):
     session = open_session(maze, config=ControllerConfig(epsilon=0.1), selection=selection)
     results, _ = rollout(session, make_env("maze"), 1, seed=3, audit=None)
     codes, labels = maze.tag("policy")
-    from aoc_cli.control.rollout import run_episode
+    from aoc_cli.control.episodes import run_episode
 
     res = run_episode(make_env("maze"), session.controller, session.model.history_length, maze,
                       0, 5, keep_decisions=True)
