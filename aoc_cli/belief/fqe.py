@@ -2,18 +2,22 @@
 
 ``--value fqe`` (docs/design.md, "The method, precisely"): the value of row c is the
 behaviour's action value Q(o^c, a^c), learned from the corpus alone (observations, actions,
-rewards and the episode structure) by fitted Q evaluation with SARSA targets::
+rewards and the episode structure) by fitted Q evaluation with expected SARSA targets::
 
     Q_0 = 0;   Q_{i+1} = argmin_Q  sum_c ( Q(o^c, a^c) - y_i^c )^2,
-    y_i^c = r^c + gamma Q_i(o^{c+1}, a^{c+1})    (row c + 1 the next row of c's episode)
+    y_i^c = r^c + gamma V_i(o^{c+1})              (row c + 1 the next row of c's episode)
     y_i^c = r^c                                   (c the last row of its episode)
+    V_i(o) = mean of Q_i(o, a^d) over the rows d of the log at observation o
 
-so the backup follows the action the behaviour took next: the fixed point is the behaviour's
-own Q, with no behaviour model and no propensities. As the ``return`` target, a logged
+so the backup follows the actions the behaviour took at the next observation: the fixed point
+is the behaviour's own Q, with no behaviour model and no propensities. Where no observation
+repeats, V_i(o^{c+1}) is the next row's own Q_i(o^{c+1}, a^{c+1}) (SARSA;
+``FQEConfig(next_value="logged")`` keeps that everywhere). As the ``return`` target, a logged
 episode's end is its end (no bootstrapping past a truncation). Unlike the Monte-Carlo return,
-each target averages the next row's value over every row that shares its input, so on a log
-whose states repeat (ICU-Sepsis) the noise of one patient's outcome is shared out among all the
-patients that reached the same state: docs/results.md ("icu-sepsis").
+each target averages the next step's value over every row that shares its input, so on a log
+whose states repeat (ICU-Sepsis) the noise of one patient's outcome, and of the dose they were
+given next, is shared out among all the patients that reached the same state:
+docs/results.md ("icu-sepsis").
 
 Q is a small MLP on the standardised observation with one output per action (discrete
 actions) or on [o, a] with one output (continuous). Rows with the same input are regressed as
@@ -21,8 +25,8 @@ one point of weight (their count) on their mean target: the same least-squares p
 smaller where inputs repeat, unchanged where they do not.
 
 Hand-written: d3rlpy's FQE / DiscreteFQE evaluate a trained algorithm's greedy policy
-(``Q(o', argmax_a pi(o'))``); the target here is the logged next action's value, which none
-of its estimators computes.
+(``Q(o', argmax_a pi(o'))``); the target here is the logged behaviour's value at the next
+observation, which none of its estimators computes.
 """
 
 from __future__ import annotations
@@ -71,6 +75,7 @@ def fitted_q_values(observations: np.ndarray, actions: np.ndarray, rewards: np.n
     if not 0.0 <= gamma <= 1.0:
         raise BadSetting("gamma", gamma, f"{param('gamma')} must be in [0, 1] for "
                          f"{param('value', 'fqe')}, got {gamma}")
+    expected = config.next_value == "expected"
     discrete = n_actions is not None
     x = _inputs(observations, actions, discrete)
     act = np.asarray(actions, np.int64).reshape(-1) if discrete else np.zeros(n, np.int64)
@@ -84,6 +89,12 @@ def fitted_q_values(observations: np.ndarray, actions: np.ndarray, rewards: np.n
     nxt = next_rows(episode_starts, n)
     has_next = nxt >= 0
     next_group = group[np.where(has_next, nxt, 0)]
+    # the distinct observations o (the first d_o inputs of a group): expected targets' V(o)
+    d_o = np.asarray(observations).reshape(n, -1).shape[1]
+    _, obs_of_group = np.unique(uniq[:, :d_o], axis=0, return_inverse=True)
+    obs_of_group = obs_of_group.reshape(-1)
+    obs_count = np.bincount(obs_of_group, weights=count)
+    next_obs = obs_of_group[next_group]
     r = np.asarray(rewards, np.float64)
 
     torch.manual_seed(config.seed)
@@ -97,7 +108,11 @@ def fitted_q_values(observations: np.ndarray, actions: np.ndarray, rewards: np.n
     steps = max(config.steps, int(np.ceil(2 * n_groups / config.batch_size)))
     q_group = np.zeros(n_groups)
     for it in range(config.iterations):
-        target_rows = r + gamma * np.where(has_next, q_group[next_group], 0.0)
+        if expected:  # V(o') = the rows at o' averaged: sum_g count_g Q_g / count(o')
+            following = (np.bincount(obs_of_group, weights=count * q_group) / obs_count)[next_obs]
+        else:
+            following = q_group[next_group]
+        target_rows = r + gamma * np.where(has_next, following, 0.0)
         target = np.bincount(group, weights=target_rows, minlength=n_groups) / count
         y = torch.from_numpy(target.astype(np.float32))
         lr = config.final_lr if it >= config.iterations - config.final_iterations else config.lr

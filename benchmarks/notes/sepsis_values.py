@@ -6,9 +6,10 @@ controller's decisions with other values v^c swapped into its index, valued exac
 
 For a corpus with a trained ``--value fqe`` model of history length 0 and its index (``aoc
 train NAME``, ``aoc index NAME``): each ``--variant`` is fitted Q evaluation
-(``aoc_cli.belief.fqe``) with FQEConfig fields changed (``ens=M``: the mean of M seeds), e.g.
-``h256:hidden=256``, ``ens3:ens=3``, ``st900:steps=900``; ``base`` is the stored model's own
-values. For each: **validation from the log alone** (fitted on 70% of the episodes, the mean
+(``aoc_cli.belief.fqe``) with FQEConfig fields changed (``ens=M``: the mean of M seeds; a
+value is an int, a float or a word), e.g. ``h256:hidden=256``, ``ens3:ens=3``,
+``l30:next_value=logged,iterations=30`` (the default before 2026-11-26); ``base`` is the stored
+model's own values. For each: **validation from the log alone** (fitted on 70% of the episodes, the mean
 squared error of Q(o, a) against the held-out 30%'s returns-to-go on the (state, dose) pairs
 both hold: the behaviour's Q is their expectation, so a lower error is a better Q up to a
 constant), then the values fitted on the whole log swapped into the index (the beliefs and
@@ -35,6 +36,16 @@ from aoc_cli.store import DEFAULT_MODEL, Store, model_dir
 from aoc_cli.threads import one_thread
 
 VAL_SHARE = 0.3
+
+
+def _number(text: str):
+    """A --variant value: an int, a float or a word (``next_value=expected``)."""
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
 
 
 def fqe(obs, act, rew, starts, spec: dict) -> np.ndarray:
@@ -95,7 +106,7 @@ def main() -> None:
 
     for text in args.variant:
         name, _, kv = text.partition(":")
-        spec = {k: int(x) for k, x in (p.split("=") for p in kv.split(",") if p)}
+        spec = {k: _number(x) for k, x in (p.split("=") for p in kv.split(",") if p)}
         started = time.perf_counter()
         val_q = by_pair(fqe(obs[tr], act[tr], rew[tr], tr_starts, spec), tr)
         v = np.load(stored) if name == "base" else fqe(obs, act, rew, starts, spec)

@@ -1,5 +1,7 @@
 """--value fqe: fitted Q evaluation of the logged behaviour, against Q values computed by hand."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -39,6 +41,38 @@ def test_fitted_q_is_the_behaviours_q_through_the_logged_next_actions():
     np.testing.assert_allclose(q, truth, atol=0.02)
     # the Monte-Carlo return of the episode whose B step paid 0 is 0; FQE shares B's value
     assert abs(q[6] - 0.75) < 0.02
+
+
+def test_fitted_q_values_the_next_observation_by_every_row_logged_there():
+    """A then B twice (B's next dose: 0 once, 1 once), B alone twice (dose 0): at B dose 0
+    pays 1 and dose 1 pays 0, and the log's rows at B took dose 0 three times in four, so
+    Q(A, 0) = V(B) = 0.75 (expected targets), where the doses that happened to follow A
+    give 0.5 (the logged next rows' Q, SARSA)."""
+    a_obs, b_obs = [1.0, 0.0], [0.0, 1.0]
+    episodes = [[(a_obs, 0, 0.0), (b_obs, 0, 1.0)], [(a_obs, 0, 0.0), (b_obs, 1, 0.0)],
+                [(b_obs, 0, 1.0)], [(b_obs, 0, 1.0)]]
+    rows = [step for ep in episodes for step in ep]
+    obs = np.array([r[0] for r in rows], np.float32)
+    act = np.array([r[1] for r in rows], np.int64)
+    rew = np.array([r[2] for r in rows])
+    starts = episode_starts_from_lengths([len(ep) for ep in episodes])
+    q = fitted_q_values(obs, act, rew, starts, 1.0, n_actions=2, config=SMALL)
+    np.testing.assert_allclose(q, [0.75, 1.0, 0.75, 0.0, 1.0, 1.0], atol=0.02)
+    sarsa = fitted_q_values(obs, act, rew, starts, 1.0, n_actions=2,
+                            config=replace(SMALL, next_value="logged"))
+    np.testing.assert_allclose(sarsa, [0.5, 1.0, 0.5, 0.0, 1.0, 1.0], atol=0.02)
+
+
+def test_expected_and_logged_targets_agree_where_no_observation_repeats():
+    rng = np.random.default_rng(1)
+    obs = rng.normal(size=(60, 3)).astype(np.float32)
+    act = rng.integers(0, 3, 60)
+    rew = rng.random(60)
+    starts = episode_starts_from_lengths([6] * 10)
+    a = fitted_q_values(obs, act, rew, starts, 0.9, n_actions=3, config=SMALL)
+    b = fitted_q_values(obs, act, rew, starts, 0.9, n_actions=3,
+                        config=replace(SMALL, next_value="logged"))
+    np.testing.assert_array_equal(a, b)
 
 
 def test_fitted_q_discounts_the_next_value():
@@ -86,6 +120,9 @@ def test_fqe_needs_rewards_and_a_gamma_in_range(tmp_path):
     obs, act, rew, starts, _ = two_step_log()
     with pytest.raises(AocError, match="gamma"):
         fitted_q_values(obs, act, rew, starts, 1.5, n_actions=2, config=SMALL)
+    with pytest.raises(AocError, match="next_value"):
+        fitted_q_values(obs, act, rew, starts, 1.0, n_actions=2,
+                        config=replace(SMALL, next_value="greedy"))
     n = len(act)
     data = CorpusData(observations=obs, actions=act, rewards=None,
                       terminals=np.zeros(n, bool), truncations=np.zeros(n, bool),
