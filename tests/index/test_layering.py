@@ -13,7 +13,7 @@ def _modules_after(statement: str) -> set[str]:
 
 
 def test_index_depends_on_numpy_and_faiss_only():
-    mods = _modules_after("import aoc_cli.index")
+    mods = _modules_after("from aoc_cli.index import BeliefIndex, IndexConfig, PerAction")
     assert "faiss" in mods and "numpy" in mods
     assert "torch" not in mods
     above = {m for m in mods if m.startswith(("aoc_cli.decompose", "aoc_cli.control",
@@ -25,3 +25,9 @@ def test_belief_artefact_and_train_import_in_either_order():
     # no import cycle between the two: each loads on its own, first
     for first in ("aoc_cli.belief.artefact", "aoc_cli.belief.train"):
         assert first in _modules_after(f"import {first}")
+
+
+def test_the_index_settings_load_without_faiss():
+    # the package loads its names on first use: aoc index --help reads IndexConfig's fields
+    mods = _modules_after("from aoc_cli.index.config import IndexConfig")
+    assert "faiss" not in mods and "torch" not in mods
