@@ -7,7 +7,7 @@ baselines that use another k say so by calling these functions with their own ar
 
 * the paper's k = 2 (d_b + 1): twice the size of a minimal corpus subset (:func:`default_k`);
 * an imitation model of discrete actions on a small log (at most :data:`SMALL_MAX_ROWS`
-  rows): the paper's k nearest rows *of each action* present, n 2 (d_b + 1)
+  rows): the 3 (d_b + 1) nearest rows *of each action* present, n 3 (d_b + 1)
   (:func:`per_action_k`; :mod:`aoc_cli.index.strata`);
 * the same on a larger log: (d_b + 1) / the rarest action's share, between the paper's k and
   :data:`MAX_K_FACTOR` (d_b + 1) (:func:`default_k` with ``rarest_share``).
@@ -49,10 +49,16 @@ def default_k(d_b: int, rarest_share: float | None = None) -> int:
     return k
 
 
+#: Rows of each action step 1 takes on a small imitation log, as a multiple of d_b + 1 (ward:
+#: 63 of each): chosen by validation on the training patients of two ward logs, 20 splits
+#: (docs/design.md, "Candidates of every action").
+PER_ACTION_FACTOR = 3
+
+
 def per_action_k(d_b: int, n_actions: int) -> int:
-    """The paper's k nearest rows of each of ``n_actions`` actions present (at least one):
-    n 2 (d_b + 1) rows in all."""
-    return max(int(n_actions), 1) * default_k(d_b)
+    """The :data:`PER_ACTION_FACTOR` (d_b + 1) nearest rows of each of ``n_actions`` actions
+    present (at least one): n 3 (d_b + 1) rows in all."""
+    return max(int(n_actions), 1) * PER_ACTION_FACTOR * subset_size(d_b)
 
 
 def rarest_share(actions: np.ndarray) -> float | None:
@@ -66,7 +72,7 @@ def rarest_share(actions: np.ndarray) -> float | None:
 def index_k(d_b: int, corpus, imitation: bool, candidates: str = "auto") -> tuple[int, str]:
     """The k of an index of a model with ``d_b``-dimensional beliefs on ``corpus`` (its
     ``actions`` and ``n_rows``, read only when the rule needs them), and how step 1 takes its
-    candidates: "nearest" (the k nearest rows) or "per_action" (the paper's k nearest of each
+    candidates: "nearest" (the k nearest rows) or "per_action" (the 3 (d_b + 1) nearest of each
     action). ``imitation``: the model imitates the corpus's discrete actions. ``candidates``:
     "auto" (the rule of the module docstring), "nearest" (the paper's k) or "per_action"."""
     if candidates == PER_ACTION or (candidates == "auto" and imitation

@@ -99,7 +99,7 @@ def test_default_training_on_ward_beats_the_majority_clearly(aoc, ward):
     assert "label smoothing 0.1" in err
     code, out, err = aoc("index", "ward", "--format", "json")
     assert code == 0, err
-    assert json.loads(out)["candidates"] == "per_action" and json.loads(out)["k"] == 84
+    assert json.loads(out)["candidates"] == "per_action" and json.loads(out)["k"] == 126
     code, out, err = aoc("evaluate", "ward", "--data", "held", "--baselines", "none",
                          "--format", "json")
     assert code == 0, err
@@ -197,7 +197,7 @@ def _check_abc_validation(ward, m, err):
     from aoc_cli.belief.config import BeliefConfig
     from aoc_cli.belief.data import prepare
     from aoc_cli.metrics import auc
-    from aoc_cli.decompose import decompose, default_k
+    from aoc_cli.decompose import decompose
     from aoc_cli.index import BeliefIndex
     from aoc_cli.index.strata import PerAction
 
@@ -211,8 +211,8 @@ def _check_abc_validation(ward, m, err):
     b = model.beliefs(np.asarray(corpus.observations), None,
                       corpus.history(np.arange(corpus.n_rows), model.history_length))
     a_tr, y = acts[split.train_rows], acts[split.val_rows]
-    # as `aoc index` takes them: the paper's 2 (d_b + 1) nearest rows of each action
-    k = 2 * default_k(model.d_b)
+    # as `aoc index` takes them: the 3 (d_b + 1) nearest rows of each action
+    k = 2 * 3 * (model.d_b + 1)
     assert m["val_abc_k"] == k
     search = PerAction(BeliefIndex.build(b[split.train_rows], kind="flat"), a_tr)
     dec = decompose(b[split.train_rows], b[split.val_rows], k=k, index=search)

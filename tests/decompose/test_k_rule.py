@@ -27,17 +27,17 @@ def test_the_paper_k_is_twice_the_size_of_a_minimal_subset():
     assert subset_size(20) == 21 and default_k(20) == 42
 
 
-def test_per_action_k_takes_the_paper_k_of_each_action_present():
-    assert per_action_k(20, 2) == 84 and per_action_k(4, 3) == 30
-    assert per_action_k(20, 0) == 42  # no action present: one neighbourhood still
+def test_per_action_k_takes_three_minimal_subsets_of_each_action_present():
+    assert per_action_k(20, 2) == 126 and per_action_k(4, 3) == 45   # 3 (d_b + 1) of each
+    assert per_action_k(20, 0) == 63  # no action present: one neighbourhood still
 
 
 @pytest.mark.parametrize("rows,imitation,candidates,expected", [
-    (5000, True, "auto", (84, "per_action")),
+    (5000, True, "auto", (126, "per_action")),
     (SMALL_MAX_ROWS + 10, True, "auto", (210, "nearest")),   # ceil(21 / 0.1)
     (5000, False, "auto", (42, "nearest")),
     (5000, True, "nearest", (42, "nearest")),
-    (SMALL_MAX_ROWS + 10, False, "per_action", (84, "per_action")),
+    (SMALL_MAX_ROWS + 10, False, "per_action", (126, "per_action")),
 ])
 def test_the_index_k_follows_the_rule(rows, imitation, candidates, expected):
     actions = np.zeros(rows, np.int64)
@@ -62,7 +62,7 @@ def test_the_index_k_reads_no_actions_when_the_rule_needs_none():
 def test_knn_takes_the_paper_k_not_the_index_k_unless_k_is_set():
     session = SimpleNamespace(model=SimpleNamespace(d_b=20),
                               controller=SimpleNamespace(config=SimpleNamespace(k=None)))
-    assert knn_k(session) == 42  # an imitation index of ward would take 84 or 191
+    assert knn_k(session) == 42  # an imitation index of ward would take 126 or 191
     session.controller.config.k = 7
     assert knn_k(session) == 7
 

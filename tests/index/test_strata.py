@@ -114,8 +114,8 @@ def test_the_index_rule_per_action_on_small_logs_only():
         return SimpleNamespace(n_rows=n, discrete=True, actions=acts, name="c")
 
     imitation, value = SimpleNamespace(mode="imitation", d_b=20), SimpleNamespace(mode="value", d_b=20)
-    assert neighbours(corpus(5000), imitation) == (84, "per_action")
+    assert neighbours(corpus(5000), imitation) == (126, "per_action")
     assert neighbours(corpus(SMALL_MAX_ROWS + 10), imitation) == (210, "nearest")  # 21 / 0.1
-    assert neighbours(corpus(SMALL_MAX_ROWS + 10), imitation, "per_action") == (84, "per_action")
+    assert neighbours(corpus(SMALL_MAX_ROWS + 10), imitation, "per_action") == (126, "per_action")
     assert neighbours(corpus(5000), imitation, "nearest") == (42, "nearest")
     assert neighbours(corpus(5000), value) == (42, "nearest")
