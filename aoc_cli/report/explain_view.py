@@ -84,11 +84,15 @@ def _print_contrast(c: dict) -> None:
 
 
 def _support_rows(support: list[dict]) -> list[dict]:
+    """The subset's rows as table records; no value column where no row has a value
+    (imitation: the rows' actions are what the decision weighs)."""
+    valued = any(s["value"] is not None for s in support)
     return [{"row": s["row"], "episode": s["episode"],
              **({"episode_id": s["episode_id"]} if s.get("episode_id") is not None else {}),
              "step": s["step"], **s["tags"], "action": s["action"],
              **({"action label": s["action_label"]} if "action_label" in s else {}),
-             "value": s["value"], "weight": s["weight"], "distance": s["distance"],
+             **({"value": s["value"]} if valued else {}),
+             "weight": s["weight"], "distance": s["distance"],
              "episodes here": s.get("episodes_here")} for s in support]
 
 
