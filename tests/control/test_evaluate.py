@@ -70,8 +70,8 @@ def test_imitation_metrics_match_a_hand_computation(ward):
     # d_b = 4 and the imitation k here -- leaves the share undefined)
     assert summary["extrapolating_share"] == (
         pytest.approx(np.mean(r > 3 * typical), abs=1e-12) if typical else None)
-    # imitation: the paper's 2 (d_b + 1) nearest rows of each of the two actions
-    assert summary["k"] == session.index.k == 2 * 10
+    # imitation: the 3 (d_b + 1) nearest rows of each of the two actions (d_b = 4)
+    assert summary["k"] == session.index.k == 2 * 3 * 5
     assert summary["candidates"] == session.index.meta["candidates"] == "per_action"
     assert session.index.meta["typical_residual"]["k"] == session.index.k  # measured alike
     # a value model of the same corpus keeps the paper's k = 2 (d_b + 1) nearest rows
@@ -238,7 +238,7 @@ def test_an_index_without_its_candidates_is_read_as_the_k_nearest_rows(ward, tmp
     assert summary["candidates"] == "nearest" and summary["k"] == 44
     new = open_session(Store(root).corpus("ward"), config=ControllerConfig())
     fresh, _ = evaluate(new, Store(root).corpus("held"), [])
-    assert fresh["candidates"] == "per_action" and fresh["k"] == 20
+    assert fresh["candidates"] == "per_action" and fresh["k"] == 30
     # per action, every decision's neighbourhood held both actions; the k nearest rows not
     assert fresh["auc"] != summary["auc"]
 
