@@ -20,8 +20,9 @@ from aoc_cli.store import Store
 EPISODES = 1000
 #: The exact survival AOC's decisions must reach, per task.
 #: icu-sepsis (clinicians 0.7818, random 0.7801, their modal dose 0.7868): measured 0.7953 with
-#: the task's defaults (fqe values, cap, support penalty); the return-to-go values of before
-#: gave 0.7895.
+#: the task's defaults (fqe values, cap, support penalty), 0.7945 with FQE's expected targets
+#: and 60 backups (2026-11-26; 0.8147 at 10k, 0.8388 at 50k); the return-to-go values of
+#: before gave 0.7895.
 #: icu-sepsis-terminate (a dose outside the clinicians' admissible set is fatal; the clinicians'
 #: estimated policy 0.4158, which puts ~16% of its mass there; their modal dose 0.7868):
 #: measured 0.632 with the task's defaults, fatal doses in 12.6% of the live states; the
