@@ -7,8 +7,8 @@
 * ``mean-return``: the mean of the remaining rewards ``(1 / (T_e - t)) sum_{k = t}^{T_e - 1} r_k``.
 * ``reward``: the immediate reward ``r_t``.
 * ``fqe``: the logged behaviour's action value ``Q(o_t, a_t)`` by fitted Q evaluation with
-  SARSA targets ``r_t + gamma Q(o_{t+1}, a_{t+1})`` (bootstrapped through the log's own next
-  steps; :mod:`aoc_cli.belief.fqe`).
+  expected SARSA targets ``r_t + gamma V(o_{t+1})``, V(o) the mean of Q(o, a) over the log's
+  rows at o (bootstrapped through the log's own next steps; :mod:`aoc_cli.belief.fqe`).
 * any other name: a numeric per-row column of the corpus, used as is.
 """
 
@@ -119,7 +119,8 @@ def value_spec(value: str, gamma: float) -> dict:
     if value == "fqe":
         spec["gamma"] = gamma
         spec["definition"] = ("the logged behaviour's Q(o, a) by fitted Q evaluation "
-                              "(SARSA targets through the log's next steps)")
+                              "(expected SARSA targets through the log's next "
+                              "observations)")
         spec["fqe"] = FQEConfig().to_dict()
     elif value == "return":
         spec["gamma"] = gamma
