@@ -14,7 +14,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1] / "aoc_cli"
 
 #: Modules any stage may import; each imports only the ones before it in this list.
-LOW = ["errors", "settings", "progress", "metrics", "rows", "threads", "parallel"]  # docs/design.md, "Module map"
+LOW = ["lazy", "errors", "settings", "progress", "metrics", "rows", "threads", "parallel"]  # docs/design.md, "Module map"
 #: The stages, in the order of the flow: each may import the low modules and the stages before it.
 STAGES = ["store", "formats", "envs", "index", "decompose", "belief", "corpus_index", "control",
           "baselines", "report", "experiments", "api", "cli"]

@@ -21,7 +21,7 @@ entry of that name.
 
 from __future__ import annotations
 
-import importlib
+from aoc_cli.lazy import exports
 
 #: Where each public name lives; loaded on first use (PEP 562), so that a command imports only
 #: what its entry needs (``aoc info`` no torch, FAISS or matplotlib).
@@ -38,13 +38,4 @@ _WHERE = {
 __all__ = sorted(_WHERE)
 
 
-def __getattr__(name: str):
-    if name in _WHERE:
-        value = getattr(importlib.import_module(f"aoc_cli.api.{_WHERE[name]}"), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module 'aoc_cli.api' has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_WHERE))
+__getattr__, __dir__ = exports(__name__, _WHERE)

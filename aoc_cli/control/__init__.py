@@ -9,7 +9,7 @@ submodule binds its name in the package; the episode loop is ``episodes.py``, th
 
 from __future__ import annotations
 
-import importlib
+from aoc_cli.lazy import exports
 
 _WHERE = {
     "Controller": "controller",
@@ -39,13 +39,4 @@ _WHERE = {
 __all__ = sorted(_WHERE)
 
 
-def __getattr__(name: str):
-    if name not in _WHERE:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f"{__name__}.{_WHERE[name]}"), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__():
-    return sorted(list(globals()) + __all__)
+__getattr__, __dir__ = exports(__name__, _WHERE)

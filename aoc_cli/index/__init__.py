@@ -12,7 +12,7 @@ Names are imported lazily (PEP 562), so that reading the index's settings
 
 from __future__ import annotations
 
-import importlib
+from aoc_cli.lazy import exports
 
 _WHERE = {"BeliefIndex": "belief_index", "IndexConfig": "config", "PerAction": "strata",
           "Selection": "belief_index"}
@@ -20,13 +20,4 @@ _WHERE = {"BeliefIndex": "belief_index", "IndexConfig": "config", "PerAction": "
 __all__ = sorted(_WHERE)
 
 
-def __getattr__(name: str):
-    if name not in _WHERE:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f"{__name__}.{_WHERE[name]}"), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__():
-    return sorted(list(globals()) + __all__)
+__getattr__, __dir__ = exports(__name__, _WHERE)
