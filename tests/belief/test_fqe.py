@@ -72,7 +72,7 @@ def test_expected_and_logged_targets_agree_where_no_observation_repeats():
     a = fitted_q_values(obs, act, rew, starts, 0.9, n_actions=3, config=SMALL)
     b = fitted_q_values(obs, act, rew, starts, 0.9, n_actions=3,
                         config=replace(SMALL, next_value="logged"))
-    np.testing.assert_array_equal(a, b)
+    np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-6)   # two code paths: a few ulp apart at most
 
 
 def test_fitted_q_discounts_the_next_value():
