@@ -273,7 +273,9 @@ def check_corpus(model: BeliefModel, corpus) -> None:
 
 def load_model(corpus, model_id: str | None = None, device: str | None = None) -> BeliefModel:
     """Load model ``model_id`` of ``corpus`` (None: ``default`` when it exists, else the only
-    one, else the latest trained)."""
+    one, else the latest trained) onto ``device`` (None: ``auto``, a GPU when torch sees one).
+    The device the model was trained on is a training setting, not the model's: a model
+    trained on a GPU machine runs on one without."""
     ids = list_models(corpus)
     if model_id is None:
         if not ids:
@@ -290,7 +292,7 @@ def load_model(corpus, model_id: str | None = None, device: str | None = None) -
                        f"{todo}")
     check_files(path, meta, ("weights.pt", "values.npy"), what, todo)
     try:
-        dev = pick_device(device or meta["config"].get("device", "auto"))
+        dev = pick_device(device or "auto")
         net = build_net(meta["dims"], BeliefConfig.from_dict(meta["config"], strict=False))
         state = torch.load(path / "weights.pt", map_location="cpu", weights_only=True)
         net.load_state_dict(state)

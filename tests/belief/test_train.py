@@ -8,7 +8,7 @@ import torch
 from aoc_cli.belief import BeliefConfig, load_model, train_model
 from aoc_cli.belief.targets import value_targets
 from aoc_cli.errors import AocError, ModelExists, ModelMissing, ModelStale
-from aoc_cli.store import Store
+from aoc_cli.store import Store, seal
 
 from tests.belief.corpora import (continuous_imitation, discrete_imitation, history_dependent,
                                   synthetic_value)
@@ -177,3 +177,21 @@ def test_a_model_of_a_changed_corpus_is_refused(tmp_path):
         ("m", corpus.hash, changed.hash)
     with pytest.raises(AocError, match="different version"):
         load_model(corpus, "m").row_beliefs(changed)
+
+
+def test_a_model_trained_on_a_gpu_loads_where_torch_sees_none(tmp_path, monkeypatch):
+    """The training device is recorded in the config but does not bind the model: a model
+    trained with device "cuda" is loaded on the CPU of a machine without a GPU (weights are
+    read with map_location="cpu")."""
+    corpus = Store(tmp_path).write("c", synthetic_value(episodes=6, length=20))
+    train_model(corpus, BeliefConfig(value="v", threads=1, max_epochs=1, hidden=16), "g")
+    path = corpus.models_dir / "g" / "config.json"
+    meta = json.loads(path.read_text())
+    meta["config"]["device"] = "cuda"
+    meta.pop("sha256", None)
+    path.write_text(json.dumps(seal(meta)))
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    model = load_model(corpus, "g")
+    assert model.device.type == "cpu" and model.config.device == "cuda"
+    with pytest.raises(AocError, match="sees no GPU"):
+        load_model(corpus, "g", device="cuda")
