@@ -26,7 +26,8 @@ def train(name: str, *, store: StoreLike = None, model: str = DEFAULT_MODEL,
           val_fraction: float = _D.val_fraction, seed: int = _D.seed,
           threads: int | None = None, dropout: float = _D.dropout,
           class_weight: str = _D.class_weight, critic_steps: int | None = None,
-          critic_bc_weight: float = _D.critic_bc_weight, paper: bool = False,
+          critic_bc_weight: float = _D.critic_bc_weight, device: str = _D.device,
+          paper: bool = False,
           overwrite: bool = False, progress: Progress | None = None,
           log: Log | None = None) -> Trained:
     """Train the belief model ``model`` of corpus ``name`` (``aoc train``): ``mode`` value
@@ -34,15 +35,16 @@ def train(name: str, *, store: StoreLike = None, model: str = DEFAULT_MODEL,
     Settings left None come from the task the corpus was collected from, then from validation
     on a small log (history_length, hidden, weight_decay), then the paper's; ``paper``: the
     paper's for all. The other arguments are :class:`~aoc_cli.belief.BeliefConfig`'s
-    (``belief_dim`` d_b, ``max_epochs``, ...). One writer per model id; ``overwrite``
-    replaces one. Returns :class:`~aoc_cli.belief.fit.Trained` (``.metrics`` as saved)."""
+    (``belief_dim`` d_b, ``max_epochs``, ``device`` auto|cpu|cuda, ...). One writer per
+    model id; ``overwrite`` replaces one. Returns :class:`~aoc_cli.belief.fit.Trained`
+    (``.metrics`` as saved)."""
     settings = dict(mode=mode, belief=belief, value=value, gamma=gamma,
                     history_length=history_length, dynamics_weight=dynamics_weight,
                     hidden=hidden, weight_decay=weight_decay, label_smoothing=label_smoothing,
                     belief_dim=belief_dim, max_epochs=max_epochs, batch_size=batch_size, lr=lr,
                     patience=patience, val_fraction=val_fraction, seed=seed, threads=threads,
                     dropout=dropout, class_weight=class_weight, critic_steps=critic_steps,
-                    critic_bc_weight=critic_bc_weight)
+                    critic_bc_weight=critic_bc_weight, device=device)
     check_settings(settings)  # bad settings fail before the store is read
     corpus = open_store(store).corpus(name)
     return train_corpus(corpus, model, paper=paper, overwrite=overwrite, progress=progress,

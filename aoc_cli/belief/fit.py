@@ -99,9 +99,10 @@ def _train(corpus, config: BeliefConfig, model: str, overwrite: bool, open_names
     fqe = config.mode == "value" and config.value == "fqe"
     if fqe and progress is not None:
         progress(0, 1, f"fitted Q evaluation of {name}")
+    from aoc_cli.belief.train import pick_device, train_model  # lazy: torch, once settings are good
+    pick_device(config.device)  # a GPU asked for where torch sees none: before the targets
     prepared = prepare(corpus, config, model, overwrite, progress=progress if fqe else None)
     corpus.verify_content()  # the columns prepare read are cached: hashing reads nothing again
-    from aoc_cli.belief.train import train_model  # lazy: torch, once the input is good
 
     total = config.max_epochs
     if config.belief == "critic":  # counted in gradient steps, not epochs

@@ -67,6 +67,7 @@ IndexKind = choices_of(IndexConfig, "kind")
 BeliefMode = choices_of(BeliefConfig, "mode")
 BeliefKind = choices_of(BeliefConfig, "belief")
 ClassWeight = choices_of(BeliefConfig, "class_weight")
+Device = choices_of(BeliefConfig, "device")
 
 
 class StepCandidates(str, Enum):

@@ -13,7 +13,7 @@ import typer
 import aoc_cli
 from aoc_cli.belief import select
 from aoc_cli.belief.config import BeliefConfig
-from aoc_cli.cli.common import (BeliefKind, BeliefMode, ClassWeight, CorpusArgument,
+from aoc_cli.cli.common import (BeliefKind, BeliefMode, ClassWeight, CorpusArgument, Device,
                                 FormatOption, choice, state)
 from aoc_cli.cli.fields import TASK, from_field
 from aoc_cli.report import train_view
@@ -68,6 +68,7 @@ def train(
     val_fraction: float = _option("val_fraction"),
     seed: int = _option("seed"),
     threads: Optional[int] = _option("threads"),
+    device: Device = _option("device"),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing model id."),
     fmt: FormatOption = None,
 ) -> None:
@@ -81,7 +82,8 @@ def train(
             label_smoothing=label_smoothing, critic_steps=critic_steps,
             critic_bc_weight=critic_bc_weight, belief_dim=belief_dim, max_epochs=epochs,
             batch_size=batch_size, lr=lr, patience=patience, val_fraction=val_fraction,
-            seed=seed, threads=threads, dropout=dropout, class_weight=choice(class_weight),
+            seed=seed, threads=threads, device=choice(device), dropout=dropout,
+            class_weight=choice(class_weight),
             paper=paper, overwrite=overwrite, progress=bar, log=message)
     for line in train_view.notes(trained):
         message(line)

@@ -25,7 +25,7 @@ MIRRORS = {"train": [BeliefConfig], "index": [IndexConfig], "rollout": [Controll
            "explain": [ControllerConfig], "evaluate": [ControllerConfig, OPESettings],
            "bench": [ControllerConfig]}
 #: BeliefConfig's settings that aoc train does not offer (the library's only).
-NOT_OFFERED = {"min_delta", "belief_activation", "device"}
+NOT_OFFERED = {"min_delta", "belief_activation"}
 
 
 def _options(command: str) -> dict[str, TyperOption]:

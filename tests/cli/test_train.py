@@ -93,3 +93,21 @@ def test_critic_steps_follow_the_data_and_epochs_with_the_estimate_shown_first(a
     said = " ".join(err.split())  # the console wraps long lines
     assert said.startswith(f"training the critic: {2 * per_epoch} gradient steps (2 epochs")
     assert " s at " in said.split("trained syn/c")[0]  # the estimate, before training ends
+
+
+def test_device_is_a_training_setting_and_a_missing_gpu_is_refused_before_any_work(
+        aoc_inproc, corpora, monkeypatch):
+    """``--device cpu`` trains on the CPU and is recorded; ``--device cuda`` where torch sees no
+    GPU is one line, exit 2, and no model folder (refused before the value targets)."""
+    import torch
+
+    code, out, err = aoc_inproc("train", "syn", "--value", "v", "--device", "cpu", *QUICK)
+    assert code == 0, err
+    assert json.loads(out)["device"] == "cpu"
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    code, out, err = aoc_inproc("train", "syn", "--value", "v", "--device", "cuda",
+                                "--model", "g", *QUICK)
+    assert code == 2 and out == ""
+    assert err.strip().splitlines() == [
+        "aoc: error: --device cuda asked for, but torch sees no GPU: use --device cpu"]
+    assert not (corpora.corpus("syn").models_dir / "g").exists()
