@@ -103,7 +103,9 @@ def fitted_q_values(observations: np.ndarray, actions: np.ndarray, rewards: np.n
     net = nn.Sequential(nn.Linear(g_x.shape[1], config.hidden), nn.ReLU(),
                         nn.Linear(config.hidden, config.hidden), nn.ReLU(),
                         nn.Linear(config.hidden, out))
-    opt = torch.optim.Adam(net.parameters(), lr=config.lr)
+    # foreach: the same elementwise updates as the default per-tensor loop, one call for the
+    # six tensors (the same values, tests/belief/test_held_out_targets.py): ~8% of a backup
+    opt = torch.optim.Adam(net.parameters(), lr=config.lr, foreach=True)
     n_groups = len(uniq)
     steps = max(config.steps, int(np.ceil(2 * n_groups / config.batch_size)))
     q_group = np.zeros(n_groups)

@@ -55,7 +55,8 @@ class StepScores:
 
     ``row`` held-out rows; ``episode``, ``step``; ``logged`` (S,) int or (S, d_a);
     ``decided`` likewise; ``scores`` (S, n) action weights (discrete imitation) or None;
-    ``v_hat`` / ``target`` (S,) value mode (v_hat of the logged action), ``decided_value``
+    ``v_hat`` / ``target`` (S,) value mode (v_hat of the logged action; the target is set
+    by the driver after the chunks merge, :meth:`EvalContext.targets`), ``decided_value``
     (S,) v_hat of the decision; ``residual`` (S,) of the decision; ``warning``
     (S,) bool heterogeneity; ``support_rows``/``support_weights`` (S, m) (-1 / 0 padded);
     ``baselines`` name -> {"decided", "scores" or "v_hat"} arrays on the same steps.
@@ -234,7 +235,7 @@ def _value(ctx, rows, ep, obs, hist, logged) -> StepScores:
     out = StepScores(rows, ep, rows - ctx.data_starts[ep], logged, decided,
                      dec.residual[pick], heterogeneity(ctx, dec.rows[pick], dec.weights[pick]),
                      dec.rows[pick], dec.weights[pick], v_hat=dec_l.value,
-                     target=ctx.data_values[rows], decided_value=dec.value[pick])
+                     decided_value=dec.value[pick])
     if head_c is not None:
         head_l = b_logged.astype(np.float64) @ ctx.head.weight.T + ctx.head.bias
         out.baselines["bc"] = {"decided": cands[np.arange(s), head_c.argmax(1)],
@@ -276,7 +277,7 @@ def _value_distinct(ctx, rows, ep, obs, hist, logged) -> StepScores:
     out = StepScores(rows, ep, rows - ctx.data_starts[ep], logged, u.decided[inverse],
                      u.residual[inverse], u.warning[inverse], u.support_rows[inverse],
                      u.support_weights[inverse], v_hat=val[inverse, logged],
-                     target=ctx.data_values[rows], decided_value=u.decided_value[inverse])
+                     decided_value=u.decided_value[inverse])
     if "bc" in ctx.baselines:
         head = np.concatenate(heads)                                # (U, n)
         out.baselines["bc"] = {"decided": head.argmax(1)[inverse],
@@ -381,6 +382,7 @@ def evaluate(session, data, baselines=BASELINES, seed: int = 0, progress=None,
             if progress is not None:
                 progress(done, ctx.data.n_rows)
     res = merge(parts)
+    res.target = ctx.targets(res.row)     # value mode: the held-out log's targets, once here
     summary = summarise(ctx, res)
     decided = time.perf_counter()
     with one_thread():

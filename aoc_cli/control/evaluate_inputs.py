@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from aoc_cli.belief.config import REWARD_TARGETS
-from aoc_cli.belief.targets import value_targets
+from aoc_cli.belief.targets import held_out_targets
 from aoc_cli.control.controller import action_bounds, support_disagreement
 from aoc_cli.control.episodes import check_same_spaces
 from aoc_cli.decompose import subset_size
@@ -262,15 +262,27 @@ class EvalContext:
             self.span = np.maximum(self.high - self.low, 1e-12)
         values = self.index.values
         self.value_std = float(np.std(values)) if values is not None and len(values) else 1.0
-        self.data_values = None
-        if self.mode == "value":
+        self._data_values = None
+        self.knn = KNNBaseline(self) if "knn" in self.baselines else None
+
+    def targets(self, rows: np.ndarray) -> np.ndarray | None:
+        """(S,) float64 the value target of held-out ``rows`` (value mode; None in imitation
+        mode): the model's own values when the data are its corpus, else the target computed
+        on the held-out log as the model's values were (``fqe``: kept beside the log,
+        :func:`aoc_cli.belief.targets.held_out_targets`). Computed on first use: only the
+        driver reads them (a fitted Q evaluation costs about what training the values did,
+        and the chunks' decisions do not need it: a Ray task never computes it)."""
+        if self.mode != "value":
+            return None
+        if self._data_values is None:
+            model = self.model
             if self.own:
-                self.data_values = np.asarray(model.values, np.float64)
+                self._data_values = np.asarray(model.values, np.float64)
             else:
                 spec = model.meta.get("value") or {}
-                self.data_values = value_targets(data, spec.get("target", "return"),
-                                                 float(spec.get("gamma", 0.99)))
-        self.knn = KNNBaseline(self) if "knn" in self.baselines else None
+                self._data_values = held_out_targets(self.data, spec.get("target", "return"),
+                                                     float(spec.get("gamma", 0.99)))
+        return self._data_values[np.asarray(rows, np.int64)]
 
     @property
     def corpus(self):

@@ -66,6 +66,7 @@ def evaluate_on_ray(store_root, name: str, data: str, model: str | None, index_i
     results = map_chunks(_score, [(spec, [groups[i] for i in run]) for run in runs],
                          workers=workers, address=address, retries=1, done=done)
     res = merge([part for parts in results for part in parts])
+    res.target = ctx.targets(res.row)     # the driver's alone: the tasks never compute them
     summary = summarise(ctx, res)
     decided = time.perf_counter()
     with one_thread():

@@ -26,7 +26,7 @@ from aoc_cli.store.corpus import (
     gather_history,
 )
 from aoc_cli.store.layout import (DEFAULT_INDEX, DEFAULT_MODEL, index_dir, model_dir,
-                                  store_root)
+                                  store_root, targets_dir)
 from aoc_cli.store.lock import writing_corpus, writing_model
 from aoc_cli.store.reader import Corpus
 from aoc_cli.store.store import Store, check_name
@@ -67,6 +67,7 @@ __all__ = [
     "seal_status",
     "store_root",
     "summarize",
+    "targets_dir",
     "write_json",
     "write_npy",
     "writing_corpus",

@@ -4,6 +4,8 @@
       <name>/corpus.h5, manifest.json
       <name>/models/<model>/         a belief model and its row beliefs (model_dir)
       <name>/models/<model>/index/<index>/   a corpus index built on it (index_dir)
+      <name>/targets/                value targets computed on the corpus as a held-out log
+                                     (targets_dir; aoc_cli.belief.targets.held_out_targets)
       .<name>.lock, .<name>.model-<model>.lock   writer locks (aoc_cli.store.lock)
 
 Every other module builds these paths through the functions here, and names the default
@@ -33,6 +35,7 @@ CORPUS_FILE = "corpus.h5"
 MANIFEST_FILE = "manifest.json"
 MODELS = "models"
 INDEXES = "index"
+TARGETS = "targets"
 
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,127}$")
 
@@ -78,3 +81,8 @@ def indexes_dir(corpus_path: str | os.PathLike, model_id: str) -> Path:
 def index_dir(corpus_path: str | os.PathLike, model_id: str, index_id: str) -> Path:
     """``<corpus>/models/<model_id>/index/<index_id>/`` (both ids checked as store names)."""
     return indexes_dir(corpus_path, model_id) / check_name(index_id, "index")
+
+
+def targets_dir(corpus_path: str | os.PathLike) -> Path:
+    """``<corpus>/targets/``: value targets computed on the corpus as a held-out log."""
+    return Path(corpus_path) / TARGETS

@@ -295,3 +295,21 @@ def test_value_decisions_in_batches_apply_the_support_and_cap_rules_as_decide_do
         assert int(one.action) == int(res.decided[i]) or \
             (len(close) > 1 and close[-1] - close[-2] < 1e-6)
     assert changed > 0, "the rule never changed a decision: the test checks nothing"
+
+
+def test_value_targets_are_the_drivers_a_chunk_never_computes_them(ward, monkeypatch):
+    """A Ray task scores chunks: the held-out log's value targets (a fitted Q evaluation for
+    fqe values) are the driver's, read once after the chunks merge."""
+    from aoc_cli.control import evaluate_inputs
+    from aoc_cli.control.evaluate import chunks, score_episodes
+
+    _root, store = ward
+    session = open_session(store.corpus("ward"), "value", config=ControllerConfig())
+    ctx = evaluate_inputs.EvalContext.build(session, store.corpus("held"), ["knn", "bc"])
+
+    def never(*_args, **_kwargs):
+        raise AssertionError("a chunk computed the held-out targets")
+
+    monkeypatch.setattr(evaluate_inputs, "held_out_targets", never)
+    part = score_episodes(ctx, chunks(ctx)[0])
+    assert len(part.row) > 0 and part.target is None
