@@ -28,6 +28,7 @@ def evaluate(name: str, data: str, *, store: StoreLike = None,
              index_id: str = DEFAULT_INDEX, candidates: int | None = None,
              epsilon: float | None = None, k: int | None = None,
              min_support: float | None = None, support_penalty: float | None = None,
+             row_smoothing: float | None = None,
              exact: bool | None = None, seed: int = 0, ope: str | None = None,
              propensity: str | None = None, ope_gamma: float = 1.0,
              fqe_steps: int | None = None, fqe_refits: int | None = None,
@@ -60,7 +61,8 @@ def evaluate(name: str, data: str, *, store: StoreLike = None,
     config = ControllerConfig.for_task(collected_task(corpus), candidates=candidates,
                                        epsilon=epsilon, k=k, residual_cap=None,
                                        min_support=min_support,
-                                       support_penalty=support_penalty)
+                                       support_penalty=support_penalty,
+                                       row_smoothing=row_smoothing)
     removal = removal_of(corpus, without, without_episodes)
     if removal is not None and (workers is not None or ray_address is not None):
         raise BadSetting("without", without, f"{param('without')} runs in one process: drop "

@@ -37,7 +37,8 @@ def explain(name: str, *, store: StoreLike = None, queries: str | os.PathLike | 
             model: str | None = None, index_id: str = DEFAULT_INDEX,
             candidates: int | None = None, epsilon: float | None = None, k: int | None = None,
             min_support: float | None = None, support_penalty: float | None = None,
-            residual_cap: float | None = None, seed: int = 0,
+            residual_cap: float | None = None, row_smoothing: float | None = None,
+            seed: int = 0,
             without: dict[str, list[str]] | None = None,
             without_episodes: list[str] | None = None, html: str | os.PathLike | None = None,
             steps_file: str | os.PathLike | None = None) -> Explained:
@@ -76,7 +77,8 @@ def explain(name: str, *, store: StoreLike = None, queries: str | os.PathLike | 
     corpus = s.corpus(name)
     config = ControllerConfig.for_task(collected_task(corpus), candidates=candidates,
                                        epsilon=epsilon, k=k, residual_cap=residual_cap,
-                                       min_support=min_support, support_penalty=support_penalty)
+                                       min_support=min_support, support_penalty=support_penalty,
+                                       row_smoothing=row_smoothing)
     opened = dict(model_id=model, index_id=index_id, config=config, seed=seed)
     removal = removal_of(corpus, without, without_episodes)
     session = None

@@ -31,6 +31,8 @@ _WHERE = {
     "episode_rows": "data",
     "prepare": "data",
     "train_model": "train",
+    "default_row_smoothing": "row_labels",
+    "subset_scores": "row_labels",
 }
 
 __all__ = sorted(_WHERE)

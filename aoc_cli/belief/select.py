@@ -38,6 +38,8 @@ from dataclasses import replace
 import numpy as np
 
 from aoc_cli.belief.config import BeliefConfig
+from aoc_cli.belief.row_labels import default_row_smoothing, subset_scores
+from aoc_cli.index.strata import PER_ACTION
 from aoc_cli.metrics import auc
 from aoc_cli.settings import SMALL_LOG_ROWS
 
@@ -140,9 +142,13 @@ def abc_validation(actions: np.ndarray, n_actions: int, k: int | None = None):
         search = PerAction(BeliefIndex.build(b[:n_tr], kind="flat"), a_tr)
         kk = k if k is not None else per_action_k(b.shape[1], len(search.masks))
         dec = decompose(b[:n_tr], b[n_tr:], k=kk, index=search)
-        scores = abc_scores(dec.rows, dec.weights, a_tr, n_actions)
+        lam = default_row_smoothing(True, PER_ACTION)
+        head = (net.head.weight.detach().cpu().double().numpy(),  # the logits' (n, d_b), (n,)
+                net.head.bias.detach().cpu().double().numpy())
+        scores = subset_scores(dec.rows, dec.weights, a_tr, n_actions, b[:n_tr], head, lam)
         return {"val_abc_accuracy": float(np.mean(scores.argmax(1) == y)),
-                "val_abc_auc": auc(y, scores), "val_abc_k": int(min(kk, n_tr))}
+                "val_abc_auc": auc(y, scores), "val_abc_k": int(min(kk, n_tr)),
+                "val_abc_row_smoothing": lam}
 
     return inspect
 
@@ -150,13 +156,10 @@ def abc_validation(actions: np.ndarray, n_actions: int, k: int | None = None):
 def abc_scores(rows: np.ndarray, weights: np.ndarray, actions: np.ndarray,
                n_actions: int) -> np.ndarray:
     """(Q, n_actions) each action's weight in the minimal corpus subsets ``rows`` (Q, m)
-    (-1 padded) with ``weights`` (Q, m), ``actions`` (N,) the corpus rows' actions."""
-    used = rows >= 0
-    scores = np.zeros((len(rows), n_actions))
-    q = np.repeat(np.arange(len(rows)), rows.shape[1])
-    np.add.at(scores, (q, actions[np.maximum(rows, 0)].reshape(-1)),
-              np.where(used, weights, 0.0).reshape(-1))
-    return scores
+    (-1 padded) with ``weights`` (Q, m), ``actions`` (N,) the corpus rows' actions: the
+    paper's score (the rows' labels unsmoothed, :func:`aoc_cli.belief.row_labels.subset_scores`
+    with lambda 0)."""
+    return subset_scores(rows, weights, actions, n_actions)
 
 
 def _score(metrics: dict) -> float:

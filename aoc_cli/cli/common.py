@@ -113,6 +113,9 @@ MinSupportOption = Annotated[Optional[float], from_field(
 SupportPenaltyOption = Annotated[Optional[float], from_field(
     ControllerConfig, "support_penalty", given=TASK, annotated=True)]
 
+RowSmoothingOption = Annotated[Optional[float], from_field(
+    ControllerConfig, "row_smoothing", given=TASK, annotated=True)]
+
 CandidatesOption = Annotated[Optional[int], from_field(
     ControllerConfig, "candidates", "--candidates", "-K", given=TASK, annotated=True)]
 

@@ -12,8 +12,8 @@ import typer
 import aoc_cli
 from aoc_cli.cli.common import (CandidatesOption, CorpusArgument, EpsilonOption,
                                 FormatOption, IndexOption, KOption, MinSupportOption, ModelOption,
-                                RayAddressOption, SupportPenaltyOption, WithoutEpisodesOption,
-                                WithoutOption, WorkersOption, parse_episodes,
+                                RayAddressOption, RowSmoothingOption, SupportPenaltyOption,
+                                WithoutEpisodesOption, WithoutOption, WorkersOption, parse_episodes,
                                 parse_selection, state)
 from aoc_cli.cli.fields import from_field
 from aoc_cli.control.ope_eval import OPESettings
@@ -44,6 +44,7 @@ def register(app: typer.Typer) -> None:
         k: KOption = None,
         min_support: MinSupportOption = None,
         support_penalty: SupportPenaltyOption = None,
+        row_smoothing: RowSmoothingOption = None,
         exact: Annotated[Optional[bool], typer.Option(
             "--exact/--ivf", help="Search the index exactly for every step, or an IVF structure "
                                   "built for the run (default: exact up to "
@@ -72,7 +73,7 @@ def register(app: typer.Typer) -> None:
                 name, data, store=state.store, baselines=[b.strip() for b in baselines.split(",")],
                 steps_file=steps_file, model=model, index_id=index_id, candidates=candidates,
                 epsilon=epsilon, k=k, min_support=min_support, support_penalty=support_penalty,
-                exact=exact, seed=seed, ope=ope_names, propensity=propensity, ope_gamma=ope_gamma,
+                row_smoothing=row_smoothing, exact=exact, seed=seed, ope=ope_names, propensity=propensity, ope_gamma=ope_gamma,
                 fqe_steps=fqe_steps, fqe_refits=fqe_refits, workers=workers,
                 ray_address=ray_address,
                 without=parse_selection(without, "--without"),

@@ -12,7 +12,7 @@ import typer
 import aoc_cli
 from aoc_cli.cli.common import (CandidatesOption, CorpusArgument, EpsilonOption, FormatOption,
                                 IndexOption, KOption, MinSupportOption, ModelOption,
-                                ResidualCapOption, SupportPenaltyOption,
+                                ResidualCapOption, RowSmoothingOption, SupportPenaltyOption,
                                 WithoutEpisodesOption, WithoutOption, parse_episodes,
                                 parse_selection, state)
 from aoc_cli.errors import AocError
@@ -47,6 +47,7 @@ def register(app: typer.Typer) -> None:
         k: KOption = None,
         min_support: MinSupportOption = None,
         support_penalty: SupportPenaltyOption = None,
+        row_smoothing: RowSmoothingOption = None,
         residual_cap: ResidualCapOption = None,
         seed: Annotated[int, typer.Option("--seed", help="Seed of the candidates.")] = 0,
         without: WithoutOption = None,
@@ -69,7 +70,8 @@ def register(app: typer.Typer) -> None:
                                compare=[_parse_action(c) for c in compare or []], model=model,
                                index_id=index_id, candidates=candidates, epsilon=epsilon, k=k,
                                min_support=min_support, support_penalty=support_penalty,
-                               residual_cap=residual_cap, seed=seed,
+                               residual_cap=residual_cap, row_smoothing=row_smoothing,
+                               seed=seed,
                                without=parse_selection(without, "--without"),
                                without_episodes=parse_episodes(without_episodes), html=html,
                                steps_file=steps_file)

@@ -30,7 +30,8 @@ class ControllerConfig(Settings):
     number of episodes behind its v_hat; :mod:`aoc_cli.control.support`); with
     ``support_penalty`` z the argmax is of v_hat - z sigma_v / sqrt(support). In imitation mode
     (ABC) there are no candidates: the decision is the weighted
-    action of the minimal corpus subset of :math:`b(o_t, h_t)`.
+    action of the minimal corpus subset of :math:`b(o_t, h_t)` (discrete: the argmax of the
+    actions' scores over its rows, ``row_smoothing``; aoc_cli.belief.row_labels).
     """
 
     label = "controller"
@@ -71,6 +72,14 @@ class ControllerConfig(Settings):
     bc_noise: float = setting(0.2, bounds=">= 0",
                               help="Standard deviation of the bc sampler's noise, as a "
                                    "fraction of the action range.")
+    #: None: :func:`aoc_cli.belief.row_labels.default_row_smoothing` (0.75 for discrete
+    #: imitation with the candidates of every action, else 0).
+    row_smoothing: float | None = setting(
+        None, bounds="[0, 1]",
+        none="0.75 for discrete imitation with the candidates of every action, else 0",
+        help="Imitation: lambda, each named row's label is its logged action smoothed by "
+             "lambda towards the belief's probabilities at that row; an action's score is "
+             "the subset's weighted sum of the labels (0: the action's weight).")
     min_weight: float = setting(0.05, bounds=">= 0",
                                 help="Supporting rows with at least this weight count when "
                                      "checking for disagreement.")

@@ -89,7 +89,8 @@ def _imitation_contrast(d: Decision, corpus, index, controller: Controller) -> d
     if not corpus.discrete or not len(d.support_rows):
         return None
     actions = np.asarray(controller.corpus_actions)[d.support_rows].astype(np.int64)
-    scores = np.bincount(actions, weights=d.support_weights, minlength=int(corpus.n_actions))
+    scores = (d.scores if len(d.scores) else
+              np.bincount(actions, weights=d.support_weights, minlength=int(corpus.n_actions)))
     chosen = int(np.asarray(d.action))
     scores_others = scores.copy()
     scores_others[chosen] = -np.inf
@@ -97,13 +98,15 @@ def _imitation_contrast(d: Decision, corpus, index, controller: Controller) -> d
     mine = actions == other
     lost = Decision(action=np.asarray(other), value=None, residual=d.residual,
                     support_rows=d.support_rows[mine], support_weights=d.support_weights[mine],
-                    support_distances=d.support_distances[mine], candidates=np.empty(0),
+                    support_distances=d.support_distances[mine],
+                    support_labels=(d.support_labels[mine] if len(d.support_labels)
+                                    else np.empty((0, 0))), candidates=np.empty(0),
                     candidate_residuals=np.empty(0), candidate_values=np.empty(0),
                     passed=np.empty(0, bool), chosen=-1, threshold=float("nan"))
     rec = decision_record(lost, corpus, index)
     rec.pop("observation", None)
     rec["score"] = float(scores[other])
     rec["why"] = {"reason": "lower score", "score_gap": float(scores[chosen] - scores[other]),
-                  "text": (f"its rows carry {scores[other]:.0%} of the subset's weight, the "
+                  "text": (f"its score over the subset's rows is {scores[other]:.0%}, the "
                            f"chosen action's {scores[chosen]:.0%}")}
     return rec

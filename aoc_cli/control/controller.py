@@ -14,7 +14,8 @@ One step, top to bottom:
    z, of ``v_hat - z sigma_v / sqrt(support)``.
 
 In imitation mode (ABC) the belief is ``b(o_t, h_t)`` and the decision is the weighted action
-of its minimal corpus subset: the weighted mean (continuous) or the weight-argmax (discrete).
+of its minimal corpus subset: the weighted mean (continuous) or, discrete, the argmax of the
+actions' scores, the subset's weighted sum of its rows' labels (aoc_cli.belief.row_labels).
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from aoc_cli.belief.row_labels import default_row_smoothing, row_labels
 from aoc_cli.control.config import ControllerConfig
 from aoc_cli.control.epsilon import epsilon_filter, residual_cap
 from aoc_cli.control.support import penalised, row_episodes, support_episodes, support_filter
@@ -43,6 +45,8 @@ class Decision:
     (:mod:`aoc_cli.control.support`), ``candidate_support`` (K,) each candidate's (computed
     where ``min_support`` or ``support_penalty`` reads it, else empty),
     ``support_counts`` (m,) the distinct episodes at each supporting row's belief.
+    ``support_labels`` (m, n) each supporting row's label and ``scores`` (n,) the actions'
+    scores (discrete imitation: :mod:`aoc_cli.belief.row_labels`; else empty).
     """
 
     action: np.ndarray
@@ -61,6 +65,8 @@ class Decision:
     support: float = float("nan")
     candidate_support: np.ndarray = field(default_factory=lambda: np.empty(0))
     support_counts: np.ndarray = field(default_factory=lambda: np.empty(0, np.int64))
+    support_labels: np.ndarray = field(default_factory=lambda: np.empty((0, 0)))
+    scores: np.ndarray = field(default_factory=lambda: np.empty(0))
 
 
 def action_bounds(action_space: dict, actions: np.ndarray | None = None):
@@ -120,6 +126,15 @@ class Controller:
         """Neighbours per query: ``config.k`` when set (``--k``), else the k the index was
         built with (the k rule, :mod:`aoc_cli.decompose.k_rule`)."""
         return int(self.config.k) if self.config.k is not None else int(self.index.k)
+
+    @property
+    def row_smoothing(self) -> float:
+        """lambda of the rows' labels (discrete imitation): ``config.row_smoothing`` when set,
+        else :func:`aoc_cli.belief.row_labels.default_row_smoothing` for the index's
+        candidates."""
+        if self.config.row_smoothing is not None:
+            return float(self.config.row_smoothing)
+        return default_row_smoothing(self.discrete, self.index.candidates)
 
     # -- candidates ------------------------------------------------------------------------
     def sample_candidates(self, observation: np.ndarray, history: History) -> np.ndarray:
@@ -229,8 +244,13 @@ class Controller:
         rows = _trim(dec.rows[0], dec.rows[0])
         weights = _trim(dec.weights[0], dec.rows[0])
         actions = self.corpus_actions[rows]
+        labels, totals = np.empty((0, 0)), np.empty(0)
         if self.discrete:
-            totals = np.bincount(actions, weights=weights, minlength=int(self.corpus.n_actions))
+            n = int(self.corpus.n_actions)
+            lam = self.row_smoothing
+            labels = row_labels(actions, self.index.beliefs[rows] if lam else None,
+                                self.model.head_weights if lam else None, n, lam)
+            totals = weights @ labels  # the actions' scores: sum_c w^c l^c over the rows
             action = np.asarray(int(np.argmax(totals)))
         else:
             action = (weights[:, None] * actions).sum(axis=0)
@@ -243,7 +263,8 @@ class Controller:
             candidates=np.empty((0,)), candidate_residuals=np.empty(0),
             candidate_values=np.empty(0), passed=np.empty(0, bool), chosen=-1,
             threshold=float("nan"), support=float(support[0]),
-            support_counts=_trim(counts[0], dec.rows[0]),
+            support_counts=_trim(counts[0], dec.rows[0]), support_labels=labels,
+            scores=totals,
         )
         decision.warnings = self.heterogeneity(decision)
         return decision

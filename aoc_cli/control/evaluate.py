@@ -10,8 +10,9 @@ For a chunk of whole episodes of the held-out corpus (S steps):
    NAME, each step's own episode is left out of its neighbours (as ``aoc explain --data`` does
    with its row mask; here per query: :class:`LeaveEpisodeOut`), so no step is explained by
    its own row;
-4. the decision: imitation, the weighted action of the minimal corpus subset (its weights per
-   action are the scores); value, the controller's rule (epsilon-quantile filter on the
+4. the decision: imitation, the weighted action of the minimal corpus subset (discrete: the
+   argmax of the actions' scores, the subset's weighted sum of its rows' labels,
+   aoc_cli.belief.row_labels); value, the controller's rule (epsilon-quantile filter on the
    residuals, capped by ``residual_cap`` x the typical p90 residual when set, with
    ``min_support`` the support filter, then the best v_hat, or with ``support_penalty`` the
    best penalised v_hat) over the candidates;
@@ -33,6 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from aoc_cli import metrics as sc
+from aoc_cli.belief.row_labels import subset_scores
 from aoc_cli.control.evaluate_inputs import (BASELINES, EXACT_MAX_ROWS, EvalContext,
                                              candidate_beliefs, check_inputs, episode_rows,
                                              heterogeneity)
@@ -171,10 +173,8 @@ def _imitate(ctx, rows, ep, obs, hist, logged) -> StepScores:
     head = beliefs.astype(np.float64) @ ctx.head.weight.T + ctx.head.bias
     scores = None
     if ctx.discrete:
-        n = ctx.n_actions
-        scores = np.zeros((len(rows), n))
-        q = np.repeat(np.arange(len(rows)), dec.rows.shape[1])
-        np.add.at(scores, (q, acts.reshape(-1)), np.where(used, dec.weights, 0.0).reshape(-1))
+        scores = subset_scores(dec.rows, dec.weights, ctx.corpus_actions, ctx.n_actions,
+                               ctx.index.beliefs, ctx.head, ctx.row_smoothing)
         decided = scores.argmax(1)
         probs = np.exp(head - head.max(1, keepdims=True))
         probs /= probs.sum(1, keepdims=True)

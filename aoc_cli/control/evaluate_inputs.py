@@ -255,6 +255,7 @@ class EvalContext:
         self.data_obs = np.asarray(data.observations)
         self.data_actions = np.asarray(data.actions)
         self.head = model.head_weights
+        self.row_smoothing = self.session.controller.row_smoothing  # discrete imitation
         if self.discrete:
             self.majority = int(np.bincount(self.corpus_actions, minlength=self.n_actions).argmax())
         else:

@@ -1,7 +1,8 @@
 """Decision records (what a person audits) and the audit log (HDF5, written atomically).
 
 A record holds the decision, its value estimate and residual, one entry per supporting corpus
-row (row, episode, step, tags, action, value, weight, distance), a summary of the other
+row (row, episode, step, tags, action, value, weight, distance; discrete imitation: its label,
+and the record the actions' scores, aoc_cli.belief.row_labels), a summary of the other
 candidates and the warnings. The audit log keeps, for every step of every episode, the inputs
 of the decision (observation, history, candidates) and its outputs, so any recorded decision
 can be re-run and explained again.
@@ -52,6 +53,8 @@ def decision_record(decision: Decision, corpus, index, step: int | None = None,
             "weight": float(decision.support_weights[j]),
             "distance": float(decision.support_distances[j]),
             "episodes_here": int(counts[j]) if j < len(counts) else None,
+            **({"label": decision.support_labels[j].tolist()}
+               if len(decision.support_labels) else {}),
         })
     support.sort(key=lambda s: -s["weight"])
     record = {
@@ -66,6 +69,8 @@ def decision_record(decision: Decision, corpus, index, step: int | None = None,
         "support": support,
         "warnings": list(decision.warnings),
     }
+    if len(decision.scores):  # discrete imitation: sum over the rows of weight x label
+        record["scores"] = decision.scores.tolist()
     if typical_residual and decision.residual > 3 * typical_residual:
         record["warnings"].append(
             f"large residual: {decision.residual:.3g} is over 3x the corpus's typical "

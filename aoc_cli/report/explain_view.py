@@ -43,6 +43,8 @@ def write_explained(records: list[dict], fmt: str) -> None:
                                                   if "action_label" in rec else {}),
                     "value (v_hat)": rec["value"], "residual": rec["residual"],
                     "support (episodes)": rec.get("support_episodes")}
+            if "scores" in rec:  # discrete imitation: sum over the rows of weight x label
+                head["scores"] = [round(v, 4) for v in rec["scores"]]
             if typical:
                 head["typical residual"] = typical
                 head["residual / typical"] = rec["residual"] / typical if typical else None
@@ -92,7 +94,9 @@ def _support_rows(support: list[dict]) -> list[dict]:
              "step": s["step"], **s["tags"], "action": s["action"],
              **({"action label": s["action_label"]} if "action_label" in s else {}),
              **({"value": s["value"]} if valued else {}),
-             "weight": s["weight"], "distance": s["distance"],
+             "weight": s["weight"],
+             **({"label": [round(v, 4) for v in s["label"]]} if "label" in s else {}),
+             "distance": s["distance"],
              "episodes here": s.get("episodes_here")} for s in support]
 
 

@@ -62,7 +62,10 @@ def test_imitation_contrast_is_the_other_action_with_its_rows_of_the_subset(corr
         assert c["action"] == 1 - rec["action"] and c["why"]["reason"] == "lower score"
         mine = [s for s in rec["support"] if s["action"] == c["action"]]
         assert [s["row"] for s in c["support"]] == [s["row"] for s in mine]
-        assert c["score"] == pytest.approx(sum(s["weight"] for s in mine), abs=1e-12)
+        # its score: the sum over the whole subset of weight x the row's label of that action
+        assert c["score"] == pytest.approx(
+            sum(s["weight"] * s["label"][c["action"]] for s in rec["support"]), abs=1e-12)
+        assert c["score"] == pytest.approx(rec["scores"][c["action"]], abs=1e-12)
         assert c["score"] <= 0.5 + 1e-12
         seen_rows += len(mine)
     assert seen_rows > 0

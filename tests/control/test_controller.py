@@ -103,18 +103,31 @@ def test_noise_injected_after_step_t_is_flagged_out_of_distribution(maze):
     assert not any(any(r.ood[:8]) for r in calm), [np.flatnonzero(r.ood)[:5] for r in calm]
 
 
-def test_imitation_decision_is_the_weight_argmax_of_the_supporting_actions(corridor):
+def test_imitation_decision_is_the_argmax_of_its_rows_weights_times_their_labels(corridor):
+    from aoc_cli.belief.row_labels import ROW_SMOOTHING, row_labels
+
     session = open_session(corridor)
-    assert session.model.mode == "imitation"
-    actions = corridor.actions
+    plain = open_session(corridor, config=ControllerConfig(row_smoothing=0.0))
+    assert session.model.mode == "imitation" and session.index.candidates == "per_action"
+    assert session.controller.row_smoothing == ROW_SMOOTHING  # the default with these candidates
+    actions, head = corridor.actions, session.model.head_weights
     buf = HistoryBuffer(session.model.history_length, 2, 1, True)
     agree = 0
     for x in np.linspace(0.2, 9.8, 25):
         obs = np.array([x, np.sin(x)], np.float32)
         d = session.controller.decide(obs, buf.history())
-        totals = np.bincount(actions[d.support_rows], weights=d.support_weights, minlength=2)
-        assert int(d.action) == int(np.argmax(totals))
+        rows = d.support_rows
+        labels = row_labels(actions[rows], session.index.beliefs[rows], head, 2, ROW_SMOOTHING)
+        assert np.allclose(d.support_labels, labels, rtol=0, atol=1e-12)
+        assert np.allclose(d.scores, d.support_weights @ labels, rtol=0, atol=1e-12)
+        assert int(d.action) == int(np.argmax(d.scores))
         agree += int(d.action) == int(x < 5)
+        # lambda 0, the paper's score: each action's weight in the same subset
+        p = plain.controller.decide(obs, buf.history())
+        assert np.array_equal(p.support_rows, rows)
+        totals = np.bincount(actions[rows], weights=p.support_weights, minlength=2)
+        assert np.allclose(p.scores, totals, rtol=0, atol=1e-12)
+        assert int(p.action) == int(np.argmax(totals))
     assert agree >= 22  # the expert's rule, recovered from the corpus
 
 
@@ -129,8 +142,9 @@ def test_a_logged_step_in_imitation_mode_is_the_decision_alone_without_its_episo
         assert rec["logged_action"] == int(corridor.actions[row])
         support = rec["support"]
         assert support and all(s["episode"] != episode for s in support)
-        totals = np.bincount([s["action"] for s in support],
-                             weights=[s["weight"] for s in support], minlength=2)
+        # the record shows each row's label; the scores are the sum of weight x label
+        totals = np.sum([s["weight"] * np.asarray(s["label"]) for s in support], axis=0)
+        assert np.allclose(rec["scores"], totals, rtol=0, atol=1e-12)
         assert rec["action"] == int(np.argmax(totals))
     assert session.controller.selection is None   # the left-out episode is not left behind
 
