@@ -4,6 +4,8 @@ pendulum-het figures (does the history identify the dynamics?).
     .venv/bin/python benchmarks/perf/train.py time    [--rows 100000] [--repeats 3] [--threads 2]
                                                      [-f json]
     .venv/bin/python benchmarks/perf/train.py figures [--rows 100000] [--seed 0] [--threads 2]
+    .venv/bin/python benchmarks/perf/train.py devices --store DIR --corpus NAME [--paper]
+                                                     [--devices cpu,cuda] [--repeats 1]
 
 ``time``: collect ``--rows`` pendulum-het rows (collect seed = run index), store them, and train
 the default value-mode model (L = 4, d_b = 20, batch 500, Adam 1e-3, patience 10) to early stop
@@ -19,6 +21,14 @@ training episodes' rows, from the L = 4 beliefs, the L = 0 beliefs, and the raw 
 Diagnostics beside the four figures: the same value models given the true system as a fourth
 observation (how much the value depends on the system at all), and the probe on the beliefs of
 an imitation-mode model (L = 4), whose target, the action, does depend on the system.
+
+``devices``: the model of stored corpus ``--corpus`` (as ``aoc train NAME``, or ``--paper``)
+trained on each of ``--devices`` (default: the CPU, and the GPU when torch sees one), the
+devices interleaved over ``--repeats`` rounds; reported: the wall and CPU seconds of the whole
+training (value targets included: fitted Q evaluation runs on the CPU), the belief fit's own
+seconds, epochs and validation R^2 (other devices round otherwise: close, not equal). Then each
+model is loaded as a machine without a GPU loads it (on the CPU) and on its own device: the
+largest difference of the corpus's row beliefs between the two (``cross_device_max_diff``).
 """
 
 from __future__ import annotations
@@ -32,6 +42,7 @@ import numpy as np
 
 import aoc_cli
 from aoc_cli.belief import episode_rows, load_model, logistic_probe, split_episodes
+from aoc_cli.belief.inputs import pick_device
 from aoc_cli.belief.config import BeliefConfig
 from aoc_cli.store import Store, box_space
 
@@ -115,14 +126,47 @@ def run_figures(args) -> None:
         print(json.dumps(out, indent=2))
 
 
+def run_devices(args) -> None:
+    import torch
+
+    store = Store(args.store)
+    corpus = store.corpus(args.corpus)
+    devices = (args.devices.split(",") if args.devices else
+               ["cpu"] + (["cuda"] if torch.cuda.is_available() else []))
+
+    def train_on(device: str):
+        return lambda _i: aoc_cli.train(args.corpus, store=store, model=f"on-{device}",
+                                        device=device, threads=args.threads, paper=args.paper,
+                                        overwrite=True).metrics
+
+    runs = h.interleave({d: train_on(d) for d in devices}, args.repeats)
+    rows = []
+    for d in devices:
+        beliefs = {where: load_model(corpus, f"on-{d}", device=where).row_beliefs(corpus)
+                   for where in dict.fromkeys(["cpu", pick_device(d).type])}
+        diff = float(np.abs(beliefs["cpu"] - beliefs[pick_device(d).type]).max())
+        ms = runs[d].outs
+        rows.append(h.row(f"train on {d}", corpus.n_rows, runs[d],
+                          device=torch.cuda.get_device_name() if d == "cuda" else "cpu",
+                          fit_s=[round(m["seconds"], 2) for m in ms],
+                          epochs=[m["epochs"] for m in ms],
+                          val_r2=[round(m["val_r2"], 4) for m in ms],
+                          cross_device_max_diff=diff))
+    h.emit(rows, args.format)
+
+
 def main() -> None:
     ap = h.parser(__doc__, repeats=3)
-    ap.add_argument("what", choices=["time", "figures"])
+    ap.add_argument("what", choices=["time", "figures", "devices"])
+    ap.add_argument("--store", help="devices: the store holding --corpus")
+    ap.add_argument("--corpus", help="devices: the corpus to train")
+    ap.add_argument("--devices", default=None, help="devices: comma-separated, e.g. cpu,cuda")
+    ap.add_argument("--paper", action="store_true", help="devices: the paper's settings")
     ap.add_argument("--rows", type=int, default=100_000)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--threads", type=int, default=2)
     args = ap.parse_args()
-    run_time(args) if args.what == "time" else run_figures(args)
+    {"time": run_time, "figures": run_figures, "devices": run_devices}[args.what](args)
 
 
 if __name__ == "__main__":

@@ -40,12 +40,13 @@ def test_block_inputs_are_the_in_memory_encoding_of_the_same_rows(corpus):
     model_cfg = BeliefConfig(max_epochs=1, history_length=4, seed=0, threads=1)
     train_model(corpus, model_cfg, "m", overwrite=True)
     model = load_model(corpus, "m")
-    full = encode_corpus(corpus, model.encoder, 4, True, torch.device("cpu"))
+    device = model.device  # the encoder's (a GPU when torch sees one)
+    full = encode_corpus(corpus, model.encoder, 4, True, device)
     cols = Columns(corpus)
     for a, b in [(0, 37), (37, 1000), (1001, 1002), (4790, corpus.n_rows)]:
-        inputs, lo = block_inputs(cols, model.encoder, a, b, 4, True, torch.device("cpu"))
-        got = inputs.batch(torch.arange(a - lo, b - lo))
-        want = full.batch(torch.arange(a, b))
+        inputs, lo = block_inputs(cols, model.encoder, a, b, 4, True, device)
+        got = inputs.batch(torch.arange(a - lo, b - lo, device=device))
+        want = full.batch(torch.arange(a, b, device=device))
         for g, w in zip(got, want):
             assert torch.equal(g, w)
 

@@ -17,6 +17,13 @@ from tests.belief.corpora import (continuous_imitation, discrete_imitation, hist
 FAST = dict(threads=1, max_epochs=15, patience=5, batch_size=250, hidden=64)
 
 
+def _across_batches(model) -> float:
+    """The tolerance between beliefs of the same rows computed in batches of other shapes:
+    a few float32 ulp on the CPU; on a GPU the kernels differ with the batch's shape (4e-5
+    measured on an H100)."""
+    return 1e-5 if model.device.type == "cpu" else 1e-4
+
+
 @pytest.fixture(scope="module")
 def value_run(tmp_path_factory):
     """One value-mode model on a corpus where v is a known function of (o, a)."""
@@ -59,7 +66,7 @@ def test_loaded_model_beliefs_agree_across_entry_points(value_run):
     hist = corpus.history(rows, 4)
     direct = model.beliefs(corpus.observations[rows], corpus.actions[rows], hist)
     assert direct.shape == (len(rows), 20) and direct.dtype == np.float32
-    np.testing.assert_allclose(direct, beliefs, atol=1e-5)
+    np.testing.assert_allclose(direct, beliefs, atol=_across_batches(model))
     # the head in original units reproduces predict(), which tracks the known value
     weight, bias = model.head_weights
     pred = model.predict(corpus.observations[rows], corpus.actions[rows], hist)
@@ -139,7 +146,7 @@ def test_imitation_on_continuous_actions_predicts_them_in_original_units(tmp_pat
     assert np.abs(pred - corpus.actions[rows]).mean() < 0.1
     weight, bias = model.head_weights
     b = model.row_beliefs(corpus)[rows]
-    np.testing.assert_allclose(b @ weight.T + bias, pred, atol=1e-4)
+    np.testing.assert_allclose(b @ weight.T + bias, pred, atol=10 * _across_batches(model))
 
 
 def test_bad_requests_are_refused_with_what_to_do(tmp_path):
