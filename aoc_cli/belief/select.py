@@ -103,7 +103,7 @@ def why_no_search(corpus, config: BeliefConfig, given: dict, paper: bool) -> str
     if not left:
         return None
     if paper:
-        return "--paper: the paper's settings"
+        return "the paper's settings, as asked (no task settings, no selection)"
     if config.mode != "imitation":
         return ("value mode: the paper's settings (settings are chosen by validation only "
                 "when imitating discrete actions; a lower value loss is not a better "

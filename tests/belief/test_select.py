@@ -258,6 +258,9 @@ def test_settings_are_searched_only_when_imitating_discrete_actions():
     continuous = SimpleNamespace(n_rows=5000, discrete=False)
     assert select.open_settings(continuous, imitation, given) == []
     assert "continuous actions" in select.why_no_search(continuous, imitation, given, False)
+    # the reason is saved in the model's metrics: the library's words, not a CLI flag
+    paper = select.why_no_search(continuous, imitation, given, True)
+    assert "paper's settings" in paper and "--" not in paper
     assert select.with_imitation_defaults(continuous, imitation, {}).label_smoothing == 0
     discrete = SimpleNamespace(n_rows=5000, discrete=True)
     assert select.open_settings(discrete, imitation, given) == ["history_length", "hidden",
