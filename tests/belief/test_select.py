@@ -48,7 +48,7 @@ def test_given_settings_and_paper_flag_skip_the_search(aoc, ward):
     code, out, err = aoc("train", "ward", "--model", "p", "--paper", "--hidden", "16", *QUICK)
     assert code == 0, err
     metrics = json.loads(out)
-    assert metrics["selection"]["searched"] == [] and "--paper" in metrics["selection"]["why"]
+    assert metrics["selection"]["searched"] == [] and "as asked" in metrics["selection"]["why"]
     config = json.loads((ward.corpus("ward").models_dir / "p" / "config.json").read_text())
     assert config["config"]["history_length"] == 4 and config["config"]["weight_decay"] == 0.0
     code, out, err = aoc("train", "ward", "--model", "g", "--history-length", "1", "--hidden",
