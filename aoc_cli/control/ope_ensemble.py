@@ -53,9 +53,10 @@ class FQEEnsemble:
         self.target = [_bmm(p, b) for p, b in zip(stack([s["target"] for s in states]),
                                                   self.is_bias)]
         group = fit.fqe.impl.modules.optim.optim.param_groups[0]
+        # foreach: the per-tensor loop's updates in one call (the same values)
         self.optim = torch.optim.Adam(self.params, lr=group["lr"], betas=group["betas"],
                                       eps=group["eps"], weight_decay=group["weight_decay"],
-                                      amsgrad=group["amsgrad"])
+                                      amsgrad=group["amsgrad"], foreach=True)
         moments = [s["optim"]["optim"]["state"] for s in states]
         if all(len(m) for m in moments):
             if len({float(m[0]["step"]) for m in moments}) != 1:
@@ -194,14 +195,29 @@ def _sampler(fit, cums: np.ndarray, policy_of: np.ndarray, pools: list, rng, M: 
     offsets = np.concatenate([[0], np.cumsum(lens[:-1, 0])])[:, None]       # (M, 1)
     pol = policy_of[:, None]
     B, n = fit.batch, fit.n_actions
+    # a deterministic policy's cumulative row is 0 before its action and 1 from it on, so the
+    # count of entries below u in [0, 1) is that action (0 where u is 0): the same draw with
+    # no (M, B, n) gather, where every policy is deterministic (aoc evaluate's decisions)
+    chosen = _deterministic(cums)                                           # (P, N) or None
 
     def draw():
         rows = flat[offsets + (rng.random((M, B)) * lens).astype(np.int64)]   # (M, B)
         u = rng.random((M, B, 1))
+        if chosen is not None:
+            return rows, np.where(u[..., 0] > 0, chosen[pol, fit.nxt[rows]], 0)
         nxt_a = (cums[pol, fit.nxt[rows]] < u).sum(2).clip(0, n - 1)         # (M, B)
         return rows, nxt_a
 
     return draw
+
+
+def _deterministic(cums: np.ndarray) -> np.ndarray | None:
+    """(P, N) int64 the action of every row of P policies' cumulative probabilities (P, N, n)
+    when each row is a step from 0 to 1 (a deterministic policy), else None."""
+    cums = np.asarray(cums)
+    if cums.ndim != 3 or not np.all((cums == 0.0) | (cums == 1.0)):
+        return None
+    return (cums == 0.0).sum(2).astype(np.int64)
 
 
 def _bmm(p, bias: bool):

@@ -164,3 +164,24 @@ def test_the_sampler_draws_each_member_from_its_pool_and_policy(log):
     assert len(set(rows[1])) > 20                 # member 1: every row
     # member 0 evaluates the deterministic policy: its action at the next logged step
     assert np.array_equal(acts[0], log[2][1][fit.nxt[rows[0]]].argmax(1))
+
+
+def test_deterministic_policies_draw_the_next_actions_of_the_general_rule(log, monkeypatch):
+    """Where every policy is deterministic the next actions come from each row's action, not
+    from the (M, B, n) comparison with the cumulative probabilities: the same draws."""
+    from aoc_cli.control import ope_ensemble
+
+    fit = make(log)
+    n, rng = fit.n_actions, np.random.default_rng(3)
+    cums = np.stack([cumulative(np.eye(n)[rng.integers(0, n, fit.n_rows)]) for _ in range(2)])
+    assert ope_ensemble._deterministic(cums) is not None
+    assert ope_ensemble._deterministic(np.stack([fit.cum])) is None      # the behaviour's
+    args = (fit, cums, np.array([0, 1, 1]), [None, None, np.arange(0, fit.n_rows, 2)])
+    fast = ope_ensemble._sampler(*args, np.random.default_rng(5), 3)
+    monkeypatch.setattr(ope_ensemble, "_deterministic", lambda _cums: None)
+    general = ope_ensemble._sampler(*args, np.random.default_rng(5), 3)
+    for _ in range(20):
+        (r1, a1), (r2, a2) = fast(), general()
+        np.testing.assert_array_equal(r1, r2)
+        np.testing.assert_array_equal(a1, a2)
+        assert len(np.unique(a1)) > 1
