@@ -3,6 +3,8 @@ records): JSON, JSONL, CSV with one row per supporting row, or tables."""
 
 from __future__ import annotations
 
+import numpy as np
+
 from aoc_cli.report.output import console, write_object, write_records
 
 
@@ -65,7 +67,8 @@ def write_explained(records: list[dict], fmt: str) -> None:
                  + f", step {rec['step']})"
                  if "episode" in rec else "")
             write_object(head, "table", title=title)
-            write_records(_support_rows(rec["support"]), "table", title="minimal corpus subset")
+            write_records(_support_rows(rec["support"], rec["action"]), "table",
+                          title="minimal corpus subset")
             for w in rec["warnings"]:
                 console.print(f"[yellow]warning:[/] {w}")
             if rec.get("contrast"):
@@ -82,21 +85,29 @@ def _print_contrast(c: dict) -> None:
         head["score"] = c["score"]
     write_object(head, "table", title="contrast: the best action not chosen")
     if c["support"]:
-        write_records(_support_rows(c["support"]), "table", title="its supporting rows")
+        write_records(_support_rows(c["support"], c["action"]), "table",
+                      title="its supporting rows")
 
 
-def _support_rows(support: list[dict]) -> list[dict]:
+def _support_rows(support: list[dict], action=None) -> list[dict]:
     """The subset's rows as table records; no value column where no row has a value
-    (imitation: the rows' actions are what the decision weighs)."""
+    (imitation: the rows' actions are what the decision weighs); the episode's own id where
+    the corpus has ids, else its number (the JSON keeps both). Discrete imitation: each
+    row's label of ``action`` (the decided or contrasted one; the score of that action is
+    the sum of weight x label), weights and distances to 3 significant digits (the JSON
+    keeps them whole)."""
     valued = any(s["value"] is not None for s in support)
-    return [{"row": s["row"], "episode": s["episode"],
-             **({"episode_id": s["episode_id"]} if s.get("episode_id") is not None else {}),
+    code = int(np.asarray(action).reshape(-1)[0]) if action is not None else None
+    return [{"row": s["row"],
+             **({"episode_id": s["episode_id"]} if s.get("episode_id") is not None
+                else {"episode": s["episode"]}),
              "step": s["step"], **s["tags"], "action": s["action"],
              **({"action label": s["action_label"]} if "action_label" in s else {}),
              **({"value": s["value"]} if valued else {}),
-             "weight": s["weight"],
-             **({"label": [round(v, 4) for v in s["label"]]} if "label" in s else {}),
-             "distance": s["distance"],
+             **({"weight": float(f"{s['weight']:.3g}"), "label": round(s["label"][code], 3),
+                 "distance": float(f"{s['distance']:.3g}")}
+                if "label" in s and code is not None else
+                {"weight": s["weight"], "distance": s["distance"]}),
              "episodes here": s.get("episodes_here")} for s in support]
 
 
@@ -110,5 +121,5 @@ def _print_what_if(w: dict) -> None:
             "supporting rows removed": len(w["support_removed"]),
             "unchanged": w["unchanged"]}
     write_object(head, "table", title="what if")
-    write_records(_support_rows(w["support"]), "table",
+    write_records(_support_rows(w["support"], w["action"]), "table",
                   title="minimal corpus subset without them")
