@@ -64,6 +64,8 @@ def lede(rec: dict, ctx: PageContext) -> str:
     episodes = {s["episode"] for s in rec["support"]}
     words, css = residual_words(rec["residual"], rec.get("typical_residual"))
     value = "" if rec.get("value") is None else f"; expected value {num(rec['value'])}"
+    if rec.get("scores") is not None:  # discrete imitation: the sum over the rows of weight x label
+        value = f"; score {rec['scores'][int(rec['action'])]:.0%} (weight x label over the rows)"
     role = rec.get("role", "decision")
     verb = "Recommended" if role == "decision" else "Explained"
     return (f'<p class="lede"><b>{esc(verb)}: {esc(ctx.action(rec["action"]))}</b>, '
@@ -152,9 +154,19 @@ def card(s: dict, hist, obs_now, query: dict, ctx: PageContext, features, names:
     return (f'<div class="card" data-row="{int(s["row"])}"><h3>{esc(who)}, step '
             f'{int(s["step"])}</h3><div class="kv">row {int(s["row"])}'
             f'{" &middot; " + esc(tags) if tags else ""}<br>action <b>'
-            f'{esc(ctx.action(s["action"]))}</b>{value} &middot; weight <b>{s["weight"]:.1%}</b> &middot; distance '
+            f'{esc(ctx.action(s["action"]))}</b>{value} &middot; weight <b>{s["weight"]:.1%}</b>'
+            f'{_label(s, ctx)} &middot; distance '
             f'{num(s["distance"], 3)}</div>{plot}{acts}'
             f'{_bars(s, ctx, names.get("history_step") or [], names.get("action") or [])}</div>')
+
+
+def _label(s: dict, ctx: PageContext) -> str:
+    """A row's label (discrete imitation: its logged action smoothed towards the belief's
+    probabilities; aoc_cli.belief.row_labels) as " · label a 68%, b 32%", else ""."""
+    if "label" not in s:
+        return ""
+    return " &middot; label " + esc(", ".join(f"{ctx.action(a)} {p:.0%}"
+                                             for a, p in enumerate(s["label"])))
 
 
 def _support_table(support: list[dict], ctx: PageContext) -> str:
@@ -163,7 +175,7 @@ def _support_table(support: list[dict], ctx: PageContext) -> str:
         f"</td><td>{int(s['step'])}</td><td>"
         f"{esc(', '.join(f'{k}={v}' for k, v in s['tags'].items()))}</td>"
         f"<td>{esc(ctx.action(s['action']))}</td><td>{num(s.get('value'))}</td>"
-        f"<td>{s['weight']:.1%}</td></tr>" for s in support)
+        f"<td>{s['weight']:.1%}{_label(s, ctx)}</td></tr>" for s in support)
     return ("<table><tr><th>episode</th><th>step</th><th>tags</th><th>action</th><th>value"
             f"</th><th>weight</th></tr>{rows}</table>")
 

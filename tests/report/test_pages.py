@@ -77,6 +77,10 @@ def test_the_page_shows_markup_from_the_log_as_text(ward_page):
     # one card per supporting row, each with its history plot
     assert text.count('class="card"') == len(rec[0]["support"] if isinstance(rec, list)
                                                else rec["support"])
+    # the decided action's score, and each card's label of the row (row labels, ABC)
+    rec = rec[0] if isinstance(rec, list) else rec
+    assert f"score {rec['scores'][rec['action']]:.0%} (weight x label over the rows)" in text
+    assert text.count("&middot; label ") >= len(rec["support"])
 
 
 def test_a_decision_page_in_the_browser(ward_page, browser):
