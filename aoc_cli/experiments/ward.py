@@ -3,8 +3,9 @@
 Over random 10:1 splits by patient of one ward log, on the held-out patients' steps:
 
 * **abc** -- ABC as a user gets it: ``aoc train --mode imitation`` with its default settings
-  (chosen by validation, aoc_cli.belief.select), ``aoc index``, ``aoc evaluate`` (the decision
-  is the weight-argmax of the minimal corpus subset; the AUC score is the treated rows' weight);
+  (chosen by validation, aoc_cli.belief.select), ``aoc index``, ``aoc evaluate`` (the AUC score
+  of oxygen is the sum over the minimal corpus subset of weight x each row's label of it,
+  aoc_cli.belief.row_labels; the decision is the argmax of the scores);
 * **abc-head** -- the same model's own head (the black box ABC explains);
 * **bc-lr**, **bc-mlp** -- scikit-learn's logistic regression and MLP (128, 128; early stopping)
   on the same information ABC reads: the standardised observation and the previous L steps'
