@@ -62,7 +62,9 @@ class OPESettings(Settings):
                    "estimates them",
         help="Corpus column of the behaviour's probability of each logged action.")
     fqe_steps: int | None = setting(None, bounds=">= 1",
-                                    none="about 30 passes over the log, 1,500 to 6,000",
+                                    none="about 30 passes over the log and 2.5 target syncs "
+                                         "per step of its 99th-percentile episode length, "
+                                         "1,500 to 12,000",
                                     help="Gradient steps of fitted Q evaluation.")
     fqe_refits: int = setting(REFITS, bounds=">= 0",
                               help="Refits on resampled episodes behind FQE's interval, each a "
@@ -252,7 +254,8 @@ def off_policy_values(data, logged: np.ndarray, policies: dict, settings: OPESet
                          seed=settings.seed)["mean"]
     out = {"ope": {"estimators": list(settings.estimators), "gamma": settings.gamma,
                    "propensity": source, "bootstrap": settings.n_boot,
-                   "fqe_steps": (settings.fqe_steps or default_steps(data.n_rows))
+                   "fqe_steps": (settings.fqe_steps or default_steps(
+                       data.n_rows, data.episode_starts, settings.gamma))
                    if "fqe" in settings.estimators or "wdr" in settings.estimators else None,
                    "fqe_refits": settings.fqe_refits if "fqe" in settings.estimators
                    else None},

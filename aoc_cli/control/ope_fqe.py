@@ -35,6 +35,11 @@ BATCH = 256
 LEARNING_RATE = 1e-3
 TARGET_UPDATE = 100
 HIDDEN = (64, 64)
+#: Target syncs per step of the log's horizon (:func:`default_steps`), and the most steps: chosen
+#: on icu-sepsis's held-out logs 0-4 by the convergence of the estimates as the steps double
+#: (docs/results.md, "FQE's steps").
+SYNCS_PER_STEP = 2.5
+MAX_STEPS = 12000
 #: The bootstrap of refits (:func:`bootstrap_fqe`): how many, and the share of the full fit's
 #: steps each takes (``steps // REFIT_SHARE``).
 REFITS = 10
@@ -76,9 +81,27 @@ class _NextActions:
         return torch.as_tensor(self.actions, dtype=torch.long, device=x.device)
 
 
-def default_steps(n_rows: int) -> int:
-    """Gradient steps: about 30 passes over the log, between 1,500 and 6,000."""
-    return int(np.clip(30 * n_rows // BATCH, 1500, 6000))
+def horizon(starts: np.ndarray, gamma: float = 1.0) -> int:
+    """How many steps a value must travel back in the log: the 99th percentile of its
+    episodes' lengths (``starts`` (E + 1,)), no more than the steps within which gamma's
+    discount falls to 1% (gamma < 1)."""
+    lengths = np.diff(np.asarray(starts, np.int64))
+    h = float(np.percentile(lengths, 99)) if len(lengths) else 1.0
+    if gamma < 1.0:
+        h = min(h, np.log(0.01) / np.log(max(float(gamma), 1e-6)))
+    return max(1, int(np.ceil(h)))
+
+
+def default_steps(n_rows: int, starts: np.ndarray | None = None, gamma: float = 1.0) -> int:
+    """Gradient steps: about 30 passes over the log, and at least :data:`SYNCS_PER_STEP`
+    target syncs per step of the log's :func:`horizon` (FQE moves a value one step back per
+    target sync: too few and Q_hat stays between its start, 0, and the fixed point, low for a
+    policy whose value lies far ahead; docs/results.md "FQE's steps"), between 1,500 and
+    :data:`MAX_STEPS`."""
+    steps = 30 * n_rows // BATCH
+    if starts is not None:
+        steps = max(steps, int(np.ceil(SYNCS_PER_STEP * horizon(starts, gamma))) * TARGET_UPDATE)
+    return int(np.clip(steps, 1500, MAX_STEPS))
 
 
 class FQEFit:
@@ -181,7 +204,7 @@ def fit_fqe(observations, actions, rewards, starts, policy, gamma: float = 1.0,
     them. ``progress(done, total)`` after each block of steps."""
     fit = FQEFit(observations, actions, rewards, starts, policy, gamma, seed, batch,
                  learning_rate, target_update)
-    total = default_steps(fit.n_rows) if steps is None else int(steps)
+    total = default_steps(fit.n_rows, starts, gamma) if steps is None else int(steps)
     fit.train(total, progress=progress)
     return fit.q()
 
@@ -230,7 +253,7 @@ def fqe_policies(observations, actions, rewards, starts, policies: list, gamma: 
     P = len(policies)
     fit = FQEFit(observations, actions, rewards, starts, policies[0], gamma, seed)
     cums = np.stack([fit.cum] + [cumulative(p) for p in policies[1:]])      # (P, N, n)
-    total = default_steps(fit.n_rows) if steps is None else int(steps)
+    total = default_steps(fit.n_rows, starts, gamma) if steps is None else int(steps)
     k = refit_steps(total) if refit_step_count is None else int(refit_step_count)
     grand = P * total + (P * refits * k if refits > 1 else 0)
     tick = (lambda base, m: None) if progress is None else \

@@ -98,9 +98,39 @@ def bc_policy(corpus, t) -> np.ndarray:
     return out
 
 
+def table(runs: list, truth: dict) -> list[dict]:
+    """One row per policy and estimator over the logs' runs: coverage, mean, bias, mean
+    |error|, mean width, mean ESS (``fqe_fit``: one fit's value inside FQE's interval)."""
+    rows = []
+    for pname in dict.fromkeys(x["policy"] for x in runs):
+        for est in ("pdwis", "wdr", "fqe", "fqe_fit"):
+            r = [x for x in runs if x["policy"] == pname and est in x]
+            if est == "fqe_fit":        # one fit's value as the point, FQE's interval around it
+                half = [(x["fqe"]["high"] - x["fqe"]["low"]) / 2 for x in r]
+                r = [{**x, est: {"estimate": x[est], "low": x[est] - h, "high": x[est] + h}}
+                     for x, h in zip(r, half)]
+            if not r:
+                continue
+            e = np.array([x[est]["estimate"] for x in r])
+            cover = sum(x[est]["low"] <= x["truth"] <= x[est]["high"] for x in r)
+            width = np.mean([x[est]["high"] - x[est]["low"] for x in r])
+            rows.append({"policy": pname, "truth": round(truth[pname], 4), "estimator": est,
+                         "covered": f"{cover} of {len(r)}", "mean": round(float(e.mean()), 4),
+                         "bias": round(float(e.mean() - truth[pname]), 4),
+                         "mean_abs_error": round(float(np.abs(e - truth[pname]).mean()), 4),
+                         "width": round(float(width), 4),
+                         "ess": round(float(np.mean([x["ess"] for x in r])), 1)})
+    return rows
+
+
 def main() -> None:
     ap = h.parser(__doc__)
     ap.add_argument("--logs", type=int, default=10)
+    ap.add_argument("--first", type=int, default=0,
+                    help="the first held-out log (logs FIRST .. FIRST + LOGS - 1): a run split "
+                         "over processes, then --merge")
+    ap.add_argument("--merge", nargs="+", default=None, metavar="JSON",
+                    help="only print the table of these runs' --out files together")
     ap.add_argument("--episodes", type=int, default=5000)
     ap.add_argument("--train-episodes", type=int, default=10000)
     ap.add_argument("--store", default="/tmp/aoc-ope-sepsis")
@@ -114,6 +144,11 @@ def main() -> None:
     ap.add_argument("--no-check", dest="check", action="store_false",
                     help="skip checking aoc evaluate's decisions on the first log")
     args = ap.parse_args()
+    if args.merge:
+        parts = [json.loads(Path(f).read_text()) for f in args.merge]
+        runs = sorted((r for p in parts for r in p["runs"]), key=lambda r: r["log"])
+        h.emit(table(runs, parts[0]["truth"]), args.format)
+        return
     store = Store(args.store)
     t = tables("mean")
     corpus = prepare(store, args.train_episodes)
@@ -125,7 +160,7 @@ def main() -> None:
                            fqe_steps=args.fqe_steps, fqe_refits=args.fqe_refits,
                            fqe_schedule=args.fqe_schedule)
     runs = []
-    for i in range(args.logs):
+    for i in range(args.first, args.first + args.logs):
         started = time.perf_counter()
         name = f"held{i}"
         held = h.corpus_ready(store, name, "icu-sepsis", episodes=args.episodes, seed=1000 + i)
@@ -133,7 +168,7 @@ def main() -> None:
         logged = np.asarray(held.actions, np.int64)
         log = ope.Log(held.episode_starts, held.rewards, 1.0)
         prop = held.column("propensity")
-        if i == 0 and args.check:   # aoc evaluate's own decisions are the policy evaluated here
+        if i == args.first and args.check:   # aoc evaluate's own decisions are the policy evaluated here
             session = aoc_cli.open_session(corpus.name, store=store)
             _, res = evaluate(session, held, [], ope=OPESettings(estimators=()))
             agree = float(np.mean(res.decided == policies["aoc"][s]))
@@ -160,26 +195,7 @@ def main() -> None:
         print(f"log {i}: {time.perf_counter() - started:.0f} s", file=sys.stderr)
         if args.out:
             Path(args.out).write_text(json.dumps({"truth": truth, "runs": runs}, indent=1))
-    rows = []
-    for pname in at_steps:
-        for est in ("pdwis", "wdr", "fqe", "fqe_fit"):
-            r = [x for x in runs if x["policy"] == pname and est in x]
-            if est == "fqe_fit":        # one fit's value as the point, FQE's interval around it
-                half = [(x["fqe"]["high"] - x["fqe"]["low"]) / 2 for x in r]
-                r = [{**x, est: {"estimate": x[est], "low": x[est] - h, "high": x[est] + h}}
-                     for x, h in zip(r, half)]
-            if not r:
-                continue
-            e = np.array([x[est]["estimate"] for x in r])
-            cover = sum(x[est]["low"] <= x["truth"] <= x[est]["high"] for x in r)
-            width = np.mean([x[est]["high"] - x[est]["low"] for x in r])
-            rows.append({"policy": pname, "truth": round(truth[pname], 4), "estimator": est,
-                         "covered": f"{cover} of {len(r)}", "mean": round(float(e.mean()), 4),
-                         "bias": round(float(e.mean() - truth[pname]), 4),
-                         "mean_abs_error": round(float(np.abs(e - truth[pname]).mean()), 4),
-                         "width": round(float(width), 4),
-                         "ess": round(float(np.mean([x["ess"] for x in r])), 1)})
-    h.emit(rows, args.format)
+    h.emit(table(runs, truth), args.format)
 
 
 if __name__ == "__main__":
