@@ -27,13 +27,13 @@ evaluation of the log), the OPE, and the rest (the decisions and the baselines):
 * ``distinct``: each distinct observation decided once, no OPE (``--ope none``);
 
 (these two read the held-out log's targets kept by an earlier run: they time the decisions)
-* ``OPE, targets fitted, before``: ``aoc evaluate``'s default (PDWIS, WDR, FQE with its
+* ``ope fitted before``: ``aoc evaluate``'s default (PDWIS, WDR, FQE with its
   refits, for the controller and both baselines) as it ran before issue 26's speed work: the
   held-out log's targets computed by each run, Adam's per-tensor loop (the targets' FQE and
   the OPE's ensemble), the ensemble's next actions by the (M, B, n) comparison;
-* ``OPE, targets fitted``: the first ``aoc evaluate`` of a log now (targets computed, then
+* ``ope fitted``: the first ``aoc evaluate`` of a log now (targets computed, then
   kept beside the log; Adam in one call; a deterministic policy's next action read off);
-* ``OPE, targets kept, before`` / ``OPE, targets kept``: every later ``aoc evaluate`` of the
+* ``ope kept before`` / ``ope kept``: every later ``aoc evaluate`` of the
   same log (any model or controller of the same value target reads them back), the OPE as
   before / now.
 """
@@ -64,8 +64,8 @@ import ope_sepsis  # noqa: E402
 
 #: The paper's value target, on the task's corpus (what this benchmark timed first).
 PAPER_VALUE = {"value": "return", "gamma": 0.99, "history_length": 0}
-CASES = ("per step", "distinct", "OPE, targets fitted, before", "OPE, targets fitted",
-         "OPE, targets kept, before", "OPE, targets kept")
+CASES = ("per step", "distinct", "ope fitted before", "ope fitted",
+         "ope kept before", "ope kept")
 
 
 def prepare(store: Store, model: str):
@@ -146,14 +146,14 @@ def main() -> None:
         ope = none if name in ("per step", "distinct") else full
 
         def run(_i):
-            if name.startswith("OPE, targets fitted"):
+            if name.startswith("ope fitted"):
                 shutil.rmtree(kept, ignore_errors=True)   # as a log evaluated the first time
             stages.reset()
             if name == "per step":
                 ev._value_distinct = lambda ctx, *a: _per_step(ctx, *a)
                 ev.chunk_size = lambda ctx, chunk_steps=ev.CHUNK_STEPS: chunk_steps
             if name.endswith("before"):
-                torch.optim.Adam = lambda p, **kw: adam(p, **{**kw, "foreach": False})
+                torch.optim.Adam = lambda *a, **kw: adam(*a, **{**kw, "foreach": False})
                 ens._deterministic = lambda _cums: None
             try:
                 summary = ev.evaluate(session, data, ["knn", "bc"], ope=ope)[0]
@@ -165,6 +165,8 @@ def main() -> None:
         return data, run
 
     names = [c.strip() for c in args.cases.split(",") if c.strip()]
+    if any(n not in CASES for n in names):
+        ap.error(f"unknown case in {args.cases!r}: use {', '.join(CASES)}")
     # kept by an earlier evaluate (and by each fitted case): the decisions' rows read them
     stages.real(held, *value_spec(session))
     stages.real(few, *value_spec(session))
