@@ -2,7 +2,8 @@
 held-out steps per second, where the time goes, and the decisions checked step by step.
 
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/perf/evaluate_ope.py [--model task|paper]
-        [--store DIR] [--repeats 3] [--per-step-episodes 200] [--cases a,b] [-f json]
+        [--store DIR] [--repeats 3] [--per-step-episodes 200] [--cases a,b] [--fqe-steps N,...]
+        [-f json]
 
 The store (``--store``, default /tmp/aoc-evaluate-sepsis) is laid out as
 ``benchmarks/perf/ope_sepsis.py``'s (built here when missing, through the API
@@ -35,7 +36,9 @@ evaluation of the log), the OPE, and the rest (the decisions and the baselines):
   kept beside the log; Adam in one call; a deterministic policy's next action read off);
 * ``ope kept before`` / ``ope kept``: every later ``aoc evaluate`` of the
   same log (any model or controller of the same value target reads them back), the OPE as
-  before / now.
+  before / now;
+* ``ope kept, fqe N steps``: the latter with FQE's fit at N gradient steps instead of
+  its default (``--fqe-steps N,...``, e.g. the default before, to time a change of it in one run).
 """
 
 from __future__ import annotations
@@ -127,6 +130,8 @@ def main() -> None:
     ap.add_argument("--per-step-episodes", type=int, default=200)
     ap.add_argument("--cases", default=",".join(CASES),
                     help="comma-separated, of: " + ", ".join(CASES))
+    ap.add_argument("--fqe-steps", default="",
+                    help="also 'ope kept' with FQE at these gradient steps (N,...)")
     args = ap.parse_args()
     store = Store(args.store)
     corpus, held, session = prepare(store, args.model)
@@ -144,6 +149,8 @@ def main() -> None:
     def case(name):
         data = few if name == "per step" else held
         ope = none if name in ("per step", "distinct") else full
+        if " fqe " in name:
+            ope = OPESettings(fqe_steps=int(name.split(" fqe ")[1].split()[0]))
 
         def run(_i):
             if name.startswith("ope fitted"):
@@ -167,6 +174,7 @@ def main() -> None:
     names = [c.strip() for c in args.cases.split(",") if c.strip()]
     if any(n not in CASES for n in names):
         ap.error(f"unknown case in {args.cases!r}: use {', '.join(CASES)}")
+    names += [f"ope kept, fqe {int(n)} steps" for n in args.fqe_steps.split(",") if n]
     # kept by an earlier evaluate (and by each fitted case): the decisions' rows read them
     stages.real(held, *value_spec(session))
     stages.real(few, *value_spec(session))
