@@ -51,16 +51,10 @@ def split_corpora(store: Store, data, split: int):
     return store.corpus(tr_name), store.corpus(te_name)
 
 
-def decomposed(b_corpus, a_corpus, queries, per: int):
-    """(scores (Q, 2), decomposition) with ``per`` rows of each action as candidates."""
-    search = PerAction(BeliefIndex.build(b_corpus.astype(np.float32), kind="flat"), a_corpus)
-    dec = decompose(b_corpus, queries, k=2 * per, index=search)
-    return abc_scores(dec.rows, dec.weights, a_corpus, 2), dec
-
-
-def one_split(store, data, split: int, counts: list[int]) -> dict:
-    from sklearn.metrics import roc_auc_score
-
+def split_beliefs(store: Store, data, split: int):
+    """Split ``split``'s corpora, its ABC model (trained when missing, as the bench trains it)
+    and what both scripts score: (train corpus, test corpus, model, b_tr (N, d_b), b_te
+    (Q, d_b), a_tr (N,), y (Q,), val (N,) bool: the rows of the model's validation episodes)."""
     tr, te = split_corpora(store, data, split)
     if not (tr.models_dir / DEFAULT_MODEL).exists():
         train_corpus(tr, DEFAULT_MODEL, overwrite=True, mode="imitation", threads=1, seed=split)
@@ -72,6 +66,20 @@ def one_split(store, data, split: int, counts: list[int]) -> dict:
     a_tr, y = np.asarray(tr.actions), np.asarray(te.actions)
     _, val_eps = split_episodes(tr.n_episodes, cfg["val_fraction"], cfg["seed"])
     val = np.isin(tr.episode_of(np.arange(tr.n_rows)), val_eps)
+    return tr, te, model, b_tr, b_te, a_tr, y, val
+
+
+def decomposed(b_corpus, a_corpus, queries, per: int):
+    """(scores (Q, 2), decomposition) with ``per`` rows of each action as candidates."""
+    search = PerAction(BeliefIndex.build(b_corpus.astype(np.float32), kind="flat"), a_corpus)
+    dec = decompose(b_corpus, queries, k=2 * per, index=search)
+    return abc_scores(dec.rows, dec.weights, a_corpus, 2), dec
+
+
+def one_split(store, data, split: int, counts: list[int]) -> dict:
+    from sklearn.metrics import roc_auc_score
+
+    tr, te, model, b_tr, b_te, a_tr, y, val = split_beliefs(store, data, split)
     w, c = np.asarray(model.head_weights.weight), np.asarray(model.head_weights.bias)
 
     def logit(b):

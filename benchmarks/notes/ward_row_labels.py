@@ -34,19 +34,16 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
-from aoc_cli.belief.artefact import load_model
-from aoc_cli.belief.data import split_episodes
-from aoc_cli.belief.fit import train_corpus
 from aoc_cli.belief.row_labels import subset_scores
 from aoc_cli.decompose import decompose, per_action_k
 from aoc_cli.envs import collect
 from aoc_cli.experiments.ward import history_features
 from aoc_cli.index import BeliefIndex, PerAction
-from aoc_cli.store import DEFAULT_MODEL, Store
+from aoc_cli.store import Store
 from aoc_cli.threads import one_thread
 
 sys.path.insert(0, str(Path(__file__).parent))
-from ward_candidates import PATIENTS, split_corpora  # noqa: E402
+from ward_candidates import PATIENTS, split_beliefs  # noqa: E402
 
 VARIANTS = ["logged"] + [f"head:{x}" for x in (0.25, 0.5, 0.75, 1.0)] + \
            [f"knn:{m}" for m in (5, 11, 21)]
@@ -71,17 +68,8 @@ def one_split(store, data, split: int) -> dict:
     from sklearn.pipeline import make_pipeline
     from sklearn.preprocessing import StandardScaler
 
-    tr, te = split_corpora(store, data, split)
-    if not (tr.models_dir / DEFAULT_MODEL).exists():
-        train_corpus(tr, DEFAULT_MODEL, overwrite=True, mode="imitation", threads=1, seed=split)
-    model = load_model(tr, DEFAULT_MODEL)
-    cfg = json.loads((tr.models_dir / DEFAULT_MODEL / "config.json").read_text())["config"]
+    tr, te, model, b_tr, b_te, a_tr, y, val = split_beliefs(store, data, split)
     L = model.history_length
-    b_tr = model.beliefs(np.asarray(tr.observations), None, tr.history(np.arange(tr.n_rows), L))
-    b_te = model.beliefs(np.asarray(te.observations), None, te.history(np.arange(te.n_rows), L))
-    a_tr, y = np.asarray(tr.actions), np.asarray(te.actions)
-    _, val_eps = split_episodes(tr.n_episodes, cfg["val_fraction"], cfg["seed"])
-    val = np.isin(tr.episode_of(np.arange(tr.n_rows)), val_eps)
     head = model.head_weights
     k = per_action_k(b_tr.shape[1], 2)
     with one_thread():
