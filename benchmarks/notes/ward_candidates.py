@@ -115,16 +115,27 @@ def one_split(store, data, split: int, counts: list[int]) -> dict:
     return out
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def split_parser(doc: str) -> argparse.ArgumentParser:
+    """The ward notes' arguments: ``--store``, ``--log-seed`` (the ward log), ``--splits``."""
+    ap = argparse.ArgumentParser(description=doc.split("\n\n")[0])
     ap.add_argument("--store", required=True)
     ap.add_argument("--log-seed", type=int, default=0)
     ap.add_argument("--splits", default=",".join(map(str, range(10))))
+    return ap
+
+
+def store_and_log(args) -> tuple[Store, object]:
+    """The notes' store and the ward log of ``--log-seed`` (its CorpusData)."""
+    data, _ = collect("ward", episodes=PATIENTS, seed=args.log_seed)
+    return Store(Path(args.store)), data
+
+
+def main() -> None:
+    ap = split_parser(__doc__)
     ap.add_argument("--per", default="42,63,84,126,168")
     args = ap.parse_args()
     counts = [int(x) for x in args.per.split(",")]
-    store = Store(Path(args.store))
-    data, _ = collect("ward", episodes=PATIENTS, seed=args.log_seed)
+    store, data = store_and_log(args)
     results = []
     for split in (int(x) for x in args.splits.split(",")):
         r = one_split(store, data, split, counts)

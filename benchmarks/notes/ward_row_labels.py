@@ -26,7 +26,6 @@ logs 0 and 1; of the variants within 0.001 of it, the smallest lambda.
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
@@ -36,14 +35,12 @@ from scipy.spatial import cKDTree
 
 from aoc_cli.belief.row_labels import subset_scores
 from aoc_cli.decompose import decompose, per_action_k
-from aoc_cli.envs import collect
 from aoc_cli.experiments.ward import history_features
 from aoc_cli.index import BeliefIndex, PerAction
-from aoc_cli.store import Store
 from aoc_cli.threads import one_thread
 
 sys.path.insert(0, str(Path(__file__).parent))
-from ward_candidates import PATIENTS, split_beliefs  # noqa: E402
+from ward_candidates import split_beliefs, split_parser, store_and_log  # noqa: E402
 
 VARIANTS = ["logged"] + [f"head:{x}" for x in (0.25, 0.5, 0.75, 1.0)] + \
            [f"knn:{m}" for m in (5, 11, 21)]
@@ -96,13 +93,8 @@ def one_split(store, data, split: int) -> dict:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--store", required=True)
-    ap.add_argument("--log-seed", type=int, default=0)
-    ap.add_argument("--splits", default=",".join(map(str, range(10))))
-    args = ap.parse_args()
-    store = Store(Path(args.store))
-    data, _ = collect("ward", episodes=PATIENTS, seed=args.log_seed)
+    args = split_parser(__doc__).parse_args()
+    store, data = store_and_log(args)
     results = []
     for split in (int(x) for x in args.splits.split(",")):
         results.append(one_split(store, data, split))
