@@ -12,7 +12,7 @@ import numpy as np
 from aoc_cli.control.config import ControllerConfig
 from aoc_cli.control.controller import Controller
 from aoc_cli.corpus_index import CorpusIndex, load_index, load_model
-from aoc_cli.errors import AocError, call
+from aoc_cli.errors import AocError, call, param, warn
 from aoc_cli.store import DEFAULT_INDEX, Corpus
 
 if TYPE_CHECKING:
@@ -73,6 +73,11 @@ def open_session(corpus: Corpus, model_id: str | None = None, index_id: str = DE
     bool row mask (:func:`aoc_cli.rows.row_selection`)."""
     config = config or ControllerConfig()
     index = load_index(corpus, model_id, index_id)
+    if config.row_smoothing is not None and not (index.model.mode == "imitation"
+                                                  and corpus.discrete):
+        warn(f"{param('row_smoothing')} applies to ABC's scores (imitation of discrete "
+             f"actions); the {index.model.mode}-mode model of corpus {corpus.name!r} does not "
+             "use it")
     bc_model = None
     if config.sampler == "bc" and index.model.mode == "value" and not corpus.discrete:
         bc_model = load_model(corpus, config.bc_model)

@@ -212,3 +212,12 @@ def test_the_typical_residual_has_one_typed_accessor(maze):
     # the model's hash is computed once, and is what a fresh load computes
     model = ci.model
     assert model.hash is model.hash and model.hash == load_index(maze).model.hash
+
+
+def test_row_smoothing_given_to_a_value_model_is_a_warning_not_silence(maze):
+    """lambda shapes ABC's scores only: given to a value-mode model it is said to be unused."""
+    from aoc_cli.errors import AocWarning
+
+    with pytest.warns(AocWarning, match="row_smoothing.*does not use it"):
+        session = maze_session(maze, row_smoothing=0.5)
+    assert session.model.mode == "value"
