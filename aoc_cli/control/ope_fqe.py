@@ -92,15 +92,17 @@ def horizon(starts: np.ndarray, gamma: float = 1.0) -> int:
     return max(1, int(np.ceil(h)))
 
 
-def default_steps(n_rows: int, starts: np.ndarray | None = None, gamma: float = 1.0) -> int:
+def default_steps(n_rows: int, starts: np.ndarray | None = None, gamma: float = 1.0,
+                  target_update: int = TARGET_UPDATE) -> int:
     """Gradient steps: about 30 passes over the log, and at least :data:`SYNCS_PER_STEP`
-    target syncs per step of the log's :func:`horizon` (FQE moves a value one step back per
-    target sync: too few and Q_hat stays between its start, 0, and the fixed point, low for a
-    policy whose value lies far ahead; docs/results.md "FQE's steps"), between 1,500 and
-    :data:`MAX_STEPS`."""
+    target syncs (one every ``target_update`` steps) per step of the log's :func:`horizon`
+    (FQE moves a value one step back per target sync: too few and Q_hat stays between its
+    start, 0, and the fixed point, low for a policy whose value lies far ahead;
+    docs/results.md "FQE's steps"), between 1,500 and :data:`MAX_STEPS`."""
     steps = 30 * n_rows // BATCH
     if starts is not None:
-        steps = max(steps, int(np.ceil(SYNCS_PER_STEP * horizon(starts, gamma))) * TARGET_UPDATE)
+        syncs = int(np.ceil(SYNCS_PER_STEP * horizon(starts, gamma)))
+        steps = max(steps, syncs * int(target_update))
     return int(np.clip(steps, 1500, MAX_STEPS))
 
 
@@ -204,7 +206,8 @@ def fit_fqe(observations, actions, rewards, starts, policy, gamma: float = 1.0,
     them. ``progress(done, total)`` after each block of steps."""
     fit = FQEFit(observations, actions, rewards, starts, policy, gamma, seed, batch,
                  learning_rate, target_update)
-    total = default_steps(fit.n_rows, starts, gamma) if steps is None else int(steps)
+    total = default_steps(fit.n_rows, starts, gamma, target_update) if steps is None \
+        else int(steps)
     fit.train(total, progress=progress)
     return fit.q()
 
@@ -253,7 +256,8 @@ def fqe_policies(observations, actions, rewards, starts, policies: list, gamma: 
     P = len(policies)
     fit = FQEFit(observations, actions, rewards, starts, policies[0], gamma, seed)
     cums = np.stack([fit.cum] + [cumulative(p) for p in policies[1:]])      # (P, N, n)
-    total = default_steps(fit.n_rows, starts, gamma) if steps is None else int(steps)
+    total = default_steps(fit.n_rows, starts, gamma, fit.fqe.config.target_update_interval) \
+        if steps is None else int(steps)
     k = refit_steps(total) if refit_step_count is None else int(refit_step_count)
     grand = P * total + (P * refits * k if refits > 1 else 0)
     tick = (lambda base, m: None) if progress is None else \

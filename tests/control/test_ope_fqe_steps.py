@@ -23,6 +23,8 @@ def test_default_steps_add_target_syncs_per_step_of_the_horizon():
     want = int(np.ceil(SYNCS_PER_STEP * horizon(starts))) * TARGET_UPDATE
     assert default_steps(int(starts[-1]), starts) == max(1500, min(want, MAX_STEPS))
     assert default_steps(int(starts[-1])) == 1500                  # rows alone: the floor
+    # syncs, not steps, are what the horizon asks for: a fit syncing every 300 steps needs 3x
+    assert default_steps(int(starts[-1]), starts, target_update=300) == min(3 * want, MAX_STEPS)
     # a discount shortens the horizon: gamma 0.5 falls to 1% within 7 steps
     assert horizon(starts, gamma=0.5) == 7
     assert default_steps(10**7, starts) == MAX_STEPS
