@@ -41,6 +41,14 @@ from typing import Iterator
 import numpy as np
 
 
+def cores() -> int:
+    """The CPU cores this process may run on (its affinity; the CPU count elsewhere)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
+
+
 def wait_passively() -> bool:
     """Set ``OMP_WAIT_POLICY=PASSIVE`` unless the environment sets it. True when it can still
     take effect (neither torch nor FAISS is loaded yet)."""

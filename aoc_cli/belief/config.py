@@ -8,11 +8,11 @@ of Examples", section "Optimization Procedure"
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 
 from aoc_cli.errors import BadSetting, param
 from aoc_cli.settings import Settings, setting
+from aoc_cli.threads import cores
 
 MODES = ("value", "imitation")
 #: What the value-mode belief b(o, a, h) is trained on (the linear head always maps it to the
@@ -201,12 +201,7 @@ class BeliefConfig(Settings):
 
     def resolved_threads(self) -> int:
         """The explicit CPU thread count torch will use."""
-        if self.threads is not None:
-            return int(self.threads)
-        try:
-            return max(1, len(os.sched_getaffinity(0)))
-        except AttributeError:  # pragma: no cover - not Linux
-            return max(1, os.cpu_count() or 1)
+        return int(self.threads) if self.threads is not None else cores()
 
 
 @dataclass(frozen=True)

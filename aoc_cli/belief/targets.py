@@ -123,33 +123,41 @@ KEPT_TARGETS = ("fqe",)
 
 def held_out_targets(corpus, value: str, gamma: float, progress=None) -> np.ndarray:
     """(N,) :func:`value_targets` of a corpus used as a held-out log (``aoc evaluate``'s
-    value target), computed once and kept beside it.
-
-    Why: a fitted Q evaluation of a held-out log costs what fitting the model's own values did
-    (icu-sepsis, 45,000 held-out rows: ~70 s CPU, 60 backups of 300 gradient steps), more
-    than deciding every step and the offline policy evaluation together; evaluating several
-    models, controllers or baselines on the same log needs the same targets. ``fqe`` targets
-    are written to ``<corpus>/targets/`` (:func:`aoc_cli.store.targets_dir`) with what they
-    were computed from: the corpus's content hash, the value, gamma, FQE's settings, torch's
-    version, and the array's own hash. They are read back only when all of it matches
-    (anything else, a damaged or half-read file included, computes them anew and rewrites
-    them). A store that cannot be written is no error: the targets are then computed each
-    time. The other targets cost a pass over the rewards and are not kept.
-    """
-    path = getattr(corpus, "path", None)
-    if value not in KEPT_TARGETS or path is None or not getattr(corpus, "hash", None):
+    value target, where no other estimate is given), computed once and kept beside it
+    (:func:`kept_values`): a fitted Q evaluation of a held-out log costs what fitting the model's
+    own values did (icu-sepsis, 45,000 held-out rows: ~50 s, 60 backups of 300 gradient
+    steps). The other targets cost a pass over the rewards and are not kept."""
+    if value not in KEPT_TARGETS:
         return value_targets(corpus, value, gamma, progress=progress)
     import torch  # lazy: torch, for fqe targets only (its version is part of the record)
 
-    record = {"corpus": corpus.hash, "rows": int(corpus.n_rows), "value": value,
-              "gamma": float(gamma), "fqe": FQEConfig().to_dict(), "torch": torch.__version__}
+    record = {"value": value, "gamma": float(gamma), "fqe": FQEConfig().to_dict(),
+              "torch": torch.__version__}
+    return kept_values(corpus, value, record,
+                       lambda: value_targets(corpus, value, gamma, progress=progress))
+
+
+def kept_values(corpus, name: str, record: dict, compute) -> np.ndarray:
+    """(N,) float64 ``compute()`` for the rows of ``corpus``, computed once and kept beside
+    it, in ``<corpus>/targets/`` (:func:`aoc_cli.store.targets_dir`), under ``name`` with what
+    they were computed from: ``record`` (JSON: the settings and versions), the corpus's
+    content hash and row count, and the array's own hash. They are read back only when all of
+    it matches (anything else, a damaged or half-read file included, computes them anew and
+    rewrites them). A store that cannot be written, or a corpus with no path or hash, is no
+    error: the values are then computed each time."""
+    path = getattr(corpus, "path", None)
+    if path is None or not getattr(corpus, "hash", None):
+        return np.asarray(compute(), np.float64)
+    record = {"corpus": corpus.hash, "rows": int(corpus.n_rows), **record}
     key = hashlib.sha256(json.dumps(record, sort_keys=True).encode()).hexdigest()[:16]
     folder = targets_dir(path)
-    npy, meta = folder / f"{value}-{key}.npy", folder / f"{value}-{key}.json"
+    npy, meta = folder / f"{name}-{key}.npy", folder / f"{name}-{key}.json"
     kept = _read_kept(npy, meta, record)
     if kept is not None:
         return kept
-    v = value_targets(corpus, value, gamma, progress=progress)
+    v = np.asarray(compute(), np.float64)
+    if v.shape != (record["rows"],):
+        raise ValueError(f"{name}: {v.shape} values for {record['rows']} rows")
     try:
         write_npy(npy, v)
         write_json(meta, {**record, "values": hash_arrays(v)})

@@ -39,7 +39,7 @@ from aoc_cli.control.evaluate_inputs import (BASELINES, EXACT_MAX_ROWS, EvalCont
                                              candidate_beliefs, check_inputs, episode_rows,
                                              heterogeneity)
 from aoc_cli.control.epsilon import epsilon_filter, residual_cap
-from aoc_cli.control.ope_eval import add_ope, wanted
+from aoc_cli.control.ope_eval import ope_block, put_ope, wanted
 from aoc_cli.control.records import step_records  # noqa: F401 (aoc_cli.control.evaluate's API)
 from aoc_cli.control.support import penalised, support_episodes, support_filter
 from aoc_cli.decompose import decompose
@@ -336,6 +336,7 @@ def summarise(ctx: EvalContext, res: StepScores) -> dict:
                 base[name] = sc.regression(res.logged, b["decided"])
     else:
         out.update(sc.value_fit(res.target, res.v_hat))
+        out["value_target"] = ctx.target_source
         out.update(sc.agreement(res.logged, res.decided, ctx.discrete))
         for name, b in res.baselines.items():
             rec = sc.value_fit(res.target, b["v_hat"])
@@ -382,12 +383,14 @@ def evaluate(session, data, baselines=BASELINES, seed: int = 0, progress=None,
             if progress is not None:
                 progress(done, ctx.data.n_rows)
     res = merge(parts)
-    res.target = ctx.targets(res.row)     # value mode: the held-out log's targets, once here
-    summary = summarise(ctx, res)
     decided = time.perf_counter()
     with one_thread():
-        add_ope(summary, data, res, ope, seed)
-    summary["ope_seconds"] = time.perf_counter() - decided
+        block = ope_block(ctx.mode, data, res, ope, seed)
+    ope_seconds = time.perf_counter() - decided
+    res.target = ctx.targets(res.row, block)  # value mode: the held-out log's targets, once
+    summary = summarise(ctx, res)
+    put_ope(summary, block)
+    summary["ope_seconds"] = ope_seconds
     summary["seconds"] = time.perf_counter() - started
     summary["steps_per_second"] = summary["steps"] / max(summary["seconds"], 1e-9)
     return summary, res

@@ -8,9 +8,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from aoc_cli.belief.config import REWARD_TARGETS
-from aoc_cli.belief.targets import held_out_targets
+from aoc_cli.belief.targets import held_out_targets, value_spec
 from aoc_cli.control.controller import action_bounds, support_disagreement
 from aoc_cli.control.episodes import check_same_spaces
+from aoc_cli.control.ope_eval import OPESettings, behaviour_targets
 from aoc_cli.decompose import subset_size
 from aoc_cli.errors import AocError, NoRewards, call
 from aoc_cli.index import BeliefIndex
@@ -264,25 +265,47 @@ class EvalContext:
         values = self.index.values
         self.value_std = float(np.std(values)) if values is not None and len(values) else 1.0
         self._data_values = None
+        self.target_source = None
         self.knn = KNNBaseline(self) if "knn" in self.baselines else None
 
-    def targets(self, rows: np.ndarray) -> np.ndarray | None:
+    def targets(self, rows: np.ndarray, ope: dict | None = None) -> np.ndarray | None:
         """(S,) float64 the value target of held-out ``rows`` (value mode; None in imitation
         mode): the model's own values when the data are its corpus, else the target computed
-        on the held-out log as the model's values were (``fqe``: kept beside the log,
-        :func:`aoc_cli.belief.targets.held_out_targets`). Computed on first use: only the
-        driver reads them (a fitted Q evaluation costs about what training the values did,
-        and the chunks' decisions do not need it: a Ray task never computes it)."""
+        on the held-out log as the model's values were. For ``fqe`` values, the logged
+        behaviour's Q(o, a) by d3rlpy's fitted Q evaluation of the held-out log
+        (:func:`aoc_cli.control.ope_eval.behaviour_targets`: the OPE's own when ``ope``, its
+        block, fitted it at the model's discount; kept beside the log), or where that cannot
+        run by aoc's own, as the model's values were
+        (:func:`aoc_cli.belief.targets.held_out_targets`, kept too). Computed on first use:
+        only the driver reads them (the chunks' decisions do not need them: a Ray task never
+        computes them)."""
         if self.mode != "value":
             return None
         if self._data_values is None:
             model = self.model
             if self.own:
                 self._data_values = np.asarray(model.values, np.float64)
+                self.target_source = "the model's own values (the data are its corpus)"
             else:
                 spec = model.meta.get("value") or {}
-                self._data_values = held_out_targets(self.data, spec.get("target", "return"),
-                                                     float(spec.get("gamma", 0.99)))
+                value, gamma = spec.get("target", "return"), float(spec.get("gamma", 0.99))
+                v = None
+                if value == "fqe":
+                    settings = ope["settings"] if ope else OPESettings(seed=self.seed)
+                    fresh = ope.get("behaviour_fqe") if ope else None
+                    same = fresh is not None and settings.gamma == gamma
+                    v = behaviour_targets(self.data, gamma, settings,
+                                          fresh["logged"] if same else None)
+                if v is None:
+                    v = held_out_targets(self.data, value, gamma)
+                    self.target_source = value_spec(value, gamma)["definition"] + \
+                        " (the held-out log's)"
+                else:
+                    self.target_source = (
+                        "the logged behaviour's Q(o, a) by d3rlpy's fitted Q evaluation of the "
+                        f"held-out log (SARSA, gamma {gamma:g}): another estimator of what the "
+                        "model's values estimate")
+                self._data_values = v
         return self._data_values[np.asarray(rows, np.int64)]
 
     @property

@@ -20,7 +20,7 @@ import numpy as np
 from aoc_cli.control.evaluate import (CHUNK_STEPS, chunk_size, chunks, merge, score_episodes,
                                       summarise)
 from aoc_cli.control.evaluate_inputs import EvalContext
-from aoc_cli.control.ope_eval import add_ope, wanted
+from aoc_cli.control.ope_eval import ope_block, put_ope, wanted
 from aoc_cli.control.session import open_session
 from aoc_cli.parallel import capacity, map_chunks, start_ray
 from aoc_cli.store import Store
@@ -66,12 +66,14 @@ def evaluate_on_ray(store_root, name: str, data: str, model: str | None, index_i
     results = map_chunks(_score, [(spec, [groups[i] for i in run]) for run in runs],
                          workers=workers, address=address, retries=1, done=done)
     res = merge([part for parts in results for part in parts])
-    res.target = ctx.targets(res.row)     # the driver's alone: the tasks never compute them
-    summary = summarise(ctx, res)
     decided = time.perf_counter()
     with one_thread():
-        add_ope(summary, ctx.data, res, ope, seed)
-    summary["ope_seconds"] = time.perf_counter() - decided
+        block = ope_block(ctx.mode, ctx.data, res, ope, seed)
+    ope_seconds = time.perf_counter() - decided
+    res.target = ctx.targets(res.row, block)  # the driver's alone: the tasks never compute them
+    summary = summarise(ctx, res)
+    put_ope(summary, block)
+    summary["ope_seconds"] = ope_seconds
     summary["seconds"] = time.perf_counter() - started
     summary["steps_per_second"] = summary["steps"] / max(summary["seconds"], 1e-9)
     return summary, res

@@ -71,15 +71,20 @@ class FQEEnsemble:
         self.interval = int(fit.fqe.config.target_update_interval)
         self.x = torch.from_numpy(fit.x)                                     # (N, d_o)
 
-    def repeat(self, r: int) -> "FQEEnsemble":
-        """A new ensemble of M * r members, each member here r times in a row (weights,
-        target, Adam's moments, step count): the warm starts of r refits per member."""
+    def repeat(self, r: int, members=None) -> "FQEEnsemble":
+        """A new ensemble of len(members) * r members, each of ``members`` (None: all M) here r
+        times in a row (weights, target, Adam's moments, step count): the warm starts of r
+        refits per member."""
         import copy
 
+        import torch
+
+        keep = torch.arange(self.M) if members is None else torch.as_tensor(
+            np.asarray(members, np.int64))
         out = copy.copy(self)
-        out.M = self.M * r
-        out.counts = np.repeat(self.counts, r)
-        rep = lambda t: t.detach().repeat_interleave(r, dim=0).clone()
+        out.M = len(keep) * r
+        out.counts = np.repeat(self.counts[keep.numpy()], r)
+        rep = lambda t: t.detach()[keep].repeat_interleave(r, dim=0).clone()
         out.params = [rep(p).requires_grad_(True) for p in self.params]
         out.target = [rep(t) for t in self.target]
         old = self.optim
@@ -119,8 +124,10 @@ class FQEEnsemble:
 
         fit, B = self.fit, self.fit.batch
         if draw is None:
-            draw = _sampler(fit, cums, np.asarray(policy_of, np.int64), pools, rng, self.M)
+            draw = sampler(fit, cums, np.asarray(policy_of, np.int64), pools, rng, self.M)
         alive = 1.0 - fit.last.astype(np.float32)                            # (N,)
+        table = self._next_table()
+        members = np.arange(self.M)[:, None]
         group = self.optim.param_groups[0]
         lr0 = group["lr"]
         if schedule not in ("constant", "cosine"):
@@ -130,8 +137,11 @@ class FQEEnsemble:
                 group["lr"] = lr0 * 0.5 * (1.0 + np.cos(np.pi * step / int(steps)))
             idx, a_next = draw()                                             # (M, B) each
             with torch.no_grad():           # (numpy gathers: cheaper than torch's indexing)
-                q_next = self._forward(self.target, torch.from_numpy(fit.x[fit.nxt[idx]]))
-                q_next = q_next.gather(2, torch.from_numpy(a_next)[..., None])[..., 0]
+                if table is None:
+                    q_next = self._forward(self.target, torch.from_numpy(fit.x[fit.nxt[idx]]))
+                    q_next = q_next.gather(2, torch.from_numpy(a_next)[..., None])[..., 0]
+                else:
+                    q_next = torch.from_numpy(table.q[members, table.of[fit.nxt[idx]], a_next])
                 y = torch.from_numpy(fit.rew[idx]) + self.gamma * q_next * torch.from_numpy(
                     alive[idx])                                              # (M, B)
             q = self._forward(self.params, torch.from_numpy(fit.x[idx])).gather(
@@ -148,10 +158,26 @@ class FQEEnsemble:
                 with torch.no_grad():
                     for t, p in zip(self.target, self.params):
                         t[keep] = p[keep]
+                if table is not None:
+                    table.refresh(self)
             self.counts += 1
             if progress is not None and (step + 1) % 100 == 0:
                 progress(step + 1)
         group["lr"] = lr0
+
+    def _next_table(self) -> "_TargetTable | None":
+        """The target network's Q of every distinct next observation, when computing it at
+        each sync costs less than the target's forward pass over every mini-batch until the
+        next sync (distinct observations at most ``interval`` x B: a log whose states repeat,
+        e.g. icu-sepsis's 713 in 45,000 rows); None otherwise. The same values as the
+        per-batch forward pass (each row's Q is its own product), a quarter of an update's
+        arithmetic less."""
+        xu, of = self.fit.distinct()
+        if len(xu) > self.interval * self.fit.batch:
+            return None
+        table = _TargetTable(xu, of)
+        table.refresh(self)
+        return table
 
     def state(self, m: int) -> dict:
         """Member m as an ``FQEFit.snapshot()`` (for ``FQEFit.restore``), with its step
@@ -184,7 +210,24 @@ class FQEEnsemble:
         return out
 
 
-def _sampler(fit, cums: np.ndarray, policy_of: np.ndarray, pools: list, rng, M: int):
+class _TargetTable:
+    """Q of the target network at each distinct observation ``xu`` (U, d_o), every member:
+    ``q`` (M, U, n); ``of`` (N,) the distinct observation of each row."""
+
+    def __init__(self, xu: np.ndarray, of: np.ndarray):
+        import torch
+
+        self.xu, self.of = torch.from_numpy(np.ascontiguousarray(xu)), of
+        self.q = None
+
+    def refresh(self, ens: FQEEnsemble) -> None:
+        import torch
+
+        with torch.no_grad():
+            self.q = ens._forward(ens.target, self.xu.expand(ens.M, -1, -1)).numpy()
+
+
+def sampler(fit, cums: np.ndarray, policy_of: np.ndarray, pools: list, rng, M: int):
     """draw() -> (rows (M, B), next actions (M, B)): member m's B rows uniform over its pool,
     the next action of each drawn from member m's policy at the row's next logged step."""
     pools = [np.arange(fit.n_rows) if p is None else np.asarray(p, np.int64) for p in pools]
@@ -207,6 +250,16 @@ def _sampler(fit, cums: np.ndarray, policy_of: np.ndarray, pools: list, rng, M: 
             return rows, np.where(u[..., 0] > 0, chosen[pol, fit.nxt[rows]], 0)
         nxt_a = (cums[pol, fit.nxt[rows]] < u).sum(2).clip(0, n - 1)         # (M, B)
         return rows, nxt_a
+
+    return draw
+
+
+def joined(*draws):
+    """draw() of an ensemble whose members are drawn in groups, each group by its own draw()
+    (its own generator: a group's draws do not depend on the others'), stacked in order."""
+    def draw():
+        parts = [d() for d in draws]
+        return (np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]))
 
     return draw
 

@@ -22,10 +22,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from aoc_cli.control import ope
-from aoc_cli.control.ope_fqe import (REFITS, SCHEDULE, available, default_steps,
+from aoc_cli.belief.targets import kept_values
+from aoc_cli.control.ope_fqe import (BATCH, HIDDEN, LEARNING_RATE, REFITS, SCHEDULE,
+                                      TARGET_UPDATE, available, behaviour_fqe, default_steps,
                                       fqe_policies)
 from aoc_cli.errors import AocError, BadSetting, NoRewards, param
 from aoc_cli.settings import Settings, setting
+from aoc_cli.threads import cores, thread_limits
 
 ESTIMATORS = ("pdwis", "wdr", "fqe")
 #: The propensity column looked for when none is named.
@@ -193,21 +196,65 @@ def policy_value(log: ope.Log, observations, logged, propensity, policy, n_actio
 
 
 def fqe_values(log: ope.Log, observations, logged, policies: list, settings: OPESettings,
-               progress=None) -> list:
+               progress=None, behaviour: bool = False) -> list:
     """The direct method for each policy (N, n) at once
-    (:func:`aoc_cli.control.ope_fqe.fqe_policies`: one batched ensemble), when an estimator
-    needs it: with refits when FQE is asked for and ``settings.fqe_refits`` > 1. Each entry
-    None (no estimator needs a Q model) or a record; without d3rlpy, a record with ``q`` None
-    and the reason as its ``note``."""
+    (:func:`aoc_cli.control.ope_fqe.fqe_policies`: one batched ensemble, on every core: it
+    is training), when an estimator needs it: with refits when FQE is asked for and
+    ``settings.fqe_refits`` > 1. Each entry None (no estimator needs a Q model) or a record;
+    without d3rlpy, a record with ``q`` None and the reason as its ``note``. ``behaviour``:
+    the logged behaviour's record last (``fqe_policies``'s), when FQE runs."""
     if "fqe" not in settings.estimators and "wdr" not in settings.estimators:
         return [None] * len(policies)
     reason = available()
     if reason is not None:
         return [{"q": None, "note": reason, "replicates": ()} for _ in policies]
     refits = settings.fqe_refits if "fqe" in settings.estimators else 0
-    return fqe_policies(observations, logged, log.rewards, log.starts, policies,
-                        settings.gamma, settings.fqe_steps, refits if refits > 1 else 0,
-                        seed=settings.seed, progress=progress, schedule=settings.fqe_schedule)
+    with thread_limits(torch=cores()):
+        return fqe_policies(observations, logged, log.rewards, log.starts, policies,
+                            settings.gamma, settings.fqe_steps, refits if refits > 1 else 0,
+                            seed=settings.seed, progress=progress,
+                            schedule=settings.fqe_schedule, behaviour=behaviour)
+
+
+def fqe_record(settings: OPESettings, n_rows: int, starts: np.ndarray, gamma: float) -> dict:
+    """What the behaviour's fitted Q evaluation (:func:`behaviour_targets`) is computed from:
+    its estimator, settings and the libraries' versions (JSON)."""
+    import d3rlpy
+    import torch
+
+    return {"value": "fqe", "gamma": float(gamma),
+            "estimator": "d3rlpy DiscreteFQE of the logged behaviour (SARSA)",
+            "steps": int(settings.fqe_steps or default_steps(n_rows, starts, gamma)),
+            "batch": BATCH, "learning_rate": LEARNING_RATE, "target_update": TARGET_UPDATE,
+            "hidden": list(HIDDEN), "schedule": settings.fqe_schedule,
+            "seed": int(settings.seed), "torch": torch.__version__,
+            "d3rlpy": d3rlpy.__version__}
+
+
+def behaviour_targets(data, gamma: float, settings: OPESettings,
+                      fresh: np.ndarray | None = None) -> np.ndarray | None:
+    """(N,) the logged behaviour's Q_hat(o_t, a_t) of every step of held-out log ``data`` by
+    d3rlpy's fitted Q evaluation at the OPE's settings (discount ``gamma``): ``aoc evaluate``'s
+    held-out value target of a model whose values are ``fqe`` (an estimate of the same
+    Q(o, a), by another estimator, from the held-out log alone). ``fresh``: the one the OPE
+    just fitted beside its policies (:func:`fqe_values`, ``behaviour``); else fitted alone
+    (:func:`aoc_cli.control.ope_fqe.behaviour_fqe`, the same values). Kept beside the log
+    (:func:`aoc_cli.belief.targets.kept_values`). None where it cannot run (no d3rlpy,
+    continuous actions, no rewards): the caller then uses aoc's own fitted Q evaluation."""
+    if available() is not None or not data.discrete or not data.has_rewards:
+        return None
+    record = fqe_record(settings, data.n_rows, data.episode_starts, gamma)
+
+    def compute():
+        if fresh is not None:
+            return fresh
+        with thread_limits(torch=cores()):
+            return behaviour_fqe(data.observations, np.asarray(data.actions, np.int64),
+                                 data.rewards, data.episode_starts, data.n_actions, gamma,
+                                 record["steps"], settings.seed,
+                                 schedule=settings.fqe_schedule)["logged"]
+
+    return kept_values(data, "fqe-behaviour", record, compute)
 
 
 def warnings_for(name: str, rec: dict, n_episodes: int) -> list[str]:
@@ -242,7 +289,10 @@ def off_policy_values(data, logged: np.ndarray, policies: dict, settings: OPESet
                       progress=None) -> dict:
     """The OPE block of ``aoc evaluate`` for held-out corpus ``data`` (every row, in order):
     ``policies`` name -> decisions (N,) or probabilities (N, n). Returns {"ope": ...,
-    "behaviour_value": ..., "policies": {name: {policy_value, ess, notes}}, "ope_warnings"}."""
+    "behaviour_value": ... (with "fqe", the direct method's value of the logged behaviour,
+    when FQE ran: a check of FQE against the log's mean return), "policies": {name:
+    {policy_value, ess, notes}}, "ope_warnings"} and, when FQE ran, "behaviour_fqe" (the
+    behaviour's record of :func:`aoc_cli.control.ope_fqe.fqe_policies`)."""
     check_log(data)
     logged = np.asarray(logged, np.int64)
     if len(logged) != data.n_rows:
@@ -261,7 +311,18 @@ def off_policy_values(data, logged: np.ndarray, policies: dict, settings: OPESet
                    else None},
            "behaviour_value": mean.as_dict(), "policies": {}, "ope_warnings": []}
     probs = {name: _as_probs(p, data.n_actions) for name, p in policies.items()}
-    fqes = fqe_values(log, data.observations, logged, list(probs.values()), settings, progress)
+    fqes = fqe_values(log, data.observations, logged, list(probs.values()), settings, progress,
+                      behaviour=True)
+    if len(fqes) > len(probs):          # the logged behaviour's, last
+        own = fqes.pop()
+        out["behaviour_fqe"] = own
+        out["behaviour_value"]["fqe"] = own["estimate"]
+        low, high = out["behaviour_value"]["low"], out["behaviour_value"]["high"]
+        if not low <= own["estimate"] <= high:
+            out["ope_warnings"].append(
+                f"fqe values the logged behaviour at {own['estimate']:.4g}, outside the 95% "
+                f"interval of its mean return ({low:.4g} to {high:.4g}): the direct method "
+                "is off on this log, and so may be its values of the policies")
     for i, ((name, policy), fqe) in enumerate(zip(probs.items(), fqes)):
         try:
             rec = policy_value(log, data.observations, logged, propensity, policy,
@@ -299,12 +360,13 @@ def wanted(settings: OPESettings | None, mode: str, data) -> bool:
     return True
 
 
-def add_ope(summary: dict, data, res, settings: OPESettings | None, seed: int = 0,
-            progress=None) -> None:
-    """Put the OPE of the controller's decisions (``res.decided``) and of each baseline's into
-    an ``aoc evaluate`` summary, when :func:`wanted` (``seed``: of the default settings)."""
-    if not wanted(settings, summary["mode"], data):
-        return
+def ope_block(mode: str, data, res, settings: OPESettings | None, seed: int = 0,
+              progress=None) -> dict | None:
+    """The OPE of the controller's decisions (``res.decided``) and of each baseline's on
+    held-out log ``data`` (:func:`off_policy_values`, with the settings used under
+    "settings"), when :func:`wanted` (``seed``: of the default settings); else None."""
+    if not wanted(settings, mode, data):
+        return None
     settings = settings or OPESettings(seed=seed)
     if not np.array_equal(res.row, np.arange(data.n_rows)):
         raise AocError("offline policy evaluation needs every step of the held-out log")
@@ -313,12 +375,21 @@ def add_ope(summary: dict, data, res, settings: OPESettings | None, seed: int = 
         if b.get("decided") is not None:
             policies[name] = b["decided"]
     block = off_policy_values(data, res.logged, policies, settings, progress)
-    own = block["policies"].pop("aoc")
+    block["settings"] = settings
+    return block
+
+
+def put_ope(summary: dict, block: dict | None) -> None:
+    """Put an :func:`ope_block` into an ``aoc evaluate`` summary (nothing for None)."""
+    if block is None:
+        return
+    own = block["policies"]["aoc"]
     summary["policy_value"] = own["policy_value"]
     summary["ess"] = own["ess"]
     summary["behaviour_value"] = block["behaviour_value"]
     summary["ope"] = {**block["ope"], "notes": own["notes"]}
     for name, rec in block["policies"].items():
-        summary["baselines"][name].update(policy_value=rec["policy_value"], ess=rec["ess"],
-                                          ope_notes=rec["notes"])
+        if name != "aoc":
+            summary["baselines"][name].update(policy_value=rec["policy_value"],
+                                              ess=rec["ess"], ope_notes=rec["notes"])
     summary["ope_warnings"] = block["ope_warnings"]

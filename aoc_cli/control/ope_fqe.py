@@ -27,7 +27,7 @@ import copy
 
 import numpy as np
 
-from aoc_cli.control.ope_ensemble import FQEEnsemble
+from aoc_cli.control.ope_ensemble import FQEEnsemble, joined, sampler
 from aoc_cli.errors import AocError
 
 #: FQE settings: mini-batch, learning rate, target network sync, hidden layers.
@@ -196,6 +196,16 @@ class FQEFit:
         x = self.x if rows is None else self.x[np.asarray(rows, np.int64)]
         return q_table(self.fqe, x, self.n_actions)
 
+    def distinct(self) -> tuple:
+        """(the distinct standardised observations (U, d_o), each row's index among them
+        (N,)), found once (rows compared as bytes: one sort)."""
+        if getattr(self, "_distinct", None) is None:
+            rows = np.ascontiguousarray(self.x).view(
+                np.dtype((np.void, self.x.dtype.itemsize * self.x.shape[1]))).ravel()
+            _, first, of = np.unique(rows, return_index=True, return_inverse=True)
+            self._distinct = (self.x[first], np.asarray(of, np.int64).reshape(-1))
+        return self._distinct
+
 
 def fit_fqe(observations, actions, rewards, starts, policy, gamma: float = 1.0,
             steps: int | None = None, seed: int = 0, progress=None, batch: int = BATCH,
@@ -228,7 +238,8 @@ def bootstrap_fqe(observations, actions, rewards, starts, policy, gamma: float =
 def fqe_policies(observations, actions, rewards, starts, policies: list, gamma: float = 1.0,
                  steps: int | None = None, refits: int = REFITS,
                  refit_step_count: int | None = None, seed: int = 0, progress=None,
-                 schedule: str = SCHEDULE) -> list:
+                 schedule: str = SCHEDULE, behaviour: bool = False,
+                 n_actions: int | None = None) -> list:
     """The direct method for each of P policies on one log, with an interval that holds the
     fitted model's own error. Per policy: Q_hat (N, n) of the full fit, its estimate (the mean
     start value of the policy), and ``refits`` refits, each on the log's episodes resampled
@@ -248,26 +259,43 @@ def fqe_policies(observations, actions, rewards, starts, policies: list, gamma: 
     ``schedule`` the learning rate's over the fit and over each refit
     (:meth:`aoc_cli.control.ope_ensemble.FQEEnsemble.train`).
     Returns per policy {"q" (the full fit's), "estimate", "fit_estimate", "low", "high",
-    "replicates" (refits,), "bagged", "steps", "refit_steps", "seconds"}."""
+    "replicates" (refits,), "bagged", "steps", "refit_steps", "seconds"}.
+
+    ``behaviour``: one more member in the fit's ensemble, the logged behaviour (the next
+    action the log's own: SARSA; ``n_actions`` actions when no policy is given), no refits, drawing its mini-batches from its own
+    generator (seeded by ``seed``), so that its Q_hat is the same whatever policies train
+    beside it (:func:`behaviour_fqe` alone); its record, last in the list, holds "q" (N, n),
+    "logged" (N,) Q_hat of each logged step, "estimate" (the mean Q_hat of the episodes' first
+    logged steps: the behaviour's value, which the log's mean return also estimates), "steps"."""
     import time
 
     started = time.perf_counter()
     policies = [np.asarray(p, np.float64) for p in policies]
     P = len(policies)
-    fit = FQEFit(observations, actions, rewards, starts, policies[0], gamma, seed)
-    cums = np.stack([fit.cum] + [cumulative(p) for p in policies[1:]])      # (P, N, n)
+    act = np.asarray(actions, np.int64).reshape(-1)
+    logged = None
+    if behaviour:                   # the logged actions as a policy (N, n): one-hot
+        logged = np.zeros((len(act), policies[0].shape[1] if P else int(n_actions)))
+        logged[np.arange(len(act)), act] = 1.0
+    fit = FQEFit(observations, act, rewards, starts, policies[0] if P else logged, gamma, seed)
+    cums = np.stack([fit.cum] + [cumulative(p) for p in policies[1:]]) if P else None
+    M = P + (logged is not None)
     total = default_steps(fit.n_rows, starts, gamma, fit.fqe.config.target_update_interval) \
         if steps is None else int(steps)
     k = refit_steps(total) if refit_step_count is None else int(refit_step_count)
-    grand = P * total + (P * refits * k if refits > 1 else 0)
+    grand = M * total + (P * refits * k if refits > 1 else 0)
     tick = (lambda base, m: None) if progress is None else \
         (lambda base, m: lambda done: progress(base + m * done, grand))
-    ens = FQEEnsemble(fit, [fit.snapshot()] * P, [fit.fqe._grad_step] * P)
-    ens.train(total, cums, np.arange(P), [None] * P, fit.rng, progress=tick(0, P),
+    draws = [] if not P else [sampler(fit, cums, np.arange(P), [None] * P, fit.rng, P)]
+    if logged is not None:
+        draws.append(sampler(fit, cumulative(logged)[None], np.zeros(1, np.int64), [None],
+                             np.random.default_rng([seed, 1]), 1))
+    ens = FQEEnsemble(fit, [fit.snapshot()] * M, [fit.fqe._grad_step] * M)
+    ens.train(total, None, None, None, None, draw=joined(*draws), progress=tick(0, M),
               schedule=schedule)
     first = fit.starts[:-1]
     n_episodes = len(first)
-    q = ens.q()                                                             # (P, N, n)
+    q = ens.q()                                                             # (M, N, n)
     fitted = [float(np.mean((policies[i][first] * q[i][first]).sum(1))) for i in range(P)]
     out = [{"q": q[i], "estimate": fitted[i], "fit_estimate": fitted[i], "low": float("nan"),
             "high": float("nan"), "replicates": np.empty(0), "bagged": float("nan"),
@@ -281,9 +309,9 @@ def fqe_policies(observations, actions, rewards, starts, policies: list, gamma: 
         for c in counts:
             chosen = np.repeat(np.arange(n_episodes), c)                    # resampled episodes
             pools.append(np.repeat(fit.starts[chosen], lengths[chosen]) + _offsets(lengths[chosen]))
-        boot = ens.repeat(refits)                       # member i * refits + b: policy i, refit b
+        boot = ens.repeat(refits, range(P))             # member i * refits + b: policy i, refit b
         boot.train(k, cums, np.repeat(np.arange(P), refits), pools * P, fit.rng,
-                   progress=tick(P * total, P * refits), schedule=schedule)
+                   progress=tick(M * total, P * refits), schedule=schedule)
         q0 = boot.q(first).reshape(P, refits, n_episodes, -1)               # (P, refits, E, n)
         for i, rec in enumerate(out):
             v0 = (policies[i][first][None] * q0[i]).sum(2)                  # (refits, E)
@@ -292,10 +320,25 @@ def fqe_policies(observations, actions, rewards, starts, policies: list, gamma: 
             bagged = float(v0.mean())
             rec.update(estimate=bagged, low=bagged - half, high=bagged + half, replicates=reps,
                        bagged=bagged, refit_steps=k)
+    if logged is not None:
+        at = q[P][np.arange(fit.n_rows), act]                              # (N,)
+        out.append({"q": q[P], "logged": at, "estimate": float(np.mean(at[first])),
+                    "steps": total})
     seconds = time.perf_counter() - started
     for rec in out:
         rec["seconds"] = seconds
     return out
+
+
+def behaviour_fqe(observations, actions, rewards, starts, n_actions: int, gamma: float = 1.0,
+                  steps: int | None = None, seed: int = 0, progress=None,
+                  schedule: str = SCHEDULE) -> dict:
+    """The behaviour's record of :func:`fqe_policies` (``behaviour=True``) with no policy
+    beside it: the same Q_hat as when it trains beside policies (its own draws, the same
+    initialisation), to float rounding."""
+    return fqe_policies(observations, actions, rewards, starts, [], gamma, steps, 0, seed=seed,
+                        progress=progress, schedule=schedule, behaviour=True,
+                        n_actions=n_actions)[-1]
 
 
 def cumulative(policy: np.ndarray) -> np.ndarray:

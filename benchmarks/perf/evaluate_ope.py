@@ -38,7 +38,17 @@ evaluation of the log), the OPE, and the rest (the decisions and the baselines):
   same log (any model or controller of the same value target reads them back), the OPE as
   before / now;
 * ``ope kept, fqe N steps``: the latter with FQE's fit at N gradient steps instead of
-  its default (``--fqe-steps N,...``, e.g. the default before, to time a change of it in one run).
+  its default (``--fqe-steps N,...``, e.g. the default before, to time a change of it in one run);
+* ``ope fitted aoc targets``: a log's first evaluate with value_r2's held-out target for fqe
+  values fitted by aoc's own fitted Q evaluation, as the model's values were (60 backups of 300
+  steps; what ``aoc evaluate`` did before the OPE's FQE fitted the logged behaviour beside the
+  policies, and what it does without d3rlpy);
+* ``ope kept one thread``: ``ope kept`` with the OPE's FQE on one thread (it runs on every
+  core, as training does).
+
+The "before" cases put back earlier code paths by patching this process (Adam's per-tensor
+loop, the ensemble's general next-action draw); the targets' stage times both of
+``aoc evaluate``'s held-out targets (aoc's FQE and the logged behaviour's by d3rlpy's).
 """
 
 from __future__ import annotations
@@ -59,6 +69,7 @@ from aoc_cli.control import ControllerConfig, open_session  # noqa: E402
 from aoc_cli.control import evaluate as ev  # noqa: E402
 from aoc_cli.control import evaluate_inputs as ei  # noqa: E402
 from aoc_cli.control import ope_ensemble as ens  # noqa: E402
+from aoc_cli.control import ope_eval  # noqa: E402
 from aoc_cli.control.ope_eval import OPESettings  # noqa: E402
 from aoc_cli.store import Store, targets_dir  # noqa: E402
 from aoc_cli.threads import one_thread  # noqa: E402
@@ -68,7 +79,7 @@ import ope_sepsis  # noqa: E402
 #: The paper's value target, on the task's corpus (what this benchmark timed first).
 PAPER_VALUE = {"value": "return", "gamma": 0.99, "history_length": 0}
 CASES = ("per step", "distinct", "ope fitted before", "ope fitted",
-         "ope kept before", "ope kept")
+         "ope kept before", "ope kept", "ope fitted aoc targets", "ope kept one thread")
 
 
 def prepare(store: Store, model: str):
@@ -89,15 +100,18 @@ class Stages:
 
     def __init__(self):
         self.wall = self.cpu = 0.0
-        self.real = ei.held_out_targets
+        self.real, self.behaviour = ei.held_out_targets, ei.behaviour_targets
 
-        def timed(*args, **kwargs):
-            out, wall, cpu = h.timed(lambda: self.real(*args, **kwargs))
-            self.wall += wall
-            self.cpu += cpu
-            return out
+        def timer(real):
+            def timed(*args, **kwargs):
+                out, wall, cpu = h.timed(lambda: real(*args, **kwargs))
+                self.wall += wall
+                self.cpu += cpu
+                return out
+            return timed
 
-        ei.held_out_targets = timed
+        ei.held_out_targets = timer(self.real)
+        ei.behaviour_targets = self.timed_behaviour = timer(self.behaviour)
 
     def reset(self):
         self.wall = self.cpu = 0.0
@@ -156,6 +170,10 @@ def main() -> None:
             if name.startswith("ope fitted"):
                 shutil.rmtree(kept, ignore_errors=True)   # as a log evaluated the first time
             stages.reset()
+            if name == "ope fitted aoc targets":
+                ei.behaviour_targets = lambda *a, **kw: None
+            if name == "ope kept one thread":
+                ope_eval.cores = lambda: 1
             if name == "per step":
                 ev._value_distinct = lambda ctx, *a: _per_step(ctx, *a)
                 ev.chunk_size = lambda ctx, chunk_steps=ev.CHUNK_STEPS: chunk_steps
@@ -168,6 +186,7 @@ def main() -> None:
             finally:
                 ev._value_distinct, ev.chunk_size = _distinct, _chunk_size
                 torch.optim.Adam, ens._deterministic = adam, deterministic
+                ei.behaviour_targets, ope_eval.cores = stages.timed_behaviour, cores
 
         return data, run
 
@@ -176,8 +195,10 @@ def main() -> None:
         ap.error(f"unknown case in {args.cases!r}: use {', '.join(CASES)}")
     names += [f"ope kept, fqe {int(n)} steps" for n in args.fqe_steps.split(",") if n]
     # kept by an earlier evaluate (and by each fitted case): the decisions' rows read them
-    stages.real(held, *value_spec(session))
-    stages.real(few, *value_spec(session))
+    for data in (held, few):
+        value, gamma = value_spec(session)
+        if value != "fqe" or stages.behaviour(data, gamma, full) is None:
+            stages.real(data, value, gamma)
     made = {name: case(name) for name in names}
     runs = h.interleave({name: run for name, (_d, run) in made.items()}, args.repeats)
     rows = []
@@ -205,6 +226,7 @@ def _per_step(ctx, rows, ep, obs, hist, logged):
 
 
 _distinct, _chunk_size = ev._value_distinct, ev.chunk_size
+cores = ope_eval.cores
 
 if __name__ == "__main__":
     main()

@@ -311,5 +311,6 @@ def test_value_targets_are_the_drivers_a_chunk_never_computes_them(ward, monkeyp
         raise AssertionError("a chunk computed the held-out targets")
 
     monkeypatch.setattr(evaluate_inputs, "held_out_targets", never)
+    monkeypatch.setattr(evaluate_inputs, "behaviour_targets", never)
     part = score_episodes(ctx, chunks(ctx)[0])
     assert len(part.row) > 0 and part.target is None

@@ -216,3 +216,72 @@ def test_continuous_actions_asked_for_ope_are_refused_before_any_step_is_decided
                  baselines=[], progress=lambda done, total: decided.append(done),
                  ope=OPESettings(estimators=("pdwis",)))
     assert decided == []
+
+
+def test_an_fqe_models_held_out_target_is_the_behaviours_fqe_kept_beside_the_log(
+        sepsis, monkeypatch):
+    """For fqe values, value_r2's held-out target is the logged behaviour's Q by d3rlpy's FQE
+    at the OPE's settings: the OPE's own fit when it ran at the model's discount, kept beside
+    the log and read back by a later evaluate; fitted alone at another discount."""
+    pytest.importorskip("d3rlpy", reason="the bench extra (d3rlpy) is not installed")
+    from aoc_cli.control import ope_eval
+    from aoc_cli.store import targets_dir
+
+    _root, store, _ = sepsis
+    held = store.corpus("held")
+    rows = np.arange(held.n_rows)
+
+    def context():
+        session = _session(store)
+        session.model.meta["value"] = {"target": "fqe", "gamma": 1.0}
+        return EvalContext.build(session, held, [])
+
+    settings = OPESettings(fqe_steps=200, seed=3)
+    fresh = np.linspace(0.0, 1.0, held.n_rows)
+    ctx = context()
+    got = ctx.targets(rows, {"settings": settings, "behaviour_fqe": {"logged": fresh}})
+    np.testing.assert_array_equal(got, fresh)
+    assert "d3rlpy's fitted Q evaluation" in ctx.target_source
+    assert len(list(targets_dir(held.path).glob("fqe-behaviour-*.npy"))) == 1
+
+    def never(*_a, **_k):
+        raise AssertionError("fitted again")
+
+    monkeypatch.setattr(ope_eval, "behaviour_fqe", never)
+    np.testing.assert_array_equal(context().targets(rows, {"settings": settings}), fresh)
+
+    alone = {}
+
+    def fit_alone(*args, **_kwargs):
+        alone["gamma"] = args[5]
+        return {"logged": np.full(held.n_rows, 0.5)}
+
+    monkeypatch.setattr(ope_eval, "behaviour_fqe", fit_alone)
+    other = OPESettings(fqe_steps=200, seed=4, gamma=0.9)     # the OPE's discount, not 1
+    got = context().targets(rows, {"settings": other, "behaviour_fqe": {"logged": fresh}})
+    assert alone["gamma"] == 1.0 and np.all(got == 0.5)
+
+
+def test_fqe_off_on_the_logged_behaviour_is_a_warning(sepsis, monkeypatch):
+    """The direct method values the logged behaviour beside the policies; outside the
+    interval of the log's mean return, the OPE says so."""
+    from aoc_cli.control import ope_eval
+
+    _root, store, _ = sepsis
+    held = store.corpus("held")
+    n = held.n_rows
+
+    def fake(_log, _obs, _logged, policies, _settings, _progress=None, behaviour=False):
+        recs = [{"q": None, "note": "no model here", "replicates": ()} for _ in policies]
+        return recs + [{"q": np.zeros((n, held.n_actions)), "logged": np.zeros(n),
+                        "estimate": 5.0}] if behaviour else recs
+
+    monkeypatch.setattr(ope_eval, "fqe_values", fake)
+    out = ope_eval.off_policy_values(held, held.actions, {"aoc": held.actions},
+                                     OPESettings(estimators=("pdwis",), n_boot=50))
+    assert out["behaviour_value"]["fqe"] == 5.0
+    assert any(w.startswith("fqe values the logged behaviour at 5,") or
+               w.startswith("fqe values the logged behaviour at 5 ")
+               for w in out["ope_warnings"]), out["ope_warnings"]
+    low, high = out["behaviour_value"]["low"], out["behaviour_value"]["high"]
+    assert low <= out["behaviour_value"]["estimate"] <= high

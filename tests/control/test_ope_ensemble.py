@@ -125,9 +125,9 @@ def test_repeat_warm_starts_copies_that_train_on_as_the_original(log):
 
 def _first_member_thrice(cum, fit, rng):
     """The default sampler's draws for one member, given to three."""
-    from aoc_cli.control.ope_ensemble import _sampler
+    from aoc_cli.control.ope_ensemble import sampler
 
-    one = _sampler(fit, cum[None], np.zeros(1, np.int64), [None], rng, 1)
+    one = sampler(fit, cum[None], np.zeros(1, np.int64), [None], rng, 1)
 
     def draw():
         rows, acts = one()
@@ -150,13 +150,13 @@ def test_a_member_state_restored_into_d3rlpy_predicts_the_same_q(log):
         assert np.isfinite(other.q()).all()
 
 
-def test_the_sampler_draws_each_member_from_its_pool_and_policy(log):
-    from aoc_cli.control.ope_ensemble import _sampler
+def test_thesampler_draws_each_member_from_its_pool_and_policy(log):
+    from aoc_cli.control.ope_ensemble import sampler
 
     fit = make(log)
     det = cumulative(log[2][1])                   # a deterministic policy
     pools = [np.array([3, 5, 7]), None]
-    draw = _sampler(fit, np.stack([fit.cum, det]), np.array([1, 0]), pools,
+    draw = sampler(fit, np.stack([fit.cum, det]), np.array([1, 0]), pools,
                     np.random.default_rng(0), 2)
     rows, acts = draw()
     assert rows.shape == acts.shape == (2, fit.batch)
@@ -177,11 +177,59 @@ def test_deterministic_policies_draw_the_next_actions_of_the_general_rule(log, m
     assert ope_ensemble._deterministic(cums) is not None
     assert ope_ensemble._deterministic(np.stack([fit.cum])) is None      # the behaviour's
     args = (fit, cums, np.array([0, 1, 1]), [None, None, np.arange(0, fit.n_rows, 2)])
-    fast = ope_ensemble._sampler(*args, np.random.default_rng(5), 3)
+    fast = ope_ensemble.sampler(*args, np.random.default_rng(5), 3)
     monkeypatch.setattr(ope_ensemble, "_deterministic", lambda _cums: None)
-    general = ope_ensemble._sampler(*args, np.random.default_rng(5), 3)
+    general = ope_ensemble.sampler(*args, np.random.default_rng(5), 3)
     for _ in range(20):
         (r1, a1), (r2, a2) = fast(), general()
         np.testing.assert_array_equal(r1, r2)
         np.testing.assert_array_equal(a1, a2)
         assert len(np.unique(a1)) > 1
+
+
+def test_the_target_table_of_repeated_observations_gives_the_per_batch_q(log, monkeypatch):
+    """Where observations repeat, the target network's Q comes from a table of the distinct
+    observations, refreshed at each sync: the same training as its forward pass per batch."""
+    obs, data, policies = log
+    rep = np.round(obs[:, :4], 0)                 # few distinct observations (the states)
+    cums = np.stack([cumulative(p) for p in policies[:2]])
+
+    def trained(table: bool):
+        with one_thread():
+            fit = FQEFit(rep, data["action"], data["reward"], data["starts"], policies[0])
+            if not table:                         # as a log with too many to tabulate
+                monkeypatch.setattr(fit, "distinct", lambda: (np.zeros((10 ** 6, 1)), None))
+            ens = FQEEnsemble(fit, [fit.snapshot()] * 2, [0, 0])
+            assert (ens._next_table() is not None) == table
+            ens.train(250, cums, np.array([0, 1]), [None, None], np.random.default_rng(4))
+            return ens.q()
+
+    xu, _of = FQEFit(rep, data["action"], data["reward"], data["starts"],
+                     policies[0]).distinct()
+    assert len(xu) < 10
+    with_table, without = trained(True), trained(False)
+    assert np.abs(with_table).max() > 0.1
+    assert np.abs(with_table - without).max() < TOL
+
+
+def test_a_group_drawn_by_its_own_generator_trains_the_same_beside_others(log):
+    """joined draws: a member with its own generator gets the same mini-batches, so the same
+    training, alone or beside other members (and they the same without it)."""
+    from aoc_cli.control.ope_ensemble import joined, sampler
+
+    with one_thread():
+        fit = make(log)
+        cums = np.stack([fit.cum, cumulative(log[2][1])])
+        own = lambda: sampler(fit, cums[1:], np.zeros(1, np.int64), [None],
+                              np.random.default_rng(9), 1)
+        shared = lambda: sampler(fit, cums[:1], np.zeros(1, np.int64), [None],
+                                 np.random.default_rng(8), 1)
+        alone = FQEEnsemble(fit, [fit.snapshot()], [0])
+        alone.train(150, None, None, None, None, draw=own())
+        first = FQEEnsemble(fit, [fit.snapshot()], [0])
+        first.train(150, None, None, None, None, draw=shared())
+        both = FQEEnsemble(fit, [fit.snapshot()] * 2, [0, 0])
+        both.train(150, None, None, None, None, draw=joined(shared(), own()))
+    assert np.abs(both.q()[1] - alone.q()[0]).max() < TOL
+    assert np.abs(both.q()[0] - first.q()[0]).max() < TOL
+    assert np.abs(both.q()[0] - both.q()[1]).max() > 10 * TOL
