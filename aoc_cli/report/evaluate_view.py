@@ -31,7 +31,9 @@ def _ope_rows(summary: dict) -> list[dict]:
         if "policy_value" in rec:
             rows.append({"policy": name, "ess": rec["ess"],
                          **{k: cell(v) for k, v in (rec["policy_value"] or {}).items()}})
-    rows.append({"policy": "behaviour", "mean_return": cell(summary["behaviour_value"])})
+    own = summary["behaviour_value"]
+    rows.append({"policy": "behaviour", "mean_return": cell(own),
+                 **({"fqe": f"{own['fqe']:.4f}"} if own.get("fqe") is not None else {})})
     return rows
 
 
@@ -58,6 +60,8 @@ def write_evaluation(summary: dict, fmt: str) -> None:
     res = summary["residual"]
     head["residual p50 / p90 / p99"] = f"{res['p50']:.4g} / {res['p90']:.4g} / {res['p99']:.4g}"
     head["typical residual"] = res["typical"]
+    if summary.get("value_target"):
+        head["value target (value_r2's)"] = summary["value_target"]
     write_object(head, "table", title=f"aoc evaluate {summary['corpus']} on {summary['data']}")
     write_records(rows, "table", columns=present, title="decisions against the log")
     if "what_if" in summary:
