@@ -8,7 +8,8 @@ held-out steps per second, where the time goes, and the decisions checked step b
 The store (``--store``, default /tmp/aoc-evaluate-sepsis) is laid out as
 ``benchmarks/perf/ope_sepsis.py``'s (built here when missing, through the API
 entries of the commands): a corpus ``train`` of 10,000 clinician episodes and a held-out log
-``held0`` of 5,000 (seed 1000). ``--model task`` (the default) times ``aoc evaluate`` as a
+``held0`` of 5,000 (seed 1000; ``--held-episodes N``: ``held0-N`` of N episodes).
+``--model task`` (the default) times ``aoc evaluate`` as a
 user runs it after ``aoc collect icu-sepsis``, ``aoc train NAME`` and ``aoc index NAME`` with no
 flags: the model ``default`` (fqe values, gamma 1, history 0) and the task's controller
 (residual cap 0.01, support penalty 5), as ``aoc_cli.open_session`` opens them.
@@ -16,7 +17,8 @@ flags: the model ``default`` (fqe values, gamma 1, history 0) and the task's con
 return, gamma 0.99, history 0) and the paper's controller settings (what this benchmark timed
 before). Times :func:`aoc_cli.control.evaluate.evaluate` in this process (the session opened
 once before; 25 candidate actions a step, the knn and bc baselines), wall and CPU seconds
-(user + system of this one-threaded process: what the wall figure would be on an idle core),
+(user + system of this process: the OPE's FQE runs on every core, as ``aoc evaluate``'s does,
+the rest on one),
 the median of ``--repeats`` runs, the cases interleaved round by round. Each row splits its
 time into the value targets of the held-out log (value_r2's target: for fqe values a fitted Q
 evaluation of the log), the OPE, and the rest (the decisions and the baselines):
@@ -82,7 +84,7 @@ CASES = ("per step", "distinct", "ope fitted before", "ope fitted",
          "ope kept before", "ope kept", "ope fitted aoc targets", "ope kept one thread")
 
 
-def prepare(store: Store, model: str):
+def prepare(store: Store, model: str, held_episodes: int = 5000):
     """(corpus, held-out log, session) of ``--model``."""
     corpus = ope_sepsis.prepare(store, 10_000)
     if model == "paper":
@@ -91,7 +93,8 @@ def prepare(store: Store, model: str):
         session = open_session(corpus, "paper", config=ControllerConfig())
     else:
         session = aoc_cli.open_session(corpus.name, store=store)  # the task's settings
-    held = h.corpus_ready(store, "held0", "icu-sepsis", episodes=5000, seed=1000)
+    name = "held0" if held_episodes == 5000 else f"held0-{held_episodes}"
+    held = h.corpus_ready(store, name, "icu-sepsis", episodes=held_episodes, seed=1000)
     return corpus, held, session
 
 
@@ -142,14 +145,16 @@ def main() -> None:
     ap.add_argument("--model", choices=("task", "paper"), default="task")
     ap.add_argument("--store", default="/tmp/aoc-evaluate-sepsis")
     ap.add_argument("--per-step-episodes", type=int, default=200)
+    ap.add_argument("--held-episodes", type=int, default=5000,
+                    help="episodes of the held-out log (5,000: held0; else held0-N, seed 1000)")
     ap.add_argument("--cases", default=",".join(CASES),
                     help="comma-separated, of: " + ", ".join(CASES))
     ap.add_argument("--fqe-steps", default="",
                     help="also 'ope kept' with FQE at these gradient steps (N,...)")
     args = ap.parse_args()
     store = Store(args.store)
-    corpus, held, session = prepare(store, args.model)
-    first = f"held0-first{args.per_step_episodes}"  # the first episodes of held0
+    corpus, held, session = prepare(store, args.model, args.held_episodes)
+    first = f"{held.name}-first{args.per_step_episodes}"  # the first episodes of held
     if not store.exists(first):
         store.write(first, held.load().select_episodes(
             np.arange(held.n_episodes) < args.per_step_episodes))
