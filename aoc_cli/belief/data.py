@@ -28,6 +28,21 @@ def split_episodes(n_episodes: int, val_fraction: float, seed: int) -> tuple[np.
     return np.sort(perm[n_val:]), np.sort(perm[:n_val])
 
 
+def episode_folds(n_episodes: int, val_fraction: float, seed: int,
+                  folds: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Up to ``folds`` (train episodes, validation episodes) splits, sorted, for choosing
+    settings by cross-validation: the validation episodes are disjoint blocks of the usual
+    size (:func:`split_episodes`'s) taken in order from the same random order of the
+    episodes, so the first fold is :func:`split_episodes`'s split; as many as there are whole
+    blocks of episodes."""
+    _train, first = split_episodes(n_episodes, val_fraction, seed)  # checks n_episodes
+    n_val = len(first)
+    order = np.random.default_rng(seed).permutation(n_episodes)
+    return [(np.sort(np.concatenate([order[:j * n_val], order[(j + 1) * n_val:]])),
+             np.sort(order[j * n_val:(j + 1) * n_val]))
+            for j in range(max(1, min(folds, n_episodes // n_val)))]
+
+
 def episode_rows(episode_starts: np.ndarray, episodes: np.ndarray) -> np.ndarray:
     """(R,) int64 rows of the given episodes, in row order."""
     episodes = np.asarray(episodes, dtype=np.int64)

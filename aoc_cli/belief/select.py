@@ -3,19 +3,25 @@
 On a small corpus (at most :data:`SELECT_MAX_ROWS` rows) whose model imitates discrete actions
 (ABC on a reward-free log, e.g. ward), the paper's settings (a 4-step GRU history, 128 units,
 no weight decay) can overfit or underfit what the data supports, and nothing tells the user.
-So, for the settings the user leaves open, ``aoc train`` trains candidates on the same split
-of whole episodes and keeps the one with the lowest validation loss (cross-entropy of the
-logged action):
+So, for the settings the user leaves open, ``aoc train`` trains candidates and keeps the one
+with the lowest validation loss (cross-entropy of the logged action) averaged over
+:data:`FOLDS` validation folds of whole episodes (cross-validation by episode, e.g. by
+patient: disjoint blocks of the usual validation size from one random order of the episodes,
+the first being the usual split, :func:`aoc_cli.belief.data.episode_folds`):
 
 1. history length L in (0, 1, 4);
 2. then the width (GRU and hidden units) in (128, 64, 256) at the chosen L;
 3. then Adam's weight decay in (0, 1e-4, 1e-3).
 
-A candidate replaces the current choice only when its validation loss is lower by more than
-:data:`MARGIN` (relative): ties keep the simpler, earlier setting. Candidates stop early with
-patience :data:`SEARCH_PATIENCE` (at most the user's); the chosen settings are then trained
-with the user's patience and saved. What was tried, what was chosen and why go to the output
-and to the model's config (``metrics.selection``).
+A candidate replaces the current choice only when its mean validation loss is lower by more
+than :data:`MARGIN` (relative): ties keep the simpler, earlier setting (:func:`choose`). One
+validation split is not enough on a ward-sized log: on one of 30 patient splits the search
+kept L = 4 by 2.7% on its one split, and the other seeds' splits (which draw other
+validation patients) chose L = 1 (docs/design.md, "Settings chosen on small logs").
+Candidates stop early with patience :data:`SEARCH_PATIENCE` (at most the user's); the chosen
+settings are then trained on the usual split with the user's patience and saved. What was
+tried (each candidate's loss on every fold and their mean), what was chosen and why go to the
+output and to the model's config (``metrics.selection``).
 
 **Where it runs** (:func:`searches`): only for imitation of discrete actions, where it was
 measured (docs/results.md, "ward"). For a decision's accountability the action's validation
@@ -38,6 +44,7 @@ from dataclasses import replace
 import numpy as np
 
 from aoc_cli.belief.config import BeliefConfig
+from aoc_cli.belief.data import episode_folds, episode_rows
 from aoc_cli.belief.row_labels import default_row_smoothing, subset_scores
 from aoc_cli.index.strata import PER_ACTION
 from aoc_cli.metrics import auc
@@ -55,6 +62,9 @@ SEARCH: tuple[tuple[str, tuple], ...] = (
 PAPER = {name: BeliefConfig.__dataclass_fields__[name].default for name, _values in SEARCH}
 MARGIN = 0.01
 SEARCH_PATIENCE = 5
+#: Validation folds of whole episodes each candidate is trained and scored on (fewer when the
+#: corpus has fewer whole blocks of the validation size); the first is the usual split.
+FOLDS = 3
 #: How much better than the majority / mean the model must be not to be flagged.
 BASELINE_MARGIN = 0.005
 
@@ -162,75 +172,93 @@ def abc_scores(rows: np.ndarray, weights: np.ndarray, actions: np.ndarray,
     return subset_scores(rows, weights, actions, n_actions)
 
 
-def _score(metrics: dict) -> float:
-    return float(metrics["val_loss"])
+def fold_data(corpus, prepared, config: BeliefConfig, folds: int) -> list:
+    """The validation folds of the search: ``prepared`` (a
+    :class:`~aoc_cli.belief.data.TrainingData`, the usual split) with the training and
+    validation episodes of each of :func:`aoc_cli.belief.data.episode_folds`'s folds (the
+    first is ``prepared``'s own split)."""
+    starts = corpus.episode_starts
+    return [replace(prepared, train_episodes=tr, val_episodes=va,
+                    train_rows=episode_rows(starts, tr), val_rows=episode_rows(starts, va))
+            for tr, va in episode_folds(corpus.n_episodes, config.val_fraction, config.seed,
+                                        folds)]
+
+
+def choose(values: tuple, loss) -> tuple:
+    """(the value chosen, its loss) among ``values`` in order: a value replaces the current
+    choice only when ``loss(value)`` (a candidate's mean validation loss over the folds) is
+    lower than the current one's by more than :data:`MARGIN` (relative)."""
+    best, best_loss = values[0], loss(values[0])
+    for v in values[1:]:
+        if loss(v) < best_loss * (1 - MARGIN):
+            best, best_loss = v, loss(v)
+    return best, best_loss
 
 
 def select_and_train(corpus, config: BeliefConfig, open_names: list[str], model_id: str,
                      overwrite: bool, prepared, progress=None, extra: dict | None = None) -> dict:
     """Search ``open_names`` (see the module docstring), then train and save the chosen
-    configuration as ``model_id``; the final metrics, with ``selection`` (what was tried and
-    why the winner was chosen). ``progress`` (:mod:`aoc_cli.progress`): each candidate tried
-    as a label (its settings and loss), then the final training's epochs."""
+    configuration as ``model_id``; the final metrics, with ``selection`` (what was tried on
+    each fold and why the winner was chosen). ``progress`` (:mod:`aoc_cli.progress`): each
+    candidate tried on each fold as a label (its settings and loss), then the final
+    training's epochs."""
     from aoc_cli.belief.train import train_model  # lazy: torch; settings are checked first
 
     started = time.perf_counter()
-    best = config
+    names = [n for n, _ in SEARCH]
     search_cfg = replace(config, patience=min(config.patience, SEARCH_PATIENCE))
-    tried: list[dict] = []
-    cache: dict[tuple, dict] = {}
+    data = fold_data(corpus, prepared, config, FOLDS)
+    tried: dict[tuple, dict] = {}
 
     def run(cfg: BeliefConfig) -> dict:
-        key = tuple(getattr(cfg, n) for n, _ in SEARCH)
-        if key not in cache:
-            m = train_model(corpus, replace(search_cfg, **dict(zip([n for n, _ in SEARCH],
-                                                                   key))),
-                            model_id, overwrite=True, prepared=prepared, save=False)
-            rec = {n: v for n, v in zip([n for n, _ in SEARCH], key)}
-            rec.update({k: m[k] for k in ("val_loss", "val_accuracy", "val_r2", "epochs")
-                        if k in m})
-            tried.append(rec)
-            cache[key] = rec
-            if progress is not None:
-                progress(0, None, "choosing settings: " + ", ".join(
-                    f"{k} {rec[k]}" for k in ("history_length", "hidden", "weight_decay"))
-                    + f" val loss {rec['val_loss']:.4f}")
-        return cache[key]
+        """The candidate's record: its settings, loss and accuracy on every fold, the mean."""
+        key = tuple(getattr(cfg, n) for n in names)
+        if key not in tried:
+            rec: dict = dict(zip(names, key))
+            per_fold = []
+            for j, fold in enumerate(data):
+                m = train_model(corpus, replace(search_cfg, **rec), model_id, overwrite=True,
+                                prepared=fold, save=False)
+                per_fold.append(m)
+                if progress is not None:
+                    progress(0, None, "choosing settings: " + ", ".join(
+                        f"{k} {rec[k]}" for k in names)
+                        + f" fold {j + 1}/{len(data)} val loss {m['val_loss']:.4f}")
+            rec["val_losses"] = [float(m["val_loss"]) for m in per_fold]
+            rec["val_loss"] = float(np.mean(rec["val_losses"]))
+            if "val_accuracy" in per_fold[0]:
+                rec["val_accuracy"] = float(np.mean([m["val_accuracy"] for m in per_fold]))
+            rec["epochs"] = [int(m["epochs"]) for m in per_fold]
+            tried[key] = rec
+        return tried[key]
 
-    reasons = []
+    best, reasons = config, []
     for name, values in SEARCH:
         if name not in open_names:
             continue
-        current = replace(best, **{name: values[0]})
-        best_rec = run(current)
-        for v in values[1:]:
-            cand = replace(best, **{name: v})
-            rec = run(cand)
-            if _score(rec) < _score(best_rec) * (1 - MARGIN):
-                current, best_rec = cand, rec
-        best = current
-        reasons.append(f"{name} {getattr(best, name)}: validation loss "
-                       f"{_score(best_rec):.4g} (" + ", ".join(
-                           f"{r[name]}: {_score(r):.4g}" for r in tried
-                           if all(r[n] == getattr(best, n) for n, _ in SEARCH if n != name))
-                       + ")")
+        value, loss = choose(values, lambda v: run(replace(best, **{name: v}))["val_loss"])
+        best = replace(best, **{name: value})
+        reasons.append(f"{name} {value}: mean validation loss {loss:.4g} (" + ", ".join(
+            f"{v}: {run(replace(best, **{name: v}))['val_loss']:.4g}" for v in values) + ")")
     selection = {
         "searched": list(open_names),
-        "chosen": {n: getattr(best, n) for n, _ in SEARCH},
-        "why": "lowest validation loss on held-out episodes (a candidate must beat the "
-               f"simpler one by more than {MARGIN:.0%}): " + "; ".join(reasons),
-        "candidates": tried,
+        "chosen": {n: getattr(best, n) for n in names},
+        "why": f"lowest mean validation loss over {len(data)} folds of held-out episodes (a "
+               f"candidate must beat the simpler one by more than {MARGIN:.0%}): "
+               + "; ".join(reasons),
+        "folds": len(data),
+        "fold_val_episodes": [len(f.val_episodes) for f in data],
+        "candidates": list(tried.values()),
         "search_seconds": time.perf_counter() - started,
-        "rule": f"settings left open are chosen by validation on corpora of at most "
-                f"{SELECT_MAX_ROWS} rows",
+        "rule": f"settings left open are chosen by cross-validation over episodes on corpora "
+                f"of at most {SELECT_MAX_ROWS} rows",
     }
     inspect = None
     if config.mode == "imitation" and corpus.discrete:  # ABC's own decisions, validated
         inspect = abc_validation(corpus.actions, int(corpus.n_actions))
-    metrics = train_model(corpus, best, model_id, overwrite=overwrite, progress=progress,
-                          prepared=prepared, extra={**(extra or {}), "selection": selection},
-                          inspect=inspect)
-    return metrics
+    return train_model(corpus, best, model_id, overwrite=overwrite, progress=progress,
+                       prepared=prepared, extra={**(extra or {}), "selection": selection},
+                       inspect=inspect)
 
 
 def baseline_check(metrics: dict, margin: float = BASELINE_MARGIN) -> str | None:

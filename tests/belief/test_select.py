@@ -37,11 +37,82 @@ def test_open_settings_are_chosen_by_validation_and_recorded(aoc, ward):
     by_l = {c["history_length"]: c["val_loss"] for c in sel["candidates"]
             if c["weight_decay"] == 0.0}
     assert by_l[chosen["history_length"]] <= min(by_l.values()) / (1 - select.MARGIN) + 1e-12
-    assert "lowest validation loss" in sel["why"] and "chose history_length" in err
+    assert "lowest mean validation loss" in sel["why"] and "chose history_length" in err
     config = json.loads((ward.corpus("ward").models_dir / "default" / "config.json").read_text())
     assert config["config"]["history_length"] == chosen["history_length"]
     assert config["config"]["hidden"] == 32
     assert config["metrics"]["selection"]["chosen"] == chosen
+
+
+def test_settings_are_chosen_by_their_mean_validation_loss_over_folds(ward):
+    """Every candidate is trained and scored on each of FOLDS folds of whole episodes (the
+    first the usual split); the record holds one loss per fold, their mean, and the choice is
+    the margin rule over the means, which can differ from the first fold's alone."""
+    from dataclasses import replace
+
+    from aoc_cli.belief.config import BeliefConfig
+    from aoc_cli.belief.data import prepare
+    from aoc_cli.belief.fit import train_corpus
+    from aoc_cli.belief.train import train_model
+
+    corpus = ward.corpus("ward")
+    metrics = train_corpus(corpus, "cv", overwrite=True, mode="imitation", hidden=16,
+                           threads=1, max_epochs=3).metrics
+    sel = metrics["selection"]
+    assert sel["searched"] == ["history_length", "weight_decay"]
+    assert sel["folds"] == select.FOLDS == 3 and sel["fold_val_episodes"] == [32, 32, 32]
+    for c in sel["candidates"]:
+        assert len(c["val_losses"]) == select.FOLDS and len(c["epochs"]) == select.FOLDS
+        assert c["val_loss"] == pytest.approx(np.mean(c["val_losses"]), rel=1e-12)
+        assert len(set(c["val_losses"])) == select.FOLDS  # three validation sets, three losses
+    mean = {(c["history_length"], c["weight_decay"]): c["val_loss"] for c in sel["candidates"]}
+    chosen_l = 0
+    for h in (1, 4):  # the margin rule by hand over the means
+        if mean[(h, 0.0)] < mean[(chosen_l, 0.0)] * (1 - select.MARGIN):
+            chosen_l = h
+    assert sel["chosen"]["history_length"] == chosen_l
+    assert "mean validation loss over 3 folds" in sel["why"]
+    # a recorded fold loss is that candidate trained on that fold: the first fold is the
+    # usual split, the second the next block of the same random order of the episodes
+    config = BeliefConfig(mode="imitation", hidden=16, threads=1, max_epochs=3,
+                          label_smoothing=select.LABEL_SMOOTHING, history_length=chosen_l,
+                          patience=select.SEARCH_PATIENCE)
+    usual = prepare(corpus, config, "x", True)
+    folds = select.fold_data(corpus, usual, config, select.FOLDS)
+    assert np.array_equal(folds[0].val_rows, usual.val_rows)
+    record = next(c for c in sel["candidates"] if c["history_length"] == chosen_l
+                  and c["weight_decay"] == 0.0)
+    for j in (0, 1):
+        m = train_model(corpus, replace(config), "x", overwrite=True, prepared=folds[j],
+                        save=False)
+        assert m["val_loss"] == pytest.approx(record["val_losses"][j], rel=1e-5)
+
+
+def test_the_margin_rule_keeps_the_simpler_setting_on_a_tie():
+    losses = {0: 1.0, 1: 0.995, 4: 0.9}
+    assert select.choose((0, 1, 4), losses.get) == (4, 0.9)
+    losses = {0: 1.0, 1: 0.995, 4: 0.9901}  # 1% lower is not more than 1% lower
+    assert select.choose((0, 1, 4), losses.get) == (0, 1.0)
+    losses = {0: 1.0, 1: 0.98, 4: 0.975}    # 4 is better than 1 but not by the margin
+    assert select.choose((0, 1, 4), losses.get) == (1, 0.98)
+
+
+def test_validation_folds_are_disjoint_blocks_of_whole_episodes():
+    from aoc_cli.belief.data import episode_folds, split_episodes
+
+    folds = episode_folds(50, 0.2, 7, 3)
+    assert len(folds) == 3
+    assert [np.array_equal(a, b) for a, b in zip(folds[0], split_episodes(50, 0.2, 7))] == \
+        [True, True]
+    vals = [set(v.tolist()) for _t, v in folds]
+    assert all(len(v) == 10 for v in vals) and len(set.union(*vals)) == 30
+    for train, val in folds:
+        assert sorted(np.concatenate([train, val]).tolist()) == list(range(50))
+    assert len(episode_folds(50, 0.4, 7, 3)) == 2      # two whole blocks of 20
+    tiny = episode_folds(2, 0.2, 0, 3)                  # one episode held out of two
+    assert [(t.tolist(), v.tolist()) for t, v in tiny] == [([1], [0]), ([0], [1])] or \
+        [(t.tolist(), v.tolist()) for t, v in tiny] == [([0], [1]), ([1], [0])]
+    assert len(episode_folds(9, 0.5, 0, 3)) == 2        # blocks of 4 (at most 8 held out)
 
 
 def test_given_settings_and_paper_flag_skip_the_search(aoc, ward):
