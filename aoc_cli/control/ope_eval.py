@@ -28,7 +28,7 @@ from aoc_cli.control.ope_fqe import (BATCH, HIDDEN, LEARNING_RATE, REFITS, SCHED
                                       fqe_policies)
 from aoc_cli.errors import AocError, BadSetting, NoRewards, param
 from aoc_cli.settings import Settings, setting
-from aoc_cli.threads import cores, thread_limits
+from aoc_cli.threads import one_thread
 
 ESTIMATORS = ("pdwis", "wdr", "fqe")
 #: The propensity column looked for when none is named.
@@ -198,8 +198,7 @@ def policy_value(log: ope.Log, observations, logged, propensity, policy, n_actio
 def fqe_values(log: ope.Log, observations, logged, policies: list, settings: OPESettings,
                progress=None, behaviour: bool = False) -> list:
     """The direct method for each policy (N, n) at once
-    (:func:`aoc_cli.control.ope_fqe.fqe_policies`: one batched ensemble, on every core: it
-    is training), when an estimator needs it: with refits when FQE is asked for and
+    (:func:`aoc_cli.control.ope_fqe.fqe_policies`: one batched ensemble), when an estimator needs it: with refits when FQE is asked for and
     ``settings.fqe_refits`` > 1. Each entry None (no estimator needs a Q model) or a record;
     without d3rlpy, a record with ``q`` None and the reason as its ``note``. ``behaviour``:
     the logged behaviour's record last (``fqe_policies``'s), when FQE runs."""
@@ -209,11 +208,10 @@ def fqe_values(log: ope.Log, observations, logged, policies: list, settings: OPE
     if reason is not None:
         return [{"q": None, "note": reason, "replicates": ()} for _ in policies]
     refits = settings.fqe_refits if "fqe" in settings.estimators else 0
-    with thread_limits(torch=cores()):
-        return fqe_policies(observations, logged, log.rewards, log.starts, policies,
-                            settings.gamma, settings.fqe_steps, refits if refits > 1 else 0,
-                            seed=settings.seed, progress=progress,
-                            schedule=settings.fqe_schedule, behaviour=behaviour)
+    return fqe_policies(observations, logged, log.rewards, log.starts, policies,
+                        settings.gamma, settings.fqe_steps, refits if refits > 1 else 0,
+                        seed=settings.seed, progress=progress, schedule=settings.fqe_schedule,
+                        behaviour=behaviour)
 
 
 def fqe_record(settings: OPESettings, n_rows: int, starts: np.ndarray, gamma: float) -> dict:
@@ -248,7 +246,7 @@ def behaviour_targets(data, gamma: float, settings: OPESettings,
     def compute():
         if fresh is not None:
             return fresh
-        with thread_limits(torch=cores()):
+        with one_thread():
             return behaviour_fqe(data.observations, np.asarray(data.actions, np.int64),
                                  data.rewards, data.episode_starts, data.n_actions, gamma,
                                  record["steps"], settings.seed,

@@ -17,8 +17,7 @@ flags: the model ``default`` (fqe values, gamma 1, history 0) and the task's con
 return, gamma 0.99, history 0) and the paper's controller settings (what this benchmark timed
 before). Times :func:`aoc_cli.control.evaluate.evaluate` in this process (the session opened
 once before; 25 candidate actions a step, the knn and bc baselines), wall and CPU seconds
-(user + system of this process: the OPE's FQE runs on every core, as ``aoc evaluate``'s does,
-the rest on one),
+(user + system of this one-threaded process: what the wall figure would be on an idle core),
 the median of ``--repeats`` runs, the cases interleaved round by round. Each row splits its
 time into the value targets of the held-out log (value_r2's target: for fqe values a fitted Q
 evaluation of the log), the OPE, and the rest (the decisions and the baselines):
@@ -44,9 +43,7 @@ evaluation of the log), the OPE, and the rest (the decisions and the baselines):
 * ``ope fitted aoc targets``: a log's first evaluate with value_r2's held-out target for fqe
   values fitted by aoc's own fitted Q evaluation, as the model's values were (60 backups of 300
   steps; what ``aoc evaluate`` did before the OPE's FQE fitted the logged behaviour beside the
-  policies, and what it does without d3rlpy);
-* ``ope kept one thread``: ``ope kept`` with the OPE's FQE on one thread (it runs on every
-  core, as training does).
+  policies, and what it does without d3rlpy).
 
 The "before" cases put back earlier code paths by patching this process (Adam's per-tensor
 loop, the ensemble's general next-action draw); the targets' stage times both of
@@ -71,7 +68,6 @@ from aoc_cli.control import ControllerConfig, open_session  # noqa: E402
 from aoc_cli.control import evaluate as ev  # noqa: E402
 from aoc_cli.control import evaluate_inputs as ei  # noqa: E402
 from aoc_cli.control import ope_ensemble as ens  # noqa: E402
-from aoc_cli.control import ope_eval  # noqa: E402
 from aoc_cli.control.ope_eval import OPESettings  # noqa: E402
 from aoc_cli.store import Store, targets_dir  # noqa: E402
 from aoc_cli.threads import one_thread  # noqa: E402
@@ -81,7 +77,7 @@ import ope_sepsis  # noqa: E402
 #: The paper's value target, on the task's corpus (what this benchmark timed first).
 PAPER_VALUE = {"value": "return", "gamma": 0.99, "history_length": 0}
 CASES = ("per step", "distinct", "ope fitted before", "ope fitted",
-         "ope kept before", "ope kept", "ope fitted aoc targets", "ope kept one thread")
+         "ope kept before", "ope kept", "ope fitted aoc targets")
 
 
 def prepare(store: Store, model: str, held_episodes: int = 5000):
@@ -177,8 +173,6 @@ def main() -> None:
             stages.reset()
             if name == "ope fitted aoc targets":
                 ei.behaviour_targets = lambda *a, **kw: None
-            if name == "ope kept one thread":
-                ope_eval.cores = lambda: 1
             if name == "per step":
                 ev._value_distinct = lambda ctx, *a: _per_step(ctx, *a)
                 ev.chunk_size = lambda ctx, chunk_steps=ev.CHUNK_STEPS: chunk_steps
@@ -191,7 +185,7 @@ def main() -> None:
             finally:
                 ev._value_distinct, ev.chunk_size = _distinct, _chunk_size
                 torch.optim.Adam, ens._deterministic = adam, deterministic
-                ei.behaviour_targets, ope_eval.cores = stages.timed_behaviour, cores
+                ei.behaviour_targets = stages.timed_behaviour
 
         return data, run
 
@@ -231,7 +225,6 @@ def _per_step(ctx, rows, ep, obs, hist, logged):
 
 
 _distinct, _chunk_size = ev._value_distinct, ev.chunk_size
-cores = ope_eval.cores
 
 if __name__ == "__main__":
     main()
