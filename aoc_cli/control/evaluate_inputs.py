@@ -12,6 +12,7 @@ from aoc_cli.belief.targets import held_out_targets, value_spec
 from aoc_cli.control.controller import action_bounds, support_disagreement
 from aoc_cli.control.episodes import check_same_spaces
 from aoc_cli.control.ope_eval import OPESettings, behaviour_targets
+from aoc_cli.control.ope_fqe import default_steps
 from aoc_cli.decompose import subset_size
 from aoc_cli.errors import AocError, NoRewards, call
 from aoc_cli.index import BeliefIndex
@@ -274,7 +275,9 @@ class EvalContext:
         on the held-out log as the model's values were. For ``fqe`` values, the logged
         behaviour's Q(o, a) by d3rlpy's fitted Q evaluation of the held-out log
         (:func:`aoc_cli.control.ope_eval.behaviour_targets`: the OPE's own when ``ope``, its
-        block, fitted it at the model's discount; kept beside the log), or where that cannot
+        block, fitted it at the model's discount and FQE's default steps and schedule; else
+        fitted alone at those: an OPE made quicker does not change the target; kept beside
+        the log), or where that cannot
         run by aoc's own, as the model's values were
         (:func:`aoc_cli.belief.targets.held_out_targets`, kept too). Computed on first use:
         only the driver reads them (the chunks' decisions do not need them: a Ray task never
@@ -290,10 +293,13 @@ class EvalContext:
                 spec = model.meta.get("value") or {}
                 value, gamma = spec.get("target", "return"), float(spec.get("gamma", 0.99))
                 v = None
-                if value == "fqe":
-                    settings = ope["settings"] if ope else OPESettings(seed=self.seed)
+                if value == "fqe":   # FQE at its default settings, whatever the OPE's
+                    ran = ope["settings"] if ope else OPESettings(seed=self.seed)
+                    settings = OPESettings(seed=ran.seed)
                     fresh = ope.get("behaviour_fqe") if ope else None
-                    same = fresh is not None and settings.gamma == gamma
+                    same = fresh is not None and ran.gamma == gamma and \
+                        ran.fqe_schedule == settings.fqe_schedule and fresh["steps"] == \
+                        default_steps(self.data.n_rows, self.data.episode_starts, gamma)
                     v = behaviour_targets(self.data, gamma, settings,
                                           fresh["logged"] if same else None)
                 if v is None:

@@ -221,8 +221,9 @@ def test_continuous_actions_asked_for_ope_are_refused_before_any_step_is_decided
 def test_an_fqe_models_held_out_target_is_the_behaviours_fqe_kept_beside_the_log(
         sepsis, monkeypatch):
     """For fqe values, value_r2's held-out target is the logged behaviour's Q by d3rlpy's FQE
-    at the OPE's settings: the OPE's own fit when it ran at the model's discount, kept beside
-    the log and read back by a later evaluate; fitted alone at another discount."""
+    at its default settings: the OPE's own fit when it ran at the model's discount and those
+    settings, kept beside the log and read back by a later evaluate; fitted alone at another
+    discount or when the OPE's FQE took other steps."""
     pytest.importorskip("d3rlpy", reason="the bench extra (d3rlpy) is not installed")
     from aoc_cli.control import ope_eval
     from aoc_cli.store import targets_dir
@@ -236,10 +237,14 @@ def test_an_fqe_models_held_out_target_is_the_behaviours_fqe_kept_beside_the_log
         session.model.meta["value"] = {"target": "fqe", "gamma": 1.0}
         return EvalContext.build(session, held, [])
 
-    settings = OPESettings(fqe_steps=200, seed=3)
+    from aoc_cli.control.ope_fqe import default_steps
+
+    steps = default_steps(held.n_rows, held.episode_starts, 1.0)
+    settings = OPESettings(seed=3)
     fresh = np.linspace(0.0, 1.0, held.n_rows)
     ctx = context()
-    got = ctx.targets(rows, {"settings": settings, "behaviour_fqe": {"logged": fresh}})
+    got = ctx.targets(rows, {"settings": settings,
+                             "behaviour_fqe": {"logged": fresh, "steps": steps}})
     np.testing.assert_array_equal(got, fresh)
     assert "d3rlpy's fitted Q evaluation" in ctx.target_source
     assert len(list(targets_dir(held.path).glob("fqe-behaviour-*.npy"))) == 1
@@ -253,13 +258,19 @@ def test_an_fqe_models_held_out_target_is_the_behaviours_fqe_kept_beside_the_log
     alone = {}
 
     def fit_alone(*args, **_kwargs):
-        alone["gamma"] = args[5]
+        alone["gamma"], alone["steps"] = args[5], args[6]
         return {"logged": np.full(held.n_rows, 0.5)}
 
     monkeypatch.setattr(ope_eval, "behaviour_fqe", fit_alone)
-    other = OPESettings(fqe_steps=200, seed=4, gamma=0.9)     # the OPE's discount, not 1
-    got = context().targets(rows, {"settings": other, "behaviour_fqe": {"logged": fresh}})
-    assert alone["gamma"] == 1.0 and np.all(got == 0.5)
+    other = OPESettings(seed=4, gamma=0.9)                    # the OPE's discount, not 1
+    got = context().targets(rows, {"settings": other,
+                                   "behaviour_fqe": {"logged": fresh, "steps": steps}})
+    assert alone == {"gamma": 1.0, "steps": steps} and np.all(got == 0.5)
+    alone.clear()
+    quick = OPESettings(seed=5, fqe_steps=200)                # a quicker OPE: not the target
+    got = context().targets(rows, {"settings": quick,
+                                   "behaviour_fqe": {"logged": fresh, "steps": 200}})
+    assert alone == {"gamma": 1.0, "steps": steps} and np.all(got == 0.5)
 
 
 def test_fqe_off_on_the_logged_behaviour_is_a_warning(sepsis, monkeypatch):
