@@ -184,7 +184,8 @@ def test_default_training_on_ward_beats_the_majority_clearly(aoc, ward):
     assert code == 0, err
     plain = json.loads(out)
     assert plain["support_max"] == s["support_max"] and plain["residual"] == s["residual"]
-    assert s["auc"] >= plain["auc"] - 0.005, (s["auc"], plain["auc"])  # measured 0.972 / 0.901
+    # measured 0.965 / 0.898 (the 3 folds chose L = 4 here; one validation split: 0.972 / 0.901)
+    assert s["auc"] >= plain["auc"] - 0.005, (s["auc"], plain["auc"])
 
 
 def test_label_smoothing_default_only_where_it_was_measured():
