@@ -11,8 +11,7 @@ from aoc_cli.belief.config import REWARD_TARGETS
 from aoc_cli.belief.targets import held_out_targets, value_spec
 from aoc_cli.control.controller import action_bounds, support_disagreement
 from aoc_cli.control.episodes import check_same_spaces
-from aoc_cli.control.ope_eval import OPESettings, behaviour_targets
-from aoc_cli.control.ope_fqe import default_steps
+from aoc_cli.control.ope_eval import behaviour_targets
 from aoc_cli.decompose import subset_size
 from aoc_cli.errors import AocError, NoRewards, call
 from aoc_cli.index import BeliefIndex
@@ -293,15 +292,9 @@ class EvalContext:
                 spec = model.meta.get("value") or {}
                 value, gamma = spec.get("target", "return"), float(spec.get("gamma", 0.99))
                 v = None
-                if value == "fqe":   # FQE at its default settings, whatever the OPE's
-                    ran = ope["settings"] if ope else OPESettings(seed=self.seed)
-                    settings = OPESettings(seed=ran.seed)
-                    fresh = ope.get("behaviour_fqe") if ope else None
-                    same = fresh is not None and ran.gamma == gamma and \
-                        ran.fqe_schedule == settings.fqe_schedule and fresh["steps"] == \
-                        default_steps(self.data.n_rows, self.data.episode_starts, gamma)
-                    v = behaviour_targets(self.data, gamma, settings,
-                                          fresh["logged"] if same else None)
+                if value == "fqe":
+                    seed = ope["settings"].seed if ope else self.seed
+                    v = behaviour_targets(self.data, gamma, seed, ope)
                 if v is None:
                     v = held_out_targets(self.data, value, gamma)
                     self.target_source = value_spec(value, gamma)["definition"] + \

@@ -229,23 +229,30 @@ def fqe_record(settings: OPESettings, n_rows: int, starts: np.ndarray, gamma: fl
             "d3rlpy": d3rlpy.__version__}
 
 
-def behaviour_targets(data, gamma: float, settings: OPESettings,
-                      fresh: np.ndarray | None = None) -> np.ndarray | None:
+def behaviour_targets(data, gamma: float, seed: int = 0,
+                      block: dict | None = None) -> np.ndarray | None:
     """(N,) the logged behaviour's Q_hat(o_t, a_t) of every step of held-out log ``data`` by
-    d3rlpy's fitted Q evaluation at the OPE's settings (discount ``gamma``): ``aoc evaluate``'s
-    held-out value target of a model whose values are ``fqe`` (an estimate of the same
-    Q(o, a), by another estimator, from the held-out log alone). ``fresh``: the one the OPE
-    just fitted beside its policies (:func:`fqe_values`, ``behaviour``); else fitted alone
-    (:func:`aoc_cli.control.ope_fqe.behaviour_fqe`, the same values). Kept beside the log
+    d3rlpy's fitted Q evaluation at FQE's default settings (discount ``gamma``, ``seed``):
+    ``aoc evaluate``'s held-out value target of a model whose values are ``fqe`` (an estimate
+    of the same Q(o, a), by another estimator, from the held-out log alone). The OPE's own
+    (``block``, an :func:`ope_block`) when it fitted the behaviour at those settings; else
+    fitted alone (:func:`aoc_cli.control.ope_fqe.behaviour_fqe`, the same values): a quicker
+    OPE does not change the target. Kept beside the log
     (:func:`aoc_cli.belief.targets.kept_values`). None where it cannot run (no d3rlpy,
     continuous actions, no rewards): the caller then uses aoc's own fitted Q evaluation."""
     if available() is not None or not data.discrete or not data.has_rewards:
         return None
+    settings = OPESettings(seed=seed)
     record = fqe_record(settings, data.n_rows, data.episode_starts, gamma)
+    fresh = None if block is None else block.get("behaviour_fqe")
+    if fresh is not None:
+        ran = block["settings"]
+        if fqe_record(ran, data.n_rows, data.episode_starts, ran.gamma) != record:
+            fresh = None                # the OPE's FQE ran at other settings
 
     def compute():
         if fresh is not None:
-            return fresh
+            return fresh["logged"]
         with one_thread():
             return behaviour_fqe(data.observations, np.asarray(data.actions, np.int64),
                                  data.rewards, data.episode_starts, data.n_actions, gamma,

@@ -196,7 +196,7 @@ def main() -> None:
     # kept by an earlier evaluate (and by each fitted case): the decisions' rows read them
     for data in (held, few):
         value, gamma = value_spec(session)
-        if value != "fqe" or stages.behaviour(data, gamma, full) is None:
+        if value != "fqe" or stages.behaviour(data, gamma, full.seed) is None:
             stages.real(data, value, gamma)
     made = {name: case(name) for name in names}
     runs = h.interleave({name: run for name, (_d, run) in made.items()}, args.repeats)
