@@ -4,7 +4,7 @@ fit, 10 warm-started refits, cosine learning rate, bagged estimate) of AOC, BC a
 clinicians at each ``--steps`` count, per log, for a choice by convergence.
 
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/notes/ope_fqe_steps.py --store DIR \
-        --logs 0,1,2,3,4 --steps 5300,10600,21200 [--target-update 100] --out runs.json
+        --logs 0,1,2,3,4 --steps 5300,10600,21200 [--target-update 100] [--lr 1e-3] [--hidden 64,64] --out runs.json
 
 ``--store`` is one ``benchmarks/perf/ope_sepsis.py`` has built (its ``train`` corpus, model
 and index, and held-out logs ``held0``, ``held1``, ...; AOC's and BC's policies as that script
@@ -45,10 +45,18 @@ def main() -> None:
     ap.add_argument("--steps", default="5300,10600,21200")
     ap.add_argument("--target-update", type=int, default=None,
                     help="steps between target syncs (default: ope_fqe.TARGET_UPDATE)")
+    ap.add_argument("--lr", type=float, default=None,
+                    help="FQE's learning rate (default: ope_fqe.LEARNING_RATE)")
+    ap.add_argument("--hidden", default=None,
+                    help="FQE's hidden layers, e.g. 32,32 (default: ope_fqe.HIDDEN)")
     ap.add_argument("--out", default=None)
     args = ap.parse_args()
-    if args.target_update:     # fqe_policies builds its FQEFit from the module's name
-        ope_fqe.FQEFit = functools.partial(ope_fqe.FQEFit, target_update=args.target_update)
+    fit_args = {k: v for k, v in (("target_update", args.target_update),
+                                  ("learning_rate", args.lr)) if v}
+    if fit_args:               # fqe_policies builds its FQEFit from the module's name
+        ope_fqe.FQEFit = functools.partial(ope_fqe.FQEFit, **fit_args)
+    if args.hidden:            # FQEFit reads the module's HIDDEN when it builds the network
+        ope_fqe.HIDDEN = tuple(int(u) for u in args.hidden.split(","))
     store = Store(args.store)
     t = tables("mean")
     corpus = store.corpus("train")
@@ -70,12 +78,13 @@ def main() -> None:
                 recs = ope_fqe.fqe_policies(held.observations, np.asarray(held.actions, np.int64),
                                             held.rewards, starts, list(probs.values()), 1.0,
                                             steps=steps)
-            run = {"log": i, "steps": steps, "target_update": args.target_update or 100, "mean_return": mean_return,
+            run = {"log": i, "steps": steps, "target_update": args.target_update or ope_fqe.TARGET_UPDATE,
+                   "lr": args.lr or ope_fqe.LEARNING_RATE, "hidden": list(ope_fqe.HIDDEN), "mean_return": mean_return,
                    "cpu": time.process_time() - cpu,
                    **{k: {"estimate": r["estimate"], "fit": r["fit_estimate"], "low": r["low"],
                           "high": r["high"]} for k, r in zip(probs, recs)}}
             runs.append(run)
-            print(json.dumps({"log": i, "steps": steps, "U": run["target_update"], "cpu": round(run["cpu"]),
+            print(json.dumps({"log": i, "steps": steps, "U": run["target_update"], "lr": run["lr"], "hidden": run["hidden"], "cpu": round(run["cpu"]),
                               **{k: round(run[k]["estimate"], 4) for k in probs},
                               "mean_return": round(mean_return, 4)}), flush=True)
             if args.out:
