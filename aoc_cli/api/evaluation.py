@@ -32,7 +32,7 @@ def evaluate(name: str, data: str, *, store: StoreLike = None,
              exact: bool | None = None, seed: int = 0, ope: str | None = None,
              propensity: str | None = None, ope_gamma: float = 1.0,
              fqe_steps: int | None = None, fqe_refits: int | None = None,
-             workers: int | None = None,
+             fqe_processes: int | None = None, workers: int | None = None,
              ray_address: str | None = None, without: dict[str, list[str]] | None = None,
              without_episodes: list[str] | None = None,
              progress: Progress | None = None) -> dict:
@@ -42,18 +42,19 @@ def evaluate(name: str, data: str, *, store: StoreLike = None,
     accuracy, AUC, calibration or value R^2, residuals, and ``baselines`` (knn, bc) on the
     same steps. ``exact``: search the index exactly (None: up to the small-log bound, IVF
     beyond). ``ope`` ("pdwis,wdr,fqe", "none"), ``propensity``, ``ope_gamma``, ``fqe_steps``,
-    ``fqe_refits`` (the bootstrap refits behind FQE's interval): offline policy evaluation
-    of the decisions. ``workers`` / ``ray_address``: chunks of episodes as Ray tasks.
+    ``fqe_refits`` (the bootstrap refits behind FQE's interval), ``fqe_processes`` (the
+    processes FQE trains in; None: the cores, at most 4): offline policy evaluation of the
+    decisions. ``workers`` / ``ray_address``: chunks of episodes as Ray tasks.
     ``without`` / ``without_episodes``: decide again without those rows and report what
     changes (``summary["what_if"]``). ``steps_file``: one JSON record per step written there.
     Returns the summary ``aoc evaluate`` prints (its ``ope_warnings``: what the OPE could not
     do)."""
     names = list(baselines)
     settings = None
-    if any(v is not None for v in (ope, propensity, fqe_steps, fqe_refits)) \
+    if any(v is not None for v in (ope, propensity, fqe_steps, fqe_refits, fqe_processes)) \
             or ope_gamma != 1.0:
         settings = OPESettings(parse_estimators(ope), gamma=ope_gamma, propensity=propensity,
-                               fqe_steps=fqe_steps, seed=seed,
+                               fqe_steps=fqe_steps, seed=seed, fqe_processes=fqe_processes,
                                **({} if fqe_refits is None else {"fqe_refits": fqe_refits}))
     s = open_store(store)
     corpus = s.corpus(name)

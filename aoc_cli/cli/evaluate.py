@@ -59,6 +59,7 @@ def register(app: typer.Typer) -> None:
         ope_gamma: float = from_field(OPESettings, "gamma"),
         fqe_steps: Optional[int] = from_field(OPESettings, "fqe_steps"),
         fqe_refits: Optional[int] = from_field(OPESettings, "fqe_refits", given="{default}"),
+        fqe_processes: Optional[int] = from_field(OPESettings, "fqe_processes"),
         workers: WorkersOption = None,
         ray_address: RayAddressOption = None,
         without: WithoutOption = None,
@@ -75,7 +76,8 @@ def register(app: typer.Typer) -> None:
                 epsilon=epsilon, k=k, min_support=min_support, support_penalty=support_penalty,
                 row_smoothing=row_smoothing, exact=exact, seed=seed, ope=ope_names,
                 propensity=propensity, ope_gamma=ope_gamma,
-                fqe_steps=fqe_steps, fqe_refits=fqe_refits, workers=workers,
+                fqe_steps=fqe_steps, fqe_refits=fqe_refits, fqe_processes=fqe_processes,
+                workers=workers,
                 ray_address=ray_address,
                 without=parse_selection(without, "--without"),
                 without_episodes=parse_episodes(without_episodes), progress=bar)

@@ -96,6 +96,29 @@ class FQEEnsemble:
                                          for k in ("exp_avg", "exp_avg_sq")}}
         return out
 
+    def put(self, members, part: "FQEEnsemble") -> None:
+        """Write ``part``'s members (a :meth:`repeat` ``(1, members)`` of this ensemble,
+        trained since) back at ``members``: weights, target, Adam's moments and step count
+        (a part trains every step, as the whole would), step counts."""
+        import torch
+
+        at = torch.as_tensor(np.asarray(members, np.int64))
+        with torch.no_grad():
+            for mine, theirs in ((self.params, part.params), (self.target, part.target)):
+                for p, q in zip(mine, theirs):
+                    p[at] = q
+            for p, q in zip(self.params, part.params):
+                if q in part.optim.state:
+                    if p not in self.optim.state:
+                        self.optim.state[p] = {k: (v.clone() if k == "step" else
+                                                   torch.zeros_like(p))
+                                               for k, v in part.optim.state[q].items()}
+                    mine, theirs = self.optim.state[p], part.optim.state[q]
+                    mine["step"] = theirs["step"].clone()
+                    for key in ("exp_avg", "exp_avg_sq"):
+                        mine[key][at] = theirs[key]
+        self.counts[np.asarray(members, np.int64)] = part.counts
+
     def _forward(self, layers: list, x):
         """(M, B, n) Q of every action for observations x (M, B, d_o): linear layers with a
         ReLU after each but the last (d3rlpy's VectorEncoder, then its linear head)."""
@@ -290,16 +313,21 @@ class _TargetTable:
             self.q = ens._forward(ens.target, self.xu.expand(ens.M, -1, -1)).numpy()
 
 
-def sampler(fit, cums: np.ndarray, policy_of: np.ndarray, pools: list, rng, M: int):
+def sampler(fit, cums: np.ndarray, policy_of: np.ndarray, pools: list, rng, M: int,
+            keep=None):
     """draw() -> (rows (M, B), next actions (M, B)): member m's B rows uniform over its pool,
-    the next action of each drawn from member m's policy at the row's next logged step."""
+    the next action of each drawn from member m's policy at the row's next logged step.
+    ``keep`` (member indices, None: all): the draw of those members only, ``(len(keep), B)``
+    each, the generator still drawn for all M (the kept members' rows and actions are those
+    of the whole draw: a part of the ensemble trained apart, :mod:`aoc_cli.control.ope_parts`)."""
     pools = [np.arange(fit.n_rows) if p is None else np.asarray(p, np.int64) for p in pools]
     if len(pools) != M or len(policy_of) != M:
         raise ValueError(f"{len(pools)} pools and {len(policy_of)} policies for {M} members")
+    keep = np.arange(M) if keep is None else np.asarray(keep, np.int64)
     flat = np.concatenate(pools)
-    lens = np.array([len(p) for p in pools], np.int64)[:, None]             # (M, 1)
-    offsets = np.concatenate([[0], np.cumsum(lens[:-1, 0])])[:, None]       # (M, 1)
-    pol = policy_of[:, None]
+    lens = np.array([len(p) for p in pools], np.int64)[keep, None]          # (K, 1)
+    offsets = np.concatenate([[0], np.cumsum([len(p) for p in pools])[:-1]])[keep, None]
+    pol = np.asarray(policy_of)[keep, None]
     B, n = fit.batch, fit.n_actions
     # a deterministic policy's cumulative row is 0 before its action and 1 from it on, so the
     # count of entries below u in [0, 1) is that action (0 where u is 0): the same draw with
@@ -307,11 +335,11 @@ def sampler(fit, cums: np.ndarray, policy_of: np.ndarray, pools: list, rng, M: i
     chosen = _deterministic(cums)                                           # (P, N) or None
 
     def draw():
-        rows = flat[offsets + (rng.random((M, B)) * lens).astype(np.int64)]   # (M, B)
-        u = rng.random((M, B, 1))
+        u_rows, u = rng.random((M, B))[keep], rng.random((M, B, 1))[keep]
+        rows = flat[offsets + (u_rows * lens).astype(np.int64)]             # (K, B)
         if chosen is not None:
             return rows, np.where(u[..., 0] > 0, chosen[pol, fit.nxt[rows]], 0)
-        nxt_a = (cums[pol, fit.nxt[rows]] < u).sum(2).clip(0, n - 1)         # (M, B)
+        nxt_a = (cums[pol, fit.nxt[rows]] < u).sum(2).clip(0, n - 1)         # (K, B)
         return rows, nxt_a
 
     return draw

@@ -26,6 +26,7 @@ from aoc_cli.belief.targets import kept_values
 from aoc_cli.control.ope_fqe import (BATCH, HIDDEN, LEARNING_RATE, REFITS, SCHEDULE,
                                       TARGET_UPDATE, available, behaviour_fqe, default_steps,
                                       fqe_policies)
+from aoc_cli.control.ope_parts import MAX_PARTS
 from aoc_cli.errors import AocError, BadSetting, NoRewards, param
 from aoc_cli.settings import Settings, setting
 from aoc_cli.threads import one_thread
@@ -78,6 +79,10 @@ class OPESettings(Settings):
     fqe_schedule: str = setting(SCHEDULE, choices=("cosine", "constant"),
                                 help="FQE's learning rate: cosine (annealed to 0 over the fit "
                                      "and over each refit) or constant (d3rlpy's default).")
+    fqe_processes: int | None = setting(None, bounds=">= 1",
+                                        none=f"the cores, at most {MAX_PARTS}",
+                                        help="Processes FQE's fits train in (the same values "
+                                             "in any number; 1 on a busy machine).")
 
     def check(self) -> "OPESettings":
         super().check()
@@ -211,7 +216,7 @@ def fqe_values(log: ope.Log, observations, logged, policies: list, settings: OPE
     return fqe_policies(observations, logged, log.rewards, log.starts, policies,
                         settings.gamma, settings.fqe_steps, refits if refits > 1 else 0,
                         seed=settings.seed, progress=progress, schedule=settings.fqe_schedule,
-                        behaviour=behaviour)
+                        behaviour=behaviour, parts=settings.fqe_processes)
 
 
 def fqe_record(settings: OPESettings, n_rows: int, starts: np.ndarray, gamma: float) -> dict:

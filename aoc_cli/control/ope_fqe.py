@@ -28,6 +28,7 @@ import copy
 import numpy as np
 
 from aoc_cli.control.ope_ensemble import FQEEnsemble, joined, sampler
+from aoc_cli.control.ope_parts import train_parts
 from aoc_cli.errors import AocError
 
 #: FQE settings: mini-batch, learning rate, target network sync, hidden layers.
@@ -239,7 +240,7 @@ def fqe_policies(observations, actions, rewards, starts, policies: list, gamma: 
                  steps: int | None = None, refits: int = REFITS,
                  refit_step_count: int | None = None, seed: int = 0, progress=None,
                  schedule: str = SCHEDULE, behaviour: bool = False,
-                 n_actions: int | None = None) -> list:
+                 n_actions: int | None = None, parts: int | None = None) -> list:
     """The direct method for each of P policies on one log, with an interval that holds the
     fitted model's own error. Per policy: Q_hat (N, n) of the full fit, its estimate (the mean
     start value of the policy), and ``refits`` refits, each on the log's episodes resampled
@@ -257,7 +258,9 @@ def fqe_policies(observations, actions, rewards, starts, policies: list, gamma: 
     update, batched); every policy's fit starts from the same d3rlpy initialisation and
     the policies' refits see the same resamples. ``progress(done, total)`` in member-steps;
     ``schedule`` the learning rate's over the fit and over each refit
-    (:meth:`aoc_cli.control.ope_ensemble.FQEEnsemble.train`).
+    (:meth:`aoc_cli.control.ope_ensemble.FQEEnsemble.train`); ``parts`` the processes each
+    ensemble trains in (:func:`aoc_cli.control.ope_parts.train_parts`; None: the cores, at
+    most 4): the same values in any number.
     Returns per policy {"q" (the full fit's), "estimate", "fit_estimate", "low", "high",
     "replicates" (refits,), "bagged", "steps", "refit_steps", "seconds"}.
 
@@ -286,13 +289,18 @@ def fqe_policies(observations, actions, rewards, starts, policies: list, gamma: 
     grand = M * total + (P * refits * k if refits > 1 else 0)
     tick = (lambda base, m: None) if progress is None else \
         (lambda base, m: lambda done: progress(base + m * done, grand))
-    draws = [] if not P else [sampler(fit, cums, np.arange(P), [None] * P, fit.rng, P)]
-    if logged is not None:
-        draws.append(sampler(fit, cumulative(logged)[None], np.zeros(1, np.int64), [None],
-                             np.random.default_rng([seed, 1]), 1))
+    behaviour_seed = [seed, 1]
+
+    def fit_draw(keep, rng):        # members keep of [policies..., behaviour]: their draws
+        draws = [] if not P else [sampler(fit, cums, np.arange(P), [None] * P, rng, P,
+                                          keep=keep[keep < P])]
+        if logged is not None and np.any(keep == P):
+            draws.append(sampler(fit, cumulative(logged)[None], np.zeros(1, np.int64), [None],
+                                 np.random.default_rng(behaviour_seed), 1))
+        return joined(*draws)
+
     ens = FQEEnsemble(fit, [fit.snapshot()] * M, [fit.fqe._grad_step] * M)
-    ens.train(total, None, None, None, None, draw=joined(*draws), progress=tick(0, M),
-              schedule=schedule)
+    train_parts(ens, total, fit_draw, fit.rng, parts, progress=tick(0, M), schedule=schedule)
     first = fit.starts[:-1]
     n_episodes = len(first)
     q = ens.q()                                                             # (M, N, n)
@@ -310,8 +318,10 @@ def fqe_policies(observations, actions, rewards, starts, policies: list, gamma: 
             chosen = np.repeat(np.arange(n_episodes), c)                    # resampled episodes
             pools.append(np.repeat(fit.starts[chosen], lengths[chosen]) + _offsets(lengths[chosen]))
         boot = ens.repeat(refits, range(P))             # member i * refits + b: policy i, refit b
-        boot.train(k, cums, np.repeat(np.arange(P), refits), pools * P, fit.rng,
-                   progress=tick(M * total, P * refits), schedule=schedule)
+        policy_of, boot_pools = np.repeat(np.arange(P), refits), pools * P
+        train_parts(boot, k, lambda keep, rng: sampler(fit, cums, policy_of, boot_pools, rng,
+                                                       P * refits, keep=keep),
+                    fit.rng, parts, progress=tick(M * total, P * refits), schedule=schedule)
         q0 = boot.q(first).reshape(P, refits, n_episodes, -1)               # (P, refits, E, n)
         for i, rec in enumerate(out):
             v0 = (policies[i][first][None] * q0[i]).sum(2)                  # (refits, E)

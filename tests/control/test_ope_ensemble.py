@@ -233,3 +233,48 @@ def test_a_group_drawn_by_its_own_generator_trains_the_same_beside_others(log):
     assert np.abs(both.q()[1] - alone.q()[0]).max() < TOL
     assert np.abs(both.q()[0] - first.q()[0]).max() < TOL
     assert np.abs(both.q()[0] - both.q()[1]).max() > 10 * TOL
+
+
+def test_the_written_out_backpropagation_is_autograds(log):
+    """FQEEnsemble._grads: the gradient of the members' Huber losses as autograd computes it
+    through the same forward pass (errors inside and outside Huber's quadratic part)."""
+    import torch
+
+    with one_thread():
+        fit = make(log)
+        ens = FQEEnsemble(fit, [fit.snapshot()] * 3, [0] * 3)
+        ens.train(60, np.stack([fit.cum] * 3), np.arange(3), [None] * 3,
+                  np.random.default_rng(2))          # members that differ
+        rng = np.random.default_rng(4)
+        rows = rng.integers(0, fit.n_rows, (3, fit.batch))
+        x, act = torch.from_numpy(fit.x[rows]), torch.from_numpy(fit.act[rows])
+        y = torch.from_numpy(rng.normal(0.5, 1.5, (3, fit.batch)).astype(np.float32))
+        with torch.no_grad():                            # as FQEEnsemble.train calls it
+            got = ens._grads(x, act, y)
+        q = ens._forward(ens.params, x).gather(2, act[..., None])[..., 0]
+        diff = y - q
+        assert (diff.abs() > 1).any() and (diff.abs() < 1).any()
+        huber = torch.where(diff.detach().abs() < 1.0, 0.5 * diff ** 2, diff.abs() - 0.5)
+        want = torch.autograd.grad(huber.mean(1).sum(), ens.params)
+    for g, w in zip(got, want):
+        assert g.shape == w.shape
+        assert float(w.abs().max()) > 0
+        np.testing.assert_allclose(g.numpy(), w.numpy(), rtol=1e-5, atol=1e-7)
+
+
+def test_a_kept_members_draw_is_its_part_of_the_whole_draw(log):
+    """sampler(keep=...): the rows and next actions of the kept members, as the whole draw
+    gives them, the generator drawn for every member (it ends where the whole draw's does)."""
+    from aoc_cli.control.ope_ensemble import sampler
+
+    fit = make(log)
+    cums = np.stack([fit.cum, cumulative(log[2][1])])
+    args = (fit, cums, np.array([0, 1, 1, 0]), [None, np.arange(40), None, np.arange(9, 90)])
+    whole = sampler(*args, np.random.default_rng(6), 4)
+    rng = np.random.default_rng(6)
+    part = sampler(*args, rng, 4, keep=np.array([1, 3]))
+    for _ in range(5):
+        (rows, acts), (kept_rows, kept_acts) = whole(), part()
+        np.testing.assert_array_equal(kept_rows, rows[[1, 3]])
+        np.testing.assert_array_equal(kept_acts, acts[[1, 3]])
+    assert rng.random() == np.random.default_rng(6).random(5 * 4 * fit.batch * 2 + 1)[-1]
