@@ -3,6 +3,7 @@ held-out steps per second, where the time goes, and the decisions checked step b
 
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/perf/evaluate_ope.py [--model task|paper]
         [--store DIR] [--repeats 3] [--per-step-episodes 200] [--cases a,b] [--fqe-steps N,...]
+        [--fqe-processes N,...]
         [-f json]
 
 The store (``--store``, default /tmp/aoc-evaluate-sepsis) is laid out as
@@ -17,7 +18,8 @@ flags: the model ``default`` (fqe values, gamma 1, history 0) and the task's con
 return, gamma 0.99, history 0) and the paper's controller settings (what this benchmark timed
 before). Times :func:`aoc_cli.control.evaluate.evaluate` in this process (the session opened
 once before; 25 candidate actions a step, the knn and bc baselines), wall and CPU seconds
-(user + system of this one-threaded process: what the wall figure would be on an idle core),
+(user + system of this process and of FQE's forked parts: what the wall figure would be on
+one idle core),
 the median of ``--repeats`` runs, the cases interleaved round by round. Each row splits its
 time into the value targets of the held-out log (value_r2's target: for fqe values a fitted Q
 evaluation of the log), the OPE, and the rest (the decisions and the baselines):
@@ -40,6 +42,8 @@ evaluation of the log), the OPE, and the rest (the decisions and the baselines):
   before / now;
 * ``ope kept, fqe N steps``: the latter with FQE's fit at N gradient steps instead of
   its default (``--fqe-steps N,...``, e.g. the default before, to time a change of it in one run);
+* ``ope kept, N processes``: the latter with FQE's ensembles trained in N processes instead of
+  the default's (the cores, at most 4; ``--fqe-processes N,...``: 1 is the one-process run);
 * ``ope fitted aoc targets``: a log's first evaluate with value_r2's held-out target for fqe
   values fitted by aoc's own fitted Q evaluation, as the model's values were (60 backups of 300
   steps; what ``aoc evaluate`` did before the OPE's FQE fitted the logged behaviour beside the
@@ -147,6 +151,8 @@ def main() -> None:
                     help="comma-separated, of: " + ", ".join(CASES))
     ap.add_argument("--fqe-steps", default="",
                     help="also 'ope kept' with FQE at these gradient steps (N,...)")
+    ap.add_argument("--fqe-processes", default="",
+                    help="also 'ope kept' with FQE's ensembles in these processes (N,...)")
     args = ap.parse_args()
     store = Store(args.store)
     corpus, held, session = prepare(store, args.model, args.held_episodes)
@@ -166,6 +172,8 @@ def main() -> None:
         ope = none if name in ("per step", "distinct") else full
         if " fqe " in name:
             ope = OPESettings(fqe_steps=int(name.split(" fqe ")[1].split()[0]))
+        if name.endswith(" processes"):
+            ope = OPESettings(fqe_processes=int(name.split(", ")[1].split()[0]))
 
         def run(_i):
             if name.startswith("ope fitted"):
@@ -193,6 +201,7 @@ def main() -> None:
     if any(n not in CASES for n in names):
         ap.error(f"unknown case in {args.cases!r}: use {', '.join(CASES)}")
     names += [f"ope kept, fqe {int(n)} steps" for n in args.fqe_steps.split(",") if n]
+    names += [f"ope kept, {int(n)} processes" for n in args.fqe_processes.split(",") if n]
     # kept by an earlier evaluate (and by each fitted case): the decisions' rows read them
     for data in (held, few):
         value, gamma = value_spec(session)
