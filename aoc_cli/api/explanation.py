@@ -9,6 +9,8 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from aoc_cli.api.common import StoreLike, open_store
 from aoc_cli.envs import collected_task
 from aoc_cli.control import (ControllerConfig, explain_logged_step, explain_query, open_session,
@@ -16,7 +18,7 @@ from aoc_cli.control import (ControllerConfig, explain_logged_step, explain_quer
 from aoc_cli.control.explain import explain_decisions
 from aoc_cli.control.records import label_of
 from aoc_cli.control.whatif import removal as removal_of
-from aoc_cli.errors import AocError, BadSetting, param
+from aoc_cli.errors import AocError, BadSetting, call, param
 from aoc_cli.report.explain_pages import check_html, steps_overview, write_html
 from aoc_cli.store import DEFAULT_INDEX, action_labels
 
@@ -105,7 +107,9 @@ def _recorded_step(corpus, audit: Path, episode: int, step: int, opened: dict,
     config = ControllerConfig.from_dict(meta["config"], strict=False) if meta.get("config") \
         else opened["config"]
     session = open_session(corpus, meta.get("model", opened["model_id"]),
-                           meta.get("index", opened["index_id"]), config, seed=opened["seed"])
+                           meta.get("index", opened["index_id"]), config,
+                           selection=_recorded_selection(recorded["selection"], corpus, audit),
+                           seed=opened["seed"])
     decision = replay_decision(session, recorded)
     rec, = explain_decisions(session, recorded["observation"], recorded["history"],
                              [decision], removal=removal, step=step)
@@ -114,6 +118,25 @@ def _recorded_step(corpus, audit: Path, episode: int, step: int, opened: dict,
     rec.update(label_of(action_labels(corpus.action_space), recorded["action"],
                         "recorded_action_label"))
     return [rec], session
+
+
+def _recorded_selection(kept, corpus, audit: Path) -> np.ndarray | None:
+    """The (N,) row mask a recorded decision was made from (``read_audit_step``'s
+    ``selection``), or None for every row; an AocError where the log cannot say."""
+    if kept is None:
+        return None
+    if isinstance(kept, str):
+        raise AocError(f"audit log {audit} was recorded from a selection of the corpus rows "
+                       f"that it does not hold (written by an older aoc): record it again "
+                       f"with `{call('rollout', '...', audit='FILE')}`")
+    if isinstance(kept, list):                  # rows listed by an older aoc
+        rows = np.asarray(kept, np.int64)
+        kept = np.zeros(max(corpus.n_rows, int(rows.max(initial=-1)) + 1), bool)
+        kept[rows] = True
+    if len(kept) != corpus.n_rows:
+        raise AocError(f"audit log {audit} was recorded from a corpus of {len(kept)} rows, "
+                       f"{corpus.name!r} has {corpus.n_rows}: it cannot be replayed against it")
+    return kept
 
 
 def _queries(session, source, compare: list, removal) -> list[dict]:

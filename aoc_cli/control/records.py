@@ -96,7 +96,8 @@ def label_of(labels: list[str] | None, action, key: str = "action_label") -> dic
     return {key: labels[code] if 0 <= code < len(labels) else None}
 
 
-def write_audit(path, episodes: list, meta: dict, corpus=None) -> None:
+def write_audit(path, episodes: list, meta: dict, corpus=None,
+                selection: np.ndarray | None = None) -> None:
     """Every decision of every episode in one HDF5 file (atomically).
 
     ``episodes`` is a list of :class:`aoc_cli.control.episodes.EpisodeResult` run with
@@ -104,10 +105,17 @@ def write_audit(path, episodes: list, meta: dict, corpus=None) -> None:
     file's attributes as JSON.
     With ``corpus``, each step's supporting rows also carry their episodes' own ids
     (``support_episode_ids``, "" where padded) when the corpus has them.
+    ``selection``: the (N,) bool mask of the corpus rows the controller decided from (``--select``
+    / ``--exclude``), kept as dataset ``selection`` (packed bits, attribute ``rows`` N) so that
+    a replay decides from the same rows (:func:`read_audit_step`).
     """
     with atomic_path(path, suffix=".h5") as tmp:
         with h5py.File(tmp, "w") as f:
             f.attrs["meta"] = json.dumps(meta)
+            if selection is not None:
+                mask = np.asarray(selection, bool)
+                f["selection"] = np.packbits(mask)
+                f["selection"].attrs["rows"] = len(mask)
             for ep in episodes:
                 g = f.create_group(f"episode_{ep.episode}")
                 g.attrs["seed"] = ep.seed
@@ -174,8 +182,22 @@ def read_audit_step(path, episode: int, step: int) -> dict:
             "support_rows": g["support_rows"][step],
             "support_weights": g["support_weights"][step],
             "candidates": g["candidates"][step] if "candidates" in g else None,
+            "selection": _selection(f, meta),
         }
     return out
+
+
+def _selection(f: h5py.File, meta: dict):
+    """The recorded row selection: an (N,) bool mask, a list of row indices (logs written
+    before the mask was kept, under 10,000 rows), "lost" (such a log of more rows: only a
+    marker was kept), or None (every row)."""
+    if "selection" in f:
+        n = int(f["selection"].attrs["rows"])
+        return np.unpackbits(f["selection"][()], count=n).astype(bool)
+    kept = meta.get("selection")
+    if kept is None:
+        return None
+    return "lost" if isinstance(kept, str) else list(kept)
 
 
 def read_audit_residuals(path) -> tuple[dict, list[np.ndarray]]:

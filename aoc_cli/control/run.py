@@ -59,7 +59,8 @@ def rollout(session: Session | ModelFreeSession, env, episodes: int, seed: int =
             if progress is not None:
                 progress(e + 1, episodes, f"rollout (return {res.total_return:.1f})")
     if audit is not None:
-        write_audit(audit, results, session.meta(), corpus=session.corpus)
+        write_audit(audit, results, session.meta(), corpus=session.corpus,
+                    selection=None if controller is None else controller.selection)
     return results, summarize(results)
 
 

@@ -179,6 +179,46 @@ def test_rollout_select_uses_only_that_policy(run, tmp_path, maze_root):
     with h5py.File(audit) as f:
         rows = f["episode_0/support_rows"][()]
     assert set(codes[rows[rows >= 0]]) == {labels.index("pi2")}
+    # explain --audit replays each decision over the rows it was made from, not all of them
+    for step in range(min(len(rows), 6)):
+        code, out, err = run("explain", "maze", "--audit", str(audit), "--episode", "0",
+                             "--step", str(step), "-f", "json")
+        assert code == 0, err
+        rec = json.loads(out)
+        replayed = sorted(s["row"] for s in rec["support"])
+        assert replayed == sorted(r for r in rows[step] if r >= 0)
+        assert rec["action"] == rec["recorded_action"]
+        assert {int(codes[r]) for r in replayed} == {labels.index("pi2")}
+
+
+def test_an_older_audit_log_replays_its_listed_rows_or_says_it_cannot(run, tmp_path):
+    """Logs written before the mask was kept: the meta's list of rows (under 10,000) is the
+    selection; a log of more rows kept only a marker, and explain says so in one line."""
+    import shutil
+
+    import h5py
+
+    audit = tmp_path / "a.h5"
+    code, _, err = run("rollout", "maze", "--env", "maze", "-n", "1", "--select", "policy=pi2",
+                       "--audit", str(audit), "-f", "json")
+    assert code == 0, err
+    args = ("explain", "maze", "--episode", "0", "--step", "3", "-f", "json")
+    new = json.loads(run(*args[:2], "--audit", str(audit), *args[2:])[1])
+    listed, lost = tmp_path / "listed.h5", tmp_path / "lost.h5"
+    for path, marker in ((listed, None), (lost, "mask")):
+        shutil.copy(audit, path)
+        with h5py.File(path, "a") as f:
+            del f["selection"]
+            meta = json.loads(f.attrs["meta"])
+            assert isinstance(meta["selection"], list) and meta["selection"]
+            if marker:
+                meta["selection"] = marker
+            f.attrs["meta"] = json.dumps(meta)
+    code, out, err = run(*args[:2], "--audit", str(listed), *args[2:])
+    assert code == 0, err
+    assert json.loads(out)["support"] == new["support"]
+    one_line_error(*run(*args[:2], "--audit", str(lost), *args[2:]),
+                   r"recorded from a selection of the corpus rows that it does not hold")
 
 
 @pytest.mark.parametrize("args, pattern", [
