@@ -63,3 +63,16 @@ class SmallMDP:
         states, actions = np.asarray(states), np.asarray(actions)
         return {"state": states, "action": actions, "reward": np.asarray(rewards),
                 "propensity": pi_b[states, actions], "starts": np.asarray(starts)}
+
+
+def noisy_log(seed: int, end: float, episodes: int, sample_seed: int):
+    """A log of a random :class:`SmallMDP` (``seed``, ``end``) under a random behaviour, its
+    observations the one-hot state plus uniform noise of 0.1: (observations (N, S), the log
+    (:meth:`SmallMDP.sample`), the behaviour pi_b (S, A), the generator for what follows)."""
+    mdp = SmallMDP.random(seed=seed, end=end)
+    rng = np.random.default_rng(seed)
+    s, a = mdp.P.shape[:2]
+    pi_b = rng.dirichlet(np.ones(a), size=s)
+    data = mdp.sample(pi_b, episodes, seed=sample_seed)
+    obs = np.eye(s)[data["state"]] + 0.1 * rng.random((len(data["state"]), s))
+    return obs, data, pi_b, rng

@@ -10,7 +10,7 @@ from aoc_cli.control.ope_ensemble import FQEEnsemble
 from aoc_cli.control.ope_fqe import FQEFit, cumulative
 from aoc_cli.threads import one_thread
 
-from tests.control.mdps import SmallMDP
+from tests.control.mdps import noisy_log
 
 pytest.importorskip("d3rlpy", reason="the bench extra (d3rlpy) is not installed")
 
@@ -21,12 +21,8 @@ TOL = 2e-5
 
 @pytest.fixture(scope="module")
 def log():
-    mdp = SmallMDP.random(seed=1, end=0.35)
-    rng = np.random.default_rng(1)
-    s, a = mdp.P.shape[:2]
-    pi_b = rng.dirichlet(np.ones(a), size=s)
-    data = mdp.sample(pi_b, 200, seed=2)
-    obs = np.eye(s)[data["state"]] + 0.1 * rng.random((len(data["state"]), s))
+    obs, data, pi_b, rng = noisy_log(seed=1, end=0.35, episodes=200, sample_seed=2)
+    s, a = pi_b.shape
     policies = [pi_b, np.eye(a)[rng.integers(0, a, size=s)], rng.dirichlet(np.ones(a), size=s)]
     return obs, data, [p[data["state"]] for p in policies]
 

@@ -12,7 +12,7 @@ from aoc_cli.control.ope_ensemble import FQEEnsemble, sampler
 from aoc_cli.control.ope_fqe import FQEFit, cumulative, fqe_policies
 from aoc_cli.threads import one_thread
 
-from tests.control.mdps import SmallMDP
+from tests.control.mdps import noisy_log
 
 pytest.importorskip("d3rlpy", reason="the bench extra (d3rlpy) is not installed")
 if not sys.platform.startswith("linux"):
@@ -26,12 +26,8 @@ ULP = 1e-6
 
 @pytest.fixture(scope="module")
 def log():
-    mdp = SmallMDP.random(seed=3, end=0.3)
-    rng = np.random.default_rng(3)
-    s, a = mdp.P.shape[:2]
-    pi_b = rng.dirichlet(np.ones(a), size=s)
-    data = mdp.sample(pi_b, 150, seed=4)
-    obs = np.eye(s)[data["state"]] + 0.1 * rng.random((len(data["state"]), s))
+    obs, data, pi_b, rng = noisy_log(seed=3, end=0.3, episodes=150, sample_seed=4)
+    s, a = pi_b.shape
     policies = [np.eye(a)[rng.integers(0, a, size=s)][data["state"]] for _ in range(3)]
     return obs, data, policies
 
