@@ -25,7 +25,7 @@ from aoc_cli.control import ope
 from aoc_cli.belief.targets import kept_values
 from aoc_cli.control.ope_fqe import (BATCH, HIDDEN, LEARNING_RATE, REFITS, SCHEDULE,
                                       TARGET_UPDATE, available, behaviour_fqe, default_steps,
-                                      fqe_policies)
+                                      fqe_policies, student_quantile)
 from aoc_cli.control.ope_parts import MAX_PARTS
 from aoc_cli.errors import AocError, BadSetting, NoRewards, param
 from aoc_cli.settings import Settings, setting
@@ -192,7 +192,8 @@ def policy_value(log: ope.Log, observations, logged, propensity, policy, n_actio
         b, k, n = len(fqe["replicates"]), fqe["refit_steps"], fqe["steps"]
         out["notes"].append(
             f"fqe: the estimate is the mean of {b} refits' start values (bagged; one fit's: "
-            f"{fqe['fit_estimate']:.4g}), the interval +- 1.96 sd of the refits' estimates, each "
+            f"{fqe['fit_estimate']:.4g}), the interval +- {student_quantile(b - 1):.3g} sd of the "
+            f"refits' estimates (Student's t, {b - 1} degrees of freedom), each "
             f"refit on the log's episodes resampled with replacement, {k:,} steps on from the "
             f"full fit's "
             f"{n:,}-step weights (the model's own sampling and training error is in it; cost "

@@ -78,7 +78,8 @@ def test_fqe_interval_is_from_refits_and_says_so(sepsis):
     assert any("start values of one fitted Q model" in n for n in one["ope"]["notes"])
     fit = one["policy_value"]["fqe"]["estimate"]        # the same full fit, without refits
     assert note == [f"fqe: the estimate is the mean of 3 refits' start values (bagged; one "
-                    f"fit's: {fit:.4g}), the interval +- 1.96 sd of the refits' estimates, each "
+                    f"fit's: {fit:.4g}), the interval +- 4.3 sd of the refits' estimates "
+                    "(Student's t, 2 degrees of freedom), each "
                     "refit on the log's episodes resampled with replacement, 300 steps on from "
                     "the full fit's 300-step weights (the model's own sampling and training "
                     "error is in it; cost 4.0x one fit)"]

@@ -70,3 +70,5 @@ def test_refits_spread_like_the_fitted_estimate_over_resampled_logs_and_cover_th
     assert out["fit_estimate"] == pytest.approx(converged, abs=0.03)
     assert out["estimate"] != out["fit_estimate"]
     assert (out["low"] + out["high"]) / 2 == pytest.approx(out["estimate"], abs=1e-12)
+    # +- Student's t (11 degrees of freedom: 2.201) times the replicates' sd
+    assert (out["high"] - out["low"]) / 2 == pytest.approx(2.2009851600916384 * sd, rel=1e-9)
