@@ -1,8 +1,7 @@
 """An FQE ensemble trained in parts over forked processes (aoc_cli.control.ope_parts): every
 member trains as in one process (the same mini-batches, the same floats to a few ulp), the
-shared generator ends where one process leaves it, and a child that dies is made up for."""
-
-import sys
+shared generator ends where one process leaves it, and a child that dies is made up for.
+(Where a process cannot fork, every number of parts is one: the same assertions hold.)"""
 
 import numpy as np
 import pytest
@@ -15,9 +14,6 @@ from aoc_cli.threads import one_thread
 from tests.control.mdps import noisy_log
 
 pytest.importorskip("d3rlpy", reason="the bench extra (d3rlpy) is not installed")
-if not sys.platform.startswith("linux"):
-    pytest.skip("parts fork processes on Linux only (one part elsewhere)",
-                allow_module_level=True)
 
 #: the same member trained in another process: the same kernels on the same inputs; a few
 #: float32 ulp of Q values of order 1 allowed for a library that picks kernels by shape
