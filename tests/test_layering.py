@@ -16,8 +16,8 @@ ROOT = Path(__file__).resolve().parents[1] / "aoc_cli"
 #: Modules any stage may import; each imports only the ones before it in this list.
 LOW = ["lazy", "errors", "settings", "progress", "metrics", "rows", "threads", "parallel"]  # docs/design.md, "Module map"
 #: The stages, in the order of the flow: each may import the low modules and the stages before it.
-STAGES = ["store", "formats", "envs", "index", "decompose", "belief", "corpus_index", "control",
-          "baselines", "report", "experiments", "api", "cli"]
+STAGES = ["store", "formats", "envs", "index", "decompose", "belief", "corpus_index", "ope", "control",
+          "evaluation", "baselines", "report", "experiments", "api", "cli"]
 
 
 def _modules() -> dict[str, Path]:

@@ -1,6 +1,6 @@
 """The API's evaluate entry: decide every logged step of a corpus and score the decisions
-against what was logged (:mod:`aoc_cli.control.evaluate`; the chunks on Ray:
-:mod:`aoc_cli.control.evaluate_ray`)."""
+against what was logged (:mod:`aoc_cli.evaluation.score`; the chunks on Ray:
+:mod:`aoc_cli.evaluation.ray`)."""
 
 from __future__ import annotations
 
@@ -9,15 +9,15 @@ import os
 from typing import Sequence
 
 from aoc_cli.api.common import StoreLike, open_store
-from aoc_cli.envs import collected_task
 from aoc_cli.control import ControllerConfig, open_session
-from aoc_cli.control.evaluate import evaluate as _evaluate
-from aoc_cli.control.evaluate import step_records
-from aoc_cli.control.evaluate_ray import evaluate_on_ray
-from aoc_cli.control.ope_eval import OPESettings, parse_estimators
 from aoc_cli.control.whatif import removal as removal_of
 from aoc_cli.control.whatif import what_if_steps
+from aoc_cli.envs import collected_task
 from aoc_cli.errors import BadSetting, param
+from aoc_cli.evaluation.ray import evaluate_on_ray
+from aoc_cli.evaluation.score import evaluate as _evaluate
+from aoc_cli.evaluation.score import step_records
+from aoc_cli.ope.policies import OPESettings, parse_estimators
 from aoc_cli.progress import Progress
 from aoc_cli.store import DEFAULT_INDEX, atomic_path
 
@@ -74,7 +74,7 @@ def evaluate(name: str, data: str, *, store: StoreLike = None,
     if workers is None and ray_address is None:
         summary, res = _evaluate(session, held_out, names, seed=seed, progress=progress,
                                  exact=exact, ope=settings)
-    else:  # the chunks of episodes as Ray tasks (aoc_cli.control.evaluate_ray)
+    else:  # the chunks of episodes as Ray tasks (aoc_cli.evaluation.ray)
         if workers is not None and workers < 1:
             raise BadSetting("workers", workers, f"{param('workers')} must be >= 1, got {workers}")
         summary, res = evaluate_on_ray(s.root, name, data, session.model.id, index_id, config,

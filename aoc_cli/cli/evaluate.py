@@ -10,14 +10,28 @@ from typing import Annotated, Optional
 import typer
 
 import aoc_cli
-from aoc_cli.cli.common import (CandidatesOption, CorpusArgument, EpsilonOption,
-                                FormatOption, IndexOption, KOption, MinSupportOption, ModelOption,
-                                RayAddressOption, RowSmoothingOption, SupportPenaltyOption,
-                                WithoutEpisodesOption, WithoutOption, WorkersOption, parse_episodes,
-                                parse_selection, state)
+from aoc_cli.cli.common import (
+    CandidatesOption,
+    CorpusArgument,
+    EpsilonOption,
+    FormatOption,
+    IndexOption,
+    KOption,
+    MinSupportOption,
+    ModelOption,
+    RayAddressOption,
+    RowSmoothingOption,
+    SupportPenaltyOption,
+    WithoutEpisodesOption,
+    WithoutOption,
+    WorkersOption,
+    parse_episodes,
+    parse_selection,
+    state,
+)
 from aoc_cli.cli.fields import from_field
-from aoc_cli.control.ope_eval import OPESettings
 from aoc_cli.errors import warn
+from aoc_cli.ope.policies import OPESettings
 from aoc_cli.report import ProgressBar, resolve_format
 from aoc_cli.report.evaluate_view import write_evaluation
 from aoc_cli.settings import SMALL_LOG_ROWS

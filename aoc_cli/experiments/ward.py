@@ -33,10 +33,10 @@ import numpy as np
 
 from aoc_cli.belief.fit import train_corpus
 from aoc_cli.control import ControllerConfig, open_session
-from aoc_cli.control.evaluate import evaluate
 from aoc_cli.corpus_index import build_index
 from aoc_cli.envs import collect, medkit_ward, render
 from aoc_cli.errors import BadSetting, param
+from aoc_cli.evaluation.score import evaluate
 from aoc_cli.experiments.results import write_rows_csv
 from aoc_cli.store import DEFAULT_MODEL, Store, atomic_path
 

@@ -32,7 +32,7 @@ h.omp_threads(1)
 import numpy as np  # noqa: E402
 
 import ope_sepsis as O  # noqa: E402
-from aoc_cli.control import ope_fqe  # noqa: E402
+from aoc_cli.ope import fqe as ope_fqe  # noqa: E402
 from aoc_cli.envs.icu_sepsis import tables  # noqa: E402
 from aoc_cli.store import Store  # noqa: E402
 from aoc_cli.threads import one_thread  # noqa: E402

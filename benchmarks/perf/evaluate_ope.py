@@ -16,7 +16,7 @@ flags: the model ``default`` (fqe values, gamma 1, history 0) and the task's con
 (residual cap 0.01, support penalty 5), as ``aoc_cli.open_session`` opens them.
 ``--model paper``: a model ``paper`` on the same corpus with the paper's value target (the
 return, gamma 0.99, history 0) and the paper's controller settings (what this benchmark timed
-before). Times :func:`aoc_cli.control.evaluate.evaluate` in this process (the session opened
+before). Times :func:`aoc_cli.evaluation.score.evaluate` in this process (the session opened
 once before; 25 candidate actions a step, the knn and bc baselines), wall and CPU seconds
 (user + system of this process and of FQE's forked parts: what the wall figure would be on
 one idle core),
@@ -64,19 +64,18 @@ import _harness as h
 h.omp_threads(1)
 
 import numpy as np  # noqa: E402
+import ope_sepsis  # noqa: E402
 import torch  # noqa: E402
 
 import aoc_cli  # noqa: E402
 from aoc_cli.belief import targets as tg  # noqa: E402
 from aoc_cli.control import ControllerConfig, open_session  # noqa: E402
-from aoc_cli.control import evaluate as ev  # noqa: E402
-from aoc_cli.control import evaluate_inputs as ei  # noqa: E402
-from aoc_cli.control import ope_ensemble as ens  # noqa: E402
-from aoc_cli.control.ope_eval import OPESettings  # noqa: E402
+from aoc_cli.evaluation import context as ei  # noqa: E402
+from aoc_cli.evaluation import score as ev  # noqa: E402
+from aoc_cli.ope import ensemble as ens  # noqa: E402
+from aoc_cli.ope.policies import OPESettings  # noqa: E402
 from aoc_cli.store import Store, targets_dir  # noqa: E402
 from aoc_cli.threads import one_thread  # noqa: E402
-
-import ope_sepsis  # noqa: E402
 
 #: The paper's value target, on the task's corpus (what this benchmark timed first).
 PAPER_VALUE = {"value": "return", "gamma": 0.99, "history_length": 0}

@@ -11,14 +11,14 @@ gamma 1, history 0, so AOC's decision depends on the state alone) and its index 
 NAME``); a stored model trained with other settings is refused. AOC is the controller with the
 task's settings (residual cap, support penalty), as ``aoc evaluate`` opens it
 (``aoc_cli.open_session``). AOC's policy is its decision in every state: each state's
-observation decided by ``aoc_cli.control.evaluate`` (one-step episodes, the same code path as
+observation decided by ``aoc_cli.evaluation.score`` (one-step episodes, the same code path as
 ``aoc evaluate``); on the first held-out log the script checks that ``aoc evaluate``'s own
 decisions are that policy's. BC is the training log's most frequent action per state (the
 clinicians' modal action as the log shows it). The clinicians are the behaviour itself (the
 package's stochastic policy). Truths: the package's tables by a linear solve
 (``aoc_cli.envs.icu_sepsis.tables``). Then for each of ``--logs`` held-out logs of
 ``--episodes`` clinician episodes (seeds 1000, 1001, ...), the estimators of ``aoc evaluate``
-(:mod:`aoc_cli.control.ope_eval`: PDWIS, WDR, FQE with the log's ``propensity`` column) for
+(:mod:`aoc_cli.ope.policies`: PDWIS, WDR, FQE with the log's ``propensity`` column) for
 each policy. Prints one row per policy and estimator: coverage (of the logs), mean estimate,
 mean error, mean |error|, mean interval width, mean ESS.
 """
@@ -37,17 +37,20 @@ h.omp_threads(1)
 import numpy as np  # noqa: E402
 
 import aoc_cli  # noqa: E402
-
-from aoc_cli.control import ope  # noqa: E402
-from aoc_cli.control.evaluate import evaluate  # noqa: E402
-from aoc_cli.control.ope_eval import ESTIMATORS, OPESettings, parse_estimators  # noqa: E402
-from aoc_cli.control.ope_eval import fqe_values, policy_value  # noqa: E402
-from aoc_cli.control.ope_fqe import REFITS, SCHEDULE  # noqa: E402
 from aoc_cli.envs.icu_sepsis import tables  # noqa: E402
 from aoc_cli.errors import AocError  # noqa: E402
+from aoc_cli.evaluation.score import evaluate  # noqa: E402
+from aoc_cli.ope import estimators as ope  # noqa: E402
+from aoc_cli.ope.fqe import REFITS, SCHEDULE  # noqa: E402
+from aoc_cli.ope.policies import (  # noqa: E402  # noqa: E402
+    ESTIMATORS,
+    OPESettings,
+    fqe_values,
+    parse_estimators,
+    policy_value,
+)
 from aoc_cli.store import DEFAULT_MODEL, CorpusData, Store, model_dir  # noqa: E402
 from aoc_cli.threads import one_thread  # noqa: E402
-
 
 #: The value model's settings ``aoc train NAME`` takes for icu-sepsis (Task.training).
 TASK_VALUE = {"value": "fqe", "gamma": 1.0, "history_length": 0}

@@ -141,8 +141,8 @@ def test_explain_reports_unchanged_for_a_removal_far_from_the_query(corridor):
 
 
 def test_evaluate_without_rows_decides_each_step_as_explain_does(corridor):
-    from aoc_cli.control.evaluate import evaluate
     from aoc_cli.control.whatif import what_if_steps
+    from aoc_cli.evaluation.score import evaluate
 
     corpus = corridor.corpus("corridor")
     session = open_session(corpus)

@@ -7,9 +7,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from aoc_cli.control.evaluate_inputs import BatchSearch
 from aoc_cli.decompose import decompose
 from aoc_cli.errors import AocError
+from aoc_cli.evaluation.context import BatchSearch
 from aoc_cli.index import BeliefIndex
 from aoc_cli.index.strata import PerAction, candidate_search
 

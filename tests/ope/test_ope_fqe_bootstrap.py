@@ -1,4 +1,4 @@
-"""The direct method's interval by a bootstrap of refits (aoc_cli.control.ope_fqe.bootstrap_fqe):
+"""The direct method's interval by a bootstrap of refits (aoc_cli.ope.fqe.bootstrap_fqe):
 on a small MDP with one-hot states, where a converged fitted Q evaluation is the tabular
 certainty-equivalence estimate, the refits' spread matches that estimate's spread over
 resampled logs (computed exactly here by linear solves), and the interval covers the exact
@@ -7,10 +7,9 @@ value."""
 import numpy as np
 import pytest
 
-from aoc_cli.control.ope_fqe import bootstrap_fqe, refit_steps
+from aoc_cli.ope.fqe import bootstrap_fqe, refit_steps
 from aoc_cli.threads import one_thread
-
-from tests.control.mdps import SmallMDP
+from tests.ope.mdps import SmallMDP
 
 pytest.importorskip("d3rlpy", reason="the bench extra (d3rlpy) is not installed")
 

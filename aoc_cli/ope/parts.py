@@ -1,7 +1,7 @@
 """An FQE ensemble trained in parts on several cores: its members split into contiguous parts,
 the first trained in this process, each other in a forked child, then put back together.
 
-Why: a member's update never reads another member's (:mod:`aoc_cli.control.ope_ensemble`:
+Why: a member's update never reads another member's (:mod:`aoc_cli.ope.ensemble`:
 stacked weights, each member's own loss, Adam elementwise), so the members divide with no
 exchange during training; ``aoc evaluate``'s FQE (a fit of every policy, then 10 refits
 each) is most of its time, and one thread gains little on these small products (its
@@ -10,10 +10,10 @@ the Python between the products holds the GIL (two threads: x1.2 on the fit's fe
 
 Every part draws its mini-batches exactly as the whole ensemble would: ``make_draw(keep,
 rng)`` builds the draw of members ``keep`` from the shared generator ``rng`` (drawn for all
-members in every part, :func:`aoc_cli.control.ope_ensemble.sampler`'s ``keep``), and a fork
+members in every part, :func:`aoc_cli.ope.ensemble.sampler`'s ``keep``), and a fork
 starts each child with a copy of that generator in this process's state. So each member
 trains on the same rows, next actions and learning rates, in the same floats, whatever the
-number of parts (tests/control/test_ope_parts.py), and this process's generator ends where
+number of parts (tests/ope/test_ope_parts.py), and this process's generator ends where
 one process's would. A child that fails is trained again here from a copy of the generator's
 starting state. Forking needs Linux (elsewhere: one part); each child runs one thread, as
 the caller does (the FQE runs under :func:`aoc_cli.threads.one_thread`), and leaves by

@@ -1,14 +1,13 @@
-"""Fitted Q evaluation through d3rlpy's DiscreteFQE (aoc_cli.control.ope_fqe): the direct
+"""Fitted Q evaluation through d3rlpy's DiscreteFQE (aoc_cli.ope.fqe): the direct
 method's value of a deterministic and a stochastic policy against the exact values of a small
 MDP, with the next action taken from the policy at the next logged step."""
 
 import numpy as np
 import pytest
 
-from aoc_cli.control.ope_fqe import fit_fqe
+from aoc_cli.ope.fqe import fit_fqe
 from aoc_cli.threads import one_thread
-
-from tests.control.mdps import SmallMDP
+from tests.ope.mdps import SmallMDP
 
 pytest.importorskip("d3rlpy", reason="the bench extra (d3rlpy) is not installed")
 
@@ -40,7 +39,7 @@ def test_the_behaviour_member_is_the_same_alone_and_beside_the_policies():
     """fqe_policies(behaviour=True): the logged behaviour's fitted Q evaluation (SARSA) trains
     beside the policies without changing theirs, and equals behaviour_fqe alone; its estimate
     is the mean Q_hat of the episodes' first logged steps."""
-    from aoc_cli.control.ope_fqe import behaviour_fqe, fqe_policies
+    from aoc_cli.ope.fqe import behaviour_fqe, fqe_policies
 
     mdp = SmallMDP.random(seed=3, end=0.3)
     rng = np.random.default_rng(3)

@@ -35,16 +35,22 @@ import numpy as np
 
 from aoc_cli import metrics as sc
 from aoc_cli.belief.row_labels import subset_scores
-from aoc_cli.control.evaluate_inputs import (BASELINES, EXACT_MAX_ROWS, EvalContext,
-                                             candidate_beliefs, check_inputs, episode_rows,
-                                             heterogeneity)
 from aoc_cli.control.epsilon import epsilon_filter, residual_cap
-from aoc_cli.control.ope_eval import ope_block, put_ope, wanted
-from aoc_cli.control.records import step_records  # noqa: F401 (aoc_cli.control.evaluate's API)
 from aoc_cli.control.support import penalised, support_episodes, support_filter
 from aoc_cli.decompose import decompose
 from aoc_cli.errors import AocError
+from aoc_cli.evaluation.context import (
+    BASELINES,
+    EXACT_MAX_ROWS,
+    EvalContext,
+    candidate_beliefs,
+    check_inputs,
+    episode_rows,
+    heterogeneity,
+)
+from aoc_cli.evaluation.records import step_records  # noqa: F401 (re-exported)
 from aoc_cli.index.strata import PerAction
+from aoc_cli.ope.policies import ope_block, put_ope, wanted
 from aoc_cli.threads import one_thread
 
 #: Held-out steps per chunk (whole episodes; a chunk has at least one episode).
@@ -367,9 +373,9 @@ def evaluate(session, data, baselines=BASELINES, seed: int = 0, progress=None,
     session's own index (True), an IVF structure built for the run (False), or the index up
     to :data:`EXACT_MAX_ROWS` corpus rows and IVF beyond (None). ``selection``: an (N,) bool
     mask of the corpus rows the decisions may use (None: every row; the baselines always use
-    every row). ``ope``: :class:`aoc_cli.control.ope_eval.OPESettings` of the offline policy
+    every row). ``ope``: :class:`aoc_cli.ope.policies.OPESettings` of the offline policy
     evaluation of the decisions (value mode; None: all estimators when the log allows it, see
-    :func:`aoc_cli.control.ope_eval.wanted`). Returns (summary, steps).
+    :func:`aoc_cli.ope.policies.wanted`). Returns (summary, steps).
     Runs with one thread in torch, FAISS and BLAS (:func:`aoc_cli.threads.one_thread`)."""
     started = time.perf_counter()
     with one_thread():

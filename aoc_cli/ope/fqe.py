@@ -12,9 +12,9 @@ The update itself is d3rlpy's (``DiscreteFQE.update``, :meth:`FQEFit.train`). Th
 of an episode, ended or truncated, is terminal (no bootstrap past the log).
 
 ``aoc evaluate`` runs :func:`fqe_policies`: every policy's fit, then every refit, trained at
-once as a batched ensemble of d3rlpy's networks (:mod:`aoc_cli.control.ope_ensemble`; each
+once as a batched ensemble of d3rlpy's networks (:mod:`aoc_cli.ope.ensemble`; each
 member equal to its own ``DiscreteFQE.update`` training to float rounding, checked by
-tests/control/test_ope_ensemble.py), ~2x less CPU than one fit after another.
+tests/ope/test_ope_ensemble.py), ~2x less CPU than one fit after another.
 
 Shapes: observations (N, d_o) float, ``policy`` (N, n) probabilities of the evaluated policy
 at each logged step (one-hot for a deterministic one), actions (N,) int, rewards (N,),
@@ -27,9 +27,9 @@ import copy
 
 import numpy as np
 
-from aoc_cli.control.ope_ensemble import FQEEnsemble, joined, sampler
-from aoc_cli.control.ope_parts import train_parts
 from aoc_cli.errors import AocError
+from aoc_cli.ope.ensemble import FQEEnsemble, joined, sampler
+from aoc_cli.ope.parts import train_parts
 
 #: FQE settings: mini-batch, learning rate, target network sync, hidden layers.
 BATCH = 256
@@ -255,12 +255,12 @@ def fqe_policies(observations, actions, rewards, starts, policies: list, gamma: 
     spread it estimates: 2.26 for 10 refits; their percentiles would be their extremes);
     without, the full fit's mean start value (``fit_estimate`` either way). The P fits train
     as one ensemble, then the P x ``refits`` refits as another
-    (:class:`aoc_cli.control.ope_ensemble.FQEEnsemble`: each member d3rlpy's DiscreteFQE
+    (:class:`aoc_cli.ope.ensemble.FQEEnsemble`: each member d3rlpy's DiscreteFQE
     update, batched); every policy's fit starts from the same d3rlpy initialisation and
     the policies' refits see the same resamples. ``progress(done, total)`` in member-steps;
     ``schedule`` the learning rate's over the fit and over each refit
-    (:meth:`aoc_cli.control.ope_ensemble.FQEEnsemble.train`); ``parts`` the processes each
-    ensemble trains in (:func:`aoc_cli.control.ope_parts.train_parts`; None: the cores, at
+    (:meth:`aoc_cli.ope.ensemble.FQEEnsemble.train`); ``parts`` the processes each
+    ensemble trains in (:func:`aoc_cli.ope.parts.train_parts`; None: the cores, at
     most 4): the same values in any number.
     Returns per policy {"q" (the full fit's), "estimate", "fit_estimate", "low", "high",
     "replicates" (refits,), "bagged", "steps", "refit_steps", "seconds"}.
@@ -357,7 +357,9 @@ def student_quantile(df: int) -> float:
     """The 97.5% quantile of Student's t with ``df`` degrees of freedom: the half-width, in
     standard deviations, of a 95% interval whose standard deviation comes from df + 1
     replicates (1.96 for many; 2.26 for 10 refits, 4.30 for 3)."""
-    from scipy.special import stdtrit   # scipy.special: ~0.2 s to import, only where refits run
+    from scipy.special import (
+        stdtrit,  # scipy.special: ~0.2 s to import, only where refits run
+    )
 
     return float(stdtrit(int(df), 0.975))
 

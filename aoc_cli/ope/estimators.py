@@ -4,7 +4,7 @@ direct method's mean, the on-policy mean return, bootstrap intervals over episod
 effective sample size.
 
 Hand-written: no library we know of does this on ragged episodes (d3rlpy has fitted Q
-evaluation only, used by :mod:`aoc_cli.control.ope_fqe`; SCOPE-RL assumes trajectories of
+evaluation only, used by :mod:`aoc_cli.ope.fqe`; SCOPE-RL assumes trajectories of
 one fixed length). The arithmetic is numpy on a padded (E, T) layout.
 
 **The log.** E episodes, N steps, flat and episode-contiguous as in a corpus: ``starts``

@@ -1,5 +1,5 @@
 """Offline policy evaluation of decided policies on a held-out log (``aoc evaluate``'s value
-mode): the estimators of :mod:`aoc_cli.control.ope` and :mod:`aoc_cli.control.ope_fqe`
+mode): the estimators of :mod:`aoc_cli.ope.estimators` and :mod:`aoc_cli.ope.fqe`
 applied to the controller's decisions (and each baseline's) at every logged step.
 
 Inputs, for a log of E episodes and N steps (discrete actions, n of them): observations
@@ -21,13 +21,23 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aoc_cli.control import ope
 from aoc_cli.belief.targets import kept_values
-from aoc_cli.control.ope_fqe import (BATCH, HIDDEN, LEARNING_RATE, REFITS, SCHEDULE,
-                                      TARGET_UPDATE, available, behaviour_fqe, default_steps,
-                                      fqe_policies, student_quantile)
-from aoc_cli.control.ope_parts import MAX_PARTS
 from aoc_cli.errors import AocError, BadSetting, NoRewards, param
+from aoc_cli.ope import estimators as ope
+from aoc_cli.ope.fqe import (
+    BATCH,
+    HIDDEN,
+    LEARNING_RATE,
+    REFITS,
+    SCHEDULE,
+    TARGET_UPDATE,
+    available,
+    behaviour_fqe,
+    default_steps,
+    fqe_policies,
+    student_quantile,
+)
+from aoc_cli.ope.parts import MAX_PARTS
 from aoc_cli.settings import Settings, setting
 from aoc_cli.threads import one_thread
 
@@ -46,12 +56,12 @@ class OPESettings(Settings):
     """``estimators`` of :data:`ESTIMATORS`; ``gamma`` the discount of the value estimated
     (1: the mean undiscounted return of an episode); ``propensity`` a column name (None: the
     ``propensity`` column when the log has one, else an imitation model); ``fqe_steps``
-    (None: :func:`aoc_cli.control.ope_fqe.default_steps`); ``fqe_refits`` the refits behind
-    FQE's interval (:func:`aoc_cli.control.ope_fqe.bootstrap_fqe`; 0: one fit, its interval
+    (None: :func:`aoc_cli.ope.fqe.default_steps`); ``fqe_refits`` the refits behind
+    FQE's interval (:func:`aoc_cli.ope.fqe.bootstrap_fqe`; 0: one fit, its interval
     resamples the start values only and leaves the model's own error out); bootstrap
     replicates; seed; ``fqe_schedule`` FQE's learning rate, "cosine" (annealed to 0 over the
     fit and over each refit) or "constant" (d3rlpy's default)
-    (:meth:`aoc_cli.control.ope_ensemble.FQEEnsemble.train`)."""
+    (:meth:`aoc_cli.ope.ensemble.FQEEnsemble.train`)."""
 
     label = "offline policy evaluation"
 
@@ -204,7 +214,7 @@ def policy_value(log: ope.Log, observations, logged, propensity, policy, n_actio
 def fqe_values(log: ope.Log, observations, logged, policies: list, settings: OPESettings,
                progress=None, behaviour: bool = False) -> list:
     """The direct method for each policy (N, n) at once
-    (:func:`aoc_cli.control.ope_fqe.fqe_policies`: one batched ensemble), when an estimator needs it: with refits when FQE is asked for and
+    (:func:`aoc_cli.ope.fqe.fqe_policies`: one batched ensemble), when an estimator needs it: with refits when FQE is asked for and
     ``settings.fqe_refits`` > 1. Each entry None (no estimator needs a Q model) or a record;
     without d3rlpy, a record with ``q`` None and the reason as its ``note``. ``behaviour``:
     the logged behaviour's record last (``fqe_policies``'s), when FQE runs."""
@@ -242,7 +252,7 @@ def behaviour_targets(data, gamma: float, seed: int = 0,
     ``aoc evaluate``'s held-out value target of a model whose values are ``fqe`` (an estimate
     of the same Q(o, a), by another estimator, from the held-out log alone). The OPE's own
     (``block``, an :func:`ope_block`) when it fitted the behaviour at those settings; else
-    fitted alone (:func:`aoc_cli.control.ope_fqe.behaviour_fqe`, the same values): a quicker
+    fitted alone (:func:`aoc_cli.ope.fqe.behaviour_fqe`, the same values): a quicker
     OPE does not change the target. Kept beside the log
     (:func:`aoc_cli.belief.targets.kept_values`). None where it cannot run (no d3rlpy,
     continuous actions, no rewards): the caller then uses aoc's own fitted Q evaluation."""
@@ -303,7 +313,7 @@ def off_policy_values(data, logged: np.ndarray, policies: dict, settings: OPESet
     "behaviour_value": ... (with "fqe", the direct method's value of the logged behaviour,
     when FQE ran: a check of FQE against the log's mean return), "policies": {name:
     {policy_value, ess, notes}}, "ope_warnings"} and, when FQE ran, "behaviour_fqe" (the
-    behaviour's record of :func:`aoc_cli.control.ope_fqe.fqe_policies`)."""
+    behaviour's record of :func:`aoc_cli.ope.fqe.fqe_policies`)."""
     check_log(data)
     logged = np.asarray(logged, np.int64)
     if len(logged) != data.n_rows:

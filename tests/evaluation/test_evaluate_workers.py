@@ -8,12 +8,11 @@ import pytest
 import ray
 
 from aoc_cli.belief import BeliefConfig, train_model
-from aoc_cli.control import ControllerConfig
-from aoc_cli.control.evaluate import evaluate
-from aoc_cli.control.evaluate_ray import evaluate_on_ray
-from aoc_cli.envs import collect
+from aoc_cli.control import ControllerConfig, open_session
 from aoc_cli.corpus_index import build_index
-from aoc_cli.control import open_session
+from aoc_cli.envs import collect
+from aoc_cli.evaluation.ray import evaluate_on_ray
+from aoc_cli.evaluation.score import evaluate
 from aoc_cli.store import Store
 
 

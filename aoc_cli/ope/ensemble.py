@@ -3,13 +3,13 @@ ensemble of members that share one log.
 
 Why: one DiscreteFQE update of icu-sepsis's network (48 -> 64 -> 64 -> 25, batch 256) costs
 ~1.7 ms, nearly all of it per-call overhead (Python, autograd, Adam's per-tensor loop), not
-arithmetic; :func:`aoc_cli.control.ope_fqe.bootstrap_fqe` runs a fit and 10 refits per
+arithmetic; :func:`aoc_cli.ope.fqe.bootstrap_fqe` runs a fit and 10 refits per
 policy, three policies an ``aoc evaluate``: ~48,000 updates, ~80 s of a 45,000-step
 evaluation. Stacking the members' weights along a leading dimension (``torch.bmm``) costs
 one update's overhead for all of them.
 
 Each member is d3rlpy's DiscreteFQE, not a re-design of it: its network is the one d3rlpy
-built and initialised (:class:`aoc_cli.control.ope_fqe.FQEFit`: a ``VectorEncoder`` of ReLU
+built and initialised (:class:`aoc_cli.ope.fqe.FQEFit`: a ``VectorEncoder`` of ReLU
 layers, then a linear head), read from and written back to the d3rlpy modules (weights,
 target weights, Adam's moments, the step count); an update is DiscreteFQEImpl.inner_update's:
 Huber loss of Q(s_t, a_t) against r_t + gamma Q_target(s_{t+1}, a') (1 - terminal_t), the
@@ -18,7 +18,7 @@ stacked members do not interact), then the target network synced when the member
 (before it rises) is a multiple of the interval, as d3rlpy does. Each member draws its
 mini-batch and next actions from its own generator exactly as ``FQEFit.train`` does, so a
 member started from a fit's state reproduces that fit's d3rlpy training to float rounding
-(tests/control/test_ope_ensemble.py checks it against d3rlpy's own update).
+(tests/ope/test_ope_ensemble.py checks it against d3rlpy's own update).
 
 Shapes: M members; layer l's weights (M, d_in, d_out), biases (M, 1, d_out); a mini-batch
 (M, B, d_o) of observations; Q (M, B, n).
@@ -30,7 +30,7 @@ import numpy as np
 
 
 class FQEEnsemble:
-    """M members on the log of ``fit`` (an :class:`aoc_cli.control.ope_fqe.FQEFit`: its
+    """M members on the log of ``fit`` (an :class:`aoc_cli.ope.fqe.FQEFit`: its
     standardised observations, actions, rewards, next rows, terminals, mini-batch size, gamma,
     target interval and Adam settings). Member m starts from ``states[m]`` (an
     ``FQEFit.snapshot()``) at step count ``counts[m]`` (the d3rlpy model's ``_grad_step``).
@@ -195,7 +195,7 @@ class FQEEnsemble:
         batch; a ReLU's the upstream gradient where its output is positive), without its graph
         and engine: ~30% of a small ensemble's update. Huber's derivative is the error clipped
         to [-1, 1]; divided by B (the mean) and put at the logged action of each row.
-        tests/control/test_ope_ensemble.py checks it against autograd's."""
+        tests/ope/test_ope_ensemble.py checks it against autograd's."""
         import torch
 
         pairs = list(zip(self.params[0::2], self.params[1::2]))
@@ -220,7 +220,7 @@ class FQEEnsemble:
         """One step of torch's Adam (``self.optim``'s settings and state) with ``grads``:
         the operations of torch.optim.Adam's multi-tensor path (foreach, no weight decay, no
         amsgrad), in its order, without its per-call dispatch (a quarter of a small
-        ensemble's update; tests/control/test_ope_ensemble.py checks it against d3rlpy's)."""
+        ensemble's update; tests/ope/test_ope_ensemble.py checks it against d3rlpy's)."""
         import torch
 
         group, state = self.optim.param_groups[0], self.optim.state
@@ -319,7 +319,7 @@ def sampler(fit, cums: np.ndarray, policy_of: np.ndarray, pools: list, rng, M: i
     the next action of each drawn from member m's policy at the row's next logged step.
     ``keep`` (member indices, None: all): the draw of those members only, ``(len(keep), B)``
     each, the generator still drawn for all M (the kept members' rows and actions are those
-    of the whole draw: a part of the ensemble trained apart, :mod:`aoc_cli.control.ope_parts`)."""
+    of the whole draw: a part of the ensemble trained apart, :mod:`aoc_cli.ope.parts`)."""
     pools = [np.arange(fit.n_rows) if p is None else np.asarray(p, np.int64) for p in pools]
     if len(pools) != M or len(policy_of) != M:
         raise ValueError(f"{len(pools)} pools and {len(policy_of)} policies for {M} members")

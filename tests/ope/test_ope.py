@@ -1,14 +1,13 @@
-"""Offline policy evaluation (aoc_cli.control.ope): the per-decision weights and both
+"""Offline policy evaluation (aoc_cli.ope.estimators): the per-decision weights and both
 estimators by hand on two ragged episodes; PDWIS and WDR against exact policy values of small
 MDPs (reward only at the end, episodes of random length); bootstrap coverage; bad input."""
 
 import numpy as np
 import pytest
 
-from aoc_cli.control.ope import Log, bootstrap, ess, padded, pdwis, ratios, wdr
 from aoc_cli.errors import AocError
-
-from tests.control.mdps import SmallMDP
+from aoc_cli.ope.estimators import Log, bootstrap, ess, padded, pdwis, ratios, wdr
+from tests.ope.mdps import SmallMDP
 
 # Two episodes by hand: lengths 2 and 3, the reward only at each end.
 STARTS = np.array([0, 2, 5])

@@ -7,13 +7,11 @@ import numpy as np
 import pytest
 
 from aoc_cli.belief import BeliefConfig, train_model
-from aoc_cli.control import ControllerConfig, explain_logged_step
-from aoc_cli.control.evaluate import LeaveEpisodeOut, evaluate, step_records
-from aoc_cli.envs import collect
+from aoc_cli.control import ControllerConfig, explain_logged_step, open_session
 from aoc_cli.corpus_index import build_index
-from aoc_cli.control import open_session
+from aoc_cli.envs import collect
+from aoc_cli.evaluation.score import LeaveEpisodeOut, evaluate, step_records
 from aoc_cli.store import Store
-
 from tests.conftest import run_aoc
 
 
@@ -300,8 +298,8 @@ def test_value_decisions_in_batches_apply_the_support_and_cap_rules_as_decide_do
 def test_value_targets_are_the_drivers_a_chunk_never_computes_them(ward, monkeypatch):
     """A Ray task scores chunks: the held-out log's value targets (a fitted Q evaluation for
     fqe values) are the driver's, read once after the chunks merge."""
-    from aoc_cli.control import evaluate_inputs
-    from aoc_cli.control.evaluate import chunks, score_episodes
+    from aoc_cli.evaluation import context as evaluate_inputs
+    from aoc_cli.evaluation.score import chunks, score_episodes
 
     _root, store = ward
     session = open_session(store.corpus("ward"), "value", config=ControllerConfig())

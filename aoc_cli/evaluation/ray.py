@@ -1,9 +1,9 @@
 """``aoc evaluate NAME --data HELD_OUT --workers N``: the chunks of episodes scored as Ray tasks.
 
 The held-out episodes are cut into the same chunks as in one process
-(:func:`aoc_cli.control.evaluate.chunks`); the chunks are dealt in contiguous runs to the
+(:func:`aoc_cli.evaluation.score.chunks`); the chunks are dealt in contiguous runs to the
 tasks. Each task opens the store by its path, builds the session and the evaluation context
-as :func:`aoc_cli.control.evaluate.evaluate` does (the same seed, so the same candidates and
+as :func:`aoc_cli.evaluation.score.evaluate` does (the same seed, so the same candidates and
 search structure), scores its chunks with :func:`score_episodes` and returns their
 :class:`StepScores`; the driver merges them in chunk order and summarises. The per-step results
 and the metrics are therefore those of the run in one process. On a cluster the store must be
@@ -17,11 +17,17 @@ import time
 
 import numpy as np
 
-from aoc_cli.control.evaluate import (CHUNK_STEPS, chunk_size, chunks, merge, score_episodes,
-                                      summarise)
-from aoc_cli.control.evaluate_inputs import EvalContext
-from aoc_cli.control.ope_eval import ope_block, put_ope, wanted
 from aoc_cli.control.session import open_session
+from aoc_cli.evaluation.context import EvalContext
+from aoc_cli.evaluation.score import (
+    CHUNK_STEPS,
+    chunk_size,
+    chunks,
+    merge,
+    score_episodes,
+    summarise,
+)
+from aoc_cli.ope.policies import ope_block, put_ope, wanted
 from aoc_cli.parallel import capacity, map_chunks, start_ray
 from aoc_cli.store import Store
 from aoc_cli.threads import one_thread

@@ -1,4 +1,4 @@
-"""FQE's default steps (aoc_cli.control.ope_fqe.default_steps) follow the log's horizon: FQE moves
+"""FQE's default steps (aoc_cli.ope.fqe.default_steps) follow the log's horizon: FQE moves
 a value one step back per target sync, so on a log of long episodes 30 passes over the data
 (the default before) stop far short of the fitted fixed point, and the default, which adds
 target syncs per step of the episodes' 99th-percentile length, reaches it."""
@@ -6,12 +6,17 @@ target syncs per step of the episodes' 99th-percentile length, reaches it."""
 import numpy as np
 import pytest
 
-from aoc_cli.control.ope_fqe import (MAX_STEPS, SYNCS_PER_STEP, TARGET_UPDATE, default_steps,
-                                     fqe_policies, horizon)
+from aoc_cli.ope.fqe import (
+    MAX_STEPS,
+    SYNCS_PER_STEP,
+    TARGET_UPDATE,
+    default_steps,
+    fqe_policies,
+    horizon,
+)
 from aoc_cli.threads import one_thread
-
-from tests.control.mdps import SmallMDP
-from tests.control.test_ope_fqe_bootstrap import tabular_estimate
+from tests.ope.mdps import SmallMDP
+from tests.ope.test_ope_fqe_bootstrap import tabular_estimate
 
 pytest.importorskip("d3rlpy", reason="the bench extra (d3rlpy) is not installed")
 

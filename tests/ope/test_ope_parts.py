@@ -1,4 +1,4 @@
-"""An FQE ensemble trained in parts over forked processes (aoc_cli.control.ope_parts): every
+"""An FQE ensemble trained in parts over forked processes (aoc_cli.ope.parts): every
 member trains as in one process (the same mini-batches, the same floats to a few ulp), the
 shared generator ends where one process leaves it, and a child that dies is made up for.
 (Where a process cannot fork, every number of parts is one: the same assertions hold.)"""
@@ -6,12 +6,11 @@ shared generator ends where one process leaves it, and a child that dies is made
 import numpy as np
 import pytest
 
-from aoc_cli.control import ope_parts
-from aoc_cli.control.ope_ensemble import FQEEnsemble, sampler
-from aoc_cli.control.ope_fqe import FQEFit, cumulative, fqe_policies
+from aoc_cli.ope import parts as ope_parts
+from aoc_cli.ope.ensemble import FQEEnsemble, sampler
+from aoc_cli.ope.fqe import FQEFit, cumulative, fqe_policies
 from aoc_cli.threads import one_thread
-
-from tests.control.mdps import noisy_log
+from tests.ope.mdps import noisy_log
 
 pytest.importorskip("d3rlpy", reason="the bench extra (d3rlpy) is not installed")
 

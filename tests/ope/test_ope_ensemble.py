@@ -1,4 +1,4 @@
-"""Fitted Q evaluations trained as one batched ensemble (aoc_cli.control.ope_ensemble): each
+"""Fitted Q evaluations trained as one batched ensemble (aoc_cli.ope.ensemble): each
 member is d3rlpy's DiscreteFQE trained by its own update (``FQEFit.train`` calls
 ``DiscreteFQE.update``), to float rounding, fresh or warm-started, on its own policy and
 resampled rows, without touching the other members."""
@@ -6,11 +6,10 @@ resampled rows, without touching the other members."""
 import numpy as np
 import pytest
 
-from aoc_cli.control.ope_ensemble import FQEEnsemble
-from aoc_cli.control.ope_fqe import FQEFit, cumulative
+from aoc_cli.ope.ensemble import FQEEnsemble
+from aoc_cli.ope.fqe import FQEFit, cumulative
 from aoc_cli.threads import one_thread
-
-from tests.control.mdps import noisy_log
+from tests.ope.mdps import noisy_log
 
 pytest.importorskip("d3rlpy", reason="the bench extra (d3rlpy) is not installed")
 
@@ -121,7 +120,7 @@ def test_repeat_warm_starts_copies_that_train_on_as_the_original(log):
 
 def _first_member_thrice(cum, fit, rng):
     """The default sampler's draws for one member, given to three."""
-    from aoc_cli.control.ope_ensemble import sampler
+    from aoc_cli.ope.ensemble import sampler
 
     one = sampler(fit, cum[None], np.zeros(1, np.int64), [None], rng, 1)
 
@@ -147,7 +146,7 @@ def test_a_member_state_restored_into_d3rlpy_predicts_the_same_q(log):
 
 
 def test_thesampler_draws_each_member_from_its_pool_and_policy(log):
-    from aoc_cli.control.ope_ensemble import sampler
+    from aoc_cli.ope.ensemble import sampler
 
     fit = make(log)
     det = cumulative(log[2][1])                   # a deterministic policy
@@ -165,7 +164,7 @@ def test_thesampler_draws_each_member_from_its_pool_and_policy(log):
 def test_deterministic_policies_draw_the_next_actions_of_the_general_rule(log, monkeypatch):
     """Where every policy is deterministic the next actions come from each row's action, not
     from the (M, B, n) comparison with the cumulative probabilities: the same draws."""
-    from aoc_cli.control import ope_ensemble
+    from aoc_cli.ope import ensemble as ope_ensemble
 
     fit = make(log)
     n, rng = fit.n_actions, np.random.default_rng(3)
@@ -211,7 +210,7 @@ def test_the_target_table_of_repeated_observations_gives_the_per_batch_q(log, mo
 def test_a_group_drawn_by_its_own_generator_trains_the_same_beside_others(log):
     """joined draws: a member with its own generator gets the same mini-batches, so the same
     training, alone or beside other members (and they the same without it)."""
-    from aoc_cli.control.ope_ensemble import joined, sampler
+    from aoc_cli.ope.ensemble import joined, sampler
 
     with one_thread():
         fit = make(log)
@@ -261,7 +260,7 @@ def test_the_written_out_backpropagation_is_autograds(log):
 def test_a_kept_members_draw_is_its_part_of_the_whole_draw(log):
     """sampler(keep=...): the rows and next actions of the kept members, as the whole draw
     gives them, the generator drawn for every member (it ends where the whole draw's does)."""
-    from aoc_cli.control.ope_ensemble import sampler
+    from aoc_cli.ope.ensemble import sampler
 
     fit = make(log)
     cums = np.stack([fit.cum, cumulative(log[2][1])])

@@ -9,17 +9,15 @@ import numpy as np
 import pytest
 
 from aoc_cli.belief import BeliefConfig, train_model
-from aoc_cli.control import ControllerConfig
-from aoc_cli.control import ope
-from aoc_cli.control.evaluate import _value, _value_distinct, evaluate
-from aoc_cli.control.evaluate_inputs import EvalContext, episode_rows
-from aoc_cli.control.ope_eval import OPESettings
-from aoc_cli.envs import collect
-from aoc_cli.control import open_session
+from aoc_cli.control import ControllerConfig, open_session
 from aoc_cli.corpus_index import build_index
+from aoc_cli.envs import collect
 from aoc_cli.errors import AocError
+from aoc_cli.evaluation.context import EvalContext, episode_rows
+from aoc_cli.evaluation.score import _value, _value_distinct, evaluate
+from aoc_cli.ope import estimators as ope
+from aoc_cli.ope.policies import OPESettings
 from aoc_cli.store import Store
-
 from tests.conftest import run_in_process
 
 
@@ -226,7 +224,7 @@ def test_an_fqe_models_held_out_target_is_the_behaviours_fqe_kept_beside_the_log
     settings, kept beside the log and read back by a later evaluate; fitted alone at another
     discount or when the OPE's FQE took other steps."""
     pytest.importorskip("d3rlpy", reason="the bench extra (d3rlpy) is not installed")
-    from aoc_cli.control import ope_eval
+    from aoc_cli.ope import policies as ope_eval
     from aoc_cli.store import targets_dir
 
     _root, store, _ = sepsis
@@ -238,7 +236,7 @@ def test_an_fqe_models_held_out_target_is_the_behaviours_fqe_kept_beside_the_log
         session.model.meta["value"] = {"target": "fqe", "gamma": 1.0}
         return EvalContext.build(session, held, [])
 
-    from aoc_cli.control.ope_fqe import default_steps
+    from aoc_cli.ope.fqe import default_steps
 
     steps = default_steps(held.n_rows, held.episode_starts, 1.0)
     settings = OPESettings(seed=3)
@@ -277,7 +275,7 @@ def test_an_fqe_models_held_out_target_is_the_behaviours_fqe_kept_beside_the_log
 def test_fqe_off_on_the_logged_behaviour_is_a_warning(sepsis, monkeypatch):
     """The direct method values the logged behaviour beside the policies; outside the
     interval of the log's mean return, the OPE says so."""
-    from aoc_cli.control import ope_eval
+    from aoc_cli.ope import policies as ope_eval
 
     _root, store, _ = sepsis
     held = store.corpus("held")

@@ -1,0 +1,8 @@
+"""Evaluation of a controller on a held-out log: every step decided as the controller would
+and scored against what was logged (docs/design.md, "Evaluation").
+
+- :mod:`aoc_cli.evaluation.context`: what scoring needs, built once (candidates, targets);
+- :mod:`aoc_cli.evaluation.score`: the scoring of episodes, in chunks, and its summary;
+- :mod:`aoc_cli.evaluation.ray`: the same chunks as Ray tasks;
+- :mod:`aoc_cli.evaluation.records`: one JSON-ready record per scored step.
+"""
