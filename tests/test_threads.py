@@ -53,7 +53,7 @@ def maze(tmp_path_factory):
 
 
 def test_a_control_step_runs_on_one_thread_and_leaves_the_callers_setting(maze, two_threads):
-    session = open_session(maze, config=ControllerConfig.for_task("maze"), seed=0)
+    session = open_session(maze, config=ControllerConfig(epsilon=0.1), seed=0)
     assert torch.get_num_threads() == 2  # opening a session changes nothing
     seen = []
     beliefs = session.model.beliefs
@@ -96,7 +96,7 @@ def test_a_rollout_runs_every_policys_steps_on_one_thread(maze, two_threads):
     from aoc_cli.control import rollout
     from aoc_cli.envs import make_env
 
-    session = open_session(maze, config=ControllerConfig.for_task("maze"), seed=0)
+    session = open_session(maze, config=ControllerConfig(epsilon=0.1), seed=0)
     env = make_env("maze")
     policy = make_baseline("zero", session, env)
     seen = []

@@ -9,12 +9,12 @@ from pathlib import Path
 
 from aoc_cli.api.common import StoreLike, open_store
 from aoc_cli.baselines import make_baseline
-from aoc_cli.control import (ControllerConfig, EpisodeResult, Session, model_free_session,
+from aoc_cli.control import (EpisodeResult, Session, given_settings, model_free_session,
                              rollout as _rollout)
 from aoc_cli.control import open_session as _open_session
 from aoc_cli.control.episodes import action_space_of
 from aoc_cli.control.run import reference_from_audit
-from aoc_cli.envs import collected_task, make_env
+from aoc_cli.envs import make_env
 from aoc_cli.errors import BadSetting, param
 from aoc_cli.progress import Progress
 from aoc_cli.rows import row_selection
@@ -34,16 +34,15 @@ def open_session(name: str, *, store: StoreLike = None, model: str | None = None
                  residual_cap: float | None = None, sampler: str | None = None) -> Session:
     """A controller ready to act on corpus ``name``: its model ``model`` (default 'default',
     else the latest), index ``index_id``, the rows of the tag selections ``select`` /
-    ``exclude`` ({tag: [values]}), and the controller settings (None: the task's, else the
-    paper's). ``env``: a built-in task or gymnasium id whose settings and action box apply
-    (default: the task the corpus was collected from, no narrower box).
+    ``exclude`` ({tag: [values]}), and the controller settings (None: the model's, decided
+    by ``aoc train`` from the log's evidence, else the paper's). ``env``: a built-in task or
+    gymnasium id whose action box applies (default: the corpus's).
     ``session.controller.decide(observation (d_o,), history (L, d_o + d_a + 1))`` -> a
     Decision (action, value, residual, supporting rows and weights)."""
     corpus = open_store(store).corpus(name)
-    config = ControllerConfig.for_task(collected_task(corpus) if env is None else env,
-                                       candidates=candidates, epsilon=epsilon, k=k,
-                                       sampler=sampler, residual_cap=residual_cap,
-                                       min_support=min_support, support_penalty=support_penalty)
+    config = given_settings(candidates=candidates, epsilon=epsilon, k=k, sampler=sampler,
+                            residual_cap=residual_cap, min_support=min_support,
+                            support_penalty=support_penalty)
     action_space = action_space_of(make_env(env)) if env is not None else None
     return _open_session(corpus, model, index_id, config, row_selection(corpus, select, exclude),
                          seed, action_space)
@@ -75,7 +74,7 @@ def rollout(name: str, env: str, *, store: StoreLike = None, episodes: int = 5,
     """Run ``episodes`` episodes of ``env`` (a built-in task or a gymnasium id) with
     ``policy`` (aoc, or a baseline: zero, random, 1nn, knn, bc, td3bc, cql, mpc, ...) acting
     on corpus ``name``; episode i starts from seed ``seed + i``. The controller settings are
-    ``env``'s under those given (as :func:`open_session`). ``audit``: write every decision to
+    those given over the model's (as :func:`open_session`). ``audit``: write every decision to
     this HDF5 file; ``plot``: a PNG of the trajectories or the residual/reward curves;
     ``noise_after``, ``noise_std``: disturb the actions after that step (a fraction of the
     action range); ``ood_reference``: flag steps against the per-step band of this audit log
@@ -90,10 +89,9 @@ def rollout(name: str, env: str, *, store: StoreLike = None, episodes: int = 5,
         raise BadSetting("noise_std", noise_std, f"{param('noise_std')} must be a finite number "
                          f">= 0, got {noise_std}")
     corpus = s.corpus(name)
-    config = ControllerConfig.for_task(env, candidates=candidates, epsilon=epsilon, k=k,
-                                       sampler=sampler, residual_cap=residual_cap,
-                                       min_support=min_support,
-                                       support_penalty=support_penalty)
+    config = given_settings(candidates=candidates, epsilon=epsilon, k=k, sampler=sampler,
+                            residual_cap=residual_cap, min_support=min_support,
+                            support_penalty=support_penalty)
     environment = make_env(env)
     selection = row_selection(corpus, select, exclude)
     action_space = action_space_of(environment)

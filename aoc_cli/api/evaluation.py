@@ -9,10 +9,9 @@ import os
 from typing import Sequence
 
 from aoc_cli.api.common import StoreLike, open_store
-from aoc_cli.control import ControllerConfig, open_session
+from aoc_cli.control import given_settings, open_session
 from aoc_cli.control.whatif import removal as removal_of
 from aoc_cli.control.whatif import what_if_steps
-from aoc_cli.envs import collected_task
 from aoc_cli.errors import BadSetting, param
 from aoc_cli.evaluation.ray import evaluate_on_ray
 from aoc_cli.evaluation.score import evaluate as _evaluate
@@ -28,7 +27,7 @@ def evaluate(name: str, data: str, *, store: StoreLike = None,
              index_id: str = DEFAULT_INDEX, candidates: int | None = None,
              epsilon: float | None = None, k: int | None = None,
              min_support: float | None = None, support_penalty: float | None = None,
-             row_smoothing: float | None = None,
+             residual_cap: float | None = None, row_smoothing: float | None = None,
              exact: bool | None = None, seed: int = 0, ope: str | None = None,
              propensity: str | None = None, ope_gamma: float = 1.0,
              fqe_steps: int | None = None, fqe_refits: int | None = None,
@@ -59,11 +58,9 @@ def evaluate(name: str, data: str, *, store: StoreLike = None,
     s = open_store(store)
     corpus = s.corpus(name)
     held_out = corpus if data == name else s.corpus(data)
-    config = ControllerConfig.for_task(collected_task(corpus), candidates=candidates,
-                                       epsilon=epsilon, k=k, residual_cap=None,
-                                       min_support=min_support,
-                                       support_penalty=support_penalty,
-                                       row_smoothing=row_smoothing)
+    config = given_settings(candidates=candidates, epsilon=epsilon, k=k,
+                            residual_cap=residual_cap, min_support=min_support,
+                            support_penalty=support_penalty, row_smoothing=row_smoothing)
     removal = removal_of(corpus, without, without_episodes)
     if removal is not None and (workers is not None or ray_address is not None):
         raise BadSetting("without", without, f"{param('without')} runs in one process: drop "

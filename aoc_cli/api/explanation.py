@@ -12,9 +12,8 @@ from pathlib import Path
 import numpy as np
 
 from aoc_cli.api.common import StoreLike, open_store
-from aoc_cli.envs import collected_task
-from aoc_cli.control import (ControllerConfig, explain_logged_step, explain_query, open_session,
-                             parse_query, read_audit_step, replay_decision)
+from aoc_cli.control import (ControllerConfig, explain_logged_step, explain_query, given_settings,
+                             open_session, parse_query, read_audit_step, replay_decision)
 from aoc_cli.control.explain import explain_decisions
 from aoc_cli.control.records import label_of
 from aoc_cli.control.whatif import removal as removal_of
@@ -77,10 +76,9 @@ def explain(name: str, *, store: StoreLike = None, queries: str | os.PathLike | 
                        f"(a recorded decision) or {param('data', 'CORPUS')} "
                        f"{param('episode', 'E')} {param('step', 'T')} (a logged step)")
     corpus = s.corpus(name)
-    config = ControllerConfig.for_task(collected_task(corpus), candidates=candidates,
-                                       epsilon=epsilon, k=k, residual_cap=residual_cap,
-                                       min_support=min_support, support_penalty=support_penalty,
-                                       row_smoothing=row_smoothing)
+    config = given_settings(candidates=candidates, epsilon=epsilon, k=k,
+                            residual_cap=residual_cap, min_support=min_support,
+                            support_penalty=support_penalty, row_smoothing=row_smoothing)
     opened = dict(model_id=model, index_id=index_id, config=config, seed=seed)
     removal = removal_of(corpus, without, without_episodes)
     session = None

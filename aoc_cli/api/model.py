@@ -27,14 +27,16 @@ def train(name: str, *, store: StoreLike = None, model: str = DEFAULT_MODEL,
           threads: int | None = None, dropout: float = _D.dropout,
           class_weight: str = _D.class_weight, critic_steps: int | None = None,
           critic_bc_weight: float = _D.critic_bc_weight, device: str = _D.device,
-          paper: bool = False,
+          paper: bool = False, no_select: bool = False,
           overwrite: bool = False, progress: Progress | None = None,
           log: Log | None = None) -> Trained:
     """Train the belief model ``model`` of corpus ``name`` (``aoc train``): ``mode`` value
     (AOC: b(o, a, h) predicts ``value``) or imitation (ABC: b(o, h) predicts the action).
-    Settings left None come from the task the corpus was collected from, then from validation
-    on a small log (history_length, hidden, weight_decay), then the paper's; ``paper``: the
-    paper's for all. The other arguments are :class:`~aoc_cli.belief.BeliefConfig`'s
+    Settings left None are decided from the log's evidence (:mod:`aoc_cli.belief.evidence`:
+    rewards or none, discrete actions, the episodes' lengths, how often observations recur),
+    then chosen by validation on a small log (history_length, hidden, weight_decay), else the
+    paper's; ``paper``: the paper's for all; ``no_select``: no choice by validation. The
+    controller settings the evidence decides are saved with the model. The other arguments are :class:`~aoc_cli.belief.BeliefConfig`'s
     (``belief_dim`` d_b, ``max_epochs``, ``device`` auto|cpu|cuda, ...). One writer per
     model id; ``overwrite`` replaces one. Returns :class:`~aoc_cli.belief.fit.Trained`
     (``.metrics`` as saved)."""
@@ -47,8 +49,8 @@ def train(name: str, *, store: StoreLike = None, model: str = DEFAULT_MODEL,
                     critic_bc_weight=critic_bc_weight, device=device)
     check_settings(settings)  # bad settings fail before the store is read
     corpus = open_store(store).corpus(name)
-    return train_corpus(corpus, model, paper=paper, overwrite=overwrite, progress=progress,
-                        log=log, **settings)
+    return train_corpus(corpus, model, paper=paper, select_settings=not no_select,
+                        overwrite=overwrite, progress=progress, log=log, **settings)
 
 
 @dataclass

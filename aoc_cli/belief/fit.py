@@ -1,29 +1,31 @@
 """Train a corpus's belief model as ``aoc train`` does, in one call: the settings checked, the
-task's own settings under the ones given (:mod:`aoc_cli.belief.task_settings`), the small-log
-defaults and the choice of the settings left open by validation (:mod:`aoc_cli.belief.select`),
-one writer per model id, the inputs checked against the corpus's content hash, then training
-(:func:`aoc_cli.belief.train.train_model`). ``aoc train``, ``aoc bench ward`` and the
-icu-sepsis bench all train through :func:`train_corpus`.
+settings the log's evidence decides under the ones given (:mod:`aoc_cli.belief.evidence`), the
+small-log defaults and the choice of the settings left open by validation
+(:mod:`aoc_cli.belief.select`), one writer per model id, the inputs checked against the
+corpus's content hash, then training (:func:`aoc_cli.belief.train.train_model`). ``aoc
+train``, ``aoc bench ward`` and the icu-sepsis bench all train through :func:`train_corpus`.
 
-Settings are :class:`~aoc_cli.belief.config.BeliefConfig`'s fields. Those a task may set or
-validation may choose (:data:`OPEN`: mode, belief, gamma, value, dynamics_weight,
+Settings are :class:`~aoc_cli.belief.config.BeliefConfig`'s fields. Those the evidence may
+decide or validation may choose (:data:`OPEN`: mode, belief, gamma, value, dynamics_weight,
 history_length, hidden, weight_decay) and ``label_smoothing`` are None when not given; every
-other field defaults to the paper's value.
+other field defaults to the paper's value. The controller's settings the evidence decides are
+saved with the model (``metrics.controller``).
 """
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import Callable
 
-from aoc_cli.belief import select, task_settings
+from aoc_cli.belief import evidence, select
 from aoc_cli.belief.config import CRITIC_STEP_SECONDS, BeliefConfig
 from aoc_cli.belief.data import prepare
 from aoc_cli.progress import Progress
 from aoc_cli.store import DEFAULT_MODEL, Corpus, check_name, writing_model
 
-#: Settings left to the task or to validation when None.
-OPEN = task_settings.FIELDS
+#: Settings left to the log's evidence or to validation when None.
+OPEN = evidence.TRAINING + ("hidden", "weight_decay")
 
 
 @dataclass
@@ -61,46 +63,60 @@ def check_settings(settings: dict) -> BeliefConfig:
 
 
 def train_corpus(corpus: Corpus, model: str = DEFAULT_MODEL, *, paper: bool = False,
-                 overwrite: bool = False, progress: Progress | None = None,
+                 select_settings: bool = True, overwrite: bool = False,
+                 progress: Progress | None = None,
                  log: Callable[[str], None] | None = None, **settings) -> Trained:
     """Train model ``model`` of ``corpus`` with ``settings`` (BeliefConfig fields; see the
-    module docstring); ``paper``: the paper's settings for everything not given (no task
-    settings, no selection). ``log``: the notes ``aoc train`` prints before training (the
-    task's settings taken, the critic's step budget). ``progress``: fitted Q evaluation, the
-    candidates tried, then the epochs (or critic steps)."""
+    module docstring); ``paper``: the paper's settings for everything not given (no rules of
+    the evidence, no selection); ``select_settings`` False: no choice by validation (the
+    evidence's rules still hold). ``log``: the notes ``aoc train`` prints before training (the
+    settings the evidence decided and why, the critic's step budget). ``progress``: fitted Q
+    evaluation, the candidates tried, then the epochs (or critic steps)."""
     note = log or (lambda _text: None)
     given, fixed, smoothing = _split(settings)
-    _config(given, fixed)  # the settings checked before the task's are read
-    task, own = task_settings.for_corpus(corpus, paper)
-    given, from_task = task_settings.resolve(given, own)
+    _config(given, fixed)  # the settings checked before the corpus is read
+    extra, ev = {}, None
+    if not paper:
+        started = time.perf_counter()
+        ev = evidence.Evidence.of(corpus)
+        decided, reasons = evidence.decide(ev, given)
+        given = {**given, **{k: v for k, v in decided.items() if k in OPEN}}
+        extra = {"settings": {"evidence": ev.to_dict(), "decided": reasons,
+                              "seconds": time.perf_counter() - started},
+                 "controller": {k: v for k, v in decided.items()
+                                if k in evidence.CONTROLLER}}
     searched = {k: given[k] for k in select.PAPER}
     config = _config(given, fixed)
+    no_search = paper or not select_settings
     config = select.with_imitation_defaults(
         corpus, config, {"label_smoothing": smoothing}, paper)
-    if from_task:
-        note(task_settings.describe(task, from_task))
-    extra = {"task_settings": {"task": task, "settings": from_task}} if task else {}
+    measure = ev is not None and not no_search and evidence.held_out(ev, config)
     with writing_model(corpus.path, check_name(model, "model")):  # one writer per model id
         metrics = _train(corpus, config, model, overwrite,
-                         select.open_settings(corpus, config, searched, paper),
-                         select.why_no_search(corpus, config, searched, paper), extra,
-                         progress, note)
+                         select.open_settings(corpus, config, searched, no_search),
+                         select.why_no_search(corpus, config, searched, paper,
+                                              select_settings), extra, progress, note,
+                         measure)
     return Trained(corpus.name, model, metrics, config,
                    smoothing is None and config.label_smoothing > 0)
 
 
 def _train(corpus, config: BeliefConfig, model: str, overwrite: bool, open_names: list[str],
            defaults_note: str | None, extra: dict, progress: Progress | None,
-           note: Callable[[str], None]) -> dict:
+           note: Callable[[str], None], measure: bool = False) -> dict:
     """Check the inputs (and the corpus's content hash), then train; with ``open_names``,
     choose those settings by validation first (aoc_cli.belief.select). ``extra``: more
-    entries of the saved metrics (the task's settings)."""
+    entries of the saved metrics (the settings the evidence decided); ``measure``: decide the
+    controller's epsilon on the validation episodes after training
+    (aoc_cli.belief.epsilon_rule), into ``extra``'s ``controller`` before the model is
+    saved."""
     name = corpus.name
     fqe = config.mode == "value" and config.value == "fqe"
     if fqe and progress is not None:
         progress(0, 1, f"fitted Q evaluation of {name}")
-    from aoc_cli.belief.train import pick_device, train_model  # lazy: torch, once settings are good
-    pick_device(config.device)  # a GPU asked for where torch sees none: before the targets
+    # lazy: torch (and FAISS, for the epsilon rule), once the settings are good
+    from aoc_cli.belief import epsilon_rule, stream, train as trainer
+    trainer.pick_device(config.device)  # a GPU asked for where torch sees none: before the targets
     prepared = prepare(corpus, config, model, overwrite, progress=progress if fqe else None)
     corpus.verify_content()  # the columns prepare read are cached: hashing reads nothing again
 
@@ -118,8 +134,10 @@ def _train(corpus, config: BeliefConfig, model: str, overwrite: bool, open_names
                                        prepared, progress, extra)
     if defaults_note:
         extra = {**extra, "selection": {"searched": [], "why": defaults_note}}
-    return train_model(corpus, config, model, overwrite=overwrite, progress=progress,
-                       prepared=prepared, extra=extra or None)
+    inspect = epsilon_rule.recording_hook(corpus, config.seed, extra) \
+        if measure and not stream.streams(corpus, config) else None
+    return trainer.train_model(corpus, config, model, overwrite=overwrite, progress=progress,
+                               prepared=prepared, extra=extra or None, inspect=inspect)
 
 
 def duration(seconds: float) -> str:

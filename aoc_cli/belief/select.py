@@ -30,7 +30,8 @@ loss is not: on the maze (19,138 rows) every candidate had a validation R^2 of 0
 kept width 256 and its weight decay, and AOC on that belief failed every episode (success 0.0,
 1.0 with the paper's settings; docs/design.md "Settings chosen on small logs"). So value-mode
 models (every belief), continuous imitation, corpora over the limit and ``--paper`` take the
-paper's value (or the task's own, aoc_cli.belief.task_settings) for whatever is open.
+paper's value (or the one the log's evidence decides, aoc_cli.belief.evidence) for whatever is
+open; ``--no-select`` skips the search.
 
 After training, :func:`baseline_check` says when the model is no better than predicting the
 majority action (discrete) or the mean (continuous, value) on the held-out episodes.
@@ -107,13 +108,16 @@ def with_imitation_defaults(corpus, config: BeliefConfig, given: dict,
     return replace(config, label_smoothing=LABEL_SMOOTHING if on else 0.0)
 
 
-def why_no_search(corpus, config: BeliefConfig, given: dict, paper: bool) -> str | None:
+def why_no_search(corpus, config: BeliefConfig, given: dict, paper: bool,
+                  select_settings: bool = True) -> str | None:
     """Why open settings took the paper's values (None when nothing was open)."""
     left = [k for k in PAPER if given.get(k) is None]
     if not left:
         return None
     if paper:
-        return "the paper's settings, as asked (no task settings, no selection)"
+        return "the paper's settings, as asked (no rules of the log's evidence, no selection)"
+    if not select_settings:
+        return "the paper's settings for those left open, as asked (--no-select)"
     if config.mode != "imitation":
         return ("value mode: the paper's settings (settings are chosen by validation only "
                 "when imitating discrete actions; a lower value loss is not a better "
@@ -141,7 +145,7 @@ def abc_validation(actions: np.ndarray, n_actions: int, k: int | None = None):
 
     actions = np.asarray(actions, dtype=np.int64)
 
-    def inspect(net, inputs, data) -> dict:
+    def inspect(net, inputs, data, _norm=None) -> dict:
         rows = torch.as_tensor(np.concatenate([data.train_rows, data.val_rows]),
                                device=inputs.obs.device)
         with torch.no_grad():

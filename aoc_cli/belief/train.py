@@ -69,9 +69,10 @@ def train_model(corpus, config: BeliefConfig, model_id: str = DEFAULT_MODEL,
     ``save=False`` trains and returns the
     metrics without writing the model; ``extra`` is merged into the saved metrics. ``prepared`` is the
     result of :func:`aoc_cli.belief.data.prepare` for the same arguments, when already known.
-    ``inspect(net, inputs, data)``, when given, is called with the trained network (best
-    weights, eval mode), the encoded corpus and the split; its dict is merged into the metrics
-    (the model selection's validation of the decomposition, aoc_cli.belief.select).
+    ``inspect(net, inputs, data, norm)``, when given, is called with the trained network (best
+    weights, eval mode), the encoded corpus, the split and the inputs' normalisation; its dict
+    is merged into the metrics (the model selection's validation of the decomposition,
+    aoc_cli.belief.select; the held-out epsilon rule, aoc_cli.belief.epsilon_rule).
     """
     if streams(corpus, config):  # a large corpus: trained a block of rows at a time
         return train_streaming(corpus, config, model_id, overwrite, progress, save=save,
@@ -103,7 +104,7 @@ def _train(corpus, config: BeliefConfig, model_id: str, data: TrainingData,
     net.eval()
     metrics = _final_metrics(net, problem, tr, va, corpus, config, model_id, stopping)
     if inspect is not None:
-        metrics.update(inspect(net, problem.inputs, data))
+        metrics.update(inspect(net, problem.inputs, data, problem.norm))
     if config.belief == "reward":
         problem.norm, head = refit_value_head(net, problem.inputs, data.values, data.train_rows,
                                               data.val_rows, problem.norm, device)

@@ -18,7 +18,7 @@ from typing import Annotated, List, Optional
 import typer
 
 from aoc_cli.belief.config import BeliefConfig
-from aoc_cli.cli.fields import TASK, choices_of, from_field
+from aoc_cli.cli.fields import MODEL, choices_of, from_field
 from aoc_cli.control.config import ControllerConfig
 from aoc_cli.errors import AocError
 from aoc_cli.index.config import IndexConfig
@@ -100,24 +100,24 @@ IndexOption = Annotated[str, typer.Option(
                                   "(re-sampled or sub-sampled rows).")]
 
 EpsilonOption = Annotated[Optional[float], from_field(
-    ControllerConfig, "epsilon", given=TASK, annotated=True)]
+    ControllerConfig, "epsilon", given=MODEL, annotated=True)]
 
-KOption = Annotated[Optional[int], from_field(ControllerConfig, "k", given=TASK, annotated=True)]
+KOption = Annotated[Optional[int], from_field(ControllerConfig, "k", given=MODEL, annotated=True)]
 
 ResidualCapOption = Annotated[Optional[float], from_field(
-    ControllerConfig, "residual_cap", given=TASK, annotated=True)]
+    ControllerConfig, "residual_cap", given=MODEL, annotated=True)]
 
 MinSupportOption = Annotated[Optional[float], from_field(
-    ControllerConfig, "min_support", given=TASK, annotated=True)]
+    ControllerConfig, "min_support", given=MODEL, annotated=True)]
 
 SupportPenaltyOption = Annotated[Optional[float], from_field(
-    ControllerConfig, "support_penalty", given=TASK, annotated=True)]
+    ControllerConfig, "support_penalty", given=MODEL, annotated=True)]
 
 RowSmoothingOption = Annotated[Optional[float], from_field(
-    ControllerConfig, "row_smoothing", given=TASK, annotated=True)]
+    ControllerConfig, "row_smoothing", given=MODEL, annotated=True)]
 
 CandidatesOption = Annotated[Optional[int], from_field(
-    ControllerConfig, "candidates", "--candidates", "-K", given=TASK, annotated=True)]
+    ControllerConfig, "candidates", "--candidates", "-K", given=MODEL, annotated=True)]
 
 SamplerOption = Annotated[SamplerName, from_field(ControllerConfig, "sampler", annotated=True)]
 

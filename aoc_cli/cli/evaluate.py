@@ -20,6 +20,7 @@ from aoc_cli.cli.common import (
     MinSupportOption,
     ModelOption,
     RayAddressOption,
+    ResidualCapOption,
     RowSmoothingOption,
     SupportPenaltyOption,
     WithoutEpisodesOption,
@@ -58,6 +59,7 @@ def register(app: typer.Typer) -> None:
         k: KOption = None,
         min_support: MinSupportOption = None,
         support_penalty: SupportPenaltyOption = None,
+        residual_cap: ResidualCapOption = None,
         row_smoothing: RowSmoothingOption = None,
         exact: Annotated[Optional[bool], typer.Option(
             "--exact/--ivf", help="Search the index exactly for every step, or an IVF structure "
@@ -88,7 +90,7 @@ def register(app: typer.Typer) -> None:
                 name, data, store=state.store, baselines=[b.strip() for b in baselines.split(",")],
                 steps_file=steps_file, model=model, index_id=index_id, candidates=candidates,
                 epsilon=epsilon, k=k, min_support=min_support, support_penalty=support_penalty,
-                row_smoothing=row_smoothing, exact=exact, seed=seed, ope=ope_names,
+                residual_cap=residual_cap, row_smoothing=row_smoothing, exact=exact, seed=seed, ope=ope_names,
                 propensity=propensity, ope_gamma=ope_gamma,
                 fqe_steps=fqe_steps, fqe_refits=fqe_refits, fqe_processes=fqe_processes,
                 workers=workers,

@@ -2,11 +2,12 @@
 (:func:`aoc_cli.settings.setting`): the flag, the help, the range, the choices and the default
 shown all come from there, so ``--help`` cannot drift from the library's settings.
 
->>> epsilon: Optional[float] = from_field(ControllerConfig, "epsilon", given=TASK)
+>>> epsilon: Optional[float] = from_field(ControllerConfig, "epsilon", given=MODEL)
 >>> batch_size: int = from_field(BeliefConfig, "batch_size")
 
-``given``: the option's value is None unless given, and then means this (``TASK``: the
-task's setting, else the field's default); without it the option's default is the field's.
+``given``: the option's value is None unless given, and then means this (``MODEL``: the
+setting saved with the model, else the field's default; ``EVIDENCE``: decided by ``aoc train``
+from the log's evidence); without it the option's default is the field's.
 """
 
 from __future__ import annotations
@@ -19,9 +20,12 @@ import typer
 from aoc_cli.cli.errors import flag
 from aoc_cli.settings import bounds_text, param_name
 
-#: ``given=TASK``: None means the task's setting (``Task.controller`` / ``Task.training``),
-#: else the field's default.
-TASK = "the task's, else {default}"
+#: ``given=EVIDENCE``: None means the value ``aoc train`` decides from the log's evidence
+#: (aoc_cli.belief.evidence), else the field's default.
+EVIDENCE = "decided from the log's evidence where a rule applies (docs/design.md), else {default}"
+#: ``given=MODEL``: None means the controller setting saved with the model (decided by ``aoc
+#: train`` from the log's evidence), else the field's default.
+MODEL = "the model's (decided by aoc train from the log's evidence), else {default}"
 
 
 def field_of(cls, name: str) -> Field:

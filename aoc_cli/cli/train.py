@@ -1,6 +1,6 @@
 """`aoc train NAME`: learn the belief model of a corpus (value mode: AOC; imitation: ABC).
 Parses and prints only; the work is in :func:`aoc_cli.api.train`. Every option but
-``--model``, ``--paper`` and ``--overwrite`` is a :class:`~aoc_cli.belief.config.BeliefConfig`
+``--model``, ``--paper``, ``--no-select`` and ``--overwrite`` is a :class:`~aoc_cli.belief.config.BeliefConfig`
 setting: its help, range, choices and default come from the field (:mod:`aoc_cli.cli.fields`).
 """
 
@@ -15,7 +15,7 @@ from aoc_cli.belief import select
 from aoc_cli.belief.config import BeliefConfig
 from aoc_cli.cli.common import (BeliefKind, BeliefMode, ClassWeight, CorpusArgument, Device,
                                 FormatOption, choice, state)
-from aoc_cli.cli.fields import TASK, from_field
+from aoc_cli.cli.fields import EVIDENCE, from_field
 from aoc_cli.report import train_view
 from aoc_cli.report.output import ProgressBar, message, resolve_format, write_object
 from aoc_cli.settings import SMALL_LOG_ROWS
@@ -27,7 +27,8 @@ _SMALL = f"when imitating discrete actions on up to {SMALL_LOG_ROWS:,} rows"
 def _searched(name: str) -> str:
     """The default shown for a setting chosen by validation on a small log."""
     values = ", ".join(f"{v:g}" for v in dict(select.SEARCH)[name])
-    return f"the task's, else chosen by validation among {values} {_SMALL}, else {{default}}"
+    return (f"decided from the log's evidence, else chosen by validation among {values} "
+            f"{_SMALL}, else {{default}}")
 
 
 def _option(name: str, *flags: str, given: str | None = None):
@@ -42,15 +43,15 @@ def train(
     name: CorpusArgument,
     model: Annotated[str, typer.Option(
         "--model", help="Model id to write (models/<ID>/ of the corpus).")] = DEFAULT_MODEL,
-    mode: Optional[BeliefMode] = _option("mode", given=TASK),
-    belief: Optional[BeliefKind] = _option("belief", given=TASK),
+    mode: Optional[BeliefMode] = _option("mode", given=EVIDENCE),
+    belief: Optional[BeliefKind] = _option("belief", given=EVIDENCE),
     critic_steps: Optional[int] = _option("critic_steps"),
     critic_bc_weight: float = _option("critic_bc_weight"),
-    value: Optional[str] = _option("value", given=TASK),
-    gamma: Optional[float] = _option("gamma", given=TASK),
+    value: Optional[str] = _option("value", given=EVIDENCE),
+    gamma: Optional[float] = _option("gamma", given=EVIDENCE),
     history_length: Optional[int] = _option("history_length",
                                             given=_searched("history_length")),
-    dynamics_weight: Optional[float] = _option("dynamics_weight", given=TASK),
+    dynamics_weight: Optional[float] = _option("dynamics_weight", given=EVIDENCE),
     belief_dim: int = _option("belief_dim"),
     hidden: Optional[int] = _option("hidden", given=_searched("hidden")),
     weight_decay: Optional[float] = _option("weight_decay", given=_searched("weight_decay")),
@@ -60,7 +61,10 @@ def train(
         "label_smoothing", given=f"{select.LABEL_SMOOTHING:g} {_SMALL}, else {{default}}"),
     paper: bool = typer.Option(False, "--paper", help=f"The paper's settings for everything "
                                                       f"not given ({_PAPER}): no selection, "
-                                                      "not the task's own settings."),
+                                                      "no rules of the log's evidence."),
+    no_select: bool = typer.Option(False, "--no-select",
+                                   help="Choose nothing by validation on held-out episodes "
+                                        "(the rules of the log's evidence still decide)."),
     epochs: int = _option("max_epochs"),
     batch_size: int = _option("batch_size"),
     lr: float = _option("lr"),
@@ -84,7 +88,7 @@ def train(
             batch_size=batch_size, lr=lr, patience=patience, val_fraction=val_fraction,
             seed=seed, threads=threads, device=choice(device), dropout=dropout,
             class_weight=choice(class_weight),
-            paper=paper, overwrite=overwrite, progress=bar, log=message)
+            paper=paper, no_select=no_select, overwrite=overwrite, progress=bar, log=message)
     for line in train_view.notes(trained):
         message(line)
     write_object(train_view.shown(trained, fmt), fmt, title=f"aoc train {name} --model {model}")

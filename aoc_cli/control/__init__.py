@@ -24,6 +24,8 @@ _WHERE = {
     "explain_logged_step": "run",
     "explain_query": "run",
     "flags_against": "monitor",
+    "given_settings": "config",
+    "model_controller": "session",
     "model_free_session": "session",
     "open_session": "session",
     "parse_query": "run",

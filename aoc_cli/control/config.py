@@ -1,7 +1,9 @@
-"""The controller's settings, with the paper's defaults."""
+"""The controller's settings, with the paper's defaults; a model carries its own
+(:meth:`ControllerConfig.for_model`)."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 from aoc_cli.settings import Settings, setting
@@ -96,14 +98,21 @@ class ControllerConfig(Settings):
                                      "mean by this many stds.")
 
     @classmethod
-    def for_task(cls, task: str | None, **flags) -> "ControllerConfig":
-        """The settings for ``task``: the ``flags`` given (None: not given) over the built-in
-        task's own settings (``Task.controller``; none for another name, an ingested corpus's
-        ``""`` or None) over the paper's defaults."""
-        # the command line reads these fields' help at every start, before any task is known:
-        # lazy: gymnasium (the environments), for a task's settings only
-        from aoc_cli.envs import TASKS
-
-        settings = dict(getattr(TASKS.get(task), "controller", None) or {}) if task else {}
-        settings.update({k: v for k, v in flags.items() if v is not None})
+    def for_model(cls, saved: Mapping | None = None, **given) -> "ControllerConfig":
+        """The settings of a decision with a model: those ``given`` (None: not given) over the
+        settings saved with the model (``saved``: its config's ``metrics.controller``, decided
+        by ``aoc train`` from the log's evidence, aoc_cli.belief.evidence) over the paper's
+        defaults. A model trained without them (by the library's ``train_model``, or before
+        they were recorded) has none: the paper's."""
+        settings = {k: v for k, v in (saved or {}).items() if k in cls.__dataclass_fields__}
+        settings.update({k: v for k, v in given.items() if v is not None})
         return cls(**settings)
+
+
+def given_settings(**flags) -> dict:
+    """The controller settings given (``flags``: field -> value, None when not given),
+    checked now (an AocError names a bad one before any store is read) and returned without
+    the Nones: what :func:`aoc_cli.control.open_session` lays over the model's own."""
+    given = {k: v for k, v in flags.items() if v is not None}
+    ControllerConfig(**given)
+    return given

@@ -4,6 +4,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -67,12 +68,17 @@ class ModelFreeSession:
 
 
 def open_session(corpus: Corpus, model_id: str | None = None, index_id: str = DEFAULT_INDEX,
-                 config: ControllerConfig | None = None, selection: np.ndarray | None = None,
-                 seed: int = 0, action_space: dict | None = None) -> Session:
+                 config: ControllerConfig | Mapping | None = None,
+                 selection: np.ndarray | None = None, seed: int = 0,
+                 action_space: dict | None = None) -> Session:
     """Load the model and index of ``corpus`` and build a controller; ``selection`` an (N,)
-    bool row mask (:func:`aoc_cli.rows.row_selection`)."""
-    config = config or ControllerConfig()
+    bool row mask (:func:`aoc_cli.rows.row_selection`). ``config``: a
+    :class:`ControllerConfig` is taken whole; a mapping holds the settings given, laid over
+    the settings saved with the model (:meth:`ControllerConfig.for_model`); None: the
+    model's."""
     index = load_index(corpus, model_id, index_id)
+    if not isinstance(config, ControllerConfig):
+        config = ControllerConfig.for_model(model_controller(index.model), **(config or {}))
     if config.row_smoothing is not None and not (index.model.mode == "imitation"
                                                   and corpus.discrete):
         warn(f"{param('row_smoothing')} applies to ABC's scores (imitation of discrete "
@@ -88,6 +94,12 @@ def open_session(corpus: Corpus, model_id: str | None = None, index_id: str = DE
     controller = Controller(corpus, index, config, selection=selection, bc_model=bc_model,
                             seed=seed, action_space=action_space)
     return Session(corpus, index.model, index, controller, action_space)
+
+
+def model_controller(model) -> dict:
+    """The controller settings saved with ``model`` (a BeliefModel): decided by ``aoc train``
+    (``metrics.controller`` of its config.json); {} when none were recorded."""
+    return dict((model.meta.get("metrics") or {}).get("controller") or {})
 
 
 def model_free_session(corpus: Corpus, action_space: dict | None = None) -> ModelFreeSession:

@@ -46,14 +46,6 @@ class Task:
     #: The behaviours ``collect`` can run (``mix``: the task's policies; ``replay``: an agent
     #: that starts random and improves, aoc_cli/envs/replay.py).
     behaviours: tuple[str, ...] = ("mix",)
-    #: Controller settings this task is run with unless the user overrides them (e.g. the
-    #: maze's 2-d uniform candidates are mostly off the experts' paths: epsilon 0.1).
-    controller: dict = field(default_factory=dict)
-    #: Training settings ``aoc train`` uses for a corpus collected from this task unless the
-    #: user gives the flag, keyed by the model they were measured with (``all``, a belief kind
-    #: or ``imitation``; BeliefConfig fields: aoc_cli.belief.task_settings), e.g.
-    #: pendulum-het-upright's value belief balances at gamma 0.9 (docs/belief.md).
-    training: dict = field(default_factory=dict)
 
     @property
     def defines_success(self) -> bool:
@@ -122,17 +114,6 @@ class Episode:
         """The first ``n`` rows (a truncated episode: no longer terminal)."""
         return Episode(self.observations[:n], self.actions[:n], self.rewards[:n], False,
                        self.tags, None, None, complete=False)
-
-
-def collected_task(corpus) -> str:
-    """The built-in task a stored corpus was collected from, as its manifest's sources record
-    it (``aoc collect`` writes ``{"kind": "collect", "task": ...}``); ``""`` for a corpus
-    ingested from a file or appended from several tasks."""
-    sources = (getattr(corpus, "manifest", None) or {}).get("sources", [])
-    tasks = {src.get("task") or "" for src in sources if src.get("kind") == "collect"}
-    if len(tasks) != 1 or any(src.get("kind") != "collect" for src in sources):
-        return ""
-    return tasks.pop()
 
 
 def budget(steps: int | None, episodes: int | None, default_steps: int | None,

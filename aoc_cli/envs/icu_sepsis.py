@@ -330,13 +330,6 @@ def make_sepsis_env(strategy: str = "mean", render_mode=None) -> gymnasium.Env:
 _plot, _trajectory = step_series("icu-sepsis", "SOFA score", -1)
 
 
-#: AOC's settings on these tasks (docs/design.md, "Support"; docs/results.md, "icu-sepsis"):
-#: states repeat exactly, so a logged (state, action) decomposes with residual 0 and the cap
-#: (1% of the typical p90 residual) keeps the candidates the corpus holds; of those, the best
-#: by v_hat shrunk by the episodes behind it (v_hat - 5 sigma_v / sqrt(support)).
-CONTROLLER = {"residual_cap": 0.01, "support_penalty": 5.0}
-
-
 def _task(name: str, gym_id: str, strategy: str, description: str) -> Task:
     return Task(
         name=name, gym_id=gym_id, description=description, horizon=MAX_STEPS,
@@ -346,13 +339,6 @@ def _task(name: str, gym_id: str, strategy: str, description: str) -> Task:
                                           name),
         plot_fn=_plot, trajectory_fn=_trajectory, default_episodes=DEFAULT_EPISODES,
         extra={"strategy": strategy, "choose_policy": True},
-        controller=dict(CONTROLLER),
-        # Markov in its observation: the value belief reads no history, so AOC's policy is a
-        # state policy (valued exactly; tests/control/test_icu_sepsis_quality.py). Each row's
-        # value is the clinicians' Q by fitted Q evaluation through the log, undiscounted as
-        # the task's survival is: the Monte-Carlo return-to-go is too noisy here (10k
-        # episodes: validation R^2 0.02 against 0.90; docs/results.md, "icu-sepsis")
-        training={"value": {"history_length": 0, "value": "fqe", "gamma": 1.0}},
     )
 
 

@@ -268,11 +268,6 @@ def _task(name: str, gym_id: str, upright: bool) -> Task:
         plot_fn=plot_trajectories, trajectory_fn=trajectory,
         default_steps=100_000, start=(0.0, 0.0) if upright else None, goal=(0.0, 0.0),
         extra={"systems": SYSTEMS, "evaluation_system": "normal"},
-        # upright, the value belief balances with the return-to-go at gamma 0.9 (100k rows:
-        # -0.021, 8 of 8; at 0.99: -407, 1 of 8; docs/belief.md); measured for the value
-        # belief only. The random start has no setting measured to swing up with the value
-        # belief, so it keeps the paper's
-        training={"value": {"gamma": 0.9}} if upright else {},
     )
 
 

@@ -299,5 +299,4 @@ TASKS = [Task(
     horizon=STAY[1], policies=CLINICIANS, make_fn=lambda **kw: gymnasium.make(GYM_ID, **kw),
     collect_fn=collect_data, plot_fn=_plot, trajectory_fn=_trajectory,
     default_episodes=DEFAULT_EPISODES, extra={"write_csv": write_csv, "reward_free": True},
-    training={"all": {"mode": "imitation"}},  # reward-free: ABC, strictly batch imitation
 )]

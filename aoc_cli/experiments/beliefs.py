@@ -47,7 +47,7 @@ def prepare_beliefs(ctx, scale: dict, corpus, methods, seed: int) -> None:
             ctx.artefacts.index(corpus, kind)
 
 
-def belief_session(ctx, method: str, corpus, env, task: str, seed: int):
+def belief_session(ctx, method: str, corpus, env, seed: int):
     """The AOC session of belief row ``method`` (its own model and index)."""
-    return session(corpus, env, task, model_id=BELIEF_ROWS[method], seed=seed,
+    return session(corpus, env, model_id=BELIEF_ROWS[method], seed=seed,
                    **ctx.aoc_config)

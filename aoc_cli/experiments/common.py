@@ -46,12 +46,12 @@ class Context:
         return [m for m in self.methods]
 
 
-def session(corpus, env, task: str | None = None, model_id: str = DEFAULT_MODEL,
-            index_id: str = DEFAULT_INDEX, seed: int = 0, selection=None, **config):
-    """An AOC session on ``corpus``: ControllerConfig fields ``config`` over the task's own
-    controller settings (as `aoc rollout --env TASK` uses them) over the paper's defaults."""
-    return open_session(corpus, model_id, index_id, ControllerConfig.for_task(task, **config),
-                        selection, seed, action_space_of(env))
+def session(corpus, env, model_id: str = DEFAULT_MODEL, index_id: str = DEFAULT_INDEX,
+            seed: int = 0, selection=None, **config):
+    """An AOC session on ``corpus``: the experiment's ControllerConfig fields ``config`` over
+    the paper's defaults (the paper's experiments state their controller)."""
+    return open_session(corpus, model_id, index_id, ControllerConfig(**config), selection,
+                        seed, action_space_of(env))
 
 
 def belief_config(scale: dict, mode: str = "value", seed: int = 0, **overrides):

@@ -60,9 +60,9 @@ def _run(ctx: Context, scale: dict, cell: Cell, corpus) -> dict:
                                     **data_values(corpus), note=f"corpus {corpus.name}")]}
     env = make_task_env("lunar", scale)
     if method in BELIEF_ROWS:
-        s = belief_session(ctx, method, corpus, env, "lunar", seed)
+        s = belief_session(ctx, method, corpus, env, seed)
     else:
-        s = session(corpus, env, "lunar", seed=seed, **ctx.aoc_config)
+        s = session(corpus, env, seed=seed, **ctx.aoc_config)
     run = ctx.runner.run("aoc" if method in BELIEF_ROWS else method, s, env,
                          ctx.n_episodes(scale["episodes"]), seed,
                          label=f"{method} lunar {setting} seed {seed}")

@@ -9,8 +9,9 @@
   x = 8 (from x < 8 to x >= 8): the crossing's y, interpolated on that step's segment, is the
   upper gate when y > 11.625 (half way between the gap around y = 8, [7.25, 8.75], and the gap
   at the top, [14.5, 16]) and the lower gate otherwise; a rollout that never crosses counts in
-  neither. Counts are per 100 rollouts. The raw-feature kNN runs at x1 for comparison. AOC uses
-  the maze task's own controller settings (epsilon 0.1, as `aoc rollout --env maze` does).
+  neither. Counts are per 100 rollouts. The raw-feature kNN runs at x1 for comparison. AOC runs
+  at epsilon 0.1 (:data:`MAZE_EPSILON`, what ``aoc train`` decides on a maze log's held-out
+  episodes: aoc_cli.belief.epsilon_rule).
 * ``two-gates`` (paper Table "epsilon contributes to the conservative behaviours"): AOC with
   epsilon in {0.1, 0.3, 0.5, 0.7}; the return and a PNG of the trajectories per epsilon.
 """
@@ -29,6 +30,8 @@ from aoc_cli.experiments.results import result_row
 from aoc_cli.store import DEFAULT_INDEX, DEFAULT_MODEL
 
 RATES = (4.0, 3.0, 2.0, 1.0, 0.75, 0.5, 0.25)
+#: maze-adapt's epsilon (module docstring).
+MAZE_EPSILON = 0.1
 EPSILONS = (0.1, 0.3, 0.5, 0.7)
 WALL_X = 8.0
 GATE_SPLIT = (8.75 + 14.5) / 2.0  # 11.625
@@ -138,7 +141,8 @@ def _maze_prepare(ctx: Context, scale: dict, prep: tuple):
 def _maze_run(ctx: Context, scale: dict, cell: Cell, corpus) -> dict:
     seed, method, (rate,) = cell.seed, cell.method, cell.args
     env = make_task_env("maze", scale)
-    s = session(corpus, env, "maze", index_id=_index_id(rate), seed=seed, **ctx.aoc_config)
+    s = session(corpus, env, index_id=_index_id(rate), seed=seed,
+                **{"epsilon": MAZE_EPSILON, **ctx.aoc_config})
     run = ctx.runner.run(method, s, env, ctx.n_episodes(scale["episodes"]), seed,
                          label=f"maze x{rate:g} seed {seed}")
     values = row_values(run)
@@ -177,7 +181,7 @@ def _two_gates_prepare(ctx: Context, scale: dict, prep: tuple):
 def _two_gates_run(ctx: Context, scale: dict, cell: Cell, corpus) -> dict:
     seed, (eps,) = cell.seed, cell.args
     env = make_task_env("two-gates", scale)
-    s = session(corpus, env, "two-gates", seed=seed, **{**ctx.aoc_config, "epsilon": eps})
+    s = session(corpus, env, seed=seed, **{**ctx.aoc_config, "epsilon": eps})
     run = ctx.runner.run("aoc", s, env, ctx.n_episodes(scale["episodes"]), seed,
                          label=f"two-gates epsilon {eps:g} seed {seed}")
     values = row_values(run)

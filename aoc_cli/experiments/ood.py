@@ -143,14 +143,14 @@ def _run(ctx: Context, scale: dict, cell: Cell, corpus) -> dict:
     env = make_task_env(task, spec)
     rows, curves = [], {}
     n = ctx.n_episodes(scale["episodes"])
-    s = session(corpus, env, task, seed=seed, **ctx.aoc_config)
+    s = session(corpus, env, seed=seed, **ctx.aoc_config)
     ref = ctx.runner.run("aoc", s, env, n, seed + REFERENCE_SEEDS,
                          label=f"{task} clean reference seed {seed}")
     band = None
     if ref.status == "ok":
         band = session_reference_band(s, [r.residuals for r in ref.results])
     for noise in (0.0, float(scale["noise"])):
-        s = session(corpus, env, task, seed=seed, **ctx.aoc_config)
+        s = session(corpus, env, seed=seed, **ctx.aoc_config)
         run = ctx.runner.run("aoc", s, env, n, seed,
                              noise_after=T if noise > 0 else None, noise_std=noise,
                              label=f"{task} noise {noise:g} seed {seed}")

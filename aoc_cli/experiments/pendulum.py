@@ -69,8 +69,8 @@ def _variant(ctx: Context, method: str, corpus, env, task: str, seed: int):
     (aoc-dynamics, aoc-critic, aoc-reward: its own model and index, bench/beliefs.py)."""
     if method == ORACLE:
         normal = row_selection(corpus, {"system": ["normal"]})
-        return session(corpus, env, task, seed=seed, selection=normal, **ctx.aoc_config)
-    return belief_session(ctx, method, corpus, env, task, seed)
+        return session(corpus, env, seed=seed, selection=normal, **ctx.aoc_config)
+    return belief_session(ctx, method, corpus, env, seed)
 
 
 def _k_values(d_b: int) -> list[int]:
@@ -125,7 +125,7 @@ def _het_run(ctx: Context, scale: dict, cell: Cell, corpus) -> dict:
                              label=f"{method} {task} {setting} seed {seed}")
         run.method = method
     else:
-        s = session(corpus, env, task, seed=seed, **ctx.aoc_config)
+        s = session(corpus, env, seed=seed, **ctx.aoc_config)
         run = ctx.runner.run(method, s, env, ctx.n_episodes(scale["episodes"]),
                              seed, label=f"{task} {setting} seed {seed}")
     return {"rows": [result_row("pendulum-het", task, method, setting, seed,
@@ -157,7 +157,7 @@ def _ablation_run(name: str):
         task, method, setting, seed = cell.key
         env = make_task_env(task, scale)
         model_id = DEFAULT_MODEL if method == "aoc" else "dynamics"
-        s = session(corpus, env, task, model_id=model_id, seed=seed,
+        s = session(corpus, env, model_id=model_id, seed=seed,
                     **{**ctx.aoc_config, **dict(cell.args)})
         run = ctx.runner.run("aoc", s, env, ctx.n_episodes(scale["episodes"]), seed,
                              label=f"{method} {task} {setting} seed {seed}")

@@ -3,9 +3,8 @@
 For each log size (episodes of the clinicians' policy, ``aoc collect icu-sepsis``) and seed:
 
 * **aoc** -- AOC as a user gets it: ``aoc train NAME`` and ``aoc index NAME`` with no flags
-  (run as commands: the settings it takes from the task or chooses from the log), and the
-  controller with the task's own settings (``ControllerConfig.for_task``, as ``aoc rollout
-  --env icu-sepsis``);
+  (run as commands: the settings they decide from the log's evidence), and the controller
+  with the settings saved with the model (as ``aoc explain`` and ``aoc rollout`` use them);
 * **knn** -- nearest-neighbour Q on the raw (observation, action) features, k = d_b + 1, with
   AOC's row values (the ``knn`` baseline of ``aoc rollout``);
 * **cql**, **bcq** -- d3rlpy's DiscreteCQL and DiscreteBCQ on the same features and rewards;
@@ -37,7 +36,6 @@ import numpy as np
 from aoc_cli.baselines import make_baseline
 from aoc_cli.baselines.offline_rl import OfflineRLConfig
 from aoc_cli.belief.fit import train_corpus
-from aoc_cli.control import ControllerConfig
 from aoc_cli.envs import collect, make_env
 from aoc_cli.envs.icu_sepsis import STRATEGIES
 from aoc_cli.envs.icu_sepsis import tables as sepsis_tables
@@ -114,7 +112,7 @@ def run_size(store, task: str, episodes: int, seed: int, cfg: dict, methods: lis
     if needs_session:
         started = time.perf_counter()
         metrics = train_aoc(store.root, name, seed=seed)
-        session = open_session(corpus, DEFAULT_MODEL, config=ControllerConfig.for_task(task))
+        session = open_session(corpus, DEFAULT_MODEL)  # the model's own controller settings
         L = session.history_length
         train_seconds = time.perf_counter() - started
         chosen = (metrics.get("selection") or {}).get("chosen") or {}

@@ -6,7 +6,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from aoc_cli.belief import select
+from aoc_cli.belief import evidence, select
+from aoc_cli.belief.evidence import Evidence
 
 if TYPE_CHECKING:  # an annotation only: aoc --help (which imports this view) loads no training
     from aoc_cli.belief.fit import Trained
@@ -27,6 +28,13 @@ def notes(trained: Trained) -> list[str]:
     out.append(f"trained {trained.corpus}/{trained.model}: {metrics['mode']} "
                f"({metrics.get('belief', 'value')} belief), {metrics['epochs']} {unit} (best "
                f"{metrics['best_epoch']}), {score}, {metrics['seconds']:.0f} s")
+    settings = metrics.get("settings")
+    if settings:
+        out.append(f"the log's evidence ({evidence.summary(Evidence(**settings['evidence']))}; "
+                   f"read in {settings['seconds']:.1f} s) decided what no flag gave:")
+        for r in settings["decided"]:
+            cost = f" ({r['seconds']:.1f} s)" if "seconds" in r else ""
+            out.append(f"  {evidence.describe([r])[0]}{cost}")
     chosen = _chosen(metrics)
     if chosen:
         out.append("chose " + ", ".join(f"{k} {v}" for k, v in chosen["chosen"].items()
@@ -49,8 +57,8 @@ def notes(trained: Trained) -> list[str]:
 
 
 def shown(trained: Trained, fmt: str) -> dict:
-    """The metrics as printed: in a table, the selection and the task's settings as one line
-    each (the JSON output and config.json keep them whole)."""
+    """The metrics as printed: in a table, the selection, the settings the log's evidence
+    decided and the controller's as one line each (the JSON output and config.json keep them whole)."""
     metrics = shown = trained.metrics
     chosen = _chosen(metrics)
     if fmt == "table" and chosen:
@@ -58,8 +66,10 @@ def shown(trained: Trained, fmt: str) -> dict:
                                                    chosen.get("chosen", {}).items())}
     if fmt == "table" and not chosen and "selection" in metrics:
         shown = {**metrics, "selection": metrics["selection"]["why"]}
-    if fmt == "table" and "task_settings" in metrics:
-        own = metrics["task_settings"]
-        shown = {**shown, "task_settings": f"{own['task']}: " + (", ".join(
-            f"{k} {v}" for k, v in own["settings"].items()) or "none")}
+    if fmt == "table" and "settings" in metrics:
+        shown = {**shown, "settings": ", ".join(
+            f"{r['setting']} {r['value']}" for r in metrics["settings"]["decided"]) or "none"}
+    if fmt == "table" and "controller" in metrics:
+        shown = {**shown, "controller": ", ".join(
+            f"{k} {v}" for k, v in metrics["controller"].items()) or "the paper's"}
     return shown

@@ -8,7 +8,7 @@ residual filter, the residual cap, the support penalty) does what (docs/results.
 For a corpus with a trained value model of history length 0 and its index (as ``aoc bench
 icu-sepsis`` leaves them in its ``--bench-store``), decides every live state's observation once
 under each rule and values that state policy exactly over the package's tables
-(``aoc_cli.envs.icu_sepsis.tables``). Rules: the task's (``ControllerConfig.for_task``), the
+(``aoc_cli.envs.icu_sepsis.tables``). Rules: the model's (``ControllerConfig.for_model``), the
 paper's (epsilon 0.5, no cap, no support rule), the cap without the penalty, the penalty
 without the cap. Prints one JSON row per rule: exact value, the share of live states where the
 dose is inadmissible and the expected inadmissible decisions per patient (under
@@ -26,18 +26,20 @@ import time
 
 import numpy as np
 
-from aoc_cli.control import ControllerConfig, open_session
+from aoc_cli.control import ControllerConfig, model_controller, open_session
 from aoc_cli.envs.icu_sepsis import STRATEGIES, tables
 from aoc_cli.experiments import sepsis_policies as sp
 from aoc_cli.store import DEFAULT_MODEL, Store
 from aoc_cli.threads import one_thread
 
 
-def rules(task: str) -> dict:
-    own = ControllerConfig.for_task(task)
-    return {"task": own,
+def rules(saved: dict) -> dict:
+    """The model's own settings (``saved``: decided by ``aoc train``), the paper's, and each
+    of the model's two rules alone."""
+    own = ControllerConfig.for_model(saved)
+    return {"model": own,
             "paper": ControllerConfig(),
-            "cap, no penalty": ControllerConfig.for_task(task, support_penalty=0.0),
+            "cap, no penalty": ControllerConfig.for_model(saved, support_penalty=0.0),
             "penalty, no cap": ControllerConfig(support_penalty=own.support_penalty)}
 
 
@@ -55,7 +57,8 @@ def main() -> None:
     np.add.at(counts, (s, np.asarray(corpus.actions, np.int64)), 1)
     logged = counts > 0
     live = np.arange(sp.LIVE)
-    for name, config in rules(args.task).items():
+    saved = model_controller(open_session(corpus, args.model).model)
+    for name, config in rules(saved).items():
         started = time.perf_counter()
         session = open_session(corpus, args.model, config=config)
         decisions = []

@@ -26,7 +26,6 @@ wait_passively()  # OpenMP threads wait passively, as under the aoc command (aoc
 import numpy as np  # noqa: E402
 
 from aoc_cli.belief.targets import value_targets  # noqa: E402
-from aoc_cli.control.config import ControllerConfig  # noqa: E402
 from aoc_cli.control.episodes import run_episode  # noqa: E402
 from aoc_cli.envs import make_env  # noqa: E402
 from aoc_cli.control import open_session  # noqa: E402
@@ -46,7 +45,7 @@ def main() -> None:
     args = p.parse_args()
     corpus = Store.open(args.store).corpus(args.corpus)
     session = open_session(corpus, args.model, DEFAULT_INDEX,
-                           config=ControllerConfig.for_task(args.env), seed=args.seed)
+                           config=None, seed=args.seed)  # the model's own settings
     values = value_targets(corpus, args.value, args.gamma)
     session.index.values = values
     session.controller.value_std = float(np.std(values))

@@ -29,7 +29,7 @@ from dataclasses import replace
 import numpy as np
 
 from aoc_cli.belief.fqe import FQEConfig, fitted_q_values
-from aoc_cli.control import ControllerConfig, open_session
+from aoc_cli.control import open_session
 from aoc_cli.envs.icu_sepsis import tables
 from aoc_cli.experiments import sepsis_policies as sp
 from aoc_cli.store import DEFAULT_MODEL, Store, model_dir
@@ -91,7 +91,7 @@ def main() -> None:
         return table
 
     def report(name, v, val_q=None, seconds=0.0):
-        session = open_session(corpus, args.model, config=ControllerConfig.for_task("icu-sepsis"))
+        session = open_session(corpus, args.model)  # the model's own controller settings
         ctl = session.controller
         ctl.index.values = v
         ctl.value_std = float(np.std(v))

@@ -52,7 +52,8 @@ from aoc_cli.ope.policies import (  # noqa: E402  # noqa: E402
 from aoc_cli.store import DEFAULT_MODEL, CorpusData, Store, model_dir  # noqa: E402
 from aoc_cli.threads import one_thread  # noqa: E402
 
-#: The value model's settings ``aoc train NAME`` takes for icu-sepsis (Task.training).
+#: The value model's settings ``aoc train NAME`` decides for an icu-sepsis log (its
+#: observations recur: aoc_cli.belief.evidence, rule 2).
 TASK_VALUE = {"value": "fqe", "gamma": 1.0, "history_length": 0}
 
 

@@ -62,7 +62,7 @@ def test_every_option_that_mirrors_a_setting_shows_its_help_range_and_default(co
         if "choices" in item.metadata:
             choices = option.type_descriptor.annotation
             assert tuple(c.value for c in choices) == item.metadata["choices"], where
-        if option.default is None:  # not given: the task's setting, a rule, or the field's
+        if option.default is None:  # not given: the model's setting, a rule, or the field's
             assert isinstance(option.show_default, str), where
             assert _shown(item) in option.show_default, where
         else:
@@ -82,8 +82,9 @@ def test_help_prints_the_default_of_a_setting(aoc_inproc, monkeypatch):
     code, out, _ = aoc_inproc("rollout", "--help")
     assert code == 0
     text = " ".join(out.replace("│", " ").split())
-    assert "[default: (the task's, else 0.5)]" in text  # --epsilon
-    assert "[default: (the task's, else no cap)]" in text  # --residual-cap
+    model = "the model's (decided by aoc train from the log's evidence)"
+    assert f"[default: ({model}, else 0.5)]" in text  # --epsilon
+    assert f"[default: ({model}, else no cap)]" in text  # --residual-cap
     code, out, _ = aoc_inproc("train", "--help")
     assert re.search(r"--batch-size .*Mini-batch rows\. Range: >= 1\. \[default: 500\]",
                      " ".join(out.replace("│", " ").split()))

@@ -27,7 +27,7 @@ def test_imitation_mode_on_a_reward_free_discrete_corpus_reports_accuracy(aoc, c
 
 
 @pytest.mark.parametrize("args, says", [
-    (["free"], "no rewards.*--mode imitation"),
+    (["free", "--mode", "value"], "no rewards.*--mode imitation"),
     (["syn", "--value", "nope"], "unknown --value 'nope'"),
     (["syn", "--history-length", "-1"], "--history-length must be >= 0"),
     (["one"], "1 episode.*at least 2"),

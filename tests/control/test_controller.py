@@ -23,7 +23,7 @@ def corridor(tmp_path_factory):
 
 
 def maze_session(corpus, **kw):
-    config = ControllerConfig.for_task("maze", **kw)
+    config = ControllerConfig(**{"epsilon": 0.1, **kw})  # the maze's (aoc train decides it)
     return open_session(corpus, config=config, seed=0)
 
 
@@ -180,19 +180,18 @@ def test_residual_cap_must_be_positive():
         ControllerConfig(residual_cap=0.0)
 
 
-def test_task_defaults_come_from_one_place():
-    from aoc_cli.envs import TASKS
-
-    maze = ControllerConfig.for_task("maze")
-    assert maze.epsilon == TASKS["maze"].controller["epsilon"] != ControllerConfig().epsilon
-    # a flag given wins; a flag not given (None) leaves the task's setting
-    assert ControllerConfig.for_task("maze", epsilon=0.3, k=None).epsilon == 0.3
-    assert ControllerConfig.for_task("maze", k=None).k is None
-    # an ingested corpus ("") or an unknown gymnasium id: the paper's defaults
-    assert ControllerConfig.for_task("") == ControllerConfig.for_task("Pendulum-v1") == \
+def test_a_models_settings_under_the_flags_given():
+    saved = {"epsilon": 0.1, "residual_cap": 0.01}
+    own = ControllerConfig.for_model(saved)
+    assert (own.epsilon, own.residual_cap) == (0.1, 0.01) and own.k is None
+    # a flag given wins; a flag not given (None) leaves the model's setting
+    assert ControllerConfig.for_model(saved, epsilon=0.3, k=None).epsilon == 0.3
+    assert ControllerConfig.for_model(saved, k=None).k is None
+    # a model with none recorded: the paper's defaults
+    assert ControllerConfig.for_model(None) == ControllerConfig.for_model({}) == \
         ControllerConfig()
     with pytest.raises(AocError, match="^epsilon must be in") as err:
-        ControllerConfig.for_task("maze", epsilon=2.0)
+        ControllerConfig.for_model(saved, epsilon=2.0)
     # the library names its parameter; the command line shows the flag
     assert err.value.for_command_line().startswith("--epsilon must be in")
     with pytest.raises(AocError, match="^residual_cap must be > 0") as err:

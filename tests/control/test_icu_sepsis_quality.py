@@ -1,7 +1,9 @@
 """icu-sepsis and icu-sepsis-terminate end to end at CI size: a log of 1,000 clinician
-episodes, ``aoc train`` and ``aoc index`` with their defaults, the controller with the task's
-settings, and the exact value of its decisions (every live state decided once: a state policy,
-valued by one linear solve over the package's tables).
+episodes written as a user's plain file (an NPZ with the D4RL keys, no trace of the task:
+tests/plain_log.py) and ingested under another name, ``aoc train`` and ``aoc index`` with no
+flags, the controller with the settings saved with the model (decided from the log's evidence),
+and the exact value of its decisions (every live state decided once: a state policy, valued by
+one linear solve over the package's tables).
 
 Guards decision quality: AOC must beat the clinicians who wrote the log by the task's
 :data:`THRESHOLD`, with every decision backed by at most d_b + 1 named rows of named patients.
@@ -11,8 +13,7 @@ Sizes: docs/results.md, "icu-sepsis" (the bench at 1k, 10k and 50k episodes).
 import numpy as np
 import pytest
 
-from aoc_cli.control import ControllerConfig
-from aoc_cli.envs import icu_sepsis
+from aoc_cli.envs import collect, icu_sepsis
 from aoc_cli.experiments.sepsis_policies import LIVE, state_policy
 from aoc_cli.control import open_session
 from aoc_cli.store import Store
@@ -37,14 +38,16 @@ def decided(request, tmp_path_factory):
     from tests.conftest import run_aoc
 
     task = request.param
-    root = tmp_path_factory.mktemp("sepsis-store")
-    env = {**__import__("os").environ, "AOC_STORE": str(root)}
-    for args in (("collect", task, "--episodes", str(EPISODES), "--name", "log"),
-                 ("train", "log"), ("index", "log")):
+    from tests.plain_log import ingest_plain
+
+    root = tmp_path_factory.mktemp("sepsis") / "store"
+    env = ingest_plain(collect(task, episodes=EPISODES, seed=0)[0], root, "log")
+    for args in (("train", "log"), ("index", "log")):
         code, _out, err = run_aoc(*args, "--format", "json", env=env)
         assert code == 0, (args, err)
     corpus = Store(root).corpus("log")
-    session = open_session(corpus, "default", config=ControllerConfig.for_task(task))
+    assert "task" not in str(corpus.manifest["sources"])
+    session = open_session(corpus, "default")  # the settings saved with the model
     decisions = []
 
     def decide(observation, history):
@@ -53,8 +56,8 @@ def decided(request, tmp_path_factory):
         return d
 
     tables = icu_sepsis.tables(STRATEGY[task])
-    assert session.history_length == 0, "icu-sepsis is Markov in its observation: the task's " \
-        "default history length is 0, so AOC's policy is a state policy"
+    assert session.history_length == 0, "the observations recur (a finite state): aoc train " \
+        "decides history length 0, so AOC's policy is a state policy"
     policy = state_policy(decide, tables)
     return task, corpus, session, tables, policy, decisions
 
@@ -86,4 +89,4 @@ def test_every_decision_is_backed_by_at_most_d_b_plus_one_rows_of_named_patients
         rows = np.asarray(d.support_rows)
         assert 1 <= len(rows) <= limit
         patients = {ids[int(np.searchsorted(starts, r, side="right")) - 1] for r in rows}
-        assert all(p.startswith("p") for p in patients)
+        assert patients and all(isinstance(p, str) and p for p in patients)

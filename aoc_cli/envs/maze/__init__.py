@@ -44,7 +44,6 @@ def _task(world: str, gym_id: str, default_episodes: int, policies: tuple[str, .
         trajectory_fn=trajectory, default_episodes=default_episodes, start=start, goal=goal,
         success_test=f"within {GOAL_RADIUS:g} of ({goal[0]:g}, {goal[1]:g})",
         extra={"gaps": WORLDS[world].gaps, "goal_radius": GOAL_RADIUS},
-        controller={"epsilon": 0.1},
     )
 
 

@@ -1,0 +1,191 @@
+"""Settings decided from the log's own evidence, never from a task's name.
+
+``aoc train`` on any corpus, collected or ingested from a file, reads a few properties of the
+log (:class:`Evidence`: discrete or continuous actions, rewards or none, the episodes' lengths
+and how many reach the longest, how often an observation repeats, the number of episodes) and
+decides, by the rules below (stated in docs/design.md, "Settings from the log's evidence"),
+every training and controller setting the user left open. A flag the user gives wins;
+``--paper`` takes the paper's value for all. Each rule's setting, its value and why go to the
+output and to the model's config (``metrics.settings``); the controller's settings chosen are
+saved with the model (``metrics.controller``) and every command that decides with it uses them
+unless its own flag is given (:func:`controller_settings`).
+
+1. **mode**: value (AOC) when the log has rewards that vary; imitation (ABC) when it has none
+   or every reward is the same (nothing to rank actions by).
+2. **a finite state the log revisits** (value mode, discrete actions, an observation seen
+   again at least :data:`REPEATS` of the rows): the belief reads no history (a state policy,
+   ``history_length`` 0); each row's value is the behaviour's Q by fitted Q evaluation
+   (``value`` fqe), bootstrapped through the revisits; undiscounted (``gamma`` 1) when the
+   episodes end by themselves (rule 3 does not hold). The controller trusts an action only
+   where the log took it in (nearly) that state: ``residual_cap`` :data:`STATE_CAP` times the
+   typical residual, and the value shrunk by the episodes behind it (``support_penalty``
+   :data:`STATE_PENALTY`).
+3. **a horizon cut by a time limit** (value mode: at least :data:`AT_LIMIT` of the episodes
+   have the longest length T: a limit ends them, not the task): ``gamma`` = 1 - 20 / T (an
+   effective horizon 1 / (1 - gamma) of T / 20, so a row's return-to-go is not cut by the
+   limit except in the last ~5% of an episode), between :data:`GAMMA_MIN` and the paper's 0.99.
+4. **continuous actions, value mode**: the controller's ``epsilon`` keeps as many of the K
+   uniform candidates as lie as near the corpus as the log's own actions do, measured on
+   held-out episodes after training (:mod:`aoc_cli.belief.epsilon_rule`; :func:`held_out`
+   says where it runs).
+5. **imitation of discrete actions on a small log**: the history length, width and weight
+   decay by cross-validation over episodes (:mod:`aoc_cli.belief.select`).
+
+>>> ev = Evidence(rows=10_000, episodes=50, discrete=False, n_actions=None, rewards=True,
+...               length_median=200.0, length_max=200, at_limit=0.98, repeats=0.2)
+>>> decide(ev, {"mode": None, "belief": None, "gamma": None})[0]
+{'mode': 'value', 'gamma': 0.9}
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+#: Rule 2: the share of rows whose observation occurs at another row above which the log's
+#: states are taken as finite and revisited (icu-sepsis: 0.93; the continuous tasks <= 0.21).
+REPEATS = 0.5
+#: Rule 3: the share of episodes at the longest length above which a time limit cuts them
+#: (pendulum: 0.98; tasks whose episodes end by themselves <= 0.2).
+AT_LIMIT = 0.5
+#: Rule 3: gamma's range.
+GAMMA_MIN, GAMMA_MAX = 0.5, 0.99
+#: Rule 3: the effective horizon is the time limit over this.
+HORIZON_DIVISOR = 20
+#: Rule 2's controller: the residual cap (times the typical p90) and the support penalty z.
+STATE_CAP, STATE_PENALTY = 0.01, 5.0
+
+#: The training settings a rule may decide (BeliefConfig fields; None when not given).
+TRAINING = ("mode", "belief", "gamma", "value", "dynamics_weight", "history_length")
+#: The controller settings a rule may decide (ControllerConfig fields).
+CONTROLLER = ("epsilon", "residual_cap", "support_penalty", "k")
+
+
+@dataclass(frozen=True)
+class Evidence:
+    """What the rules read of a log. ``at_limit``: the share of episodes whose length is the
+    longest; ``repeats``: the share of rows whose observation occurs at another row (1 -
+    distinct observations / rows)."""
+
+    rows: int
+    episodes: int
+    discrete: bool
+    n_actions: int | None
+    rewards: bool
+    length_median: float
+    length_max: int
+    at_limit: float
+    repeats: float
+
+    @classmethod
+    def of(cls, corpus) -> Evidence:
+        """The evidence of a stored corpus (reads the observations, the rewards and the
+        episode starts once)."""
+        starts = np.asarray(corpus.episode_starts, dtype=np.int64)
+        lengths = np.diff(starts)
+        rewards = corpus.rewards
+        varies = rewards is not None and len(rewards) > 0 and bool(np.ptp(rewards) > 0)
+        obs = np.ascontiguousarray(np.asarray(corpus.observations))
+        obs = obs.reshape(len(obs), -1)
+        distinct = len(np.unique(obs.view(np.dtype((np.void, obs.dtype.itemsize
+                                                    * obs.shape[1]))))) if len(obs) else 0
+        longest = int(lengths.max()) if len(lengths) else 0
+        return cls(rows=int(corpus.n_rows), episodes=int(len(lengths)),
+                   discrete=bool(corpus.discrete),
+                   n_actions=int(corpus.action_space["n"]) if corpus.discrete else None,
+                   rewards=varies,
+                   length_median=float(np.median(lengths)) if len(lengths) else 0.0,
+                   length_max=longest,
+                   at_limit=float(np.mean(lengths == longest)) if len(lengths) else 0.0,
+                   repeats=1.0 - distinct / len(obs) if len(obs) else 0.0)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @property
+    def finite_states(self) -> bool:
+        return self.discrete and self.repeats >= REPEATS
+
+    @property
+    def time_limit(self) -> bool:
+        return self.at_limit >= AT_LIMIT and self.length_max > 1
+
+
+def horizon_gamma(length: int) -> float:
+    """Rule 3's discount for episodes cut at ``length`` steps."""
+    return float(np.clip(1.0 - HORIZON_DIVISOR / max(length, 1), GAMMA_MIN, GAMMA_MAX))
+
+
+def decide(ev: Evidence, given: dict) -> tuple[dict, list[dict]]:
+    """The settings the rules decide among those ``given`` leaves open (None), training
+    (:data:`TRAINING`) and controller (:data:`CONTROLLER`) together: (setting -> value, the
+    reasons: one ``{"setting", "value", "why"}`` per setting decided). A rule whose premise
+    depends on a setting the user gave (e.g. ``--mode``) follows the given value."""
+    out, why = {}, []
+
+    def take(name: str, value, reason: str) -> None:
+        if given.get(name) is None and name not in out:
+            out[name] = value
+            why.append({"setting": name, "value": value, "why": reason})
+
+    if ev.rewards:
+        take("mode", "value", "the log has rewards that vary: AOC ranks actions by value")
+    else:
+        take("mode", "imitation", "the log has no rewards, or all equal: ABC imitates the "
+                                  "behaviour")
+    mode = given.get("mode") or out.get("mode")
+    if mode != "value":
+        return out, why
+    value_belief = (given.get("belief") or "value") == "value" \
+        and not given.get("dynamics_weight")
+    if ev.finite_states and value_belief:
+        seen = (f"an observation recurs at {ev.repeats:.0%} of the rows, with discrete "
+                "actions: a finite state the log revisits")
+        take("history_length", 0, seen + ": the belief reads no history (a state policy)")
+        take("value", "fqe", seen + ": each row's value is the behaviour's Q by fitted Q "
+                                    "evaluation, bootstrapped through the revisits")
+        if not ev.time_limit:
+            take("gamma", 1.0, "the episodes end by themselves (lengths from "
+                               f"{ev.length_median:g} median to {ev.length_max}): undiscounted")
+    if ev.finite_states:
+        take("residual_cap", STATE_CAP, "a finite state the log revisits: an action is "
+                                        "trusted only where the log took it in (nearly) that "
+                                        "state")
+        take("support_penalty", STATE_PENALTY, "a finite state the log revisits: each "
+                                               "action's value shrunk by the episodes behind it")
+    if ev.time_limit and value_belief:
+        take("gamma", horizon_gamma(ev.length_max),
+             f"{ev.at_limit:.0%} of the episodes stop at {ev.length_max} steps (a time limit): "
+             f"an effective horizon of a {HORIZON_DIVISOR}th of it")
+    return out, why
+
+
+def held_out(ev: Evidence, config) -> bool:
+    """Whether rule 4 measures epsilon on held-out episodes for a model of ``config`` (a
+    BeliefConfig): value mode, continuous actions, the value belief (the critic trains
+    without the hook, and so does a corpus streamed from disk: the paper's epsilon)."""
+    return config.mode == "value" and not ev.discrete and config.belief == "value"
+
+
+def controller_settings(corpus, mode: str) -> dict:
+    """The controller's settings the rules decide for a ``mode`` model of ``corpus`` (what
+    ``aoc train`` records; also used for a model trained without them, by the library's
+    ``train_model`` or before they were recorded)."""
+    settings, _ = decide(Evidence.of(corpus), {"mode": mode})
+    return {k: v for k, v in settings.items() if k in CONTROLLER}
+
+
+def summary(ev: Evidence) -> str:
+    """The evidence in a few words, for ``aoc train``'s output."""
+    actions = f"{ev.n_actions} discrete actions" if ev.discrete else "continuous actions"
+    return (f"{ev.rows:,} rows, {ev.episodes:,} episodes of {ev.length_median:g} median and "
+            f"{ev.length_max} most steps ({ev.at_limit:.0%} at the most), {actions}, "
+            + ("rewards" if ev.rewards else "no rewards")
+            + f", observations recurring at {ev.repeats:.0%} of the rows")
+
+
+def describe(reasons: list[dict]) -> list[str]:
+    """One line per setting decided, for ``aoc train``'s output."""
+    return [f"{r['setting']} {r['value']:g}: {r['why']}" if isinstance(r["value"], float)
+            else f"{r['setting']} {r['value']}: {r['why']}" for r in reasons]
