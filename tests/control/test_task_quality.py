@@ -1,6 +1,9 @@
-"""Every built-in task end to end at CI size, with the defaults a user gets: ``aoc collect`` ->
-``aoc train`` (no flags but the seed) -> ``aoc index`` -> ``aoc rollout --env TASK`` (the
-task's controller settings), asserting the task's success rate or return.
+"""Every built-in task end to end at CI size, with the defaults a user gets for a log of their
+own: the task's collected log written as a plain file (an NPZ with the D4RL keys, no trace of
+the task: tests/plain_log.py) and ``aoc ingest``-ed under another name -> ``aoc train`` (no
+flags but the seed) -> ``aoc index`` -> ``aoc rollout --env TASK`` (the controller settings
+saved with the model, decided from the log's evidence), asserting the task's success rate or
+return. No setting can come from the task's name.
 
 These guard decision quality: a change of a default (training, selection, index, controller)
 that makes a task's control worse fails here, as the small-log settings selection did on the
@@ -8,7 +11,8 @@ maze (success 0.0 with the chosen width; issue 24). Sizes and thresholds were me
 project's machine (docs/results.md, "Defaults per task"); the ``quality`` mark spreads them
 over pytest-xdist's workers (tests/conftest.py). ward (reward-free, ABC) is guarded by
 ``tests/belief/test_select.py::test_default_training_on_ward_beats_the_majority_clearly`` and
-icu-sepsis and icu-sepsis-terminate by ``tests/control/test_icu_sepsis_quality.py``.
+icu-sepsis and icu-sepsis-terminate by ``tests/control/test_icu_sepsis_quality.py`` (both on
+plain files too).
 pendulum-het's random start has no test here: at 10,000 rows AOC with the defaults scores -1245
 and -855 on seeds 1-2, no better than doing nothing (-680, -1181), as at every size below 100k
 (docs/results.md, "pendulum-het"), so no return threshold both holds and guards it; nor does the
@@ -19,7 +23,6 @@ expert's torque sign on held-out swing-up rows (77.9%, below always pushing the 
 from __future__ import annotations
 
 import json
-import os
 
 import numpy as np
 import pytest
@@ -44,11 +47,14 @@ def _do_nothing(task: str, seeds) -> list[float]:
     return returns
 
 
-def _pipeline(tmp_path, task: str, collect: tuple, rollout: tuple) -> dict:
-    """collect -> train -> index -> rollout on a fresh store; the rollout's JSON."""
-    env = {**os.environ, "AOC_STORE": str(tmp_path / "store"), "OMP_NUM_THREADS": "1"}
-    for args in (("collect", task, "--name", "c", *collect),
-                 ("train", "c", "--seed", "0", "--threads", "1"),  # as measured; no flag else
+def _pipeline(tmp_path, task: str, collect: dict, rollout: tuple) -> dict:
+    """collect -> a plain NPZ -> ingest -> train -> index -> rollout on a fresh store; the
+    rollout's JSON."""
+    from aoc_cli.envs import collect as collect_log
+    from tests.plain_log import ingest_plain
+
+    env = ingest_plain(collect_log(task, **collect)[0], tmp_path / "store", "c")
+    for args in (("train", "c", "--seed", "0", "--threads", "1"),  # as measured; no flag else
                  ("index", "c"), ("rollout", "c", "--env", task, *rollout)):
         code, out, err = run_aoc(*args, "--format", "json", env=env)
         assert code == 0, (args, err)
@@ -60,7 +66,7 @@ def test_maze_is_solved_with_the_default_training(tmp_path):
     # 300 expert trajectories (5,698 rows). The paper's settings: 9 of 10 episodes reach the
     # goal; the width the small-log selection chose (256, by a value loss equal for all): 0 of
     # 10, ~86 of 100 steps off the corpus
-    out = _pipeline(tmp_path, "maze", ("--episodes", "300", "--seed", "5"),
+    out = _pipeline(tmp_path, "maze", {"episodes": 300, "seed": 5},
                     ("--episodes", "5", "--seed", "11"))
     assert out["summary"]["success_rate"] >= 0.8, out["summary"]
 
@@ -69,7 +75,7 @@ def test_maze_is_solved_with_the_default_training(tmp_path):
 def test_two_gates_passes_a_gate_with_the_default_training(tmp_path):
     # 150 trajectories (3,572 rows), the task's epsilon 0.1: 4 of 5 episodes reach the goal
     # (the one that fails stops at the wall)
-    out = _pipeline(tmp_path, "two-gates", ("--episodes", "150", "--seed", "0"),
+    out = _pipeline(tmp_path, "two-gates", {"episodes": 150, "seed": 0},
                     ("--episodes", "5", "--seed", "11"))
     assert out["summary"]["success_rate"] >= 0.6, out["summary"]
 
@@ -80,7 +86,7 @@ def test_lunar_does_better_than_doing_nothing_with_the_default_training(tmp_path
     # seeds 11-12: 30.0 and -45.0, the zero action's -120.8 and -14.4 (a lander that fires at
     # random: -69.6 and -214.6). At this size AOC does not land yet (30k rows: half the
     # episodes; docs/results.md "lunar")
-    out = _pipeline(tmp_path, "lunar", ("--steps", "10000", "--seed", "0"),
+    out = _pipeline(tmp_path, "lunar", {"steps": 10000, "seed": 0},
                     ("--episodes", "2", "--seed", "11"))
     seeds = [11 + e["episode"] for e in out["episodes"]]  # episode e runs on seed + e
     assert out["summary"]["return_mean"] >= np.mean(_do_nothing("lunar", seeds)) + 30, out
@@ -91,6 +97,6 @@ def test_pendulum_het_upright_balances_with_the_default_training(tmp_path):
     # 10,000 rows; the task's own gamma 0.9: -0.015 and -0.039 on seeds 1-2 (a fall costs
     # hundreds). With gamma 0.99, landed main's default: -802 and -821 (docs/results.md
     # "Defaults per task")
-    out = _pipeline(tmp_path, "pendulum-het-upright", ("--steps", "10000", "--seed", "0"),
+    out = _pipeline(tmp_path, "pendulum-het-upright", {"steps": 10000, "seed": 0},
                     ("--episodes", "2", "--seed", "1"))
     assert all(e["return"] >= -100 for e in out["episodes"]), out["episodes"]
