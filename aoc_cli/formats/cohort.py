@@ -31,7 +31,9 @@ from aoc_cli.store import discrete_space
 class Cohort:
     """A table's rows in stay order (N rows, E stays, d observation columns).
 
-    observations (N, d) float64, NaN where empty; rewards (N,) or None; terminals,
+    observations (N, d + m) float64: the d columns ``obs_names``, NaN where empty, then room
+    for the m ``COL?measured`` features of ``measured`` (:func:`measured_planned`), filled in
+    place; rewards (N,) or None; terminals,
     truncations (N,) bool; doses {column: (N,)} for ``--bin-actions``; outcome (N,) the
     outcome column, NaN where empty; censored (N,) 0/1 the censoring column;
     ``row_label(r)``/``stay_label(e)``: text naming corpus row r / stay e in messages.
@@ -49,7 +51,20 @@ class Cohort:
     doses: dict[str, np.ndarray] = field(default_factory=dict)
     outcome: np.ndarray | None = None
     censored: np.ndarray | None = None
+    measured: list[str] = field(default_factory=list)
 
+
+def measured_planned(options, names: list[str], gaps) -> list[str]:
+    """The ``COL?measured`` features the observations will end with: those of the reused
+    imputation, else (``--impute`` with ``--impute-mask``) the columns ``names`` for which
+    ``gaps(name)`` is true, else none. Known before the observations are read, so that the
+    array is made once, at its full width."""
+    spec, _source = _like(options, "impute")
+    if spec is not None:
+        return impute.planned_measured(spec)
+    if options.impute is not None and options.impute_mask:
+        return [n for n in names if gaps(n)]
+    return []
 
 @dataclass
 class Prepared:
@@ -123,21 +138,25 @@ def prepare(c: Cohort, options) -> Prepared:
         outcomes.mark_censored(censored, terminals, truncations, c.starts)
     # 3. empty observation cells
     obs, names, imputed, cells = c.observations, list(c.obs_names), None, {}
+    d = len(names)
     spec, source = _like(options, "impute")
     if spec is not None:
         impute.check_like(spec, names, options.impute, options.impute_mask, c.where, source)
         pre.setdefault("like", {})["impute"] = source.split("'")[1]
     elif options.impute is not None:
-        spec = impute.fit(obs, names, options.impute, options.impute_mask, c.where)
+        spec = impute.fit(obs[:, :d], names, options.impute, options.impute_mask, c.where,
+                          measured=c.measured if options.impute_mask else None)
     elif options.impute_mask:
         raise AocError(f"{param('impute_mask', True)} needs {param('impute', 'hold')} or "
                        f"{param('impute', 'median')}")
     elif not options.drop_nonfinite:
         impute.refuse_gaps(obs, names, c.where)
     if spec is not None:
-        obs, mask = impute.fill(obs, c.starts, spec)
-        cells = impute.counts(mask, impute.names_with_mask(spec, names))
+        if impute.planned_measured(spec) != list(c.measured):
+            raise AssertionError("the observations were made for other measured features")
+        mask = impute.fill(obs, c.starts, spec)
         names = impute.names_with_mask(spec, names)
+        cells = impute.counts(mask, names)
         imputed = mask if mask.any() else None
         pre["impute"] = spec
     return Prepared(obs, names, imputed, cells, rewards, terminals, truncations, actions,

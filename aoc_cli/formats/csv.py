@@ -50,12 +50,13 @@ import pyarrow as pa
 
 from aoc_cli.errors import AocError, param, warn
 from aoc_cli.formats.bins import parse as parse_bins
-from aoc_cli.formats.cohort import Cohort, prepare
+from aoc_cli.formats.cohort import Cohort, measured_planned, prepare
 from aoc_cli.formats.common import ReadOptions, action_space_of, encode_labels
 from aoc_cli.formats.csv_exported import exported_mapping, restore_exported
 from aoc_cli.formats.spec import parse_spec
 from aoc_cli.formats.static import read_static
-from aoc_cli.formats.table import Table, from_frame, is_numeric, numeric, read_table, text
+from aoc_cli.formats.table import (Table, from_frame, has_gaps, is_numeric, numeric, read_table,
+                                   text)
 from aoc_cli.formats.text_actions import text_actions
 from aoc_cli.store import CorpusData
 
@@ -63,7 +64,7 @@ MAPPING_KEYS = {"id", "time", "observations", "actions", "reward", "terminal", "
                 "discrete_actions", "static_id", "static", "aoc"}
 
 
-def _sort_key(col: pa.Array, name: str, where, dates: bool) -> np.ndarray:
+def _sort_key(col: pa.ChunkedArray, name: str, where, dates: bool) -> np.ndarray:
     """Numbers if every value is a number, else (time only) dates, else (ids) the text."""
     if pa.types.is_timestamp(col.type) or pa.types.is_date(col.type):
         return col.cast(pa.timestamp("ns")).cast(pa.int64()).to_numpy(zero_copy_only=False)
@@ -301,11 +302,21 @@ def read_columns(table: Table, options: ReadOptions, source: dict) -> CorpusData
         raise AocError(f"{where}: no observation columns: name them with "
                        f"{param('obs_columns')}, a {param('columns_file')} mapping file or "
                        "obs_* column names")
-    observations = np.empty((table.n, len(obs_names)))
+    static_gaps = dict(zip(static_names, np.isnan(static_feats).any(axis=0))) \
+        if static_feats is not None else {}
+    measured = measured_planned(options, obs_names, lambda c: static_gaps[c]
+                                if c in static_gaps else has_gaps(cols[c]))
+    # made once at full width; each table column dropped once read (memory: about one copy)
+    observations = np.empty((table.n, len(obs_names) + len(measured)))
+    other_roles = set(roles.tags) | set(roles.actions) | {
+        roles.id, roles.time, roles.reward, roles.terminal, options.outcome,
+        options.censored_column}
     for j, c in enumerate(roles.observations):
         observations[:, j] = numeric(cols[c], c, where, eps.row_label)[eps.order]
+        if c not in other_roles:
+            del cols[c]
     if static_feats is not None:
-        observations[:, len(roles.observations):] = np.repeat(
+        observations[:, len(roles.observations):len(obs_names)] = np.repeat(
             static_feats, np.diff(eps.starts), axis=0)
     terminals, truncations = _flags(table, roles, eps)
     cohort = Cohort(
@@ -313,7 +324,7 @@ def read_columns(table: Table, options: ReadOptions, source: dict) -> CorpusData
         rewards=numeric(cols[roles.reward], roles.reward, where, eps.row_label)[eps.order]
         if roles.reward else None,
         terminals=terminals, truncations=truncations, row_label=eps.corpus_row_label,
-        stay_label=lambda e: f"{roles.id or 'episode'} {eps.ids[e]}")
+        stay_label=lambda e: f"{roles.id or 'episode'} {eps.ids[e]}", measured=measured)
     if bin_cols:
         cohort.doses = {c: numeric(cols[c], c, where, eps.row_label)[eps.order]
                         for c in roles.actions}
@@ -335,7 +346,7 @@ def read_columns(table: Table, options: ReadOptions, source: dict) -> CorpusData
     used = set(roles.observations) | set(roles.actions) | set(roles.tags) | {
         roles.id, roles.time, roles.reward, roles.terminal, options.censored_column}
     columns = {c: numeric(cols[c], c, where)[eps.order] for c in table.header
-               if c not in used and is_numeric(cols[c])}
+               if c not in used and c in cols and is_numeric(cols[c])}
     columns.update(prepared.columns)
     if actions is None:
         actions, act_space = prepared.actions, prepared.action_space
@@ -362,7 +373,7 @@ def read_columns(table: Table, options: ReadOptions, source: dict) -> CorpusData
     )
 
 
-def _truthy(col: pa.Array) -> np.ndarray:
+def _truthy(col: pa.ChunkedArray) -> np.ndarray:
     """(N,) float 0/1: a censoring column's cells (numbers: non-zero; text: anything but
     empty, 0, false, no)."""
     if is_numeric(col):

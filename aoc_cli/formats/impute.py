@@ -45,21 +45,27 @@ def refuse_gaps(obs: np.ndarray, names: list[str], where) -> None:
                    f"{param('drop_nonfinite', True)}")
 
 
-def fit(obs: np.ndarray, names: list[str], rule: str, mask: bool, where) -> dict:
+def fit(obs: np.ndarray, names: list[str], rule: str, mask: bool, where,
+        measured: list[str] | None = None) -> dict:
     """The imputation of (N, d) ``obs`` (NaN: empty): ``{"rule", "mask", "names",
-    "medians", "measured"}``, ``measured`` the columns with gaps (one ``COL?measured``
-    feature each with ``mask``). A column empty for every row is an AocError."""
+    "medians", "measured"}``, ``measured`` the columns with gaps (given, or found), one
+    ``COL?measured`` feature each with ``mask``. A column empty for every row is an
+    AocError."""
     if rule not in RULES:
         raise AocError(f"unknown {param('impute', rule)}: use one of {', '.join(RULES)}")
-    empty = np.isnan(obs)
-    whole = np.flatnonzero(empty.all(axis=0))
-    if whole.size:
-        raise AocError(f"{where}: column {names[int(whole[0])]!r} is empty for every stay: "
-                       f"{param('impute', rule)} has no measured value to fill it from; drop "
-                       "the column")
-    medians = [float(np.median(obs[~empty[:, j], j])) for j in range(obs.shape[1])]
+    medians, gaps = [], []
+    for j, name in enumerate(names):
+        col = obs[:, j]
+        present = col[~np.isnan(col)]
+        if present.size == 0:
+            raise AocError(f"{where}: column {name!r} is empty for every stay: "
+                           f"{param('impute', rule)} has no measured value to fill it from; "
+                           "drop the column")
+        medians.append(float(np.median(present)))
+        if present.size < len(col):
+            gaps.append(name)
     return {"rule": rule, "mask": bool(mask), "names": list(names), "medians": medians,
-            "measured": [n for n, gap in zip(names, empty.any(axis=0)) if gap]}
+            "measured": list(gaps if measured is None else measured)}
 
 
 def check_like(spec: dict, names: list[str], rule: str | None, mask: bool, where,
@@ -76,36 +82,42 @@ def check_like(spec: dict, names: list[str], rule: str | None, mask: bool, where
                        "'measured' features: drop it")
 
 
-def fill(obs: np.ndarray, starts: np.ndarray, spec: dict) -> tuple[np.ndarray, np.ndarray]:
-    """(N, d) ``obs`` with NaN -> (filled (N, d'), imputed (N, d') bool), d' = d plus one
-    ``COL?measured`` feature per column of ``spec["measured"]`` when ``spec["mask"]``
-    (never imputed themselves). ``starts`` (E + 1,): the stays."""
-    empty = np.isnan(obs)
-    out = obs.copy()
-    if spec["rule"] == "hold" and empty.any():
-        out = _hold(out, empty, starts)
-    medians = np.asarray(spec["medians"], dtype=obs.dtype)
-    still = np.isnan(out)
-    out[still] = np.broadcast_to(medians, out.shape)[still]
-    if not spec["mask"] or not spec["measured"]:
-        return out, empty
-    cols = [spec["names"].index(n) for n in spec["measured"]]
-    measured = (~empty[:, cols]).astype(obs.dtype)
-    return (np.concatenate([out, measured], axis=1),
-            np.concatenate([empty, np.zeros(measured.shape, bool)], axis=1))
+def planned_measured(spec: dict | None) -> list[str]:
+    """The ``COL?measured`` features a fitted ``spec`` adds (none without its mask)."""
+    return list(spec["measured"]) if spec and spec.get("mask") else []
 
 
-def _hold(obs: np.ndarray, empty: np.ndarray, starts: np.ndarray) -> np.ndarray:
-    """Each empty cell takes the last measured value of its column in its stay (NaN before
-    the first one): a forward fill by the index of the last measured row."""
+def fill(obs: np.ndarray, starts: np.ndarray, spec: dict) -> np.ndarray:
+    """Fill ``obs`` (N, d + m) in place and return the imputed cells (N, d + m) bool.
+
+    The first d = ``len(spec["names"])`` columns hold the values, NaN where empty; each empty
+    cell takes, by ``spec["rule"]``, the last measured value of its column within its stay
+    (``hold``; the stays: ``starts`` (E + 1,)) or else the column's median. The m trailing
+    columns receive the 0/1 ``COL?measured`` features of ``spec["measured"]`` (with
+    ``spec["mask"]``; never imputed themselves). Column by column: a few (N,) temporaries."""
+    names, d = spec["names"], len(spec["names"])
     n = len(obs)
-    rows = np.arange(n)[:, None]
-    last = np.where(~empty, rows, -1)
-    stay_start = np.repeat(starts[:-1], np.diff(starts))[:, None]
-    np.maximum.accumulate(last, axis=0, out=last)
-    held = last >= stay_start  # the last measured row lies in this stay
-    cols = np.broadcast_to(np.arange(obs.shape[1]), obs.shape)
-    return np.where(held, obs[np.maximum(last, 0), cols], np.nan)
+    features = {name: d + k for k, name in enumerate(planned_measured(spec))}
+    imputed = np.zeros(obs.shape, bool)
+    rows = np.arange(n)
+    stay_start = np.repeat(starts[:-1], np.diff(starts)) if spec["rule"] == "hold" else None
+    for j in range(d):
+        col = obs[:, j]
+        empty = np.isnan(col)
+        if names[j] in features:
+            obs[:, features[names[j]]] = ~empty
+        if not empty.any():
+            continue
+        imputed[:, j] = empty
+        still = empty
+        if stay_start is not None:  # the last measured row at or before each row
+            last = np.where(empty, -1, rows)
+            np.maximum.accumulate(last, out=last)
+            held = empty & (last >= stay_start)
+            col[held] = col[last[held]]
+            still = empty & ~held
+        col[still] = spec["medians"][j]
+    return imputed
 
 
 def names_with_mask(spec: dict | None, names: list[str]) -> list[str]:

@@ -3,11 +3,14 @@ and in-memory Arrow tables or pandas / polars DataFrames, as columns of Arrow ar
 those columns as numbers or text. What the tabular log reader (:mod:`aoc_cli.formats.csv`)
 and its static covariates (:mod:`aoc_cli.formats.static`) build on.
 
-pyarrow's readers are multithreaded, typed and null-aware: an empty cell of a number column is
-a null (NaN once converted), a column holding text stays text. A CSV is parsed fast first;
-only when that fails is it re-read allowing quoted line breaks (a spreadsheet's free-text
-notes), and only when that fails too is the bad row found, with Python's ``csv`` module, to
-name it.
+pyarrow's readers are typed and null-aware: an empty cell of a number column is a null (NaN
+once converted), a column holding text stays text. A CSV is streamed block by block first
+(the types inferred from the first block; the peak memory is the columns plus a block, not the
+whole parse); when that fails (a later block holds what the first one's types cannot, a quoted
+line break) the whole file is read at once, allowing quoted line breaks (a spreadsheet's
+free-text notes), and only when that fails too is the bad row found, with Python's ``csv``
+module, to name it. Columns stay in their reader's chunks (a caller drops each one once
+converted, so the table and the arrays made from it are not all held at once).
 """
 
 from __future__ import annotations
@@ -39,7 +42,7 @@ class Table:
 
     where: str
     header: list[str]
-    cols: dict[str, pa.Array]
+    cols: dict[str, pa.ChunkedArray]
     n: int
 
 
@@ -109,13 +112,16 @@ def _read_csv(path: Path, text_columns) -> pa.Table:
     convert = pacsv.ConvertOptions(
         column_types={c: pa.string() for c in text_columns if c in header},
         strings_can_be_null=False, quoted_strings_can_be_null=False)
-    for newlines in (False, True):  # fast first; quoted line breaks only when needed
+    read = pacsv.ReadOptions(block_size=BLOCK_BYTES)
+    for newlines in (False, True):  # streamed first; the whole file, quoted line breaks, next
+        parse = pacsv.ParseOptions(delimiter=delimiter, newlines_in_values=newlines)
         try:
-            return pacsv.read_csv(
-                path, read_options=pacsv.ReadOptions(block_size=BLOCK_BYTES),
-                parse_options=pacsv.ParseOptions(delimiter=delimiter,
-                                                 newlines_in_values=newlines),
-                convert_options=convert)
+            if not newlines:
+                with pacsv.open_csv(path, read_options=read, parse_options=parse,
+                                    convert_options=convert) as reader:
+                    return pa.Table.from_batches(list(reader), schema=reader.schema)
+            return pacsv.read_csv(path, read_options=read, parse_options=parse,
+                                  convert_options=convert)
         except pa.ArrowInvalid as err:
             failure = err
         except (OSError, pa.ArrowException) as err:
@@ -182,9 +188,9 @@ def _checked(table: pa.Table, where: str, text_columns) -> Table:
         raise AocError(f"{where} repeats column names {dup}: rename them")
     cols = {}
     for h, col in zip(header, table.columns):
-        col = col.combine_chunks() if isinstance(col, pa.ChunkedArray) else col
         if pa.types.is_dictionary(col.type):
-            col = col.dictionary_decode()
+            col = pa.chunked_array([c.dictionary_decode() for c in col.chunks],
+                                   type=col.type.value_type)
         if h in text_columns and not _is_text(col.type):
             col = pc.cast(col, pa.string())
         cols[h] = col
@@ -195,7 +201,18 @@ def _is_text(t) -> bool:
     return pa.types.is_string(t) or pa.types.is_large_string(t)
 
 
-def numeric(col: pa.Array, name: str, where, row_label=None) -> np.ndarray:
+def has_gaps(col: pa.ChunkedArray) -> bool:
+    """Whether a column has empty cells (nulls; NaN; empty text)."""
+    if col.null_count:
+        return True
+    if pa.types.is_floating(col.type):
+        return bool(pc.any(pc.is_nan(col)).as_py())
+    if _is_text(col.type):
+        return bool(pc.any(pc.equal(pc.utf8_trim_whitespace(col), "")).as_py())
+    return False
+
+
+def numeric(col: pa.ChunkedArray, name: str, where, row_label=None) -> np.ndarray:
     """An Arrow column -> (N,) float64; empty and null cells are NaN; a cell that is not a
     number is an AocError naming its row (``row_label(i)``: text naming row i's episode)."""
     t = col.type
@@ -205,12 +222,12 @@ def numeric(col: pa.Array, name: str, where, row_label=None) -> np.ndarray:
             pa.types.is_decimal(t):
         if not pa.types.is_float64(t):
             col = pc.cast(col, pa.float64())
-        return col.to_numpy(zero_copy_only=False)
+        return col.to_numpy()
     if not _is_text(t):
         raise AocError(f"{where}: column {name!r} holds {t} values, not numbers")
     trimmed = _trimmed(col)
     try:
-        return pc.cast(trimmed, pa.float64()).to_numpy(zero_copy_only=False)
+        return pc.cast(trimmed, pa.float64()).to_numpy()
     except pa.ArrowInvalid:
         i, cell = _first_text_cell(trimmed)
         at = f" ({row_label(i)})" if row_label is not None else ""
@@ -273,9 +290,9 @@ def text(col: pa.Array) -> np.ndarray:
             col = pc.if_else(whole, pc.cast(as_int, pa.string()), pc.cast(col, pa.string()))
         else:
             col = pc.cast(col, pa.string())
-    out = pc.fill_null(pc.utf8_trim_whitespace(col), "").to_numpy(zero_copy_only=False)
+    out = pc.fill_null(pc.utf8_trim_whitespace(col), "").to_numpy()
     return out.astype(str) if len(out) else np.array([], dtype=str)
 
 
-__all__ = ["Table", "from_frame", "is_numeric", "is_parquet", "numeric", "read_table", "text",
+__all__ = ["Table", "from_frame", "has_gaps", "is_numeric", "is_parquet", "numeric", "read_table", "text",
            "text_cells"]
