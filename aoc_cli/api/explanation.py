@@ -79,7 +79,7 @@ def explain(name: str, *, store: StoreLike = None, queries: str | os.PathLike | 
     config = controller_config(controller, collected_task(corpus))
     opened = dict(model_id=model, index_id=index_id, config=config, seed=seed)
     removal = removal_of(corpus, without, without_episodes)
-    session = None
+    session = source = None
     if data is not None:
         source = corpus if data == name else s.corpus(data)
         records = explain_logged_step(open_session(corpus, **opened), source, episode, step,
@@ -90,7 +90,7 @@ def explain(name: str, *, store: StoreLike = None, queries: str | os.PathLike | 
         records = _queries(open_session(corpus, **opened), queries, compare or [], removal)
     if html is not None:
         write_html(Path(html), records, corpus, session=session, audit=audit,
-                   episode=episode, step=step)
+                   episode=episode, step=step, source=source)
     return Explained(corpus.name, records, None if html is None else Path(html))
 
 
