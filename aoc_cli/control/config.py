@@ -4,8 +4,9 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
+from aoc_cli.errors import BadSetting, param
 from aoc_cli.settings import Settings, setting
 
 
@@ -109,10 +110,29 @@ class ControllerConfig(Settings):
         return cls(**settings)
 
 
-def given_settings(**flags) -> dict:
-    """The controller settings given (``flags``: field -> value, None when not given),
-    checked now (an AocError names a bad one before any store is read) and returned without
-    the Nones: what :func:`aoc_cli.control.open_session` lays over the model's own."""
-    given = {k: v for k, v in flags.items() if v is not None}
-    ControllerConfig(**given)
-    return given
+#: ``controller=`` of the API's deciding entries (open_session, rollout, explain, evaluate,
+#: bench): a ControllerConfig, a mapping of its fields, or None (no setting given).
+ControllerLike = ControllerConfig | Mapping | None
+
+
+def given_settings(controller: ControllerLike) -> dict:
+    """The controller settings ``controller`` gives, {field: value}: a ControllerConfig's or a
+    mapping's fields that are not None (None: not given, so the model's setting, else the
+    paper's default, applies when :meth:`ControllerConfig.for_model` resolves them). A key that
+    is no field of ControllerConfig is a :class:`~aoc_cli.errors.BadSetting` naming it and
+    the known ones; the values are checked when the config is built."""
+    if controller is None:
+        return {}
+    if isinstance(controller, ControllerConfig):
+        return {k: v for k, v in controller.to_dict().items() if v is not None}
+    if not isinstance(controller, Mapping):
+        raise BadSetting("controller", controller,
+                         f"{param('controller')} must be a ControllerConfig or a mapping of its "
+                         f"settings, got {type(controller).__name__}")
+    known = {item.name for item in fields(ControllerConfig)}
+    unknown = sorted(set(controller) - known)
+    if unknown:
+        raise BadSetting(unknown[0], controller[unknown[0]],
+                         f"unknown controller setting {param(unknown[0])}: the settings are "
+                         f"{', '.join(sorted(known))}")
+    return {k: v for k, v in controller.items() if v is not None}

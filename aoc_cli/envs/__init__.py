@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import gymnasium
 
-from aoc_cli.envs.base import Episode, Progress, Task
+from aoc_cli.envs.base import Episode, Progress, Task, collected_task
 from aoc_cli.errors import AocError, BadSetting, call, param
 from aoc_cli.store import CorpusData
 
@@ -103,4 +103,4 @@ def collect(task: str, steps: int | None = None, episodes: int | None = None, se
     return data.validate(), summary
 
 
-__all__ = ["TASKS", "Episode", "Task", "collect", "get_task", "make_env"]
+__all__ = ["TASKS", "Episode", "Task", "collect", "collected_task", "get_task", "make_env"]
