@@ -12,6 +12,10 @@ For each log size (episodes of the clinicians' policy, ``aoc collect icu-sepsis`
   :mod:`aoc_cli.experiments.sepsis_policies`);
 * **tabular** -- reference, told the state: the behaviour's Q in a count model of the log,
   greedy over actions logged at least 10 times;
+* **spibb** -- the peer to beat, told the state: Pi_b-SPIBB (safe policy improvement with
+  baseline bootstrapping) on the log's count model, its threshold N_wedge chosen by a rule on
+  the log's held-out halves (:mod:`aoc_cli.experiments.spibb`); a stochastic policy, valued
+  exactly;
 * **clinicians** (the behaviour), **modal** (their most frequent action), **random**,
   **one-step** (argmax of the clinicians' exact Q on their support: what a perfect AOC reaches)
   and **optimal** (value iteration): references from the package's tables, the same at every
@@ -43,6 +47,7 @@ from aoc_cli.envs.tabular import greedy
 from aoc_cli.errors import AocError, BadSetting, param
 from aoc_cli.experiments import sepsis_policies as sp
 from aoc_cli.experiments.results import write_rows_csv
+from aoc_cli.experiments.spibb import spibb_policy
 from aoc_cli.control import open_session
 from aoc_cli.corpus_index import build_index
 from aoc_cli.store import DEFAULT_MODEL, Store, atomic_path
@@ -52,7 +57,7 @@ SCALES = {
     "quick": {"sizes": (1000, 5000), "cql_steps": 3000, "mc_episodes": 300},
     "tiny": {"sizes": (200,), "cql_steps": 200, "mc_episodes": 10},
 }
-LEARNT = ("aoc", "knn", "cql", "bcq", "bc", "tabular")
+LEARNT = ("aoc", "knn", "cql", "bcq", "bc", "tabular", "spibb")
 REFERENCES = ("clinicians", "modal", "random", "one-step", "optimal")
 METHODS = LEARNT + REFERENCES
 TASKS = ("icu-sepsis", "icu-sepsis-terminate")
@@ -118,6 +123,12 @@ def run_size(store, task: str, episodes: int, seed: int, cfg: dict, methods: lis
         chosen = (metrics.get("selection") or {}).get("chosen") or {}
     for method in methods:
         started = time.perf_counter()
+        if method == "spibb":
+            pol, rule = spibb_policy(data.columns["state"].astype(np.int64), data.actions,
+                                     data.rewards, data.terminals, data.episode_starts, seed)
+            record(method, sp.exact(tables, pol), time.perf_counter() - started, None,
+                   n_wedge=rule["n_wedge"])
+            continue
         if method in ("bc", "tabular"):
             if method == "bc":
                 pol = sp.bc_policy(corpus.observations, corpus.actions, tables)

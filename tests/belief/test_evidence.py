@@ -172,7 +172,8 @@ def test_the_controller_settings_travel_with_the_model(aoc, store, tmp_path):
     assert aoc("index", "icu", "--format", "json")[0] == 0
     own = aoc_cli.open_session("icu", store=store).controller.config
     assert (own.residual_cap, own.support_penalty, own.epsilon) == (0.01, 5.0, 0.5)
-    flag = aoc_cli.open_session("icu", store=store, support_penalty=0.0).controller.config
+    flag = aoc_cli.open_session("icu", store=store,
+                                controller={"support_penalty": 0.0}).controller.config
     assert (flag.residual_cap, flag.support_penalty) == (0.01, 0.0)
     from aoc_cli.control import open_session
 

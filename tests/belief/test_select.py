@@ -126,6 +126,12 @@ def test_given_settings_and_paper_flag_skip_the_search(aoc, ward):
                          "16", "--weight-decay", "0", *QUICK)
     assert code == 0, err
     assert "selection" not in json.loads(out)
+    code, out, err = aoc("train", "ward", "--model", "n", "--no-select", "--hidden", "16",
+                         *QUICK)
+    assert code == 0, err
+    metrics = json.loads(out)
+    assert metrics["selection"]["searched"] == [] and "--no-select" in metrics["selection"]["why"]
+    assert metrics["settings"]["decided"] == []  # --mode given: nothing left to a rule
 
 
 def test_large_corpora_keep_the_paper_settings(ward):
@@ -155,23 +161,38 @@ def test_no_better_than_majority_or_mean_is_said():
     assert select.baseline_check({"val_r2": 0.4}) is None
 
 
+@pytest.fixture
+def ward_file(store, tmp_path):
+    """ward's log as a user's plain files (NPZ with the D4RL keys, no rewards, no trace of
+    the task: tests/plain_log.py), ingested as ``mine`` (160 patients) and ``held`` (40)."""
+    from tests.plain_log import ingest_plain
+
+    data, _ = collect("ward", episodes=200, seed=0)
+    keep = np.arange(200) % 5 != 0
+    ingest_plain(data.select_episodes(keep), store, "mine")
+    ingest_plain(data.select_episodes(~keep), store, "held")
+    return Store(store)
+
+
 @pytest.mark.quality
-def test_default_training_on_ward_beats_the_majority_clearly(aoc, ward):
-    # ward's quality test (tests/control/test_task_quality.py has the others): the task's own
-    # mode (imitation), settings chosen by validation, label smoothing. 30 epochs: with 8 or
-    # 15 the head already scores 0.96 on these held-out steps, but ABC's per-action decisions
-    # only 0.91-0.93 (measured; 0.967 at 30, the head's level)
-    code, out, err = aoc("train", "ward", "--threads", "1", "--epochs", "30", "--format",
+def test_default_training_on_ward_beats_the_majority_clearly(aoc, ward_file):
+    # ward's quality test (tests/control/test_task_quality.py has the others), on a plain file:
+    # imitation because the log has no rewards, settings chosen by validation, label
+    # smoothing. 30 epochs: with 8 or 15 the head already scores 0.96 on these held-out steps,
+    # but ABC's per-action decisions only 0.91-0.93 (measured; 0.967 at 30, the head's level)
+    code, out, err = aoc("train", "mine", "--threads", "1", "--epochs", "30", "--format",
                          "json")
     assert code == 0, err
-    _check_abc_validation(ward, json.loads(out), err)
-    saved = json.loads((ward.corpus("ward").models_dir / "default" / "config.json").read_text())
+    assert json.loads(out)["mode"] == "imitation"
+    _check_abc_validation(ward_file, json.loads(out), err, "mine")
+    saved = json.loads((ward_file.corpus("mine").models_dir / "default" / "config.json")
+                       .read_text())
     assert saved["config"]["label_smoothing"] == select.LABEL_SMOOTHING == 0.1  # the default
     assert "label smoothing 0.1" in err
-    code, out, err = aoc("index", "ward", "--format", "json")
+    code, out, err = aoc("index", "mine", "--format", "json")
     assert code == 0, err
     assert json.loads(out)["candidates"] == "per_action" and json.loads(out)["k"] == 126
-    code, out, err = aoc("evaluate", "ward", "--data", "held", "--baselines", "none",
+    code, out, err = aoc("evaluate", "mine", "--data", "held", "--baselines", "none",
                          "--format", "json")
     assert code == 0, err
     s = json.loads(out)
@@ -179,7 +200,7 @@ def test_default_training_on_ward_beats_the_majority_clearly(aoc, ward):
     assert s["auc"] >= 0.85 and s["support_max"] <= 21
     # the rows' labels smoothed towards the belief (the default with these candidates) rank
     # the same subsets at least as well as their logged actions alone (lambda 0, the paper's)
-    code, out, err = aoc("evaluate", "ward", "--data", "held", "--baselines", "none",
+    code, out, err = aoc("evaluate", "mine", "--data", "held", "--baselines", "none",
                          "--row-smoothing", "0", "--format", "json")
     assert code == 0, err
     plain = json.loads(out)
@@ -270,7 +291,7 @@ def test_bad_training_options_are_one_line(aoc, ward):
         assert err.strip().count("\n") == 0 and flag in err, err
 
 
-def _check_abc_validation(ward, m, err):
+def _check_abc_validation(ward, m, err, name="ward"):
     """The chosen model's metrics hold ABC's own decisions on the validation episodes
     (val_abc_*): recomputed here from the saved model, the split and the decomposition."""
     from aoc_cli.belief import load_model
@@ -282,7 +303,7 @@ def _check_abc_validation(ward, m, err):
     from aoc_cli.index.strata import PerAction
 
     assert "ABC's own decisions on the validation episodes" in err
-    corpus = ward.corpus("ward")
+    corpus = ward.corpus(name)
     model = load_model(corpus, "default")
     cfg = BeliefConfig.from_dict(json.loads((corpus.models_dir / "default" / "config.json")
                                             .read_text())["config"])

@@ -63,18 +63,20 @@ def _pipeline(tmp_path, task: str, collect: dict, rollout: tuple) -> dict:
 
 @pytest.mark.quality
 def test_maze_is_solved_with_the_default_training(tmp_path):
-    # 300 expert trajectories (5,698 rows). The paper's settings: 9 of 10 episodes reach the
-    # goal; the width the small-log selection chose (256, by a value loss equal for all): 0 of
-    # 10, ~86 of 100 steps off the corpus
+    # 300 expert trajectories (5,698 rows) from a plain file: epsilon 0.1 decided on held-out
+    # episodes (the logged action nearer the corpus than 4% of the uniform candidates, median),
+    # 5 of 5 reach the goal (2026-11-28). The width the small-log selection once chose (256, by
+    # a value loss equal for all): 0 of 10, ~86 of 100 steps off the corpus
     out = _pipeline(tmp_path, "maze", {"episodes": 300, "seed": 5},
                     ("--episodes", "5", "--seed", "11"))
-    assert out["summary"]["success_rate"] >= 0.8, out["summary"]
+    assert out["summary"]["success_rate"] >= 0.9, out["summary"]
 
 
 @pytest.mark.quality
 def test_two_gates_passes_a_gate_with_the_default_training(tmp_path):
-    # 150 trajectories (3,572 rows), the task's epsilon 0.1: 4 of 5 episodes reach the goal
-    # (the one that fails stops at the wall)
+    # 150 trajectories (3,572 rows) from a plain file, epsilon 0.1 decided on held-out episodes:
+    # 4 of 5 episodes reach the goal (the one that fails stops at the wall; 2026-11-28, as with
+    # the collected corpus)
     out = _pipeline(tmp_path, "two-gates", {"episodes": 150, "seed": 0},
                     ("--episodes", "5", "--seed", "11"))
     assert out["summary"]["success_rate"] >= 0.6, out["summary"]
@@ -82,10 +84,11 @@ def test_two_gates_passes_a_gate_with_the_default_training(tmp_path):
 
 @pytest.mark.quality
 def test_lunar_does_better_than_doing_nothing_with_the_default_training(tmp_path):
-    # 10,000 rows (43 episodes of the heuristic lander with persistent noise); AOC's returns on
-    # seeds 11-12: 30.0 and -45.0, the zero action's -120.8 and -14.4 (a lander that fires at
-    # random: -69.6 and -214.6). At this size AOC does not land yet (30k rows: half the
-    # episodes; docs/results.md "lunar")
+    # 10,000 rows (43 episodes of the heuristic lander with persistent noise) from a plain
+    # file, epsilon 0.2 decided on held-out episodes: AOC's returns on seeds 11-12 57.3 and
+    # -60.0 (2026-11-28; at the paper's 0.5: 30.0 and -45.0), the zero action's -120.8 and
+    # -14.4 (a lander that fires at random: -69.6 and -214.6). At this size AOC does not land
+    # yet (30k rows: half the episodes; docs/results.md "lunar")
     out = _pipeline(tmp_path, "lunar", {"steps": 10000, "seed": 0},
                     ("--episodes", "2", "--seed", "11"))
     seeds = [11 + e["episode"] for e in out["episodes"]]  # episode e runs on seed + e
@@ -94,9 +97,10 @@ def test_lunar_does_better_than_doing_nothing_with_the_default_training(tmp_path
 
 @pytest.mark.quality
 def test_pendulum_het_upright_balances_with_the_default_training(tmp_path):
-    # 10,000 rows; the task's own gamma 0.9: -0.015 and -0.039 on seeds 1-2 (a fall costs
-    # hundreds). With gamma 0.99, landed main's default: -802 and -821 (docs/results.md
-    # "Defaults per task")
+    # 10,000 rows from a plain file: gamma 0.9 decided from the log's time limit (every
+    # episode stops at 200 steps), epsilon 0.3 on held-out episodes: -0.114 and -0.025 on
+    # seeds 1-2 (2026-11-28; a fall costs hundreds). With gamma 0.99: -802 and -821
+    # (docs/results.md "Defaults per task")
     out = _pipeline(tmp_path, "pendulum-het-upright", {"steps": 10000, "seed": 0},
                     ("--episodes", "2", "--seed", "1"))
-    assert all(e["return"] >= -100 for e in out["episodes"]), out["episodes"]
+    assert all(e["return"] >= -2 for e in out["episodes"]), out["episodes"]

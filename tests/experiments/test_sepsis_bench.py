@@ -48,6 +48,28 @@ def test_tabular_policy_without_enough_counts_is_the_logged_modal_action():
     assert pol[3] == 7
 
 
+def test_spibb_copies_the_behaviour_where_it_bootstraps_and_improves_elsewhere():
+    """The hand-made log above: in s3, a1 (twice, half die) and a7 (once, to s4, survives)."""
+    from aoc_cli.experiments.spibb import _model, spibb
+
+    states = np.array([3, 4, 3, 4, 3])
+    actions = np.array([1, 2, 7, 2, 1])
+    rewards = np.array([0.0, 1.0, 0.0, 1.0, 0.0])
+    terminals = np.array([False, True, False, True, True])
+    starts = np.array([0, 2, 4, 5])
+    model, behaviour, counts = _model(states, actions, rewards, terminals, starts)
+    # every pair bootstrapped (N_wedge 10): the behaviour itself, unvisited states on action 0
+    pi = spibb(model, behaviour, counts, 10, 0)
+    np.testing.assert_array_equal(pi[[3, 4]], behaviour[[3, 4]])
+    assert pi[0, 0] == 1.0 and model.terminal[0]
+    # a1 trusted (2 >= 2), a7 not: a7 keeps its 1/3, a1 takes the rest (the only trusted one)
+    pi = spibb(model, behaviour, counts, 2, 0)
+    np.testing.assert_allclose(pi[3, [1, 7]], [2 / 3, 1 / 3], rtol=0, atol=1e-15)
+    # nothing bootstrapped (N_wedge 1): all of s3's mass on the better a7
+    pi = spibb(model, behaviour, counts, 1, 0)
+    assert pi[3, 7] == 1.0
+
+
 def test_bc_takes_the_modal_action_of_each_observation_and_the_nearest_for_the_unseen(tables):
     obs = tables.observations[[5, 5, 5, 7]]
     pol = sp.bc_policy(obs, np.array([3, 3, 1, 2]), tables)
@@ -92,8 +114,8 @@ def test_inadmissible_doses_are_counted_per_state_and_per_patient():
 
 def test_run_writes_the_table_with_the_references_and_log_policies(tmp_path):
     report = run_sepsis(tmp_path / "out", tmp_path / "store", "tiny",
-                        methods=["bc", "tabular", "clinicians", "one-step", "optimal"],
-                        sizes=[300])
+                        methods=["bc", "tabular", "spibb", "clinicians", "one-step",
+                                 "optimal"], sizes=[300])
     by = {r["method"]: r for r in report["summary"]}
     assert by["one-step"]["value"] == pytest.approx(0.8618, abs=1e-4)
     assert by["optimal"]["value"] == pytest.approx(0.8751, abs=1e-4)
@@ -103,6 +125,10 @@ def test_run_writes_the_table_with_the_references_and_log_policies(tmp_path):
         assert 0.7 < by[m]["value"] < by["optimal"]["value"]
         assert 0.0 <= by[m]["agree_one_step"] <= 1.0
         assert 0.0 <= by[m]["inadmissible_states"] <= 1.0
+    from aoc_cli.experiments.spibb import THRESHOLDS
+
+    assert by["spibb"]["kind"] == "exact" and 0.7 < by["spibb"]["value"] < by["optimal"]["value"]
+    assert [r["n_wedge"] for r in report["rows"] if r["method"] == "spibb"][0] in THRESHOLDS
     saved = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert saved["summary"] == report["summary"]
     md = (tmp_path / "out" / "summary.md").read_text()
