@@ -199,7 +199,7 @@ def test_pi1_copies_fill_the_nearest_entries_of_the_start_moves(bench_store):
     """maze-adapt's mechanism, measured: x2 copies of pi1 crowd the k nearest entries of both
     first moves (fewer distinct rows), while v_hat stays a weighted mean of row values."""
     from aoc_cli.experiments.common import belief_config, session
-    from aoc_cli.experiments.maze import SCALES, start_probe
+    from aoc_cli.experiments.maze import MAZE_EPSILON, SCALES, start_probe
     from aoc_cli.experiments.prepare import Artefacts
     from aoc_cli.envs import make_env
 
@@ -209,13 +209,13 @@ def test_pi1_copies_fill_the_nearest_entries_of_the_start_moves(bench_store):
     art.index(corpus, "default")
     art.index(corpus, "default", "pi1x2", resample={"policy=pi1": 2.0})
     env = make_env("maze")
-    x1 = start_probe(session(corpus, env, "maze"))
-    x2 = start_probe(session(corpus, env, "maze", index_id="pi1x2"))
+    x1 = start_probe(session(corpus, env, epsilon=MAZE_EPSILON))
+    x2 = start_probe(session(corpus, env, index_id="pi1x2", epsilon=MAZE_EPSILON))
     for move in ("pi1", "pi2"):
         assert x2[f"pi1_nearest_{move}"] > x1[f"pi1_nearest_{move}"]
         assert x2[f"distinct_nearest_{move}"] < x1[f"distinct_nearest_{move}"]
         assert 0.0 <= x2[f"pi1_support_{move}"] <= 1.0 + 1e-9
-    values = session(corpus, env, "maze").index.values
+    values = session(corpus, env, epsilon=MAZE_EPSILON).index.values
     assert values.min() - 1e-9 <= x1["value_pi1"] <= values.max() + 1e-9
 
 
