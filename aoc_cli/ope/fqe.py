@@ -30,6 +30,7 @@ import numpy as np
 
 from aoc_cli.errors import AocError
 from aoc_cli.ope.ensemble import FQEEnsemble, joined, sampler
+from aoc_cli.ope.estimators import censoring_weights
 from aoc_cli.ope.parts import train_parts
 
 #: FQE settings: mini-batch, learning rate, target network sync, hidden layers.
@@ -276,7 +277,7 @@ def fqe_policies(observations, actions, rewards, starts, policies: list, gamma: 
     "logged" (N,) Q_hat of each logged step, "estimate" (the mean Q_hat of the episodes' first
     logged steps: the behaviour's value, which the log's mean return also estimates), "steps".
 
-    ``truncated`` (E,): episodes cut short (:func:`censoring_weights`): the last step of one is
+    ``truncated`` (E,): episodes cut short (:func:`aoc_cli.ope.estimators.censoring_weights`): the last step of one is
     never drawn, and the transitions that continue are drawn in proportion to the inverse of
     their chance to have escaped the cut."""
     import time
@@ -363,26 +364,6 @@ def behaviour_fqe(observations, actions, rewards, starts, n_actions: int, gamma:
     return fqe_policies(observations, actions, rewards, starts, [], gamma, steps, 0, seed=seed,
                         progress=progress, schedule=schedule, behaviour=True,
                         n_actions=n_actions, truncated=truncated)[-1]
-
-
-def censoring_weights(starts: np.ndarray, truncated: np.ndarray) -> np.ndarray:
-    """(N,) how often FQE draws each transition of a log whose ``truncated`` (E,) episodes
-    were cut short (inverse probability of censoring weighting). A cut episode's last step is
-    censored: it went on, to a state the log does not hold, so it has no target (weight 0).
-    Dropping it alone would leave too few transitions that go on: an ending one is always in
-    the log, a continuing one only if the cut spared it, with probability 1 - h, h the share
-    of the continuing transitions that were cut. So each continuing transition weighs
-    1 / (1 - h), each ending one 1: the mini-batches are then drawn as from the uncut log
-    where the cut is independent of the state and the step (one h for the log: FQE pools
-    every step's transitions of a state)."""
-    starts = np.asarray(starts, np.int64)
-    last = np.zeros(int(starts[-1]), bool)
-    last[starts[1:] - 1] = True
-    cut = np.zeros_like(last)
-    cut[starts[1:][np.asarray(truncated, bool)] - 1] = True
-    going = ~last
-    h = cut.sum() / max(1, cut.sum() + going.sum())
-    return np.where(cut, 0.0, np.where(going, 1.0 / (1.0 - h), 1.0))
 
 
 def student_quantile(df: int) -> float:

@@ -11,7 +11,8 @@ import pytest
 
 from aoc_cli.ope import estimators as ope
 from aoc_cli.ope.fqe import student_quantile
-from aoc_cli.ope.policies import OPESettings, policy_value
+from aoc_cli.ope.policies import OPESettings
+from aoc_cli.ope.value import policy_value
 from aoc_cli.ope.support import cell, min_ess, refusal, verdict
 from tests.ope.mdps import SmallMDP
 
