@@ -139,6 +139,27 @@ def test_open_session_decides_as_the_commands_rollout_for_the_same_seed(trained,
                                   np.asarray(recorded["action"], np.float32).reshape(-1))
 
 
+def test_controller_takes_a_config_or_a_mapping_over_the_tasks_own_settings(trained):
+    from aoc_cli.control import ControllerConfig
+
+    store, _done, _built = trained
+    # two-gates sets epsilon 0.1 (its Task.controller): a mapping's None is "not given"
+    assert api.open_session("g", store=store).controller.config.epsilon == 0.1
+    mapped = api.open_session("g", store=store, controller={"epsilon": None, "k": 9,
+                                                            "row_smoothing": 0.5})
+    assert (mapped.controller.config.epsilon, mapped.controller.config.k,
+            mapped.controller.config.row_smoothing) == (0.1, 9, 0.5)
+    config = ControllerConfig(epsilon=0.7, candidates=12)
+    assert api.open_session("g", store=store, controller=config).controller.config == config
+    with pytest.raises(BadSetting, match="unknown controller setting epsilonn") as bad:
+        api.open_session("g", store=store, controller={"epsilonn": 0.2})
+    assert bad.value.param == "epsilonn"
+    with pytest.raises(BadSetting, match="residual_cap must be > 0"):
+        api.evaluate("g", "g", store=store, controller={"residual_cap": 0})
+    with pytest.raises(BadSetting, match="epsilon does not apply to two-gates"):
+        api.bench("two-gates", store=store, scale="tiny", controller={"epsilon": 0.3})
+
+
 def test_rollout_explain_and_evaluate_return_what_the_commands_print(trained, tmp_path):
     store, _done, _built = trained
     audit = tmp_path / "b.h5"

@@ -7,10 +7,10 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
-from aoc_cli.api.common import StoreLike, open_store
+from aoc_cli.api.common import StoreLike, controller_config, open_store
 from aoc_cli.baselines import make_baseline
-from aoc_cli.control import (ControllerConfig, EpisodeResult, Session, model_free_session,
-                             rollout as _rollout)
+from aoc_cli.control import EpisodeResult, Session, model_free_session, rollout as _rollout
+from aoc_cli.control.config import ControllerLike
 from aoc_cli.control import open_session as _open_session
 from aoc_cli.control.episodes import action_space_of
 from aoc_cli.control.run import reference_from_audit
@@ -28,22 +28,19 @@ MODEL_FREE = ("zero", "random")
 def open_session(name: str, *, store: StoreLike = None, model: str | None = None,
                  index_id: str = DEFAULT_INDEX, env: str | None = None, seed: int = 0,
                  select: dict[str, list[str]] | None = None,
-                 exclude: dict[str, list[str]] | None = None, candidates: int | None = None,
-                 epsilon: float | None = None, k: int | None = None,
-                 min_support: float | None = None, support_penalty: float | None = None,
-                 residual_cap: float | None = None, sampler: str | None = None) -> Session:
+                 exclude: dict[str, list[str]] | None = None,
+                 controller: ControllerLike = None) -> Session:
     """A controller ready to act on corpus ``name``: its model ``model`` (default 'default',
     else the latest), index ``index_id``, the rows of the tag selections ``select`` /
-    ``exclude`` ({tag: [values]}), and the controller settings (None: the task's, else the
-    paper's). ``env``: a built-in task or gymnasium id whose settings and action box apply
-    (default: the task the corpus was collected from, no narrower box).
+    ``exclude`` ({tag: [values]}), and the controller settings ``controller`` (a
+    ControllerConfig or a mapping of its fields, e.g. ``{"epsilon": 0.1}``; a setting not
+    given, or None: the task's, else the paper's). ``env``: a built-in task or gymnasium id
+    whose settings and action box apply (default: the task the corpus was collected from, no
+    narrower box).
     ``session.controller.decide(observation (d_o,), history (L, d_o + d_a + 1))`` -> a
     Decision (action, value, residual, supporting rows and weights)."""
     corpus = open_store(store).corpus(name)
-    config = ControllerConfig.for_task(collected_task(corpus) if env is None else env,
-                                       candidates=candidates, epsilon=epsilon, k=k,
-                                       sampler=sampler, residual_cap=residual_cap,
-                                       min_support=min_support, support_penalty=support_penalty)
+    config = controller_config(controller, collected_task(corpus) if env is None else env)
     action_space = action_space_of(make_env(env)) if env is not None else None
     return _open_session(corpus, model, index_id, config, row_selection(corpus, select, exclude),
                          seed, action_space)
@@ -63,10 +60,7 @@ class RolledOut:
 
 def rollout(name: str, env: str, *, store: StoreLike = None, episodes: int = 5,
             policy: str = "aoc", model: str | None = None, index_id: str = DEFAULT_INDEX,
-            candidates: int | None = None, epsilon: float | None = None, k: int | None = None,
-            min_support: float | None = None, support_penalty: float | None = None,
-            residual_cap: float | None = None, sampler: str = "uniform",
-            select: dict[str, list[str]] | None = None,
+            controller: ControllerLike = None, select: dict[str, list[str]] | None = None,
             exclude: dict[str, list[str]] | None = None, seed: int = 0,
             audit: str | os.PathLike | None = None, plot: str | os.PathLike | None = None,
             noise_after: int | None = None, noise_std: float = 0.5,
@@ -74,8 +68,8 @@ def rollout(name: str, env: str, *, store: StoreLike = None, episodes: int = 5,
             progress: Progress | None = None) -> RolledOut:
     """Run ``episodes`` episodes of ``env`` (a built-in task or a gymnasium id) with
     ``policy`` (aoc, or a baseline: zero, random, 1nn, knn, bc, td3bc, cql, mpc, ...) acting
-    on corpus ``name``; episode i starts from seed ``seed + i``. The controller settings are
-    ``env``'s under those given (as :func:`open_session`). ``audit``: write every decision to
+    on corpus ``name``; episode i starts from seed ``seed + i``. ``controller``: the controller
+    settings given (as :func:`open_session`), over ``env``'s own. ``audit``: write every decision to
     this HDF5 file; ``plot``: a PNG of the trajectories or the residual/reward curves;
     ``noise_after``, ``noise_std``: disturb the actions after that step (a fraction of the
     action range); ``ood_reference``: flag steps against the per-step band of this audit log
@@ -90,10 +84,7 @@ def rollout(name: str, env: str, *, store: StoreLike = None, episodes: int = 5,
         raise BadSetting("noise_std", noise_std, f"{param('noise_std')} must be a finite number "
                          f">= 0, got {noise_std}")
     corpus = s.corpus(name)
-    config = ControllerConfig.for_task(env, candidates=candidates, epsilon=epsilon, k=k,
-                                       sampler=sampler, residual_cap=residual_cap,
-                                       min_support=min_support,
-                                       support_penalty=support_penalty)
+    config = controller_config(controller, env)
     environment = make_env(env)
     selection = row_selection(corpus, select, exclude)
     action_space = action_space_of(environment)

@@ -8,8 +8,9 @@ import json
 import os
 from typing import Sequence
 
-from aoc_cli.api.common import StoreLike, open_store
-from aoc_cli.control import ControllerConfig, open_session
+from aoc_cli.api.common import StoreLike, controller_config, open_store
+from aoc_cli.control import open_session
+from aoc_cli.control.config import ControllerLike
 from aoc_cli.control.whatif import removal as removal_of
 from aoc_cli.control.whatif import what_if_steps
 from aoc_cli.envs import collected_task
@@ -25,10 +26,7 @@ from aoc_cli.store import DEFAULT_INDEX, atomic_path
 def evaluate(name: str, data: str, *, store: StoreLike = None,
              baselines: Sequence[str] = ("knn", "bc"),
              steps_file: str | os.PathLike | None = None, model: str | None = None,
-             index_id: str = DEFAULT_INDEX, candidates: int | None = None,
-             epsilon: float | None = None, k: int | None = None,
-             min_support: float | None = None, support_penalty: float | None = None,
-             row_smoothing: float | None = None,
+             index_id: str = DEFAULT_INDEX, controller: ControllerLike = None,
              exact: bool | None = None, seed: int = 0, ope: str | None = None,
              propensity: str | None = None, ope_gamma: float = 1.0,
              fqe_steps: int | None = None, fqe_refits: int | None = None,
@@ -38,7 +36,7 @@ def evaluate(name: str, data: str, *, store: StoreLike = None,
              progress: Progress | None = None) -> dict:
     """Decide every logged step of corpus ``data`` (held-out episodes of the same spaces, or
     ``name`` itself: each episode decided without its own rows) with corpus ``name``'s
-    controller (settings as :func:`~aoc_cli.api.open_session`) and score the decisions:
+    controller (``controller``: its settings, as :func:`~aoc_cli.api.open_session`) and score the decisions:
     accuracy, AUC, calibration or value R^2, residuals, and ``baselines`` (knn, bc) on the
     same steps. ``exact``: search the index exactly (None: up to the small-log bound, IVF
     beyond). ``ope`` ("pdwis,wdr,fqe", "none"), ``propensity``, ``ope_gamma``, ``fqe_steps``,
@@ -59,11 +57,7 @@ def evaluate(name: str, data: str, *, store: StoreLike = None,
     s = open_store(store)
     corpus = s.corpus(name)
     held_out = corpus if data == name else s.corpus(data)
-    config = ControllerConfig.for_task(collected_task(corpus), candidates=candidates,
-                                       epsilon=epsilon, k=k, residual_cap=None,
-                                       min_support=min_support,
-                                       support_penalty=support_penalty,
-                                       row_smoothing=row_smoothing)
+    config = controller_config(controller, collected_task(corpus))
     removal = removal_of(corpus, without, without_episodes)
     if removal is not None and (workers is not None or ray_address is not None):
         raise BadSetting("without", without, f"{param('without')} runs in one process: drop "

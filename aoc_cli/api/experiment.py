@@ -9,9 +9,10 @@ from pathlib import Path
 from typing import Sequence
 
 from aoc_cli.api.common import Log, StoreLike, open_store
+from aoc_cli.control.config import ControllerLike, given_settings
 from aoc_cli.errors import BadSetting, param
 from aoc_cli.experiments import ORDER, expected_seconds, run_experiment
-from aoc_cli.experiments.runner import SIZED, check
+from aoc_cli.experiments.runner import SIZED, VARIED, check
 from aoc_cli.experiments.sepsis import run_sepsis
 from aoc_cli.experiments.ward import run_ward
 from aoc_cli.progress import Progress, stage
@@ -38,15 +39,16 @@ class Benched:
 def bench(experiment: str, *, store: StoreLike = None, scale: str = "full",
           seeds: int | None = None, episodes: int | None = None,
           methods: Sequence[str] | None = None, out: str | os.PathLike | None = None,
-          epsilon: float | None = None, residual_cap: float | None = None,
-          sizes: Sequence[int] | None = None, behaviour: str = "mix",
+          controller: ControllerLike = None, sizes: Sequence[int] | None = None, behaviour: str = "mix",
           bench_store: str | os.PathLike = "bench/store", workers: int | None = None,
           ray_address: str | None = None, source: str = "ward",
           progress: Progress | None = None, log: Log | None = None) -> Benched:
     """Run ``experiment`` (pendulum-het, epsilon, k, maze-adapt, two-gates, lunar, ood, all,
     ward, icu-sepsis, icu-sepsis-terminate) at ``scale`` (full, quick: <= 15 min each, tiny:
     seconds) with ``seeds`` seeds (ward: patient splits) and ``episodes`` per evaluation;
-    ``methods``: a subset of the methods; ``sizes``: rows per corpus (pendulum-het, lunar) or
+    ``methods``: a subset of the methods; ``controller``: AOC's controller settings (a
+    ControllerConfig or a mapping of its fields; None: not given) over each task's own, in
+    the rollout experiments, each but the one an experiment varies; ``sizes``: rows per corpus (pendulum-het, lunar) or
     episodes per log (icu-sepsis). Writes results.csv, summary.md, summary.json and plots to
     ``out`` (default bench/EXPERIMENT; ``all``: out/EXPERIMENT); corpora and models go to
     ``bench_store`` and are reused. ``source``: ward's log, ``ward`` (the simulated ward) or
@@ -59,12 +61,14 @@ def bench(experiment: str, *, store: StoreLike = None, scale: str = "full",
         raise BadSetting("scale", scale,
                          f"{param('scale')} {scale!r} is unknown: use {', '.join(SCALES)}")
     chosen = list(methods) if methods else None
+    given = given_settings(controller)
     sizes = list(sizes) if sizes is not None else None
     bench_store = Path(bench_store)
     if source != "ward" and experiment != "ward":
         raise BadSetting("source", source, f"{param('source')} is ward's alone (the log it "
                          f"reads), not {experiment}'s")
     if experiment == "ward":  # imitation on a log: splits, not rollouts (experiments/ward.py)
+        _no_controller(experiment, given)
         if seeds is not None and seeds < 1:
             raise BadSetting("seeds", seeds, f"{param('seeds')} (random patient splits) must be "
                              f">= 1, got {seeds}")
@@ -74,13 +78,14 @@ def bench(experiment: str, *, store: StoreLike = None, scale: str = "full",
              f"in {duration(report['seconds'])}")
         return Benched(experiment, scale, report["summary"], None)
     if experiment in ("icu-sepsis", "icu-sepsis-terminate"):  # exact values (sepsis.py)
+        _no_controller(experiment, given)
         report = run_sepsis(Path(out) if out is not None else Path("bench") / experiment,
                             bench_store, scale, seeds, chosen, sizes, experiment, log=note,
                             progress=progress)
         note(f"{experiment}: wrote {report['out']}/results.csv, summary.md and summary.json in "
              f"{duration(report['seconds'])}")
         return Benched(experiment, scale, report["summary"], None)
-    check(experiment, scale, seeds, episodes, chosen, epsilon, residual_cap, sizes,
+    check(experiment, scale, seeds, episodes, chosen, given, sizes,
           behaviour if experiment != "all" else "mix", workers)
     names = ORDER if experiment == "all" else [experiment]
     eta = expected_seconds(experiment, scale, seeds, episodes, chosen, sizes)
@@ -92,12 +97,13 @@ def bench(experiment: str, *, store: StoreLike = None, scale: str = "full",
         target = (Path(out) / name if out is not None else None) if experiment == "all" \
             else out
         label = f"bench {name}" + (f" ({i + 1}/{len(names)})" if len(names) > 1 else "")
-        if epsilon is not None and name in ("epsilon", "two-gates"):
-            note(f"{name}: --epsilon ignored (epsilon is what it varies)")
+        varied = VARIED.get(name)
+        if varied in given:
+            note(f"{name}: the {varied} given is ignored (it is what {name} varies)")
         report = run_experiment(name, scale, seeds, target, bench_store, episodes, chosen,
                                 log=note, progress=stage(progress, label),
-                                epsilon=None if name in ("epsilon", "two-gates") else epsilon,
-                                residual_cap=residual_cap, sizes=sizes,
+                                controller={k: v for k, v in given.items() if k != varied},
+                                sizes=sizes,
                                 behaviour=behaviour if name in SIZED else "mix",
                                 workers=workers, address=ray_address)
         for rec in report["summary"]:
@@ -108,6 +114,14 @@ def bench(experiment: str, *, store: StoreLike = None, scale: str = "full",
         records += report["summary"]
     return Benched(experiment, scale, [{c: r.get(c) for c in COLUMNS} for r in records],
                    COLUMNS)
+
+
+def _no_controller(experiment: str, given: dict) -> None:
+    """ward and icu-sepsis run their own controller: a setting given is an error."""
+    if given:
+        key = sorted(given)[0]
+        raise BadSetting(key, given[key], f"{param(key)} applies to the rollout experiments, "
+                         f"not to {experiment} (it runs its own settings)")
 
 
 def duration(seconds: float) -> str:

@@ -11,10 +11,11 @@ from pathlib import Path
 
 import numpy as np
 
-from aoc_cli.api.common import StoreLike, open_store
+from aoc_cli.api.common import StoreLike, controller_config, open_store
 from aoc_cli.envs import collected_task
 from aoc_cli.control import (ControllerConfig, explain_logged_step, explain_query, open_session,
                              parse_query, read_audit_step, replay_decision)
+from aoc_cli.control.config import ControllerLike
 from aoc_cli.control.explain import explain_decisions
 from aoc_cli.control.records import label_of
 from aoc_cli.control.whatif import removal as removal_of
@@ -37,10 +38,7 @@ def explain(name: str, *, store: StoreLike = None, queries: str | os.PathLike | 
             audit: str | os.PathLike | None = None, data: str | None = None,
             episode: int = 0, step: int = 0, compare: list | None = None,
             model: str | None = None, index_id: str = DEFAULT_INDEX,
-            candidates: int | None = None, epsilon: float | None = None, k: int | None = None,
-            min_support: float | None = None, support_penalty: float | None = None,
-            residual_cap: float | None = None, row_smoothing: float | None = None,
-            seed: int = 0,
+            controller: ControllerLike = None, seed: int = 0,
             without: dict[str, list[str]] | None = None,
             without_episodes: list[str] | None = None, html: str | os.PathLike | None = None,
             steps_file: str | os.PathLike | None = None) -> Explained:
@@ -54,8 +52,9 @@ def explain(name: str, *, store: StoreLike = None, queries: str | os.PathLike | 
     * ``data`` + ``episode`` + ``step``: the decision at a logged step of corpus ``data``
       (``name`` itself or held-out episodes) and what supports the logged action there.
 
-    Controller settings as :func:`~aoc_cli.api.open_session` (default: the task the corpus was
-    collected from). ``without`` ({tag: [values]}) / ``without_episodes`` (ids or numbers):
+    ``controller``: the controller settings, as :func:`~aoc_cli.api.open_session` (over the
+    settings of the task the corpus was collected from; a recorded decision is replayed with
+    its recorded settings). ``without`` ({tag: [values]}) / ``without_episodes`` (ids or numbers):
     decide again without those rows and report what changes. ``html``: also write the
     decision page; with ``steps_file`` (an ``aoc evaluate --steps`` file) and no source,
     write that file's overview page only."""
@@ -77,13 +76,10 @@ def explain(name: str, *, store: StoreLike = None, queries: str | os.PathLike | 
                        f"(a recorded decision) or {param('data', 'CORPUS')} "
                        f"{param('episode', 'E')} {param('step', 'T')} (a logged step)")
     corpus = s.corpus(name)
-    config = ControllerConfig.for_task(collected_task(corpus), candidates=candidates,
-                                       epsilon=epsilon, k=k, residual_cap=residual_cap,
-                                       min_support=min_support, support_penalty=support_penalty,
-                                       row_smoothing=row_smoothing)
+    config = controller_config(controller, collected_task(corpus))
     opened = dict(model_id=model, index_id=index_id, config=config, seed=seed)
     removal = removal_of(corpus, without, without_episodes)
-    session = None
+    session = source = None
     if data is not None:
         source = corpus if data == name else s.corpus(data)
         records = explain_logged_step(open_session(corpus, **opened), source, episode, step,
@@ -94,7 +90,7 @@ def explain(name: str, *, store: StoreLike = None, queries: str | os.PathLike | 
         records = _queries(open_session(corpus, **opened), queries, compare or [], removal)
     if html is not None:
         write_html(Path(html), records, corpus, session=session, audit=audit,
-                   episode=episode, step=step)
+                   episode=episode, step=step, source=source)
     return Explained(corpus.name, records, None if html is None else Path(html))
 
 

@@ -7,13 +7,16 @@ rewards and the episode structure) by fitted Q evaluation with expected SARSA ta
     Q_0 = 0;   Q_{i+1} = argmin_Q  sum_c ( Q(o^c, a^c) - y_i^c )^2,
     y_i^c = r^c + gamma V_i(o^{c+1})              (row c + 1 the next row of c's episode)
     y_i^c = r^c                                   (c the last row of its episode)
+    y_i^c = r^c + gamma v_cut,i(e)                (c the cut of a censored stay e)
     V_i(o) = mean of Q_i(o, a^d) over the rows d of the log at observation o
 
 so the backup follows the actions the behaviour took at the next observation: the fixed point
 is the behaviour's own Q, with no behaviour model and no propensities. Where no observation
 repeats, V_i(o^{c+1}) is the next row's own Q_i(o^{c+1}, a^{c+1}) (SARSA;
 ``FQEConfig(next_value="logged")`` keeps that everywhere). As the ``return`` target, a logged
-episode's end is its end (no bootstrapping past a truncation). Unlike the Monte-Carlo return,
+episode's end is its end (no bootstrapping past a truncation), except the cut of a stay a
+clinical ingest marked censored: v_cut,i(e) is the mean Q_i of the uncensored stays' rows at
+the step of the cut (:mod:`aoc_cli.belief.censoring`). Unlike the Monte-Carlo return,
 each target averages the next step's value over every row that shares its input, so on a log
 whose states repeat (ICU-Sepsis) the noise of one patient's outcome, and of the dose they were
 given next, is shared out among all the patients that reached the same state:
@@ -35,6 +38,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from aoc_cli.belief.censoring import cut_values
 from aoc_cli.belief.config import FQEConfig
 from aoc_cli.errors import BadSetting, param
 
@@ -61,12 +65,14 @@ def _inputs(observations: np.ndarray, actions: np.ndarray, discrete: bool) -> np
 
 def fitted_q_values(observations: np.ndarray, actions: np.ndarray, rewards: np.ndarray,
                     episode_starts: np.ndarray, gamma: float, n_actions: int | None = None,
-                    config: FQEConfig | None = None, progress=None) -> np.ndarray:
+                    config: FQEConfig | None = None, progress=None,
+                    censored: np.ndarray | None = None) -> np.ndarray:
     """(N,) float64 Q(o^c, a^c) of the logged behaviour for every row (module docstring).
 
     observations (N, d_o); actions (N,) int with ``n_actions`` given (discrete) or (N, d_a);
     rewards (N,); episode_starts (E + 1,). Same inputs and seed, same values (CPU).
-    ``progress(done, total, label)`` after each backup.
+    ``progress(done, total, label)`` after each backup; ``censored`` (E,) bool: stays cut
+    short, bootstrapped at their cut (None: none).
     """
     config = config or FQEConfig()
     n = len(rewards)
@@ -115,6 +121,10 @@ def fitted_q_values(observations: np.ndarray, actions: np.ndarray, rewards: np.n
         else:
             following = q_group[next_group]
         target_rows = r + gamma * np.where(has_next, following, 0.0)
+        if censored is not None:  # each censored stay's cut continued by the stays present
+            cuts = np.asarray(episode_starts[1:])[censored] - 1
+            target_rows[cuts] += gamma * cut_values(q_group[group], episode_starts,
+                                                    censored)[censored]
         target = np.bincount(group, weights=target_rows, minlength=n_groups) / count
         y = torch.from_numpy(target.astype(np.float32))
         lr = config.final_lr if it >= config.iterations - config.final_iterations else config.lr

@@ -34,6 +34,7 @@ import numpy as np
 import torch
 
 from aoc_cli.belief.artefact import check_corpus, save_model
+from aoc_cli.belief.censoring import censoring_of
 from aoc_cli.belief.config import BeliefConfig
 from aoc_cli.belief.data import EarlyStopping, report, split_episodes
 from aoc_cli.belief.inputs import build_net, encode_corpus, network_dims, pick_device
@@ -169,7 +170,7 @@ def block_value_targets(corpus, cols: Columns, ranges, value: str, gamma: float)
     """(N,) float64 value targets computed block by block (whole episodes each): the same
     numbers as :func:`aoc_cli.belief.targets.value_targets`, which needs the whole rewards
     column and several (N,) float64 temporaries at once."""
-    if value == "fqe":  # bootstrapped through the whole log: computed on all of it at once
+    if value == "fqe" or censoring_of(corpus) is not None:  # across episodes: all at once
         return value_targets(corpus, value, gamma)
     out = np.empty(cols.n_rows, dtype=np.float64)
     key = "rewards" if value in ("return", "mean-return", "reward") else f"columns/{value}"

@@ -19,6 +19,7 @@ import json
 
 import numpy as np
 
+from aoc_cli.belief.censoring import censored_return_to_go, censoring_of
 from aoc_cli.belief.config import REWARD_TARGETS, FQEConfig
 from aoc_cli.errors import BadSetting, NoRewards, param
 from aoc_cli.store import hash_arrays, targets_dir, write_json, write_npy
@@ -93,11 +94,14 @@ def value_targets(corpus, value: str, gamma: float, progress=None) -> np.ndarray
             v = fitted_q_values(corpus.observations, corpus.actions, rewards,
                                 corpus.episode_starts, gamma,
                                 n_actions=corpus.n_actions if corpus.discrete else None,
-                                progress=progress)
+                                progress=progress, censored=censoring_of(corpus))
         elif value == "mean-return":
             v = mean_remaining_reward(rewards, corpus.episode_starts)
         else:
             v = discounted_return_to_go(rewards, corpus.episode_starts, gamma)
+            censored = censoring_of(corpus)
+            if censored is not None:
+                v = censored_return_to_go(v, corpus.episode_starts, censored, gamma)
     else:
         columns = list(corpus.manifest.get("columns", []))
         if value not in columns:
@@ -194,7 +198,8 @@ def value_spec(value: str, gamma: float) -> dict:
     elif value == "return":
         spec["gamma"] = gamma
         spec["definition"] = ("discounted return-to-go within the logged episode, "
-                              "no bootstrapping at truncated ends")
+                              "no bootstrapping at truncated ends (a censored stay of a "
+                              "clinical ingest: continued by the stays present at its cut)")
     elif value == "mean-return":
         spec["definition"] = "mean of the remaining rewards of the episode"
     elif value == "reward":

@@ -9,14 +9,15 @@ from typing import Optional
 import typer
 
 import aoc_cli
-from aoc_cli.cli.common import (EpisodesOption, EpsilonOption, FormatOption, RayAddressOption,
-                                ResidualCapOption, WorkersOption, state)
+from aoc_cli.cli.common import (EpisodesOption, FormatOption, RayAddressOption, WorkersOption,
+                                deciding, state)
 from aoc_cli.errors import AocError
 from aoc_cli.report import ProgressBar, message, resolve_format, write_records
 
 
 def register(app: typer.Typer) -> None:
     @app.command("bench")
+    @deciding
     def bench_command(
         experiment: str = typer.Argument(
             ..., help="pendulum-het, epsilon, k, maze-adapt, two-gates, lunar, ood, all, "
@@ -32,8 +33,7 @@ def register(app: typer.Typer) -> None:
                                               help="Comma-separated methods (default: all)."),
         out: Optional[Path] = typer.Option(None, "--out", help="Output folder (default "
                                            "bench/EXPERIMENT; with all: OUT/EXPERIMENT)."),
-        epsilon: EpsilonOption = None,
-        residual_cap: ResidualCapOption = None,
+        controller: dict = None,
         sizes: Optional[str] = typer.Option(
             None, "--sizes", help="pendulum-het, lunar: comma-separated rows per corpus "
                                   "instead of the scale's (e.g. 100000, the paper's Low-Data); "
@@ -61,7 +61,7 @@ def register(app: typer.Typer) -> None:
             done = aoc_cli.bench(
                 experiment, store=state.store, scale=scale, seeds=seeds, episodes=episodes,
                 methods=[m.strip() for m in methods.split(",") if m.strip()] if methods else None,
-                out=out, epsilon=epsilon, residual_cap=residual_cap, sizes=_sizes(sizes),
+                out=out, controller=controller, sizes=_sizes(sizes),
                 behaviour=behaviour, bench_store=bench_store, workers=workers,
                 ray_address=ray_address, source=source, progress=bar, log=message)
         write_records(done.rows, fmt, columns=done.columns,

@@ -2,18 +2,20 @@
 choices as enums (``--help`` lists them, shell completion offers them), flag parsing.
 
 A command declares a shared option by its alias and its default, e.g.
-``epsilon: EpsilonOption = None``, ``fmt: FormatOption = None``, ``seed: SeedOption = 0``;
-the flag's name and help text are the same in every command. An option that mirrors a setting
-of a config dataclass takes its help, range, choices and default from the field
-(:mod:`aoc_cli.cli.fields`).
+``fmt: FormatOption = None``, ``seed: SeedOption = 0``; the flag's name and help text are the
+same in every command. An option that mirrors a setting of a config dataclass takes its help,
+range, choices and default from the field (:mod:`aoc_cli.cli.fields`). A command that decides
+takes every controller setting at once: :func:`deciding`.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import functools
+import inspect
+from dataclasses import dataclass, fields
 from enum import Enum
 from pathlib import Path
-from typing import Annotated, List, Optional
+from typing import Annotated, Callable, List, Optional, get_type_hints
 
 import typer
 
@@ -84,6 +86,43 @@ def choice(value: Enum | str | None) -> str | None:
     return value.value if isinstance(value, Enum) else value
 
 
+# -- the controller's settings, every one, on every command that decides ------------------
+#: The option of each ControllerConfig field: None unless given (then: the task's, else the
+#: field's default), flag, help, range and choices from the field (``-K`` for candidates).
+_TYPES = get_type_hints(ControllerConfig)
+CONTROLLER_OPTIONS = {
+    item.name: Annotated[
+        Optional[SamplerName if item.name == "sampler" else _TYPES[item.name]],
+        from_field(ControllerConfig, item.name,
+                   *(("--candidates", "-K") if item.name == "candidates" else ()),
+                   given=TASK, annotated=True)]
+    for item in fields(ControllerConfig)}
+
+
+def deciding(command: Callable) -> Callable:
+    """A command that decides, given every controller setting as an option: the command
+    declares a parameter ``controller`` where the options go (in ``--help``'s order) and
+    receives there {field: value, None where not given}, for the API's ``controller=``.
+    ``tests/cli/test_option_help.py`` checks every deciding command against the fields."""
+    params = [p.replace(kind=inspect.Parameter.KEYWORD_ONLY)
+              for p in inspect.signature(command, eval_str=True).parameters.values()]
+    cut = [p.name for p in params].index("controller")
+    options = [inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=None,
+                                 annotation=annotation)
+               for name, annotation in CONTROLLER_OPTIONS.items()]
+    params[cut:cut + 1] = options
+
+    @functools.wraps(command)
+    def run(**kwargs):
+        given = {name: choice(kwargs.pop(name)) for name in CONTROLLER_OPTIONS}
+        return command(**kwargs, controller=given)
+
+    run.__signature__ = inspect.Signature(params)
+    run.__annotations__ = {p.name: p.annotation for p in params}
+    del run.__wrapped__  # typer reads the signature above, not the command's
+    return run
+
+
 # -- arguments and options shared by several commands --------------------------------------
 CorpusArgument = Annotated[str, typer.Argument(help="Corpus name.", show_default=False)]
 
@@ -98,28 +137,6 @@ ModelOption = Annotated[Optional[str], typer.Option(
 IndexOption = Annotated[str, typer.Option(
     "--index", "--index-id", help="Index id: 'default' (every row once) or a derived index "
                                   "(re-sampled or sub-sampled rows).")]
-
-EpsilonOption = Annotated[Optional[float], from_field(
-    ControllerConfig, "epsilon", given=TASK, annotated=True)]
-
-KOption = Annotated[Optional[int], from_field(ControllerConfig, "k", given=TASK, annotated=True)]
-
-ResidualCapOption = Annotated[Optional[float], from_field(
-    ControllerConfig, "residual_cap", given=TASK, annotated=True)]
-
-MinSupportOption = Annotated[Optional[float], from_field(
-    ControllerConfig, "min_support", given=TASK, annotated=True)]
-
-SupportPenaltyOption = Annotated[Optional[float], from_field(
-    ControllerConfig, "support_penalty", given=TASK, annotated=True)]
-
-RowSmoothingOption = Annotated[Optional[float], from_field(
-    ControllerConfig, "row_smoothing", given=TASK, annotated=True)]
-
-CandidatesOption = Annotated[Optional[int], from_field(
-    ControllerConfig, "candidates", "--candidates", "-K", given=TASK, annotated=True)]
-
-SamplerOption = Annotated[SamplerName, from_field(ControllerConfig, "sampler", annotated=True)]
 
 PolicyOption = Annotated[PolicyName, typer.Option(
     "--policy", case_sensitive=False,

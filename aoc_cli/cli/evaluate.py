@@ -10,25 +10,9 @@ from typing import Annotated, Optional
 import typer
 
 import aoc_cli
-from aoc_cli.cli.common import (
-    CandidatesOption,
-    CorpusArgument,
-    EpsilonOption,
-    FormatOption,
-    IndexOption,
-    KOption,
-    MinSupportOption,
-    ModelOption,
-    RayAddressOption,
-    RowSmoothingOption,
-    SupportPenaltyOption,
-    WithoutEpisodesOption,
-    WithoutOption,
-    WorkersOption,
-    parse_episodes,
-    parse_selection,
-    state,
-)
+from aoc_cli.cli.common import (CorpusArgument, FormatOption, IndexOption, ModelOption,
+                                RayAddressOption, WithoutEpisodesOption, WithoutOption,
+                                WorkersOption, deciding, parse_episodes, parse_selection, state)
 from aoc_cli.cli.fields import from_field
 from aoc_cli.errors import warn
 from aoc_cli.ope.policies import OPESettings
@@ -40,6 +24,7 @@ from aoc_cli.store import DEFAULT_INDEX
 
 def register(app: typer.Typer) -> None:
     @app.command("evaluate")
+    @deciding
     def evaluate_command(
         name: CorpusArgument,
         data: Annotated[str, typer.Option(
@@ -53,12 +38,7 @@ def register(app: typer.Typer) -> None:
             "--steps", help="Write one JSON record per step to this JSONL file.")] = None,
         model: ModelOption = None,
         index_id: IndexOption = DEFAULT_INDEX,
-        candidates: CandidatesOption = None,
-        epsilon: EpsilonOption = None,
-        k: KOption = None,
-        min_support: MinSupportOption = None,
-        support_penalty: SupportPenaltyOption = None,
-        row_smoothing: RowSmoothingOption = None,
+        controller: dict = None,
         exact: Annotated[Optional[bool], typer.Option(
             "--exact/--ivf", help="Search the index exactly for every step, or an IVF structure "
                                   "built for the run (default: exact up to "
@@ -86,9 +66,8 @@ def register(app: typer.Typer) -> None:
         with ProgressBar("evaluate", transient=True) as bar:
             summary = aoc_cli.evaluate(
                 name, data, store=state.store, baselines=[b.strip() for b in baselines.split(",")],
-                steps_file=steps_file, model=model, index_id=index_id, candidates=candidates,
-                epsilon=epsilon, k=k, min_support=min_support, support_penalty=support_penalty,
-                row_smoothing=row_smoothing, exact=exact, seed=seed, ope=ope_names,
+                steps_file=steps_file, model=model, index_id=index_id, controller=controller,
+                exact=exact, seed=seed, ope=ope_names,
                 propensity=propensity, ope_gamma=ope_gamma,
                 fqe_steps=fqe_steps, fqe_refits=fqe_refits, fqe_processes=fqe_processes,
                 workers=workers,

@@ -10,10 +10,8 @@ from typing import Annotated, List, Optional
 import typer
 
 import aoc_cli
-from aoc_cli.cli.common import (CandidatesOption, CorpusArgument, EpsilonOption, FormatOption,
-                                IndexOption, KOption, MinSupportOption, ModelOption,
-                                ResidualCapOption, RowSmoothingOption, SupportPenaltyOption,
-                                WithoutEpisodesOption, WithoutOption, parse_episodes,
+from aoc_cli.cli.common import (CorpusArgument, FormatOption, IndexOption, ModelOption,
+                                WithoutEpisodesOption, WithoutOption, deciding, parse_episodes,
                                 parse_selection, state)
 from aoc_cli.errors import AocError
 from aoc_cli.report import message, resolve_format
@@ -23,6 +21,7 @@ from aoc_cli.store import DEFAULT_INDEX
 
 def register(app: typer.Typer) -> None:
     @app.command("explain")
+    @deciding
     def explain_command(
         name: CorpusArgument,
         input: Annotated[Optional[str], typer.Option(
@@ -42,13 +41,7 @@ def register(app: typer.Typer) -> None:
                               "or --compare 0.5,-1.")] = None,
         model: ModelOption = None,
         index_id: IndexOption = DEFAULT_INDEX,
-        candidates: CandidatesOption = None,
-        epsilon: EpsilonOption = None,
-        k: KOption = None,
-        min_support: MinSupportOption = None,
-        support_penalty: SupportPenaltyOption = None,
-        row_smoothing: RowSmoothingOption = None,
-        residual_cap: ResidualCapOption = None,
+        controller: dict = None,
         seed: Annotated[int, typer.Option("--seed", help="Seed of the candidates.")] = 0,
         without: WithoutOption = None,
         without_episodes: WithoutEpisodesOption = None,
@@ -68,10 +61,7 @@ def register(app: typer.Typer) -> None:
         done = aoc_cli.explain(name, store=state.store, queries=input, audit=audit, data=data,
                                episode=episode, step=step,
                                compare=[_parse_action(c) for c in compare or []], model=model,
-                               index_id=index_id, candidates=candidates, epsilon=epsilon, k=k,
-                               min_support=min_support, support_penalty=support_penalty,
-                               residual_cap=residual_cap, row_smoothing=row_smoothing,
-                               seed=seed,
+                               index_id=index_id, controller=controller, seed=seed,
                                without=parse_selection(without, "--without"),
                                without_episodes=parse_episodes(without_episodes), html=html,
                                steps_file=steps_file)

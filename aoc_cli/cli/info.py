@@ -23,11 +23,17 @@ def register(app: typer.Typer) -> None:
             write_object(summary, resolved)
             return
         brief = {k: v for k, v in summary.items()
-                 if k not in ("tags", "built", "sources", "observation_space", "action_space")}
+                 if k not in ("tags", "built", "sources", "observation_space", "action_space",
+                              "preprocessing", "imputed_cells")}
         brief["observation_space"] = space_text(summary["observation_space"])
         brief["action_space"] = space_text(summary["action_space"])
         brief["sources"] = "; ".join(_source_text(s) for s in summary["sources"])
+        if summary.get("preprocessing"):
+            brief["preprocessing"] = preprocessing_text(summary["preprocessing"])
         write_object(brief, "table", title=f"corpus {name}")
+        if summary.get("imputed_cells"):
+            write_records(imputed_rows(summary["imputed_cells"], summary["rows"]), "table",
+                          title="imputed cells")
         tag_rows = [{"tag": t, "label": label, "rows": n}
                     for t, counts in summary["tags"].items() for label, n in counts.items()]
         if tag_rows:
@@ -45,6 +51,35 @@ def register(app: typer.Typer) -> None:
         write_records(records, fmt, columns=["name", "rows", "episodes", "observation", "action",
                                              "has_rewards", "models", "status"],
                       title=str(root))
+
+
+def imputed_rows(cells: dict, rows: int) -> list[dict]:
+    """One row per imputed column: cells filled and their share of the column."""
+    return [{"column": c, "imputed": n, "share": f"{100 * n / max(rows, 1):.1f}%"}
+            for c, n in cells.items()]
+
+
+def preprocessing_text(pre: dict) -> str:
+    """One line for what was fitted while reading: rule, bins, outcome, split."""
+    parts = []
+    if "impute" in pre:
+        imp = pre["impute"]
+        parts.append(f"impute {imp['rule']}" + (" + measured features" if imp.get("mask")
+                                                  else "")
+                     + (f" (like {pre['like']['impute']})" if "impute" in pre.get("like", {})
+                        else ""))
+    if "bins" in pre:
+        b = pre["bins"]
+        parts.append("dose bins " + ",".join(f"{c}={n}" for c, n in zip(b["columns"],
+                                                                      b["bins"])))
+    if "outcome" in pre:
+        o = pre["outcome"]
+        parts.append(f"outcome {o['column']} (" + ",".join(f"{k}={v:g}" for k, v in
+                                                          o["rewards"].items()) + ")")
+    if "split" in pre:
+        sp = pre["split"]
+        parts.append(f"{sp['part']} part of {sp['corpus']!r} split")
+    return "; ".join(parts)
 
 
 def _source_text(source: dict) -> str:

@@ -9,12 +9,9 @@ from typing import Annotated, Optional
 import typer
 
 import aoc_cli
-from aoc_cli.cli.common import (CandidatesOption, CorpusArgument, EpisodesOption,
-                                EpsilonOption, ExcludeOption, FormatOption, IndexOption,
-                                KOption, MinSupportOption, ModelOption, PolicyName, PolicyOption,
-                                ResidualCapOption, SamplerOption, SelectOption,
-                                SupportPenaltyOption, choice, parse_selection, state)
-from aoc_cli.control.config import ControllerConfig
+from aoc_cli.cli.common import (CorpusArgument, EpisodesOption, ExcludeOption, FormatOption,
+                                IndexOption, ModelOption, PolicyName, PolicyOption, SelectOption,
+                                choice, deciding, parse_selection, state)
 from aoc_cli.report import (ProgressBar, message, resolve_format, write_object,
                             write_records)
 from aoc_cli.store import DEFAULT_INDEX
@@ -22,6 +19,7 @@ from aoc_cli.store import DEFAULT_INDEX
 
 def register(app: typer.Typer) -> None:
     @app.command("rollout")
+    @deciding
     def rollout_command(
         name: CorpusArgument,
         env: Annotated[str, typer.Option(
@@ -30,13 +28,7 @@ def register(app: typer.Typer) -> None:
         policy: PolicyOption = PolicyName.aoc,
         model: ModelOption = None,
         index_id: IndexOption = DEFAULT_INDEX,
-        candidates: CandidatesOption = None,
-        epsilon: EpsilonOption = None,
-        k: KOption = None,
-        min_support: MinSupportOption = None,
-        support_penalty: SupportPenaltyOption = None,
-        residual_cap: ResidualCapOption = None,
-        sampler: SamplerOption = ControllerConfig.sampler,
+        controller: dict = None,
         select: SelectOption = None,
         exclude: ExcludeOption = None,
         seed: Annotated[int, typer.Option(
@@ -59,9 +51,7 @@ def register(app: typer.Typer) -> None:
         with ProgressBar("rollout", episodes) as p:
             done = aoc_cli.rollout(
                 name, env, store=state.store, episodes=episodes, policy=choice(policy),
-                model=model, index_id=index_id, candidates=candidates, epsilon=epsilon, k=k,
-                min_support=min_support, support_penalty=support_penalty,
-                residual_cap=residual_cap, sampler=choice(sampler),
+                model=model, index_id=index_id, controller=controller,
                 select=parse_selection(select, "--select"),
                 exclude=parse_selection(exclude, "--exclude"), seed=seed, audit=audit,
                 plot=plot, noise_after=noise_after, noise_std=noise_std,

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
 
+from aoc_cli.errors import BadSetting, param
 from aoc_cli.settings import Settings, setting
 
 
@@ -107,3 +109,31 @@ class ControllerConfig(Settings):
         settings = dict(getattr(TASKS.get(task), "controller", None) or {}) if task else {}
         settings.update({k: v for k, v in flags.items() if v is not None})
         return cls(**settings)
+
+
+#: ``controller=`` of the API's deciding entries (open_session, rollout, explain, evaluate,
+#: bench): a ControllerConfig, a mapping of its fields, or None (no setting given).
+ControllerLike = ControllerConfig | Mapping | None
+
+
+def given_settings(controller: ControllerLike) -> dict:
+    """The controller settings ``controller`` gives, {field: value}: a ControllerConfig's or a
+    mapping's fields that are not None (None: not given, so the task's setting, else the
+    paper's default, applies when :meth:`ControllerConfig.for_task` resolves them). A key that
+    is no field of ControllerConfig is a :class:`~aoc_cli.errors.BadSetting` naming it and
+    the known ones; the values are checked when the config is built."""
+    if controller is None:
+        return {}
+    if isinstance(controller, ControllerConfig):
+        return {k: v for k, v in controller.to_dict().items() if v is not None}
+    if not isinstance(controller, Mapping):
+        raise BadSetting("controller", controller,
+                         f"{param('controller')} must be a ControllerConfig or a mapping of its "
+                         f"settings, got {type(controller).__name__}")
+    known = {item.name for item in fields(ControllerConfig)}
+    unknown = sorted(set(controller) - known)
+    if unknown:
+        raise BadSetting(unknown[0], controller[unknown[0]],
+                         f"unknown controller setting {param(unknown[0])}: the settings are "
+                         f"{', '.join(sorted(known))}")
+    return {k: v for k, v in controller.items() if v is not None}

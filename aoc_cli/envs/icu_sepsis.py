@@ -345,7 +345,11 @@ def _task(name: str, gym_id: str, strategy: str, description: str) -> Task:
         policy="clinicians": collect_data(steps, episodes, seed, progress, policy, strategy,
                                           name),
         plot_fn=_plot, trajectory_fn=_trajectory, default_episodes=DEFAULT_EPISODES,
-        extra={"strategy": strategy, "choose_policy": True},
+        extra={"strategy": strategy, "choose_policy": True,
+               # what the decision page says of the values it shows (aoc_cli/report/values.py)
+               "units": "the package's normalised values, not raw measurements: each state's "
+                        "cluster centre, binary features minus 0.5, the others z-scored (some "
+                        "after a log); sofa_score in SOFA points"},
         controller=dict(CONTROLLER),
         # Markov in its observation: the value belief reads no history, so AOC's policy is a
         # state policy (valued exactly; tests/control/test_icu_sepsis_quality.py). Each row's

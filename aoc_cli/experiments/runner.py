@@ -21,6 +21,7 @@ from aoc_cli.experiments.common import SCALES, Context
 from aoc_cli.experiments.methods import Budget, Runner
 from aoc_cli.experiments.prepare import Artefacts
 from aoc_cli.experiments.results import summarize_rows, summary_markdown, write_outputs
+from aoc_cli.control.config import ControllerConfig, given_settings
 from aoc_cli.errors import AocError, BadSetting, param
 
 RETURN = [("return_mean", "return"), ("success_rate", "success")]
@@ -78,12 +79,14 @@ AOC_METHODS = ("aoc", "aoc-normal-rows", "aoc-dynamics", "aoc-critic", "aoc-rewa
 
 #: Experiments that sweep the data size, and so take ``sizes`` (rows per corpus).
 SIZED = ("pendulum-het", "lunar")
+#: The controller setting an experiment varies (so takes from no one else).
+VARIED = {"epsilon": "epsilon", "two-gates": "epsilon", "k": "k"}
 
 
 def check(name: str, scale: str, seeds: int | None, episodes: int | None,
-          methods: list[str] | None = None, epsilon: float | None = None,
-          residual_cap: float | None = None, sizes: list[int] | None = None,
-          behaviour: str = "mix", workers: int | None = None) -> None:
+          methods: list[str] | None = None, controller: dict | None = None,
+          sizes: list[int] | None = None, behaviour: str = "mix",
+          workers: int | None = None) -> None:
     """Bad experiment, scale, counts, sizes, method names, AOC settings or workers -> AocError."""
     if behaviour not in ("mix", "replay"):
         raise BadSetting("behaviour", behaviour,
@@ -99,14 +102,12 @@ def check(name: str, scale: str, seeds: int | None, episodes: int | None,
         raise BadSetting("seeds", seeds, f"{param('seeds')} must be >= 1, got {seeds}")
     if episodes is not None and episodes < 1:
         raise BadSetting("episodes", episodes, f"{param('episodes')} must be >= 1, got {episodes}")
-    if epsilon is not None:
-        if name in ("epsilon", "two-gates"):
-            raise BadSetting("epsilon", epsilon,
-                             f"{param('epsilon')} does not apply to {name}: epsilon is what it "
-                             "varies")
-        if not 0.0 < epsilon <= 1.0:
-            raise BadSetting("epsilon", epsilon,
-                             f"{param('epsilon')} must be in (0, 1], got {epsilon}")
+    given = given_settings(controller)
+    varied = VARIED.get(name)
+    if varied in given:
+        raise BadSetting(varied, given[varied], f"{param(varied)} does not apply to {name}: "
+                         f"{varied} is what it varies")
+    ControllerConfig(**given)  # checks each setting given
     if methods:
         unknown = [m for m in methods if m not in AOC_METHODS and m not in BASELINES]
         if unknown:
@@ -114,9 +115,6 @@ def check(name: str, scale: str, seeds: int | None, episodes: int | None,
                            f"{', '.join([*AOC_METHODS, *BASELINES])}")
     if workers is not None and workers < 1:
         raise BadSetting("workers", workers, f"{param('workers')} must be >= 1, got {workers}")
-    if residual_cap is not None and not residual_cap > 0:
-        raise BadSetting("residual_cap", residual_cap,
-                         f"{param('residual_cap')} must be > 0, got {residual_cap}")
     if sizes is not None:
         if name not in SIZED:
             raise BadSetting("sizes", sizes, f"{param('sizes')} applies to {' and '.join(SIZED)} "
@@ -137,8 +135,8 @@ def sized(params: dict, sizes: list[int] | None) -> dict:
 def run_experiment(name: str, scale: str = "full", seeds: int | None = None,
                    out: str | Path | None = None, store: str | Path = "bench/store",
                    episodes: int | None = None, methods: list[str] | None = None,
-                   log=None, progress=None, epsilon: float | None = None,
-                   residual_cap: float | None = None, sizes: list[int] | None = None,
+                   log=None, progress=None, controller: dict | None = None,
+                   sizes: list[int] | None = None,
                    behaviour: str = "mix", workers: int | None = None,
                    address: str | None = None) -> dict:
     """Run experiment ``name`` at ``scale`` (tiny | quick | full); write and return its report:
@@ -149,13 +147,13 @@ def run_experiment(name: str, scale: str = "full", seeds: int | None = None,
     ``$RAY_ADDRESS`` when ``workers`` is given); the rows are the same. Finished cells are
     kept in ``out/cells/`` and taken by a re-run with the same settings and code.
 
-    ``epsilon`` and ``residual_cap`` (ControllerConfig fields) apply to AOC wherever the
-    experiment does not vary them; ``sizes`` replaces the scale's data sizes of the
+    ``controller`` (ControllerConfig fields given, {field: value}; a ControllerConfig) applies
+    to AOC over each task's own settings, but not the setting the experiment varies
+    (``VARIED``: an error); ``sizes`` replaces the scale's data sizes of the
     data-size sweeps (``SIZED``), e.g. one of the paper's sizes with the full scale's training
     and episodes; ``behaviour="replay"`` collects their corpora as replay buffers (an agent
     that starts random and improves, aoc_cli/envs/replay.py)."""
-    check(name, scale, seeds, episodes, methods, epsilon, residual_cap, sizes, behaviour,
-          workers)
+    check(name, scale, seeds, episodes, methods, controller, sizes, behaviour, workers)
     exp = EXPERIMENTS[name]
     params = sized(exp.scales[scale], sizes)
     out = Path(out) if out is not None else Path("bench") / name
@@ -163,9 +161,7 @@ def run_experiment(name: str, scale: str = "full", seeds: int | None = None,
     n_seeds = seeds if seeds is not None else int(params["seeds"])
     artefacts = Artefacts(store, log=log, progress=progress, behaviour=behaviour)
     runner = Runner(BUDGETS[scale], progress=progress, log=log)
-    aoc_config = {} if epsilon is None else {"epsilon": epsilon}
-    if residual_cap is not None:
-        aoc_config["residual_cap"] = residual_cap
+    aoc_config = given_settings(controller)
     ctx = Context(name, scale, out, artefacts, runner, list(range(n_seeds)), episodes,
                   methods, log, aoc_config=aoc_config)
     started = time.perf_counter()
@@ -175,8 +171,12 @@ def run_experiment(name: str, scale: str = "full", seeds: int | None = None,
     _plot(exp, summary, ctx)
     seconds = time.perf_counter() - started
     header = (f"Scale `{scale}`, seeds {n_seeds}, {seconds / 60:.1f} min"
-              + (f", AOC with epsilon = {epsilon:g}" if epsilon is not None else "")
-              + (f", residual cap {residual_cap:g} x typical p90" if residual_cap else "")
+              + (f", AOC with epsilon = {aoc_config['epsilon']:g}"
+                 if "epsilon" in aoc_config else "")
+              + (f", residual cap {aoc_config['residual_cap']:g} x typical p90"
+                 if "residual_cap" in aoc_config else "")
+              + "".join(f", AOC with {k} = {v}" for k, v in aoc_config.items()
+                        if k not in ("epsilon", "residual_cap"))
               + (f", {behaviour} data" if behaviour != "mix" else "")
               + ". Mean ± std across "
               "seeds (one seed: across its episodes). Plots: "

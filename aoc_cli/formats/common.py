@@ -45,6 +45,19 @@ class ReadOptions:
     terminal_column: str | None = None
     static: Path | None = None
     progress: Progress | None = None
+    # clinical tables (CSV, Parquet, frames): aoc_cli.formats.impute, .bins, .outcomes
+    impute: str | None = None
+    impute_mask: bool = False
+    impute_like: str | None = None
+    outcome: str | None = None
+    outcome_reward: str | dict | None = None
+    bin_actions: str | dict | None = None
+    bin_like: str | None = None
+    censored_column: str | None = None
+    #: the preprocessing of the corpora named by ``impute_like``/``bin_like`` or appended
+    #: to (``{"impute": ..., "bins": ..., "from": {"impute": name, "bins": name}}``), set by
+    #: :func:`aoc_cli.formats.ingest`
+    fitted: dict = field(default_factory=dict)
 
 
 @contextlib.contextmanager

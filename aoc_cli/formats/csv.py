@@ -1,7 +1,8 @@
-"""CSV logs of tabular data (the healthcare case): one row per time step.
+"""Tabular logs (the healthcare case): one row per time step, from a CSV (plain or gzip), a
+Parquet file, or in Python an Arrow table or a pandas / polars DataFrame.
 
-Column roles come from flags, else a small JSON mapping file (``--columns FILE``), else the
-defaults:
+Column roles come from flags (or the same keyword arguments), else a small JSON mapping file
+(``--columns FILE``), else the defaults:
 
 ==============  ==============================  =====================================
 role            mapping key                     default
@@ -9,7 +10,7 @@ role            mapping key                     default
 episode id      ``id``                          ``episode``, else ``id``, else one episode
 time            ``time``                        ``t``, else ``time``, else file order
 observations    ``observations`` (names/globs)  ``obs_*``
-actions         ``actions`` (names/globs)       ``act_*``
+actions         ``actions`` (names/globs)       ``act_*`` (the ``--bin-actions`` columns)
 reward          ``reward``                      ``reward`` if present
 terminal flag   ``terminal``                    the last row of every episode
 tag columns     ``tags`` (list)                 none
@@ -17,14 +18,21 @@ discrete        ``discrete_actions`` (bool)     false
 static id       ``static_id``                   the episode id column's name
 ==============  ==============================  =====================================
 
-Rows are ordered by episode id and time whatever the file's order (ids numerically when they
-are all numbers; times as numbers or ISO dates). The episode ids are kept. A second CSV of
-static per-episode features (``--static FILE``, one row per id) is joined onto every step and
-appended to the observation: numeric columns as they are, text columns one-hot (``sex=F``,
-``sex=M``); the names are recorded in the observation space's ``names`` and ``static``
+The table is read by pyarrow (:mod:`aoc_cli.formats.table`) and converted to numpy column by
+column, once. Rows are ordered by episode id and time whatever the file's order (ids
+numerically when they are all numbers; times as numbers or ISO dates); two rows of one episode
+at the same time are an error naming them. The episode ids are kept. A second table of static
+per-episode features (``--static FILE``, one row per id) is joined onto every step and appended
+to the observation: numeric columns as they are, text columns one-hot (``sex=F``, ``sex=M``);
+the names are recorded in the observation space's ``names`` and ``static``
 (:mod:`aoc_cli.formats.static`). Action columns holding text (``oxygen``, ``none``) are
 discrete actions whose labels are kept (:mod:`aoc_cli.formats.text_actions`). Remaining numeric
 columns are kept as corpus columns (usable as value targets).
+
+A clinical cohort table adds (each recorded in the corpus's ``preprocessing``): empty cells
+filled by ``--impute`` (:mod:`aoc_cli.formats.impute`), continuous doses cut into dose levels
+by ``--bin-actions`` (:mod:`aoc_cli.formats.bins`), the stay's outcome as its last reward and
+censored stays (:mod:`aoc_cli.formats.outcomes`).
 
 A CSV of ``aoc export`` is read back exactly with the mapping beside it
 (:mod:`aoc_cli.formats.csv_exported`).
@@ -38,31 +46,38 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import pyarrow as pa
 
 from aoc_cli.errors import AocError, param, warn
+from aoc_cli.formats.bins import parse as parse_bins
+from aoc_cli.formats.cohort import Cohort, measured_planned, prepare
 from aoc_cli.formats.common import ReadOptions, action_space_of, encode_labels
-from aoc_cli.formats.text_actions import text_actions
 from aoc_cli.formats.csv_exported import exported_mapping, restore_exported
 from aoc_cli.formats.spec import parse_spec
 from aoc_cli.formats.static import read_static
-from aoc_cli.formats.table import is_numeric, numeric, read_table
-from aoc_cli.store import CorpusData, box_space
+from aoc_cli.formats.table import (Table, from_frame, has_gaps, is_numeric, numeric, read_table,
+                                   text)
+from aoc_cli.formats.text_actions import text_actions
+from aoc_cli.store import CorpusData
 
 MAPPING_KEYS = {"id", "time", "observations", "actions", "reward", "terminal", "tags",
                 "discrete_actions", "static_id", "static", "aoc"}
 
 
-def _sort_key(values: np.ndarray, name: str, path: Path, dates: bool) -> np.ndarray:
-    """Numbers if every value is a number, else (time only) ISO dates, else (ids) the text."""
-    if is_numeric(values):
-        return numeric(values, name, path)
+def _sort_key(col: pa.ChunkedArray, name: str, where, dates: bool) -> np.ndarray:
+    """Numbers if every value is a number, else (time only) dates, else (ids) the text."""
+    if pa.types.is_timestamp(col.type) or pa.types.is_date(col.type):
+        return col.cast(pa.timestamp("ns")).cast(pa.int64()).to_numpy(zero_copy_only=False)
+    if is_numeric(col):
+        return numeric(col, name, where)
+    values = text(col)
     if dates:
         try:
-            return np.array(np.char.strip(values), dtype="datetime64[ns]").astype(np.int64)
+            return np.array(values, dtype="datetime64[ns]").astype(np.int64)
         except ValueError:
-            raise AocError(f"{path}: time column {name!r} holds neither numbers nor ISO dates "
+            raise AocError(f"{where}: time column {name!r} holds neither numbers nor ISO dates "
                            f"(e.g. {str(values[0])!r})") from None
-    return np.char.strip(values)
+    return values
 
 
 def _mapping(options: ReadOptions) -> dict:
@@ -79,7 +94,7 @@ def _mapping(options: ReadOptions) -> dict:
     return mapping
 
 
-def _match(header: list[str], patterns, role: str, path: Path) -> list[str]:
+def _match(header: list[str], patterns, role: str, where) -> list[str]:
     """Columns named by ``patterns`` (names or globs), in file order for globs."""
     patterns = [patterns] if isinstance(patterns, str) else list(patterns)
     out: list[str] = []
@@ -87,7 +102,7 @@ def _match(header: list[str], patterns, role: str, path: Path) -> list[str]:
         hits = [h for h in header if fnmatch.fnmatchcase(h, p)] if any(
             c in p for c in "*?[") else ([p] if p in header else [])
         if not hits:
-            raise AocError(f"{path}: no column matches {role} {p!r} (columns: "
+            raise AocError(f"{where}: no column matches {role} {p!r} (columns: "
                            f"{', '.join(header)})")
         out += [h for h in hits if h not in out]
     return out
@@ -112,30 +127,45 @@ class Roles:
     static_id: str | None
 
 
-def _roles(path: Path, header: list[str], options: ReadOptions) -> Roles:
+def _text_columns(options: ReadOptions) -> list[str]:
+    """Columns read as text whatever they hold: the possible id and the tag columns."""
+    m = _mapping(options)
+    return [c for c in (options.id_column, m.get("id"), "episode", "id", *options.tag_columns,
+                        *m.get("tags", [])) if c]
+
+
+def _roles(where, header: list[str], options: ReadOptions, bins: list[str] | None) -> Roles:
     """Column roles from the flags, else the mapping file, else the defaults."""
     m = _mapping(options)
     id_col = options.id_column or m.get("id") or _first_present(header, ("episode", "id"))
     time_col = options.time_column or m.get("time") or _first_present(header, ("t", "time"))
-    for role, col in (("episode id", id_col), ("time", time_col)):
+    for role, col in (("episode id", id_col), ("time", time_col),
+                      ("outcome", options.outcome), ("censoring", options.censored_column)):
         if col is not None and col not in header:
-            raise AocError(f"{path}: no {role} column {col!r} (columns: {', '.join(header)})")
+            raise AocError(f"{where}: no {role} column {col!r} (columns: {', '.join(header)})")
     obs_cols = _match(header, options.obs_columns or m.get("observations") or "obs_*",
-                      "observation column", path) if (
+                      "observation column", where) if (
         options.obs_columns or m.get("observations") or
         any(fnmatch.fnmatchcase(h, "obs_*") for h in header)) else []
-    act_cols = _match(header, options.act_columns or m.get("actions") or "act_*",
-                      "action column", path)
+    if bins:
+        act_cols = _match(header, bins, "dose column", where)
+        asked = options.act_columns or m.get("actions")
+        if asked and _match(header, asked, "action column", where) != act_cols:
+            raise AocError(f"{param('act_columns')} and {param('bin_actions')} name different "
+                           "columns: the binned doses are the actions")
+    else:
+        act_cols = _match(header, options.act_columns or m.get("actions") or "act_*",
+                          "action column", where)
     reward_col = None
     if not options.reward_free:
         reward_col = options.reward_column or (m["reward"] if "reward" in m else (
             "reward" if "reward" in header else None))  # a mapping's null: no reward
         if reward_col is not None and reward_col not in header:
-            raise AocError(f"{path}: no reward column {reward_col!r}: name it with "
+            raise AocError(f"{where}: no reward column {reward_col!r}: name it with "
                            f"{param('reward_column')} or pass {param('reward_free')}")
     term_col = options.terminal_column or m.get("terminal")
     if term_col is not None and term_col not in header:
-        raise AocError(f"{path}: no terminal column {term_col!r}")
+        raise AocError(f"{where}: no terminal column {term_col!r}")
     discrete = options.discrete_actions or bool(m.get("discrete_actions", False))
     if discrete and len(act_cols) != 1:
         raise AocError(f"{param('discrete_actions')} needs exactly one action column, got "
@@ -148,128 +178,208 @@ def _roles(path: Path, header: list[str], options: ReadOptions) -> Roles:
 @dataclass
 class Episodes:
     """Rows ordered by (id, time): ``order`` (N,) file row of each corpus row, ``starts``
-    (E + 1,), the id of each episode as text and as its sort key."""
+    (E + 1,), the id of each episode as text and as its sort key, and ``row_ids`` (N,) the
+    id text of each file row (messages name a row's stay by it)."""
 
     order: np.ndarray
     starts: np.ndarray
     ids: list[str]
     keys: np.ndarray
+    row_ids: np.ndarray
+    id_name: str | None
+
+    def row_label(self, i: int) -> str:
+        """Text naming file row ``i``'s episode: ``icustayid 1007``."""
+        return f"{self.id_name} {self.row_ids[i]}" if self.id_name else "the only episode"
+
+    def corpus_row_label(self, r: int) -> str:
+        """``data row 12 (icustayid 1007)`` for corpus row ``r``."""
+        i = int(self.order[r])
+        return f"data row {i + 1} ({self.row_label(i)})"
 
 
-def _episodes(path: Path, cols: dict, roles: Roles, n: int) -> Episodes:
-    """Order the rows by episode id and time (stable: ties keep the file's order); warn
-    about empty ids and repeated (id, time) pairs, which are kept."""
-    ids_text = np.char.strip(cols[roles.id]) if roles.id else np.full(n, "0")
+def _episodes(table: Table, roles: Roles) -> Episodes:
+    """Order the rows by episode id and time (stable); warn about empty ids; two rows of one
+    episode at one time are an AocError naming them."""
+    n, cols, where = table.n, table.cols, table.where
+    ids_text = text(cols[roles.id]) if roles.id else np.full(n, "0")
     if roles.id and (ids_text == "").any():
         rows = np.flatnonzero(ids_text == "")
-        warn(f"{path}: {len(rows)} rows have an empty {roles.id!r} cell (first: data row "
+        warn(f"{where}: {len(rows)} rows have an empty {roles.id!r} cell (first: data row "
              f"{int(rows[0]) + 1}); they form one episode with the id ''")
-    id_key = _sort_key(cols[roles.id], roles.id, path, dates=False) if roles.id \
+    id_key = _sort_key(cols[roles.id], roles.id, where, dates=False) if roles.id \
         else np.zeros(n)
     uniq_keys, id_codes = np.unique(id_key, return_inverse=True)
-    time_key = _sort_key(cols[roles.time], roles.time, path, dates=True) if roles.time \
+    time_key = _sort_key(cols[roles.time], roles.time, where, dates=True) if roles.time \
         else np.arange(n)
     order = np.lexsort((time_key, id_codes))
     id_codes = id_codes[order]
     if roles.time:
         same = (np.diff(id_codes) == 0) & (np.diff(np.asarray(time_key)[order]) == 0)
         if same.any():
-            first = int(order[np.flatnonzero(same)[0] + 1])
-            key = f"({roles.id}, {roles.time})" if roles.id else repr(roles.time)
-            warn(f"{path}: {int(same.sum())} rows repeat the {key} of an earlier row (first: "
-                 f"data row {first + 1}); kept in file order as successive steps")
+            k = int(np.flatnonzero(same)[0])
+            a, b = sorted((int(order[k]), int(order[k + 1])))
+            stay = f"{roles.id} {ids_text[a]}, " if roles.id else ""
+            raise AocError(f"{where}: data rows {a + 1} and {b + 1} are both at ({stay}"
+                           f"{roles.time} {text(cols[roles.time])[a]}) ({int(same.sum())} "
+                           "such repeats): one row per stay and time; remove the duplicates")
     bounds = np.flatnonzero(np.diff(id_codes)) + 1
     starts = np.concatenate([[0], bounds, [n]]).astype(np.int64)
     return Episodes(order, starts, [str(ids_text[r]) for r in order[starts[:-1]]],
-                    uniq_keys[id_codes[starts[:-1]]])
+                    uniq_keys[id_codes[starts[:-1]]], ids_text, roles.id)
 
 
-def _flags(path: Path, cols: dict, roles: Roles, eps: Episodes, n: int):
+def _flags(table: Table, roles: Roles, eps: Episodes):
     """(terminals, truncations) (N,): each episode's last row ends it, a terminal unless the
     terminal column says otherwise (then a truncation)."""
+    n = table.n
     terminals = np.zeros(n, bool)
     truncations = np.zeros(n, bool)
     last = eps.starts[1:] - 1
     if roles.terminal is None:
         terminals[last] = True
     else:
-        terminals = numeric(cols[roles.terminal], roles.terminal, path)[eps.order] != 0
+        terminals = numeric(table.cols[roles.terminal], roles.terminal, table.where,
+                            eps.row_label)[eps.order] != 0
         truncations[last] = ~terminals[last]
     return terminals, truncations
 
 
-def _tags(path: Path, cols: dict, roles: Roles, eps: Episodes, static_tags: dict,
+def _tags(table: Table, roles: Roles, eps: Episodes, static_tags: dict,
           has_static: bool) -> dict:
     lengths = np.diff(eps.starts)
     tags = {}
     for c in roles.tags:
-        if c in cols:
-            tags[c] = encode_labels(np.char.strip(cols[c])[eps.order])
+        if c in table.cols:
+            tags[c] = encode_labels(text(table.cols[c])[eps.order])
         elif c in static_tags:
             tags[c] = encode_labels(np.repeat(static_tags[c], lengths))
         else:
-            raise AocError(f"{param('tag_columns')} {c!r} is not a column of {path}"
+            raise AocError(f"{param('tag_columns')} {c!r} is not a column of {table.where}"
                            + (f" or of the {param('static')} file" if has_static else ""))
     return tags
 
 
 def read_csv(path: Path, options: ReadOptions) -> CorpusData:
-    """Read a CSV log (and ``options.static``) into a corpus."""
+    """Read a CSV or Parquet log (and ``options.static``) into a corpus."""
     path = Path(path)
     options = exported_mapping(path, options)
-    header, cols = read_table(path, options.progress)
-    roles = _roles(path, header, options)
-    n = len(next(iter(cols.values()))) if cols else 0
-    if n == 0:
-        raise AocError(f"{path} has zero rows: nothing to store")
-    eps = _episodes(path, cols, roles, n)
+    table = read_table(path, options.progress, text_columns=_text_columns(options))
+    data = read_columns(table, options, {"path": str(path.resolve())})
+    spec = parse_spec(_mapping(options).get("aoc"), options.columns_file)
+    return data if spec is None else restore_exported(data, spec, path)
+
+
+def read_frame(frame, options: ReadOptions) -> CorpusData:
+    """Read an Arrow table or a pandas / polars DataFrame (and ``options.static``)."""
+    table = from_frame(frame, text_columns=_text_columns(options))
+    return read_columns(table, options, {"path": None, "frame": type(frame).__name__})
+
+
+def read_columns(table: Table, options: ReadOptions, source: dict) -> CorpusData:
+    """The corpus of a table's columns (roles by ``options``)."""
+    where, cols = table.where, table.cols
+    bins = options.fitted.get("bins")
+    bin_cols = list(bins["columns"]) if bins else None
+    if options.bin_actions is not None and bin_cols is None:
+        bin_cols = list(parse_bins(options.bin_actions))
+    roles = _roles(where, table.header, options, bin_cols)
+    if table.n == 0:
+        raise AocError(f"{where} has zero rows: nothing to store")
+    eps = _episodes(table, roles)
     static_names: list[str] = []
     static_feats = None
     static_tags: dict[str, np.ndarray] = {}
     if options.static is not None:
         if roles.id is None:
-            raise AocError(f"{param('static')} needs an episode id column to join on: name it with "
-                           f"{param('id_column')}")
+            raise AocError(f"{param('static')} needs an episode id column to join on: name it "
+                           f"with {param('id_column')}")
         static_names, static_feats, static_tags = read_static(
             Path(options.static), roles.static_id, eps.keys, eps.ids,
             bool(np.issubdtype(np.asarray(eps.keys).dtype, np.number)), roles.tags)
     obs_names = list(roles.observations) + static_names
     if not obs_names:
-        raise AocError(f"{path}: no observation columns: name them with {param('obs_columns')}, a "
-                       f"{param('columns_file')} mapping file or obs_* column names")
-    parts = [numeric(cols[c], c, path)[eps.order][:, None] for c in roles.observations]
+        raise AocError(f"{where}: no observation columns: name them with "
+                       f"{param('obs_columns')}, a {param('columns_file')} mapping file or "
+                       "obs_* column names")
+    static_gaps = dict(zip(static_names, np.isnan(static_feats).any(axis=0))) \
+        if static_feats is not None else {}
+    measured = measured_planned(options, obs_names, lambda c: static_gaps[c]
+                                if c in static_gaps else has_gaps(cols[c]))
+    # made once at full width; each table column dropped once read (memory: about one copy)
+    observations = np.empty((table.n, len(obs_names) + len(measured)))
+    other_roles = set(roles.tags) | set(roles.actions) | {
+        roles.id, roles.time, roles.reward, roles.terminal, options.outcome,
+        options.censored_column}
+    for j, c in enumerate(roles.observations):
+        observations[:, j] = numeric(cols[c], c, where, eps.row_label)[eps.order]
+        if c not in other_roles:
+            del cols[c]
     if static_feats is not None:
-        parts.append(np.repeat(static_feats, np.diff(eps.starts), axis=0))
-    observations = np.concatenate(parts, axis=1)
-    labelled = text_actions(path, cols, roles.actions, eps.order)  # treatments as text
-    if labelled is None:
-        act_raw = np.stack([numeric(cols[c], c, path)[eps.order] for c in roles.actions], 1)
-        labelled = action_space_of(act_raw, roles.discrete, names=roles.actions)
-    actions, act_space = labelled
-    terminals, truncations = _flags(path, cols, roles, eps, n)
-    tags = _tags(path, cols, roles, eps, static_tags, options.static is not None)
+        observations[:, len(roles.observations):len(obs_names)] = np.repeat(
+            static_feats, np.diff(eps.starts), axis=0)
+    terminals, truncations = _flags(table, roles, eps)
+    cohort = Cohort(
+        where=where, starts=eps.starts, observations=observations, obs_names=obs_names,
+        rewards=numeric(cols[roles.reward], roles.reward, where, eps.row_label)[eps.order]
+        if roles.reward else None,
+        terminals=terminals, truncations=truncations, row_label=eps.corpus_row_label,
+        stay_label=lambda e: f"{roles.id or 'episode'} {eps.ids[e]}", measured=measured)
+    if bin_cols:
+        cohort.doses = {c: numeric(cols[c], c, where, eps.row_label)[eps.order]
+                        for c in roles.actions}
+        actions, act_space = None, None
+    else:
+        labelled = text_actions(where, cols, roles.actions, eps.order, eps.row_label)
+        if labelled is None:
+            act_raw = np.stack([numeric(cols[c], c, where, eps.row_label)[eps.order]
+                                for c in roles.actions], 1)
+            labelled = action_space_of(act_raw, roles.discrete, names=roles.actions)
+        actions, act_space = labelled
+    for role, c in (("outcome", options.outcome), ("censored", options.censored_column)):
+        if c is not None:
+            setattr(cohort, role, _truthy(cols[c]) if role == "censored" else
+                    numeric(cols[c], c, where, eps.row_label))
+            setattr(cohort, role, getattr(cohort, role)[eps.order])
+    prepared = prepare(cohort, options)
+    tags = _tags(table, roles, eps, static_tags, options.static is not None)
     used = set(roles.observations) | set(roles.actions) | set(roles.tags) | {
-        roles.id, roles.time, roles.reward, roles.terminal}
-    columns = {c: numeric(cols[c], c, path)[eps.order] for c in header
-               if c not in used and is_numeric(cols[c])}
-    obs_space = box_space(observations.shape[1], names=obs_names)
+        roles.id, roles.time, roles.reward, roles.terminal, options.censored_column}
+    columns = {c: numeric(cols[c], c, where)[eps.order] for c in table.header
+               if c not in used and c in cols and is_numeric(cols[c])}
+    columns.update(prepared.columns)
+    if actions is None:
+        actions, act_space = prepared.actions, prepared.action_space
+    obs_space = {"type": "box", "shape": [prepared.observations.shape[1]],
+                 "names": prepared.obs_names}
     if static_names:
         obs_space["static"] = static_names
-    data = CorpusData(
-        observations=observations, actions=actions,
-        rewards=numeric(cols[roles.reward], roles.reward, path)[eps.order]
-        if roles.reward else None,
-        terminals=terminals, truncations=truncations, episode_starts=eps.starts,
-        observation_space=obs_space, action_space=act_space,
-        tags=tags, columns=columns, episode_ids=eps.ids,
-        source={"format": "csv", "path": str(path.resolve()),
+    return CorpusData(
+        observations=prepared.observations, actions=actions, rewards=prepared.rewards,
+        terminals=prepared.terminals, truncations=prepared.truncations,
+        episode_starts=eps.starts, observation_space=obs_space, action_space=act_space,
+        tags=tags, columns=columns, episode_ids=eps.ids, imputed=prepared.imputed,
+        preprocessing=prepared.preprocessing,
+        source={"format": "csv", **source,
                 "static": str(Path(options.static).resolve()) if options.static else None,
                 "roles": {"id": roles.id, "time": roles.time,
                           "observations": roles.observations, "actions": roles.actions,
-                          "reward": roles.reward, "terminal": roles.terminal}},
+                          "reward": roles.reward, "terminal": roles.terminal,
+                          **({"outcome": options.outcome} if options.outcome else {}),
+                          **({"censored": options.censored_column}
+                             if options.censored_column else {})},
+                **({"imputed_cells": prepared.imputed_cells} if prepared.imputed_cells
+                   else {})},
     )
-    spec = parse_spec(_mapping(options).get("aoc"), options.columns_file)
-    return data if spec is None else restore_exported(data, spec, path)
 
 
-__all__ = ["read_csv", "read_table", "numeric"]
+def _truthy(col: pa.ChunkedArray) -> np.ndarray:
+    """(N,) float 0/1: a censoring column's cells (numbers: non-zero; text: anything but
+    empty, 0, false, no)."""
+    if is_numeric(col):
+        return np.nan_to_num(numeric(col, "", ""), nan=0.0)
+    cells = np.char.lower(text(col))
+    return (~np.isin(cells, ["", "0", "false", "no", "f", "n"])).astype(np.float64)
+
+
+__all__ = ["read_columns", "read_csv", "read_frame", "read_table", "numeric"]

@@ -10,8 +10,9 @@ from aoc_cli.errors import AocError, param
 from aoc_cli.formats.common import open_h5
 from aoc_cli.formats.d3rlpy import is_d3rlpy
 from aoc_cli.formats.minari import data_folder, datasets_root
+from aoc_cli.formats.table import PARQUET_MAGIC
 
-FORMATS = ("minari", "d4rl", "d3rlpy", "npz", "csv")
+FORMATS = ("minari", "d4rl", "d3rlpy", "npz", "csv", "parquet")
 _HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
 _ZIP_SIGNATURE = b"PK\x03\x04"
 
@@ -60,6 +61,8 @@ def detect_format(path: str | os.PathLike) -> str:
                        "of those")
     with open(p, "rb") as fh:
         head = fh.read(4)
+    if head == PARQUET_MAGIC or p.suffix.lower() in (".parquet", ".pq"):
+        return "parquet"
     if head == _ZIP_SIGNATURE or p.suffix == ".npz":
         return "npz"
     suffixes = [s.lower() for s in p.suffixes]

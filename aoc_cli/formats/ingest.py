@@ -6,19 +6,21 @@ before a long read; the store is written only once everything is valid, atomical
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from aoc_cli.errors import AocError, param
 from aoc_cli.formats.common import ReadOptions, observed_bounds
-from aoc_cli.formats.csv import read_csv
+from aoc_cli.formats.csv import read_csv, read_frame
 from aoc_cli.formats.d3rlpy import read_d3rlpy
 from aoc_cli.formats.d4rl import read_d4rl
 from aoc_cli.formats.detect import FORMATS, detect_format
+from aoc_cli.formats.impute import counts
 from aoc_cli.formats.minari import read_minari
 from aoc_cli.formats.npz import read_npz
 from aoc_cli.store import CorpusData, Store, check_name, writing_corpus
@@ -34,17 +36,20 @@ def read_dataset(path: str | os.PathLike, fmt: str | None = None,
     removal of every episode holding a NaN/inf observation, action or reward.
     """
     options = options or ReadOptions()
-    if fmt is None:
+    if is_frame(path):
+        fmt = "frame"
+    elif fmt is None:
         fmt = detect_format(path)
     elif fmt not in FORMATS:
         raise AocError(f"unknown format {fmt!r}: use {param('fmt')} {'|'.join(FORMATS)}")
     elif fmt != "minari" and not Path(path).exists():
         raise AocError(f"no such file or folder: {path}; check the path")
     reader = {"minari": read_minari, "d4rl": read_d4rl, "d3rlpy": read_d3rlpy, "npz": read_npz,
-              "csv": read_csv}[fmt]
-    data = reader(Path(path) if fmt != "minari" else path, options)
+              "csv": read_csv, "parquet": read_csv, "frame": read_frame}[fmt]
+    data = reader(Path(path) if fmt not in ("minari", "frame") else path, options)
+    where = "the frame" if fmt == "frame" else path
     if data.n_rows == 0:
-        raise AocError(f"{path} has zero rows: nothing to store")
+        raise AocError(f"{where} has zero rows: nothing to store")
     if options.reward_free:
         data.rewards = None
     for key, value in options.tags.items():
@@ -56,8 +61,8 @@ def read_dataset(path: str | os.PathLike, fmt: str | None = None,
     if options.drop_nonfinite:
         bad = data.nonfinite_episodes()
         if bad.all():
-            raise AocError(f"every episode of {path} holds NaN or inf values: nothing left to "
-                           "store")
+            raise AocError(f"every episode of {where} holds NaN or inf values: nothing left "
+                           "to store")
         if bad.any():
             data = data.select_episodes(~bad)
             data.source = {**data.source, "dropped_nonfinite_episodes": int(bad.sum())}
@@ -95,6 +100,35 @@ def _check_finite(data: CorpusData) -> None:
                    "episodes that hold such rows")
 
 
+def is_frame(source) -> bool:
+    """Whether ``source`` is an in-memory table (Arrow, pandas, polars), not a path."""
+    return not isinstance(source, (str, bytes, os.PathLike))
+
+
+def with_fitted(store: Store, name: str, options: ReadOptions, append: bool) -> ReadOptions:
+    """``options`` with the preprocessing to reuse (``fitted``): the imputation and dose bins
+    of the corpus appended to, or of those named by ``impute_like`` and ``bin_like``."""
+    fitted: dict = {"from": {}}
+    wanted = []
+    if append and store.exists(name):
+        wanted += [("impute", name, False), ("bins", name, False)]
+    if options.impute_like:
+        wanted.append(("impute", options.impute_like, True))
+    if options.bin_like:
+        wanted.append(("bins", options.bin_like, True))
+    for key, corpus, required in wanted:
+        pre = store.corpus(corpus).preprocessing
+        if key not in pre:
+            if required:
+                flag = param("impute_like" if key == "impute" else "bin_like", corpus)
+                raise AocError(f"{flag}: corpus {corpus!r} has no "
+                               f"{'imputation' if key == 'impute' else 'dose bins'} to reuse")
+            continue
+        fitted[key] = pre[key]
+        fitted["from"][key] = corpus
+    return dataclasses.replace(options, fitted=fitted) if len(fitted) > 1 else options
+
+
 @dataclass
 class IngestResult:
     """What ``aoc ingest`` prints."""
@@ -107,6 +141,8 @@ class IngestResult:
     total_rows: int
     total_episodes: int
     dropped_episodes: int
+    imputed_cells: dict = field(default_factory=dict)
+    censored_episodes: int = 0
 
     def summary(self) -> dict:
         out = {"name": self.name, "format": self.format, "rows": self.rows,
@@ -115,27 +151,40 @@ class IngestResult:
             out.update(total_rows=self.total_rows, total_episodes=self.total_episodes)
         if self.dropped_episodes:
             out["dropped_episodes"] = self.dropped_episodes
+        if self.censored_episodes:
+            out["censored_episodes"] = self.censored_episodes
+        if self.imputed_cells:
+            out["imputed_cells"] = self.imputed_cells
         return out
 
 
 def ingest(path: str | os.PathLike, name: str, *, store: Store | None = None,
            fmt: str | None = None, options: ReadOptions | None = None,
            overwrite: bool = False, append: bool = False) -> IngestResult:
-    """Read ``path`` and store it as corpus ``name`` (replace with ``overwrite``, add episodes
-    with ``append``: same spaces required). Nothing is written unless everything is valid."""
+    """Read ``path`` (or an in-memory table: Arrow, pandas, polars) and store it as corpus
+    ``name`` (replace with ``overwrite``, add episodes with ``append``: same spaces required).
+    Nothing is written unless everything is valid."""
     t0 = time.perf_counter()
     store = store or Store.open()
+    options = options or ReadOptions()
     check_name(name)
     store.check_writable(name, overwrite=overwrite, append=append, notify=False)
-    if fmt is None:
+    if is_frame(path):
+        fmt = "frame"
+    elif fmt is None:
         fmt = detect_format(path)  # a missing or unknown input fails before the store is touched
     with writing_corpus(store.root, name):  # one writer per corpus: a second fails at once
         store.check_writable(name, overwrite=overwrite, append=append)
-        data = read_dataset(path, fmt, options)
+        data = read_dataset(path, fmt, with_fitted(store, name, options, append))
         corpus = store.write(name, data, overwrite=overwrite, append=append)
     return IngestResult(
         name=name, format=data.source.get("format", fmt or "?"), rows=data.n_rows,
         episodes=data.n_episodes, seconds=time.perf_counter() - t0,
         total_rows=corpus.n_rows, total_episodes=corpus.n_episodes,
         dropped_episodes=int(data.source.get("dropped_nonfinite_episodes", 0)),
+        imputed_cells={} if data.imputed is None else counts(
+            data.imputed, data.observation_space.get("names") or
+            [f"obs_{j}" for j in range(data.observations.shape[1])]),
+        censored_episodes=int(data.truncations[np.asarray(data.episode_starts[1:]) - 1].sum())
+        if data.preprocessing else 0,
     )

@@ -110,6 +110,8 @@ def take_episodes(data: CorpusData, order: np.ndarray) -> CorpusData:
         episode_ids=None if data.episode_ids is None
         else [data.episode_ids[e] for e in order],
         source=data.source,
+        imputed=None if data.imputed is None else np.asarray(data.imputed)[rows],
+        preprocessing=data.preprocessing,
     )
 
 

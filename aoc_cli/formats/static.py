@@ -11,17 +11,19 @@ from pathlib import Path
 import numpy as np
 
 from aoc_cli.errors import AocError, param, warn
-from aoc_cli.formats.table import is_numeric, numeric, read_table
+from aoc_cli.formats.table import is_numeric, numeric, read_table, text
 
 
 def read_static(path: Path, id_col: str, episode_keys: np.ndarray, episode_ids: list[str],
                  numeric_ids: bool, tag_cols: list[str]):
     """Static per-episode features, one row per id -> (names, (E, d_s) float, tag values)."""
-    header, cols = read_table(path)
+    table = read_table(path, text_columns=[id_col, *tag_cols])
+    header, cols = table.header, table.cols
     if id_col not in header:
         raise AocError(f"{param('static')} {path} has no id column {id_col!r} (columns: "
                        f"{', '.join(header)}): name it as in the main file")
-    keys = numeric(cols[id_col], id_col, path) if numeric_ids else np.char.strip(cols[id_col])
+    id_text = text(cols[id_col])
+    keys = numeric(cols[id_col], id_col, path) if numeric_ids else id_text
     uniq, counts = np.unique(keys, return_counts=True)
     if np.any(counts > 1):
         raise AocError(f"{param('static')} {path} has several rows for id "
@@ -39,7 +41,7 @@ def read_static(path: Path, id_col: str, episode_keys: np.ndarray, episode_ids: 
     if unused:
         extra = sorted(set(range(len(keys))) - set(rows.tolist()))
         warn(f"{param('static')} {path}: {unused} ids have no rows in the series (first: "
-             f"{str(np.char.strip(cols[id_col])[extra[0]])!r}); their static rows are not "
+             f"{str(id_text[extra[0]])!r}); their static rows are not "
              "used")
     names: list[str] = []
     feats: list[np.ndarray] = []
@@ -47,15 +49,15 @@ def read_static(path: Path, id_col: str, episode_keys: np.ndarray, episode_ids: 
     for c in header:
         if c == id_col:
             continue
-        values = cols[c][rows]
         if c in tag_cols:
-            tags[c] = np.char.strip(values)
-        elif is_numeric(values):
+            tags[c] = text(cols[c])[rows]
+        elif is_numeric(cols[c]):
             names.append(c)
-            feats.append(numeric(values, c, path))
+            feats.append(numeric(cols[c], c, path)[rows])
         else:  # levels from the whole file, so they do not depend on which ids are present
-            for level in sorted(set(np.char.strip(cols[c]).tolist())):
+            levels = text(cols[c])
+            for level in sorted(set(levels.tolist())):
                 names.append(f"{c}={level}")
-                feats.append((np.char.strip(values) == level).astype(np.float64))
+                feats.append((levels[rows] == level).astype(np.float64))
     feats_arr = np.stack(feats, axis=1) if feats else np.zeros((len(rows), 0))
     return names, feats_arr, tags

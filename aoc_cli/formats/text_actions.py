@@ -17,42 +17,36 @@ from pathlib import Path
 import numpy as np
 
 from aoc_cli.errors import AocError
-from aoc_cli.formats.table import is_numeric
+from aoc_cli.formats.table import is_numeric, text, text_cells
 from aoc_cli.store import discrete_space
 
 
-def _numbers(cells: np.ndarray) -> np.ndarray:
-    """(N,) bool: the stripped cells that parse as numbers (empty cells do not)."""
-    out = np.zeros(len(cells), dtype=bool)
-    for i, v in enumerate(cells):
-        try:
-            float(v)
-            out[i] = v != ""
-        except ValueError:
-            pass
-    return out
+def _at(row_label, row: int) -> str:
+    return f" ({row_label(row)})" if row_label is not None else ""
 
 
-def text_actions(path: Path, cols: dict[str, np.ndarray], names: list[str],
-                 order: np.ndarray) -> tuple[np.ndarray, dict] | None:
+def text_actions(path: Path | str, cols: dict, names: list[str], order: np.ndarray,
+                 row_label=None) -> tuple[np.ndarray, dict] | None:
     """The discrete actions (N,) int64 and their labelled space when one of the action columns
-    ``names`` holds text, else None (the numeric reading applies). ``order``: the file row of
-    each corpus row."""
+    ``names`` (Arrow arrays) holds text, else None (the numeric reading applies). ``order``:
+    the file row of each corpus row; ``row_label(i)``: text naming file row i's episode."""
     if all(is_numeric(cols[c]) for c in names):
         return None
     parts = []
     for c in names:
-        cells = np.char.strip(np.asarray(cols[c], dtype=str))
+        cells = text(cols[c])
         empty = np.flatnonzero(cells == "")
         if empty.size:
-            raise AocError(f"{path}: column {c!r}, data row {int(empty[0]) + 1} is empty: every "
-                           "step needs its action (a treatment given or not, e.g. 'none')")
-        numbers = _numbers(cells)
+            row = int(empty[0])
+            raise AocError(f"{path}: column {c!r}, data row {row + 1}{_at(row_label, row)} is "
+                           "empty: every step needs its action (a treatment given or not, "
+                           "e.g. 'none')")
+        numbers = text_cells(cells)
         if numbers.any() and not numbers.all():
             row = int(np.flatnonzero(~numbers)[0])
-            raise AocError(f"{path}: column {c!r} mixes numbers and text (data row {row + 1} "
-                           f"holds {str(cells[row])!r}): an action column holds numbers or "
-                           "labels, not both")
+            raise AocError(f"{path}: column {c!r} mixes numbers and text (data row {row + 1}"
+                           f"{_at(row_label, row)} holds {str(cells[row])!r}): an action "
+                           "column holds numbers or labels, not both")
         parts.append(cells[order])
     labels_of_rows = parts[0] if len(parts) == 1 else np.array(
         [",".join(f"{c}={v}" for c, v in zip(names, row)) for row in zip(*parts)])

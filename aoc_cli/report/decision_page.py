@@ -1,8 +1,10 @@
-"""The decision page (``aoc explain ... --html FILE``): a decision in words, one card per
+"""The decision page (``aoc explain ... --html FILE``): a decision in words, the measured
+values of the query and of its supporting rows (:mod:`aoc_cli.report.values`), one card per
 supporting row with its history beside the query's, the contrast and the what-if.
 
 Input: the records of :func:`aoc_cli.control.explain.explain_decisions` (with
-``attribution`` and ``query_history``) and the corpus. Every user string is escaped
+``attribution`` and ``query_history``), the corpus, and the corpus a logged query was read
+from (its imputed cells and columns). Every user string is escaped
 (:func:`aoc_cli.report.html.esc`); the page has no script.
 """
 
@@ -10,8 +12,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from aoc_cli.envs import TASKS, collected_task
 from aoc_cli.report.html import esc, num
 from aoc_cli.report.svg import PALETTE, chart
+from aoc_cli.report.values import (MAX_COLUMNS, Values, card_values, columns_of, history_rows,
+                                   imputed_mask, legend, shown_features, values_table)
 
 #: Observation features drawn on a card (chosen by attribution).
 TOP_FEATURES = 3
@@ -21,10 +26,12 @@ TOP_BARS = 5
 
 class PageContext:
     """What every section of a page reads from the corpus once: feature and action names,
-    the observations' mean and std (the cards draw standardised features)."""
+    the observations' mean and std (the cards draw standardised features), the imputed cells
+    and numeric columns; ``source`` the corpus logged queries were read from (``--data``)."""
 
-    def __init__(self, corpus):
+    def __init__(self, corpus, source=None):
         self.corpus = corpus
+        self.source = source
         space = corpus.observation_space or {}
         d_o = corpus.observation_dim
         self.obs_names = list(space.get("names") or [f"obs_{i}" for i in range(d_o)])
@@ -37,6 +44,26 @@ class PageContext:
         self.std = np.where(obs.std(0) > 1e-9, obs.std(0), 1.0)
         self.unit = "patients" if getattr(corpus, "episode_ids", None) is not None \
             else "episodes"
+        self.imputed = imputed_mask(corpus)
+        self.rule = (getattr(corpus, "preprocessing", None) or {}).get("impute", {}).get("rule")
+        self.columns = list(corpus.manifest.get("columns") or [])[:MAX_COLUMNS]
+        task = TASKS.get(collected_task(corpus))
+        self.units = task.extra.get("units") if task is not None else None
+
+    def query(self, rec: dict) -> tuple[Values, np.ndarray | None, bool]:
+        """The decision's query as a column of values, its history's imputed cells (L, d_o)
+        (None: none or not known), and whether its cells' imputation is known: read from the
+        ``--data`` corpus when the record is a step of it, else unknown."""
+        obs = np.asarray(rec["observation"], np.float64)
+        src, row = self.source, rec.get("row")
+        if src is None or row is None or rec.get("data") != src.name:
+            return Values("this step", "the query", obs, None, {}), None, False
+        mask = imputed_mask(src)
+        rows = np.asarray([row], np.int64)
+        length = len((rec.get("query_history") or {}).get("present") or [])
+        hist = None if mask is None or not length else mask[history_rows(rows, length)[0]]
+        return (Values("this step", "the query", obs, None if mask is None else mask[row],
+                       columns_of(src, rows, self.columns)[0]), hist, True)
 
     def action(self, a) -> str:
         """An action as a person reads it: a discrete action's label, else its numbers."""
@@ -114,10 +141,12 @@ def _bars(s: dict, ctx: PageContext, names_step: list[str], names_action: list[s
 
 
 def _series(ctx: PageContext, obs_hist, present, now, features) -> list[np.ndarray]:
-    """Standardised values of ``features`` over the history steps and now: (L + 1,) each."""
+    """Standardised values of ``features`` over the history steps and now: (L + 1,) each
+    (L may be 0: a model that reads the current step only)."""
+    obs_hist = np.asarray(obs_hist, np.float64).reshape(len(present), len(ctx.mean))
     out = []
     for j in features:
-        h = (np.asarray(obs_hist, np.float64)[:, j] - ctx.mean[j]) / ctx.std[j]
+        h = (obs_hist[:, j] - ctx.mean[j]) / ctx.std[j]
         h = np.where(np.asarray(present, bool), h, np.nan)
         out.append(np.append(h, (float(now[j]) - ctx.mean[j]) / ctx.std[j]))
     return out
@@ -131,32 +160,54 @@ def _actions(acts, present, now) -> np.ndarray:
     return np.append(a, now[0] if now.size else np.nan)
 
 
-def card(s: dict, hist, obs_now, query: dict, ctx: PageContext, features, names: dict) -> str:
-    """One supporting row: who, when, what, how much, and its history beside the query's."""
+def _imputed_points(x, series, imputed, features, colour_of, label: str) -> list[dict]:
+    """Hollow markers on a chart where a drawn value was imputed: ``imputed`` (L + 1, d_o)."""
+    if imputed is None:
+        return []
+    return [{"x": float(x[t]), "y": float(y[t]), "colour": colour_of(i), "shape": "ring",
+             "label": f"{label}: imputed"}
+            for i, (j, y) in enumerate(zip(features, series))
+            for t in np.flatnonzero(imputed[:, j]) if np.isfinite(y[t])]
+
+
+def card(s: dict, hist: dict, row: Values, query: dict, qvals: Values, ctx: PageContext,
+         features, names: dict) -> str:
+    """One supporting row: who, when, what, how much, its values against the query's, and
+    (a model with a history) its history beside the query's. ``hist`` and ``query`` hold
+    ``imputed`` (L + 1, d_o) or None: the drawn cells imputed at ingest."""
     who = s.get("episode_id") if s.get("episode_id") is not None else f"episode {s['episode']}"
     tags = ", ".join(f"{k}={v}" for k, v in s["tags"].items())
     value = "" if s.get("value") is None else f" &middot; value {num(s['value'])}"
-    x = np.arange(-len(query["present"]), 1)
-    q = _series(ctx, query["observations"], query["present"], query["observation"], features)
-    r = _series(ctx, hist["observations"], hist["present"], obs_now, features)
-    series = []
-    for i, j in enumerate(features):
-        colour = PALETTE[i % len(PALETTE)]
-        series.append({"y": r[i], "colour": colour, "label": ctx.obs_names[j]})
-        series.append({"y": q[i], "colour": colour, "dash": True, "label": ""})
-    plot = chart(x, series, title="history (standardised): row solid, query dashed",
-                 height=150, ylabel="step")
-    acts = chart(x, [{"y": _actions(hist["actions"], hist["present"], s["action"]),
-                      "colour": "#333", "label": "row's actions"},
-                     {"y": _actions(query["actions"], query["present"], query["action"]),
-                      "colour": "#333", "dash": True, "label": "query's"}],
-                 height=80, legend=True)
+    plots = ""
+    if len(query["present"]):  # a history to draw (a model of history length 0 reads none)
+        x = np.arange(-len(query["present"]), 1)
+        q = _series(ctx, query["observations"], query["present"], query["observation"],
+                    features)
+        r = _series(ctx, hist["observations"], hist["present"], row.observation, features)
+        series = []
+        for i, j in enumerate(features):
+            colour = PALETTE[i % len(PALETTE)]
+            series.append({"y": r[i], "colour": colour, "label": ctx.obs_names[j]})
+            series.append({"y": q[i], "colour": colour, "dash": True, "label": ""})
+        rings = _imputed_points(x, r, hist.get("imputed"), features,
+                                lambda i: PALETTE[i % len(PALETTE)], "row") + \
+            _imputed_points(x, q, query.get("imputed"), features,
+                            lambda i: PALETTE[i % len(PALETTE)], "query")
+        title = "history: row solid, query dashed" + ("; o imputed" if rings else "")
+        plots = chart(x, series, title=title, height=150, ylabel="step (values standardised)",
+                      points=rings)
+        plots += chart(x, [{"y": _actions(hist["actions"], hist["present"], s["action"]),
+                            "colour": "#333", "label": "row's actions"},
+                           {"y": _actions(query["actions"], query["present"], query["action"]),
+                            "colour": "#333", "dash": True, "label": "query's"}],
+                       height=80, legend=True)
     return (f'<div class="card" data-row="{int(s["row"])}"><h3>{esc(who)}, step '
             f'{int(s["step"])}</h3><div class="kv">row {int(s["row"])}'
             f'{" &middot; " + esc(tags) if tags else ""}<br>action <b>'
             f'{esc(ctx.action(s["action"]))}</b>{value} &middot; weight <b>{s["weight"]:.1%}</b>'
             f'{_label(s, ctx)} &middot; distance '
-            f'{num(s["distance"], 3)}</div>{plot}{acts}'
+            f'{num(s["distance"], 3)}</div>{card_values(features, ctx.obs_names, qvals, row)}'
+            f'{plots}'
             f'{_bars(s, ctx, names.get("history_step") or [], names.get("action") or [])}</div>')
 
 
@@ -206,8 +257,8 @@ def what_if_section(rec: dict, ctx: PageContext) -> str:
 
 
 def decision_section(rec: dict, ctx: PageContext, anchor: str = "decision") -> str:
-    """One decision's section: the sentence, warnings, the cards, the contrast, the what-if."""
-    corpus = ctx.corpus
+    """One decision's section: the sentence, warnings, the values and the cards, the
+    contrast, the what-if."""
     where = []
     if rec.get("episode") is not None:
         eid = rec.get("episode_id")
@@ -221,25 +272,53 @@ def decision_section(rec: dict, ctx: PageContext, anchor: str = "decision") -> s
     support = rec["support"]
     query = rec.get("query_history")
     if support and query is not None:
-        query = dict(query, observation=rec["observation"], action=rec["action"])
-        feats = list(np.argsort(-importance(rec, corpus.observation_dim))[:TOP_FEATURES])
-        names = rec.get("attribution_features") or {}
-        rows = np.asarray(sorted(s["row"] for s in support), np.int64)
-        length = len(query["present"])
-        hist = corpus.history(rows, length)
-        now = corpus.read("observations", rows)
-        at = {int(r): i for i, r in enumerate(rows)}
-        cards = []
-        for s in support:
-            i = at[s["row"]]
-            h = {"observations": hist.observations[i], "actions": hist.actions[i],
-                 "present": hist.mask[i]}
-            cards.append(card(s, h, now[i], query, ctx, feats, names))
-        parts.append(f'<h3>The minimal corpus subset: {len(support)} past cases</h3>'
-                     f'<div class="cards">{"".join(cards)}</div>')
+        parts.append(_subset(rec, ctx, dict(query, observation=rec["observation"],
+                                            action=rec["action"])))
     elif support:
         parts.append(_support_table(support, ctx))
     parts.append(contrast_section(rec, ctx))
     parts.append(what_if_section(rec, ctx))
     parts.append("</section>")
     return "".join(parts)
+
+
+def _subset(rec: dict, ctx: PageContext, query: dict) -> str:
+    """The minimal corpus subset: the values table of the query and its rows, then a card
+    per row."""
+    corpus, support = ctx.corpus, rec["support"]
+    weights = importance(rec, corpus.observation_dim)
+    feats = list(np.argsort(-weights, kind="stable")[:TOP_FEATURES])
+    names = rec.get("attribution_features") or {}
+    rows = np.asarray(sorted(s["row"] for s in support), np.int64)
+    length = len(query["present"])
+    hist = corpus.history(rows, length)
+    now = corpus.read("observations", rows)
+    cols = columns_of(corpus, rows, ctx.columns)
+    imp_now = hist_imp = None
+    if ctx.imputed is not None:
+        imp_now = ctx.imputed[rows]
+        hist_imp = ctx.imputed[history_rows(rows, length)] & hist.mask[..., None]
+    qvals, q_hist_imp, known = ctx.query(rec)
+    if qvals.imputed is not None:
+        q_hist_imp = np.zeros((length, corpus.observation_dim), bool) if q_hist_imp is None \
+            else q_hist_imp & np.asarray(query["present"], bool)[:, None]
+        query = dict(query, imputed=np.vstack([q_hist_imp, qvals.imputed[None]]))
+    at = {int(r): i for i, r in enumerate(rows)}
+    cards, columns = [], []
+    for s in support:
+        i = at[s["row"]]
+        who = s.get("episode_id") if s.get("episode_id") is not None else f"episode {s['episode']}"
+        row = Values(f"{who}, step {int(s['step'])}", f"weight {s['weight']:.1%}", now[i],
+                     None if imp_now is None else imp_now[i], cols[i])
+        columns.append(row)
+        h = {"observations": hist.observations[i], "actions": hist.actions[i],
+             "present": hist.mask[i],
+             "imputed": None if hist_imp is None else np.vstack([hist_imp[i], imp_now[i][None]])}
+        cards.append(card(s, h, row, query, qvals, ctx, feats, names))
+    shown, note = shown_features(weights)
+    any_imputed = ctx.imputed is not None and (bool(imp_now[:, shown].any()) or (
+        qvals.imputed is not None and bool(qvals.imputed[shown].any())))
+    table = values_table(shown, ctx.obs_names, ctx.std, qvals, columns, note) + \
+        legend(ctx.rule, any_imputed, known, ctx.units)
+    return (f"{table}<h3>The minimal corpus subset: {len(support)} past cases</h3>"
+            f'<div class="cards">{"".join(cards)}</div>')

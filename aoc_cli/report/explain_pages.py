@@ -21,9 +21,10 @@ def check_html(path: Path, store_root) -> None:
 
 
 def write_html(path: Path, records: list[dict], corpus, session=None, audit=None,
-               episode: int = 0, step: int = 0) -> None:
+               episode: int = 0, step: int = 0, source=None) -> None:
     """The decision page of ``records``; with an audit log (and its session), the overview
-    of its episode first, each step linked to its section."""
+    of its episode first, each step linked to its section; ``source``: the corpus logged
+    steps were read from (``--data``)."""
     episodes, typical = None, None
     if audit is not None and session is not None:
         ep = audit_episode(corpus, audit, episode, upper=None)
@@ -31,7 +32,8 @@ def write_html(path: Path, records: list[dict], corpus, session=None, audit=None
         episodes = [ep]
         t = session.index.typical
         typical = {"p50": t.p50, "p90": t.p90, "p99": t.p99}
-    write_page(path, decision_page(records, corpus, episodes, typical, detail=step))
+    write_page(path, decision_page(records, corpus, episodes, typical, detail=step,
+                                       source=source))
 
 
 def steps_overview(corpus, steps_file: Path, path: Path, model, index_id: str) -> None:

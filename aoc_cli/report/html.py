@@ -34,6 +34,15 @@ table{border-collapse:collapse;margin:6px 0}td,th{border:1px solid #d6dae2;paddi
 .pos{background:#3b6fb6}.neg{background:#c0504d}
 svg text{font:10px system-ui,sans-serif;fill:#333}
 .step{border-top:1px solid #e3e6ec;padding:4px 0}.step.flag{background:#fff4e5}
+.values-card{border:1px solid #ccd3de;border-radius:6px;padding:8px 12px;margin:8px 0}
+.values-card h3{margin:0 0 4px}.scroll{overflow-x:auto}
+table.values td,table.values th{font-size:12.5px;padding:2px 6px}
+table.values td{text-align:right}table.values tr.column th,table.values tr.column td{
+ border-top:2px solid #ccd3de}
+.vals td{text-align:right}.vals td:first-child{text-align:left}
+td.far1{background:#fdf1dc}td.far2{background:#f8d9a8}
+td.imputed{font-style:italic;color:#6b4c9a;text-decoration:underline dotted}
+.legend{font-size:12.5px;margin:2px 0 10px}
 a{color:#2a5aa0}
 @media print{body{margin:0;max-width:none}.cards{grid-template-columns:1fr 1fr}
  a{color:inherit;text-decoration:none}.lede{border-left-color:#000}}

@@ -15,10 +15,12 @@ def _header(corpus, what: str) -> str:
 
 
 def decision_page(records: list[dict], corpus, episodes: list[Episode] | None = None,
-                  typical: dict | None = None, detail: int | None = None) -> str:
+                  typical: dict | None = None, detail: int | None = None,
+                  source=None) -> str:
     """The HTML of a decision page: ``episodes`` (an overview) first when given, then one
-    section per record (the first is ``#decision``)."""
-    ctx = PageContext(corpus)
+    section per record (the first is ``#decision``); ``source`` the corpus logged steps were
+    read from (``--data``: the query's imputed cells and columns)."""
+    ctx = PageContext(corpus, source)
     parts = [_header(corpus, "Decision" if not episodes else "Decisions of an audit log")]
     for ep in episodes or []:
         parts.append(episode_section(ep, typical or {}, detail))

@@ -28,7 +28,8 @@ def chart(x, series: list[dict], width: int = 320, height: int = 130, title: str
     """An SVG line chart. ``x`` (T,); ``series``: dicts with ``y`` (T,) (NaN: a gap),
     ``colour``, optional ``dash`` (bool), ``label``; ``band`` (lower (T,), upper (T,), label)
     shaded; ``points``: dicts with ``x``, ``y``, ``colour``, optional ``href`` (a link, e.g.
-    ``#step-12``), ``label`` (its tooltip) and ``shape`` ("x" or "o")."""
+    ``#step-12``), ``label`` (its tooltip) and ``shape`` ("x", "o", or "ring": hollow, an imputed
+    value)."""
     x = np.asarray(x, np.float64)
     ys = [np.asarray(s["y"], np.float64) for s in series]
     allv = [v[np.isfinite(v)] for v in ys]
@@ -90,10 +91,15 @@ def chart(x, series: list[dict], width: int = 320, height: int = 130, title: str
                            f'stroke-width="1.5"{dash}/>')
     for p in points or []:
         cx, cy = float(px(p["x"])), float(py(p["y"]))
-        mark = (f'<path d="M{cx - 3:.1f},{cy - 3:.1f}L{cx + 3:.1f},{cy + 3:.1f}M{cx - 3:.1f},'
-                f'{cy + 3:.1f}L{cx + 3:.1f},{cy - 3:.1f}" stroke="{p["colour"]}" '
-                'stroke-width="1.6"/>') if p.get("shape") == "x" else \
-            f'<circle cx="{cx:.1f}" cy="{cy:.1f}" r="2.6" fill="{p["colour"]}"/>'
+        if p.get("shape") == "x":
+            mark = (f'<path d="M{cx - 3:.1f},{cy - 3:.1f}L{cx + 3:.1f},{cy + 3:.1f}M'
+                    f'{cx - 3:.1f},{cy + 3:.1f}L{cx + 3:.1f},{cy - 3:.1f}" '
+                    f'stroke="{p["colour"]}" stroke-width="1.6"/>')
+        elif p.get("shape") == "ring":  # hollow: an imputed value
+            mark = (f'<circle class="imputed" cx="{cx:.1f}" cy="{cy:.1f}" r="3.4" fill="#fff" '
+                    f'stroke="{p["colour"]}" stroke-width="1.4"/>')
+        else:
+            mark = f'<circle cx="{cx:.1f}" cy="{cy:.1f}" r="2.6" fill="{p["colour"]}"/>'
         tip = f'<title>{esc(p.get("label", ""))}</title>' if p.get("label") else ""
         out.append(f'<a href="{esc(p["href"])}">{tip}{mark}</a>' if p.get("href")
                    else f"<g>{tip}{mark}</g>")

@@ -7,7 +7,11 @@ Shapes (N rows, E episodes, d_o observation dims, d_a action dims):
 * ``terminals``, ``truncations`` (N,) bool; ``timesteps`` (N,) int64, the step within the episode;
 * ``episode_starts`` (E + 1,) int64 offsets: episode e is rows ``[starts[e], starts[e+1])``;
 * ``tags[name]`` = (codes (N,) int32, labels list[str]): behaviour policy, system, patient group;
-* ``columns[name]`` (N,) float64: any other numeric per-row column (usable as a value target).
+* ``columns[name]`` (N,) float64: any other numeric per-row column (usable as a value target);
+* ``imputed`` (N, d_o) bool, or None: true where an observation cell was empty in the source
+  and filled by the corpus's imputation rule (``preprocessing["impute"]``);
+* ``preprocessing``: what was fitted while reading (imputation medians and rule, dose-bin
+  edges, the split), applied again to data appended or ingested ``--impute-like`` it.
 """
 
 from __future__ import annotations
@@ -83,6 +87,8 @@ class CorpusData:
     columns: dict[str, np.ndarray] = field(default_factory=dict)
     episode_ids: list[str] | None = None
     source: dict = field(default_factory=dict)
+    imputed: np.ndarray | None = None
+    preprocessing: dict = field(default_factory=dict)
 
     @property
     def n_rows(self) -> int:
@@ -122,6 +128,11 @@ class CorpusData:
         self.tags = {k: (np.asarray(c, dtype=np.int32), [str(x) for x in lab])
                      for k, (c, lab) in self.tags.items()}
         self.columns = {k: np.asarray(v, dtype=np.float64) for k, v in self.columns.items()}
+        if self.imputed is not None:
+            self.imputed = np.asarray(self.imputed, dtype=bool)
+            if self.imputed.shape != self.observations.shape:
+                raise AocError(f"the imputed mask has shape {self.imputed.shape}, the "
+                               f"observations {self.observations.shape}")
         return self
 
     def _check_lengths(self) -> None:
@@ -197,6 +208,8 @@ class CorpusData:
             episode_ids=None if self.episode_ids is None
             else [e for e, k in zip(self.episode_ids, keep) if k],
             source=self.source,
+            imputed=None if self.imputed is None else np.asarray(self.imputed)[rows],
+            preprocessing=self.preprocessing,
         )
 
 

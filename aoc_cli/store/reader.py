@@ -304,6 +304,20 @@ class Corpus:
         return gather_history(rows, starts, length, self.observations, self.actions,
                               self.rewards)
 
+    @property
+    def imputed_mask(self) -> np.ndarray | None:
+        """(N, d_o) bool, true where an observation cell was empty in the source and imputed
+        (the rule and medians: :attr:`preprocessing`); None when nothing was imputed."""
+        if not self.manifest.get("imputed"):
+            return None
+        return np.asarray(self.read("imputed"), dtype=bool)
+
+    @property
+    def preprocessing(self) -> dict:
+        """What was fitted while reading the corpus: ``impute`` (rule, medians), ``bins``
+        (dose-bin edges), ``split``; {} when none."""
+        return dict(self.manifest.get("preprocessing") or {})
+
     @cached_property
     def episode_ids(self) -> list[str] | None:
         """The episodes' own ids (E,) (e.g. patient ids kept by a CSV ingest), or None."""
@@ -336,4 +350,6 @@ class Corpus:
             columns={k: self.column(k) for k in self.manifest["columns"]},
             episode_ids=ids,
             source=source,
+            imputed=self.imputed_mask,
+            preprocessing=self.preprocessing,
         )

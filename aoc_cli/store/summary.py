@@ -72,7 +72,9 @@ def summarize(corpus: Corpus) -> dict:
     Keys: name, rows, episodes, observation_dim, action_dim, discrete, n_actions,
     has_rewards, return_mean, return_std, return_min, return_max, episode_length_mean/min/max,
     tags ({tag: {label: rows}}), columns, observation_space, action_space, content_hash,
-    written, sources, built (see :func:`built_from`).
+    written, sources, built (see :func:`built_from`); for a corpus read from a clinical table,
+    preprocessing (the imputation rule and medians, dose-bin edges, outcome, split),
+    imputed_cells ({column: cells}) and censored_episodes.
     """
     returns = corpus.episode_returns()
     lengths = np.diff(corpus.episode_starts)
@@ -109,7 +111,24 @@ def summarize(corpus: Corpus) -> dict:
         "written": corpus.manifest.get("written"),
         "sources": corpus.manifest.get("sources", []),
         "built": built_from(corpus),
+        **clinical_summary(corpus),
     }
+
+
+def clinical_summary(corpus: Corpus) -> dict:
+    """``preprocessing``, ``imputed_cells`` ({column: cells filled}) and
+    ``censored_episodes`` (stays whose last row is a truncation) of a corpus that has a
+    preprocessing; {} otherwise."""
+    pre = corpus.preprocessing
+    if not pre:
+        return {}
+    mask = corpus.imputed_mask
+    names = corpus.observation_space.get("names") or []
+    cells = {} if mask is None else {
+        n: int(c) for n, c in zip(names, mask.sum(axis=0)) if c}
+    last = corpus.episode_starts[1:] - 1
+    return {"preprocessing": pre, "imputed_cells": cells,
+            "censored_episodes": int(np.asarray(corpus.read("truncations"))[last].sum())}
 
 
 def list_corpora(store: Store) -> list[dict]:

@@ -107,6 +107,10 @@ def concat(a: CorpusData, b: CorpusData) -> CorpusData:
         columns=columns,
         episode_ids=ids,
         source=b.source,
+        imputed=None if a.imputed is None and b.imputed is None else np.concatenate(
+            [np.zeros(x.observations.shape, bool) if x.imputed is None else x.imputed
+             for x in (a, b)]),
+        preprocessing=a.preprocessing,
     )
 
 
@@ -149,6 +153,8 @@ def _write_h5(path: Path, data: CorpusData, float_opts: dict) -> str:
             f[f"tags/{key}"].attrs["labels"] = json.dumps(labels)
         for key, col in data.columns.items():
             put(f, f"columns/{key}", col)
+        if data.imputed is not None:
+            put(f, "imputed", data.imputed)
         if data.episode_ids is not None:
             f.create_dataset("episode_ids", data=np.array(data.episode_ids, dtype=object),
                              dtype=h5py.string_dtype())
@@ -171,6 +177,8 @@ def hashed_arrays(data: CorpusData) -> dict[str, np.ndarray]:
                episode_starts=data.episode_starts)
     out.update({f"tags/{k}": c for k, (c, _labels) in sorted(data.tags.items())})
     out.update({f"columns/{k}": data.columns[k] for k in sorted(data.columns)})
+    if data.imputed is not None:
+        out["imputed"] = data.imputed
     return out
 
 
@@ -191,6 +199,8 @@ def _manifest(name: str, data: CorpusData, digest: str, sources: list[dict],
         "arrays": arrays,
         "sources": sources,
         "files": files,
+        "imputed": data.imputed is not None,
+        "preprocessing": data.preprocessing,
     })
 
 

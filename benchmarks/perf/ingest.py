@@ -1,7 +1,17 @@
 """Ingest benchmark (issue 2): a generated 1M-row D4RL-style file (17-d observations, 6-d
-actions) into the store, and history lookups for 100k random rows.
+actions) into the store, and history lookups for 100k random rows; with ``--cohort``, a
+clinical cohort table beside pyarrow's own ``read_csv`` of it (issue 37).
 
     .venv/bin/python benchmarks/perf/ingest.py [--rows 1000000] [--repeats 5] [--compare-compression]
+    .venv/bin/python benchmarks/perf/ingest.py --cohort [--stays 16400] [--repeats 3]
+
+``--cohort``: scripts/cohort.py's table (16,400 stays of 8-20 blocs: ~230k rows x 51 columns,
+15% of the vital and lab cells empty) written as CSV; then, round by round in fresh processes
+(so that each peak resident memory, VmHWM, is its own; the imports before the clock and
+the memory baseline), ``pyarrow.csv.read_csv`` of the file and ``aoc_cli.ingest`` of it with the clinical flags (``--impute hold --impute-mask
+--bin-actions input_4hourly=5,max_dose_vaso=5 --outcome died_in_hosp``), the store written
+included. Goal: the ingest within 3x of read_csv's time, its peak memory (above what the
+imports hold) <= 3x the file's size.
 
 Goal: >= 1M rows/s for ingest; < 1 s for the histories (L = 4) of 100k random rows.
 The generated data are smooth random walks within 1000-step episodes (like logged control
@@ -101,8 +111,87 @@ def compare_compression(src: Path, root: Path, repeats: int) -> list[dict]:
     return out
 
 
+#: A child process: the imports, then one timed case; prints seconds and memory as JSON.
+CHILD = """
+import json, sys, time
+from pathlib import Path
+case, src, store = sys.argv[1], sys.argv[2], sys.argv[3]
+import numpy, pyarrow, pyarrow.csv
+if case == "aoc":
+    import aoc_cli, aoc_cli.store
+    ingest = aoc_cli.ingest  # the API's lazy import, before the clock starts
+def hwm():
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmHWM"):
+            return int(line.split()[1]) / 1024
+before = hwm()
+t0 = time.perf_counter()
+if case == "pyarrow":
+    table = pyarrow.csv.read_csv(src)
+    rows = table.num_rows
+else:
+    obs = [c for c in Path(src).open().readline().strip().split(",")
+           if c not in ("icustayid", "bloc", "charttime", "input_4hourly", "max_dose_vaso",
+                        "died_in_hosp", "mortality_90d")]
+    result = ingest(src, "bench", store=aoc_cli.store.Store(store), overwrite=True,
+                            options=dict(id_column="icustayid", time_column="bloc",
+                                         obs_columns=obs, impute="hold", impute_mask=True,
+                                         bin_actions="input_4hourly=5,max_dose_vaso=5",
+                                         outcome="died_in_hosp", outcome_reward="1=-1,0=1"))
+    rows = result.rows
+print(json.dumps({"seconds": time.perf_counter() - t0, "rows": rows, "hwm_imports_mb": before,
+                  "hwm_mb": hwm()}))
+"""
+
+
+def cohort_rows(tmp: Path, stays: int, repeats: int) -> list[dict]:
+    """pyarrow's read_csv and aoc's ingest of one generated cohort CSV, interleaved."""
+    import importlib.util
+    import json
+    import subprocess
+
+    spec = importlib.util.spec_from_file_location("cohort", h.ROOT / "scripts" / "cohort.py")
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    src = script.write(script.cohort(stays, seed=0), tmp / "cohort.csv")
+    size_mb = src.stat().st_size / 1e6
+    cols = src.open().readline().count(",") + 1
+    print(f"source: {src.name}, {size_mb:.1f} MB, {cols} columns, {os.cpu_count()} cores, "
+          f"load {h.load():.1f}", file=sys.stderr)
+    env = {**os.environ, "PYTHONPATH": str(h.ROOT)}
+    runs = {"pyarrow": [], "aoc": []}
+    for _ in range(repeats):
+        for case in runs:
+            out = subprocess.run([sys.executable, "-c", CHILD, case, str(src),
+                                  str(tmp / "store")], capture_output=True, text=True,
+                                 env=env, check=True)
+            runs[case].append(json.loads(out.stdout))
+    rows = []
+    for case, label in (("pyarrow", "pyarrow.csv.read_csv"),
+                        ("aoc", "aoc_cli.ingest (clinical flags, store written)")):
+        r = runs[case]
+        t = h.Runs()
+        for x in r:
+            t.add(x["seconds"], float("nan"))
+        peak = sorted(x["hwm_mb"] - x["hwm_imports_mb"] for x in r)[len(r) // 2]
+        rows.append(h.row(label, r[0]["rows"], t, file_mb=round(size_mb, 1),
+                          peak_above_imports_mb=round(peak, 1),
+                          peak_over_file=round(peak / size_mb, 2),
+                          peak_total_mb=round(sorted(x["hwm_mb"] for x in r)[len(r) // 2], 1)))
+    ratios = sorted(a["seconds"] / p["seconds"] for a, p in zip(runs["aoc"], runs["pyarrow"]))
+    print(f"ingest / read_csv, paired by round: median {ratios[len(ratios) // 2]:.2f} "
+          f"(rounds {', '.join(f'{x:.2f}' for x in ratios)}); load {h.load():.1f}",
+          file=sys.stderr)
+    rows.append({"case": "ratio ingest / read_csv (median of rounds)",
+                 "median_s": ratios[len(ratios) // 2]})
+    return rows
+
+
 def main() -> None:
     parser = h.parser(__doc__, repeats=5)
+    parser.add_argument("--cohort", action="store_true",
+                        help="the clinical cohort CSV against pyarrow's read_csv instead")
+    parser.add_argument("--stays", type=int, default=16_400, help="--cohort: stays")
     parser.add_argument("--rows", type=int, default=1_000_000)
     parser.add_argument("--lookups", type=int, default=100_000, help="history lookups")
     parser.add_argument("--compare-compression", action="store_true")
@@ -111,6 +200,9 @@ def main() -> None:
     args = parser.parse_args()
     with tempfile.TemporaryDirectory(dir=args.workdir) as tmp:
         tmp = Path(tmp)
+        if args.cohort:
+            h.emit(cohort_rows(tmp, args.stays, args.repeats), args.format)
+            return
         src = tmp / "generated.hdf5"
         generate(src, args.rows)
         print(f"source: {args.rows} rows, {src.stat().st_size / 1e6:.0f} MB, "

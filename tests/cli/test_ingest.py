@@ -121,7 +121,7 @@ def test_unknown_format(store, aoc, tmp_path):
     assert_refused(aoc, store, ["ingest", str(tmp_path / "notes.txt"), "--name", "x"],
                    "cannot tell the format")
     assert_refused(aoc, store, ["ingest", str(tmp_path / "notes.txt"), "--name", "x",
-                                "--from", "parquet"], "unknown format 'parquet'")
+                                "--from", "xlsx"], "unknown format 'xlsx'")
 
 
 def test_undetectable_hdf5(store, aoc, tmp_path):

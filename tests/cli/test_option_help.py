@@ -71,6 +71,41 @@ def test_every_option_that_mirrors_a_setting_shows_its_help_range_and_default(co
             assert default == item.default and option.show_default is not False, where
 
 
+#: The commands that decide: each takes every controller setting (aoc_cli.cli.common.deciding).
+DECIDING = ("rollout", "explain", "evaluate", "bench")
+
+
+@pytest.mark.parametrize("command", DECIDING)
+def test_every_deciding_command_offers_every_controller_setting_none_unless_given(command):
+    options = _options(command)
+    for item in dataclasses.fields(ControllerConfig):
+        option = options.get(flag(param_name(item)))
+        assert option is not None, f"aoc {command} has no {flag(param_name(item))}"
+        assert option.default is None, f"aoc {command} {option.opts[0]}"  # not given: None
+
+
+@pytest.mark.parametrize("command, args", [
+    ("rollout", ["g", "--env", "two-gates"]), ("explain", ["g", "--data", "g"]),
+    ("evaluate", ["g", "--data", "g"]), ("bench", ["two-gates"])])
+def test_a_deciding_command_hands_its_entry_the_settings_given_and_none_for_the_rest(
+        aoc_inproc, monkeypatch, command, args):
+    import aoc_cli
+
+    seen = {}
+
+    def entry(*_args, controller=None, **_kwargs):
+        seen.update(controller)
+        raise aoc_cli.errors.AocError("stop here")
+
+    monkeypatch.setattr(aoc_cli, command, entry)
+    code, _, err = aoc_inproc(command, *args, "--residual-cap", "2", "--sampler", "bc",
+                              "--ood-sigmas", "4")
+    assert code == 2 and "stop here" in err
+    assert seen == {**{item.name: None for item in dataclasses.fields(ControllerConfig)},
+                    "residual_cap": 2.0, "sampler": "bc", "ood_sigmas": 4.0}
+    assert type(seen["sampler"]) is str  # the plain value, not the enum
+
+
 def test_train_offers_every_belief_setting_but_the_library_only_ones():
     offered = {item.name for item, _ in mirrored("train")}
     names = {item.name for item in dataclasses.fields(BeliefConfig)}

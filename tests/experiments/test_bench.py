@@ -174,7 +174,7 @@ def test_residual_cap_reaches_every_aoc_session_and_is_recorded(tmp_path, bench_
 
     with pytest.raises(BadSetting, match="residual_cap must be > 0") as err:
         run_experiment("two-gates", "tiny", out=tmp_path / "bad", store=bench_store,
-                       residual_cap=0.0)
+                       controller={"residual_cap": 0.0})
     assert (err.value.param, err.value.value) == ("residual_cap", 0.0)
     configs = []
     real = maze.session
@@ -186,7 +186,8 @@ def test_residual_cap_reaches_every_aoc_session_and_is_recorded(tmp_path, bench_
 
     monkeypatch.setattr(maze, "session", spy)
     out = tmp_path / "capped"
-    run_experiment("two-gates", "tiny", out=out, store=bench_store, residual_cap=2.5)
+    run_experiment("two-gates", "tiny", out=out, store=bench_store,
+                   controller={"residual_cap": 2.5})
     assert [c.epsilon for c in configs] == [0.1, 0.7]  # epsilon still varies
     assert all(c.residual_cap == 2.5 for c in configs)
     meta = json.loads((out / "summary.json").read_text())

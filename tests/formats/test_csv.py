@@ -106,7 +106,7 @@ def test_flags_override_defaults_and_leftover_numeric_columns_are_kept(tmp_path)
 def test_non_numeric_observation_cell_is_named(tmp_path):
     path = write_csv(tmp_path / "x.csv", ["episode", "t", "obs_a", "act_u"],
                      [[0, 0, 1.0, 0.1], [0, 1, "high", 0.2]])
-    with pytest.raises(AocError, match="column 'obs_a', data row 2 holds 'high'"):
+    with pytest.raises(AocError, match=r"column 'obs_a', data row 2 \(episode 0\) holds 'high'"):
         read_dataset(path)
 
 
@@ -135,14 +135,13 @@ def test_a_row_with_too_many_fields_names_its_line(tmp_path):
         read_dataset(path)
 
 
-def test_reading_reports_progress_in_lines_up_to_the_whole_file(tmp_path, monkeypatch):
-    import aoc_cli.formats.table as csv_module
+def test_reading_reports_progress_in_bytes_up_to_the_whole_file(tmp_path):
+    from aoc_cli.formats.table import read_table
 
-    monkeypatch.setattr(csv_module, "CHUNK_LINES", 2)
     path = tmp_path / "p.csv"
-    path.write_text("a,b\n" + "".join(f"{i},{i}\n" for i in range(7)))  # 9 lines with the last
+    path.write_text("a,b\n" + "".join(f"{i},{i}\n" for i in range(7)))
     seen = []
-    header, cols = csv_module.read_table(path, lambda *a: seen.append(a))
-    assert header == ["a", "b"] and cols["a"].tolist() == [str(i) for i in range(7)]
-    done = [s[0] for s in seen]
-    assert done == sorted(done) and seen[-1] == (9, 9, "reading p.csv") and len(seen) == 4
+    table = read_table(path, lambda *a: seen.append(a))
+    assert table.header == ["a", "b"] and table.cols["a"].to_pylist() == list(range(7))
+    size = path.stat().st_size
+    assert seen == [(0, size, "reading p.csv"), (size, size, "reading p.csv")]

@@ -55,9 +55,9 @@ def test_numeric_actions_are_read_as_before(tmp_path):
 
 
 @pytest.mark.parametrize("bad, message", [
-    ((1, 1, 0.2, "3", 0), r"column 'treatment' mixes numbers and text \(data row 1 holds "
-                          r"'oxygen'\)"),
-    ((1, 1, 0.2, "", 0), r"column 'treatment', data row 3 is empty: every step needs its"),
+    ((1, 1, 0.2, "3", 0), r"column 'treatment' mixes numbers and text \(data row 1 \(episode "
+                          r"2\) holds 'oxygen'\)"),
+    ((1, 1, 0.2, "", 0), r"column 'treatment', data row 3 \(episode 1\) is empty: every step needs"),
 ])
 def test_mixed_or_missing_treatments_are_one_clear_error(tmp_path, bad, message):
     rows = list(ROWS)

@@ -11,7 +11,6 @@ import pytest
 
 from tests.control.corpora import HOSTILE_TAGS, hostile_corridor_store
 from tests.control.test_whatif import maze  # noqa: F401 (fixture)
-from tests.report.chromium import Browser
 
 HOSTILE_ID = "<img src=x onerror=alert(3)>"
 
@@ -21,13 +20,6 @@ def corridor_root(tmp_path_factory):
     root = tmp_path_factory.mktemp("pages")
     hostile_corridor_store(root)
     return root
-
-
-@pytest.fixture(scope="module")
-def browser():
-    b = Browser()
-    yield b
-    b.close()
 
 
 def aoc(aoc_inproc, root, *args):

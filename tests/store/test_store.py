@@ -164,3 +164,22 @@ def test_float_columns_are_contiguous_unless_other_dataset_options_are_passed(tm
         assert f["observations"].compression == "gzip"
     assert packed.hash == plain.hash  # the same content, stored differently
     np.testing.assert_array_equal(packed.load().observations, plain.load().observations)
+
+
+def test_imputed_mask_and_preprocessing_are_stored_and_survive_append(tmp_path):
+    store = Store(tmp_path)
+    data = make_data()
+    assert store.write("plain", data).imputed_mask is None
+    mask = np.zeros(data.observations.shape, bool)
+    mask[[1, 4], 0] = True
+    data = make_data()
+    data.imputed = mask
+    data.preprocessing = {"impute": {"rule": "median", "medians": [0.5, 1.5]}}
+    c = store.write("imp", data)
+    np.testing.assert_array_equal(c.imputed_mask, mask)
+    assert c.preprocessing["impute"]["medians"] == [0.5, 1.5]
+    assert "imputed" in c.manifest["arrays"] and c.changed_arrays() == []
+    c = store.write("imp", make_data(lengths=(2,)), append=True)  # nothing imputed in it
+    assert c.imputed_mask.shape == (12, 2) and c.imputed_mask.sum() == 2
+    np.testing.assert_array_equal(c.load().imputed, c.imputed_mask)
+    assert c.preprocessing["impute"]["rule"] == "median"

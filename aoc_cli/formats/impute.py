@@ -1,0 +1,154 @@
+"""Empty observation cells of a clinical table, filled by a rule the user chose and recorded.
+
+A cohort table holds gaps: a lab drawn once a day leaves five of six 4-hour blocs empty. Each
+rule is a choice the corpus records (``preprocessing["impute"]``), with the statistics it was
+fitted on:
+
+* ``hold``: the last measured value within the stay (carried forward), else the column's
+  median;
+* ``median``: the column's median.
+
+The medians are those of the corpus's own measured cells (``fit``). Data appended to the
+corpus, a held-out log ingested ``--impute-like`` it, the test part of a split, and an
+``explain`` query holding ``null`` are filled with the corpus's medians (``fill``), never
+with their own: nothing of held-out data leaks into what the corpus was fitted on. With
+``mask``, every column with gaps adds a 0/1 feature ``COL?measured`` to the observation.
+Which cells were filled is kept (``Corpus.imputed_mask``) and counted per column.
+Actions and rewards are never imputed.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from aoc_cli.errors import AocError, param
+
+RULES = ("hold", "median")
+#: Suffix of the 0/1 feature that says whether a column was measured.
+MEASURED = "?measured"
+
+
+def refuse_gaps(obs: np.ndarray, names: list[str], where) -> None:
+    """An AocError naming the share of empty cells in the worst columns and the flags, when
+    (N, d) ``obs`` holds NaN; nothing otherwise."""
+    empty = np.isnan(obs).mean(axis=0) if len(obs) else np.zeros(len(names))
+    if not empty.any():
+        return
+    worst = np.argsort(-empty, kind="stable")[:3]
+    parts = [f"{names[j]!r} {100 * empty[j]:.1f}%" for j in worst if empty[j] > 0]
+    gaps = int((empty > 0).sum())
+    raise AocError(f"{where}: {gaps} observation column{'s' if gaps > 1 else ''} "
+                   f"{'have' if gaps > 1 else 'has'} empty cells (worst: {', '.join(parts)}): "
+                   f"choose how to fill them with {param('impute', 'hold')} or "
+                   f"{param('impute', 'median')} (add {param('impute_mask', True)} for "
+                   f"'measured' features), or drop those stays with "
+                   f"{param('drop_nonfinite', True)}")
+
+
+def fit(obs: np.ndarray, names: list[str], rule: str, mask: bool, where,
+        measured: list[str] | None = None) -> dict:
+    """The imputation of (N, d) ``obs`` (NaN: empty): ``{"rule", "mask", "names",
+    "medians", "measured"}``, ``measured`` the columns with gaps (given, or found), one
+    ``COL?measured`` feature each with ``mask``. A column empty for every row is an
+    AocError."""
+    if rule not in RULES:
+        raise AocError(f"unknown {param('impute', rule)}: use one of {', '.join(RULES)}")
+    medians, gaps = [], []
+    for j, name in enumerate(names):
+        col = obs[:, j]
+        present = col[~np.isnan(col)]
+        if present.size == 0:
+            raise AocError(f"{where}: column {name!r} is empty for every stay: "
+                           f"{param('impute', rule)} has no measured value to fill it from; "
+                           "drop the column")
+        medians.append(float(np.median(present)))
+        if present.size < len(col):
+            gaps.append(name)
+    return {"rule": rule, "mask": bool(mask), "names": list(names), "medians": medians,
+            "measured": list(gaps if measured is None else measured)}
+
+
+def check_like(spec: dict, names: list[str], rule: str | None, mask: bool, where,
+               source: str) -> None:
+    """The data to fill has the columns ``spec`` was fitted on, and no other rule asked."""
+    if list(spec["names"]) != list(names):
+        raise AocError(f"{where}: its observation columns {names} differ from those "
+                       f"{source} was imputed on {spec['names']}")
+    if rule is not None and rule != spec["rule"]:
+        raise AocError(f"{where}: {param('impute', rule)} differs from the rule "
+                       f"{spec['rule']!r} of {source}: drop it (the corpus's rule applies)")
+    if mask and not spec["mask"]:
+        raise AocError(f"{where}: {param('impute_mask', True)} but {source} has no "
+                       "'measured' features: drop it")
+
+
+def planned_measured(spec: dict | None) -> list[str]:
+    """The ``COL?measured`` features a fitted ``spec`` adds (none without its mask)."""
+    return list(spec["measured"]) if spec and spec.get("mask") else []
+
+
+def fill(obs: np.ndarray, starts: np.ndarray, spec: dict) -> np.ndarray:
+    """Fill ``obs`` (N, d + m) in place and return the imputed cells (N, d + m) bool.
+
+    The first d = ``len(spec["names"])`` columns hold the values, NaN where empty; each empty
+    cell takes, by ``spec["rule"]``, the last measured value of its column within its stay
+    (``hold``; the stays: ``starts`` (E + 1,)) or else the column's median. The m trailing
+    columns receive the 0/1 ``COL?measured`` features of ``spec["measured"]`` (with
+    ``spec["mask"]``; never imputed themselves). Column by column: a few (N,) temporaries."""
+    names, d = spec["names"], len(spec["names"])
+    n = len(obs)
+    features = {name: d + k for k, name in enumerate(planned_measured(spec))}
+    imputed = np.zeros(obs.shape, bool)
+    rows = np.arange(n)
+    stay_start = np.repeat(starts[:-1], np.diff(starts)) if spec["rule"] == "hold" else None
+    for j in range(d):
+        col = obs[:, j]
+        empty = np.isnan(col)
+        if names[j] in features:
+            obs[:, features[names[j]]] = ~empty
+        if not empty.any():
+            continue
+        imputed[:, j] = empty
+        still = empty
+        if stay_start is not None:  # the last measured row at or before each row
+            last = np.where(empty, -1, rows)
+            np.maximum.accumulate(last, out=last)
+            held = empty & (last >= stay_start)
+            col[held] = col[last[held]]
+            still = empty & ~held
+        col[still] = spec["medians"][j]
+    return imputed
+
+
+def names_with_mask(spec: dict | None, names: list[str]) -> list[str]:
+    """Observation names after filling: ``names`` plus ``COL?measured`` features."""
+    if not spec or not spec.get("mask"):
+        return list(names)
+    return list(names) + [n + MEASURED for n in spec["measured"]]
+
+
+def counts(imputed: np.ndarray, names: list[str]) -> dict[str, int]:
+    """Imputed cells per column (the columns with any)."""
+    per = imputed.sum(axis=0)
+    return {n: int(c) for n, c in zip(names, per) if c}
+
+
+def fill_query(obs: np.ndarray, spec: dict) -> np.ndarray:
+    """(Q, d) query observations whose unmeasured cells are NaN (``null`` in JSON) -> filled
+    with the corpus's medians, and the ``COL?measured`` features set (0 where the cell was
+    null) when the corpus has them; a query already of the corpus's full width has its NaN
+    cells filled and its measured features kept."""
+    d = len(spec["names"])
+    obs = np.asarray(obs, dtype=np.float64)
+    base = obs[:, :d]
+    empty = np.isnan(base)
+    filled = np.where(empty, np.asarray(spec["medians"])[None, :], base)
+    if not spec.get("mask") or not spec["measured"]:
+        return filled
+    cols = [spec["names"].index(n) for n in spec["measured"]]
+    if obs.shape[1] == d + len(cols):
+        given = obs[:, d:]
+        measured = np.where(np.isnan(given), (~empty[:, cols]).astype(float), given)
+    else:
+        measured = (~empty[:, cols]).astype(float)
+    return np.concatenate([filled, measured], axis=1)

@@ -1,0 +1,198 @@
+"""Every page for every built-in task, in headless Chromium: the decision page of a held-out
+step, the audit page of a rollout and the overview of an ``aoc evaluate --steps`` file; the
+measured values card; imputed cells marked wherever the page shows them.
+
+The corpora are tiny (12 episodes, 2 training epochs, a held-out log of a few episodes or 80
+rows): the pages are tested, not the decisions (about 5 s a task)."""
+
+from __future__ import annotations
+
+import json
+
+import h5py
+import numpy as np
+import pytest
+
+import aoc_cli
+from aoc_cli.envs import collect
+from aoc_cli.report.html import num
+from aoc_cli.store import Store
+
+TASKS = ["maze", "two-gates", "pendulum-het", "pendulum-het-upright", "lunar", "ward",
+         "icu-sepsis"]
+LONG = {"pendulum-het", "pendulum-het-upright", "lunar"}
+#: Small and fast, no validation run: the pages are under test, not the model.
+TRAIN = dict(max_epochs=2, hidden=16, weight_decay=0.0, patience=1, threads=1, seed=0)
+CLEAN = {"exceptions": [], "dialogs": [], "requests": [], "errors": []}
+
+
+def _aoc(aoc_inproc, root, *args) -> str:
+    code, out, err = aoc_inproc("--store", str(root), *args)
+    assert code == 0, err
+    return out
+
+
+def _records(out: str) -> list[dict]:
+    """The decision records of `aoc explain -f json` (a logged step: {"decisions": [...]})."""
+    doc = json.loads(out)
+    return doc["decisions"] if isinstance(doc, dict) and "decisions" in doc else \
+        doc if isinstance(doc, list) else [doc]
+
+
+def _logged_step(held, min_length: int = 3) -> tuple[int, int, int]:
+    """(episode, step, row) of the first held-out episode with ``min_length`` steps: the step
+    before its last, so that it has a history."""
+    lengths = np.diff(held.episode_starts)
+    e = int(np.flatnonzero(lengths >= min_length)[0])
+    step = int(lengths[e]) - 2
+    return e, step, int(held.episode_starts[e]) + step
+
+
+def _check_decision(browser, rec: dict, corpus, query_obs: np.ndarray, history: bool):
+    """The values card and the cards of ``#decision`` against the record and the corpus."""
+    support = rec["support"]
+    names = list((corpus.observation_space or {}).get("names") or [])
+    d_o = corpus.observation_dim
+    cards = browser.evaluate("[...document.querySelectorAll('#decision .card')].map(c => "
+                             "[+c.dataset.row, c.querySelectorAll('svg polyline').length, "
+                             "c.querySelectorAll('table.vals tr').length])")
+    assert [r for r, _, _ in cards] == [s["row"] for s in support]
+    # each card: its values against the query's (3 features, the numeric columns); a model
+    # with a history draws it, one without (icu-sepsis) draws none
+    n_cols = len(corpus.manifest.get("columns") or [])
+    assert all(vals == 1 + min(3, d_o) + min(n_cols, 4) for _, _, vals in cards)
+    assert all((lines >= 2) == history for _, lines, _ in cards)
+    table = browser.evaluate(
+        "[...document.querySelectorAll('#decision table.values tr')].map(tr => "
+        "[...tr.children].map(c => c.innerText))")
+    head, body = table[0], table[1:]
+    assert len(head) == 2 + len(support)   # feature, the query, one column per row
+    features = [r for r in body if not r[0].endswith("(column)")]
+    assert len(features) == min(d_o, 16)
+    for r in features:                     # the query's values as stored, by name
+        j = names.index(r[0]) if names else int(r[0].split("_")[1])
+        assert r[1] == num(float(query_obs[j]), 4)
+    obs = corpus.read("observations", np.asarray([s["row"] for s in support]))
+    j = names.index(features[0][0]) if names else 0
+    assert [r for r in features[0][2:]] == [num(float(v), 4) for v in obs[:, j]]
+    assert browser.evaluate("document.querySelectorAll('.imputed').length") == 0
+
+
+@pytest.mark.quality
+@pytest.mark.parametrize("task", TASKS)
+def test_every_page_of_a_task_in_the_browser(task, tmp_path, aoc_inproc, browser):
+    root, out = tmp_path / "store", tmp_path
+    aoc_cli.collect(task, "c", store=root, episodes=12, seed=0)
+    # held out: a few short episodes, or 80 rows of the long ones (every step is decided)
+    aoc_cli.collect(task, "held", store=root, seed=1,
+                    **({"steps": 80} if task in LONG else {"episodes": 6}))
+    # icu-sepsis: the task's history length 0, its value target the return (FQE's is slow)
+    aoc_cli.train("c", store=root, **TRAIN, **({"value": "return"} if task == "icu-sepsis"
+                                               else {"history_length": 2}))
+    aoc_cli.build_index("c", store=root)
+    store = Store(root)
+    corpus, held = store.corpus("c"), store.corpus("held")
+    history = task != "icu-sepsis"        # its value belief reads the current state only
+
+    # the decision page of a held-out step (icu-sepsis: history length 0, the IndexError)
+    e, step, row = _logged_step(held)
+    page = out / "decision.html"
+    recs = _records(_aoc(aoc_inproc, root, "explain", "c", "--data", "held", "--episode",
+                         str(e), "--step", str(step), "--html", str(page), "-f", "json"))
+    browser.open(page)
+    assert browser.problems() == CLEAN
+    _check_decision(browser, recs[0], corpus, held.read("observations", [row])[0], history)
+    assert browser.evaluate("document.querySelectorAll('section').length") == len(recs)
+    if task == "icu-sepsis":  # the tabular state: the query's and each row's, as a column
+        state = browser.evaluate("[...document.querySelectorAll('#decision table.values "
+                                 "tr.column')].map(tr => [...tr.children].map(c => "
+                                 "c.innerText)).find(r => r[0].startsWith('state'))")
+        rows = [s["row"] for s in recs[0]["support"]]
+        assert state[1:] == [num(float(held.read("columns/state", [row])[0]), 4)] + \
+            [num(float(v), 4) for v in corpus.read("columns/state", rows)]
+        assert "normalised values, not raw measurements" in browser.evaluate(
+            "document.querySelector('#decision .legend').innerText")
+
+    # the audit page: the episode's overview, then the step's decision
+    log, page = out / "audit.h5", out / "audit.html"
+    aoc_cli.rollout("c", task, store=root, episodes=1, seed=3, audit=log)
+    with h5py.File(log) as f:
+        n = len(f["episode_0/residuals"])
+    at = min(1, n - 1)
+    recs = _records(_aoc(aoc_inproc, root, "explain", "c", "--audit", str(log),
+                         "--episode", "0", "--step", str(at), "--html", str(page), "-f", "json"))
+    browser.open(page)
+    assert browser.problems() == CLEAN
+    assert browser.evaluate("[...document.querySelectorAll('.step')].map(s => s.id)") == \
+        [f"step-0-{t}" for t in range(n)]
+    assert browser.evaluate(f"!!document.querySelector('#step-0-{at} a[href=\"#decision\"]')")
+    _check_decision(browser, recs[0], corpus, np.asarray(recs[0]["observation"]), history)
+
+    # the overview of an `aoc evaluate --steps` file
+    steps, page = out / "steps.jsonl", out / "steps.html"
+    aoc_cli.evaluate("c", "held", store=root, baselines=(), ope="none", steps_file=steps)
+    _aoc(aoc_inproc, root, "explain", "c", "--steps", str(steps), "--html", str(page))
+    browser.open(page)
+    assert browser.problems() == CLEAN
+    lines = [json.loads(x) for x in steps.read_text().splitlines() if x.strip()]
+    assert browser.evaluate("document.querySelectorAll('.step').length") == len(lines)
+    assert browser.evaluate("document.querySelectorAll('section').length") == \
+        len({x["episode"] for x in lines})
+
+
+def _masked(data, every: int = 3):
+    """``data`` with every cell of each ``every``-th row marked imputed (median rule)."""
+    mask = np.zeros(data.observations.shape, bool)
+    mask[::every] = True
+    data.imputed = mask
+    data.preprocessing = {"impute": {"rule": "median"}}
+    return data
+
+
+def _steps_drawn(row: int, start: int) -> list[int]:
+    """The rows a history chart of length 2 draws for ``row`` (its episode starts at
+    ``start``): its previous two in the episode, and itself."""
+    return [t for t in (row - 2, row - 1, row) if t >= start]
+
+
+def test_imputed_cells_are_marked_wherever_the_page_shows_them(tmp_path, aoc_inproc,
+                                                                browser):
+    """A ward corpus and a held-out log with every third row's cells imputed: the values
+    table, each card's values and each card's history chart mark exactly those cells."""
+    root = tmp_path / "store"
+    store = Store(root)
+    corpus = store.write("w", _masked(collect("ward", episodes=12, seed=0)[0]))
+    held = store.write("held", _masked(collect("ward", episodes=6, seed=1)[0]))
+    assert getattr(corpus, "imputed_mask", None) is not None
+    aoc_cli.train("w", store=root, **TRAIN, history_length=2)
+    aoc_cli.build_index("w", store=root)
+    e, step, row = _logged_step(held)
+    page = tmp_path / "imputed.html"
+    rec = _records(_aoc(aoc_inproc, root, "explain", "w", "--data", "held", "--episode",
+                        str(e), "--step", str(step), "--html", str(page), "-f", "json"))[0]
+    browser.open(page)
+    assert browser.problems() == CLEAN
+    d_o, rows = corpus.observation_dim, [s["row"] for s in rec["support"]]
+    imputed = [row % 3 == 0] + [r % 3 == 0 for r in rows]  # query, then each row
+    table = browser.evaluate(
+        "[...document.querySelectorAll('#decision table.values tr:not(.column)')].slice(1)"
+        ".map(tr => [...tr.querySelectorAll('td')].map(c => c.classList.contains('imputed')"
+        " && c.innerText.endsWith('\u2020')))")
+    assert True in imputed and False in imputed  # the seeds give both kinds of cell
+    assert len(table) == d_o and all(r == imputed for r in table)
+    cards = browser.evaluate(
+        "[...document.querySelectorAll('#decision .card')].map(c => [[...c.querySelectorAll("
+        "'table.vals tr')].slice(1, 4).map(tr => [...tr.querySelectorAll('td')].slice(1).map("
+        "td => td.classList.contains('imputed'))), c.querySelectorAll('svg circle.imputed')"
+        ".length])")
+    assert len(cards) == len(rows) and sum(rings for _, rings in cards) > 0
+    for (vals, rings), r in zip(cards, rows):
+        assert vals == [[row % 3 == 0, r % 3 == 0]] * 3
+        # each of the 3 drawn features: a ring at every imputed step of the row's and the
+        # query's history (2 steps, in the episode) and now
+        starts = corpus.episode_starts
+        mine = _steps_drawn(r, int(starts[np.searchsorted(starts, r, "right") - 1]))
+        theirs = _steps_drawn(row, int(held.episode_starts[e]))
+        assert rings == 3 * sum(t % 3 == 0 for t in mine + theirs)
+    legend = browser.evaluate("document.querySelector('#decision .legend').innerText")
+    assert "\u2020 imputed" in legend and "rule: median" in legend
