@@ -26,8 +26,9 @@ import numpy as np
 
 from aoc_cli.belief.row_labels import default_row_smoothing, row_labels
 from aoc_cli.control.config import ControllerConfig
-from aoc_cli.control.epsilon import epsilon_filter, residual_cap
-from aoc_cli.control.support import penalised, row_episodes, support_episodes, support_filter
+from aoc_cli.control.rule import choose as _choose
+from aoc_cli.control.rule import reads_support, residual_cap
+from aoc_cli.control.support import row_episodes, support_episodes
 from aoc_cli.errors import AocError, ModelMissing, param
 from aoc_cli.store import History
 from aoc_cli.threads import one_thread
@@ -168,7 +169,8 @@ class Controller:
 
     def evaluate(self, observation: np.ndarray, history: History, candidates: np.ndarray,
                  choose: bool = True, selection: np.ndarray | None = None) -> Decision:
-        """Decompose every candidate; with ``choose``, apply the epsilon filter and argmax.
+        """Decompose every candidate; with ``choose``, the decision rule (the epsilon filter
+        and the argmax: :func:`aoc_cli.control.rule.choose`).
 
         Without ``choose`` the first candidate is reported (used to explain a given action).
         ``selection``: as in :meth:`decide`.
@@ -181,16 +183,12 @@ class Controller:
         residual = np.asarray(dec.residual, dtype=np.float64)
         value = np.asarray(dec.value, dtype=np.float64)
         # every candidate's support only where a rule reads it (a few ms for K = 100)
-        rules = self.config.min_support is not None or self.config.support_penalty is not None
-        support = self.support(dec)[0] if rules else np.empty(0)
-        if choose:
-            threshold, passed = self.candidate_filter(residual)
-            key = value
-            if rules:
-                passed = support_filter(passed, support, self.config.min_support)
-                key = penalised(value, support, self.config.support_penalty, self.value_std)
-            order = np.lexsort((residual, -key))  # by value (key) desc, then residual asc
-            chosen = int(next(i for i in order if passed[i]))
+        support = self.support(dec)[0] if reads_support(self.config) else np.empty(0)
+        if choose:  # steps 4 and 5: the decision rule (aoc_cli.control.rule.choose)
+            threshold, passed, chosen = _choose(
+                residual[None], value[None], self.config, cap=self.residual_cap,
+                support=support[None], value_std=self.value_std)
+            threshold, passed, chosen = float(threshold[0, 0]), passed[0], int(chosen[0])
         else:
             threshold, passed, chosen = float("nan"), np.ones(n, bool), 0
         own, counts = self.support(dec, chosen)  # the decision's own, for its record
@@ -221,12 +219,6 @@ class Controller:
         part = slice(None) if which is None else slice(which, which + 1)
         return support_episodes(self.index.beliefs, dec.rows[part], dec.weights[part],
                                 dec.neighbours[part], self.row_episode)
-
-    def candidate_filter(self, residual: np.ndarray) -> tuple[float, np.ndarray]:
-        """(threshold, passed (K,) bool): residual <= min(q_epsilon, c x typical p90)
-        (:func:`aoc_cli.control.epsilon.epsilon_filter`)."""
-        threshold, passed = epsilon_filter(residual, self.config.epsilon, self.residual_cap)
-        return float(threshold[0]), passed
 
     @property
     def residual_cap(self) -> float | None:

@@ -35,8 +35,8 @@ import numpy as np
 
 from aoc_cli import metrics as sc
 from aoc_cli.belief.row_labels import subset_scores
-from aoc_cli.control.epsilon import epsilon_filter, residual_cap
-from aoc_cli.control.support import penalised, support_episodes, support_filter
+from aoc_cli.control.rule import choose, reads_support, residual_cap
+from aoc_cli.control.support import support_episodes
 from aoc_cli.decompose import decompose
 from aoc_cli.errors import AocError
 from aoc_cli.evaluation.context import (
@@ -199,7 +199,8 @@ def _imitate(ctx, rows, ep, obs, hist, logged) -> StepScores:
 
 
 def _candidates_decided(ctx, rows, ep, obs, hist):
-    """The controller's rule (the same as Controller.evaluate) over its candidates at S steps:
+    """The controller's rule (:func:`aoc_cli.control.rule.choose`, as Controller.evaluate's)
+    over its candidates at S steps:
     (candidates (S, K[, d_a]), the decomposition of every candidate (S * K queries), values
     (S, K), the chosen candidate (S,), its query (S,), the bc head (S, K) or None)."""
     model, cfg = ctx.model, ctx.config
@@ -210,20 +211,12 @@ def _candidates_decided(ctx, rows, ep, obs, hist):
     dec = _decompose(ctx, b_c, np.repeat(ep, kk))
     res = dec.residual.reshape(s, kk)
     val = dec.value.reshape(s, kk)
-    _thr, passed = epsilon_filter(res, cfg.epsilon,
-                                  residual_cap(cfg.residual_cap, ctx.index.typical.p90))
-    rank = val
-    if cfg.min_support is not None or cfg.support_penalty is not None:
-        # the episodes behind each value (control/support.py)
-        support, _ = support_episodes(ctx.index.beliefs, dec.rows, dec.weights, dec.neighbours,
-                                      ctx.corpus_episode)
-        support = support.reshape(s, kk)
-        passed = support_filter(passed, support, cfg.min_support)
-        rank = penalised(val, support, cfg.support_penalty, ctx.value_std)
-    key = np.where(passed, rank, -np.inf)
-    best = key.max(1, keepdims=True)
-    # ties on v_hat: the smaller residual
-    chosen = np.where(key == best, res, np.inf).argmin(1)
+    support = None
+    if reads_support(cfg):  # the episodes behind each value (control/support.py)
+        support = support_episodes(ctx.index.beliefs, dec.rows, dec.weights, dec.neighbours,
+                                   ctx.corpus_episode)[0].reshape(s, kk)
+    _thr, _passed, chosen = choose(res, val, cfg, support=support, value_std=ctx.value_std,
+                                   cap=residual_cap(cfg.residual_cap, ctx.index.typical.p90))
     pick = np.arange(s) * kk + chosen
     head_c = None
     if "bc" in ctx.baselines:
