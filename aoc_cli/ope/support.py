@@ -78,9 +78,9 @@ def fqe_refusal(behaviour_fqe: float, low: float, high: float) -> str | None:
     ``behaviour_fqe`` outside [``low``, ``high``], the 95% interval of the log's mean return."""
     if low <= behaviour_fqe <= high:
         return None
-    return (f"FQE values the logged behaviour at {behaviour_fqe:.4g}, outside its mean "
-            f"return's 95% interval [{low:.4g}, {high:.4g}]: its bias on this log is larger "
-            "than its interval")
+    return (f"FQE off on the logged behaviour ({behaviour_fqe:.4g}, outside its mean "
+            f"return's 95% interval [{low:.4g}, {high:.4g}]: a bias its interval does not "
+            "hold)")
 
 
 def withheld(reason: str) -> dict:

@@ -185,7 +185,14 @@ def main() -> None:
     ap.add_argument("--fqe-refits", type=int, default=10)
     ap.add_argument("--n-boot", type=int, default=1000)
     ap.add_argument("--out", default=None, help="every record, JSON")
+    ap.add_argument("--table", default=None, metavar="JSON",
+                    help="only print the table of a run's --out records")
     args = ap.parse_args()
+    if args.table:
+        runs = json.loads(Path(args.table).read_text())
+        print(markdown(table(runs)))
+        verdicts(runs, sorted({r["log"] for r in runs})[0])
+        return
     if args.policies:
         with np.load(args.policies) as z:
             policies = {k: z[k].astype(np.int64) for k in ("aoc", "bc")}
@@ -212,6 +219,11 @@ def main() -> None:
     print(f"{len(logs)} logs of {args.episodes} episodes in "
           f"{time.perf_counter() - started:.0f} s ({args.processes} processes)", file=sys.stderr)
     print(markdown(table(runs)))
+    verdicts(runs, args.first)
+
+
+def verdicts(runs: list, first: int) -> None:
+    """How often each policy's verdict says "shown", and the first log's verdict."""
     print()
     for name in POLICIES:
         for kind in ("estimated", "true"):
@@ -221,7 +233,7 @@ def main() -> None:
             shown = sum(x.endswith(": shown") for x in v)
             gain = next(r["truth_gain"] for r in runs if r["policy"] == name)
             print(f"{name}, {kind} propensities: verdict 'shown' on {shown} of {len(v)} logs "
-                  f"(true difference {gain:+.4f}); log {args.first}: {v[0]}")
+                  f"(true difference {gain:+.4f}); log {first}: {v[0]}")
 
 
 if __name__ == "__main__":

@@ -85,7 +85,7 @@ def test_fqe_interval_is_from_refits_and_says_so(sepsis):
         assert "(FQE)" in summary["verdict"]
     else:
         assert e["estimate"] is None and e["reason"].startswith(
-            f"FQE values the logged behaviour at {off:.4g}, outside its mean return's")
+            f"FQE off on the logged behaviour ({off:.4g}, outside its mean return's")
     assert summary["ope"]["fqe_refits"] == 3
     note = [n for n in summary["ope"]["notes"] if n.startswith("fqe:")]
     one, _ = evaluate(_session(store), held, [], ope=OPESettings(
@@ -340,7 +340,7 @@ def test_fqe_off_on_the_logged_behaviour_is_a_warning_and_withheld(sepsis, monke
                                      OPESettings(estimators=("pdwis", "fqe"), n_boot=50))
     fqe = out["policies"]["aoc"]["policy_value"]["fqe"]
     assert fqe["estimate"] is None and fqe["reason"].startswith(
-        "FQE values the logged behaviour at 5, outside its mean return's 95% interval")
+        "FQE off on the logged behaviour (5, outside its mean return's 95% interval")
     assert out["behaviour_value"]["fqe"] == 5.0
     assert any(w.startswith("fqe values the logged behaviour at 5,") or
                w.startswith("fqe values the logged behaviour at 5 ")
