@@ -141,6 +141,8 @@ def table(runs: list) -> list[dict]:
             if not rs:
                 continue
             for est in ESTIMATORS:
+                if not any(est in r["policy_value"] for r in rs):
+                    continue                            # not run (--estimators)
                 truths = [r["truth"] for r in rs]
                 n, cover, err, width = _summary([r["policy_value"].get(est) for r in rs], truths)
                 gn, gcover, gerr, _ = _summary([r["improvement"].get(est) for r in rs],
@@ -184,6 +186,8 @@ def main() -> None:
     ap.add_argument("--fqe-steps", type=int, default=None)
     ap.add_argument("--fqe-refits", type=int, default=10)
     ap.add_argument("--n-boot", type=int, default=1000)
+    ap.add_argument("--estimators", default="pdwis,wdr,fqe",
+                    help="as aoc evaluate's --ope (pdwis alone: no FQE, the quick table)")
     ap.add_argument("--out", default=None, help="every record, JSON")
     ap.add_argument("--table", default=None, metavar="JSON",
                     help="only print the table of a run's --out records")
@@ -203,7 +207,8 @@ def main() -> None:
         print(f"policies written to {args.save_policies}", file=sys.stderr)
         return
     settings = {"fqe_steps": args.fqe_steps, "fqe_refits": args.fqe_refits,
-                "fqe_processes": 1}
+                "fqe_processes": 1,
+                "estimators": tuple(x for x in args.estimators.split(",") if x)}
     started = time.perf_counter()
     logs = range(args.first, args.first + args.logs)
     runs = []
