@@ -36,7 +36,10 @@ class PageContext:
         d_o = corpus.observation_dim
         self.obs_names = list(space.get("names") or [f"obs_{i}" for i in range(d_o)])
         names = list((corpus.action_space or {}).get("names") or [])
-        # a discrete space's names label its actions only when there is one per action
+        # a discrete space's names label its actions when there is one per action; one name
+        # (a CSV's action column, ward's act_oxygen) labels them name=i
+        if corpus.discrete and len(names) == 1 and corpus.n_actions > 1:
+            names = [f"{names[0]}={i}" for i in range(corpus.n_actions)]
         self.action_names = names if not corpus.discrete or len(names) == corpus.n_actions \
             else []
         obs = np.asarray(corpus.observations, np.float64)
@@ -136,7 +139,7 @@ def _bars(s: dict, ctx: PageContext, names_step: list[str], names_action: list[s
         f'<tr><td>{esc(name)}</td><td><span class="bar {"pos" if v >= 0 else "neg"}" '
         f'style="width:{int(60 * abs(v) / scale) + 1}px"></span> {num(v, 3)}</td></tr>'
         for name, v in top)
-    return (f'<table class="kv"><tr><th colspan="2">what made it count (projection '
+    return (f'<table class="kv bars"><tr><th colspan="2">what made it count (projection '
             f'{num(a["projection"], 3)})</th></tr>{rows}</table>')
 
 

@@ -37,9 +37,10 @@ svg text{font:10px system-ui,sans-serif;fill:#333}
 .values-card{border:1px solid #ccd3de;border-radius:6px;padding:8px 12px;margin:8px 0}
 .values-card h3{margin:0 0 4px}.scroll{overflow-x:auto}
 table.values td,table.values th{font-size:12.5px;padding:2px 6px}
-table.values td{text-align:right}table.values tr.column th,table.values tr.column td{
- border-top:2px solid #ccd3de}
+table.values td{text-align:right}tr.columns th{font-weight:400;color:#5b6472;
+ background:#fff;border-top:2px solid #ccd3de}
 .vals td{text-align:right}.vals td:first-child{text-align:left}
+.bars td:last-child{white-space:nowrap}
 td.far1{background:#fdf1dc}td.far2{background:#f8d9a8}
 td.imputed{font-style:italic;color:#6b4c9a;text-decoration:underline dotted}
 .legend{font-size:12.5px;margin:2px 0 10px}

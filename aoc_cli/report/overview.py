@@ -69,6 +69,8 @@ def _supports(corpus, rows: np.ndarray, weights: np.ndarray) -> list[list[tuple]
 def _labels(corpus, actions: np.ndarray) -> list[str]:
     names = list((corpus.action_space or {}).get("names") or [])
     if corpus.discrete:
+        if len(names) == 1 and corpus.n_actions > 1:  # one column's name: name=i
+            names = [f"{names[0]}={i}" for i in range(corpus.n_actions)]
         names = names if len(names) == corpus.n_actions else []
         return [names[int(a)] if int(a) < len(names) else f"action {int(a)}"
                 for a in np.asarray(actions).reshape(-1)]

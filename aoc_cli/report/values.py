@@ -9,11 +9,12 @@ what a clinician reads. Every user string is escaped.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from aoc_cli.report.html import esc, num
+from aoc_cli.report.html import esc
 
 #: Features in the values table when the observation has more: the largest attributions.
 MAX_VALUES = 16
@@ -76,6 +77,21 @@ def shown_features(weights: np.ndarray) -> tuple[list[int], str]:
                                          "the rows count most")
 
 
+def measured(value: float) -> str:
+    """A measured value as a chart reads: whole numbers whole (an age in days 24470, not
+    2.447e+04), others to 4 significant digits without an exponent between 0.001 and 10^6."""
+    v = float(value)
+    if not math.isfinite(v):
+        return str(v)
+    if v == round(v) and abs(v) < 1e15:
+        return str(int(round(v)))
+    a = abs(v)
+    if a >= 1e6 or a < 1e-3:
+        return f"{v:.4g}"
+    text = f"{v:.{max(0, 3 - math.floor(math.log10(a)))}f}"
+    return text.rstrip("0").rstrip(".") if "." in text else text
+
+
 def cell(value: float, imputed: bool, far: float | None = None, tag: str = "td") -> str:
     """One value: its number, the imputed mark, shaded when far from the query's."""
     cls = ["imputed"] if imputed else []
@@ -85,7 +101,7 @@ def cell(value: float, imputed: bool, far: float | None = None, tag: str = "td")
         cls.append("far1")
     attrs = (f' class="{" ".join(cls)}"' if cls else "") + \
         (f' title="{IMPUTED_TIP}"' if imputed else "")
-    return f"<{tag}{attrs}>{num(float(value), 4)}{MARK if imputed else ''}</{tag}>"
+    return f"<{tag}{attrs}>{measured(value)}{MARK if imputed else ''}</{tag}>"
 
 
 def values_table(features: list[int], names: list[str], std: np.ndarray, query: Values,
@@ -103,11 +119,13 @@ def values_table(features: list[int], names: list[str], std: np.ndarray, query: 
                   for v in rows]
         lines.append(f"<tr><th>{esc(names[j])}</th>{''.join(cells)}</tr>")
     columns = sorted({c for v in [query, *rows] for c in v.columns})
+    if columns:
+        lines.append(f'<tr class="columns"><th colspan="{2 + len(rows)}">other columns of the '
+                     "log (not read by the model)</th></tr>")
     for c in columns:
-        cells = "".join(f"<td>{num(v.columns[c], 4)}</td>" if c in v.columns else "<td>-</td>"
+        cells = "".join(f"<td>{measured(v.columns[c])}</td>" if c in v.columns else "<td>-</td>"
                         for v in [query, *rows])
-        lines.append(f'<tr class="column"><th>{esc(c)} <span class="muted">(column)</span>'
-                     f"</th>{cells}</tr>")
+        lines.append(f'<tr class="column"><th>{esc(c)}</th>{cells}</tr>')
     note = f'<p class="muted">{esc(note)}</p>' if note else ""
     return (f'<div class="values-card"><h3>Measured values: this step and its past cases</h3>'
             f'{note}<div class="scroll"><table class="values"><tr><th>feature</th>{head}</tr>'
@@ -115,15 +133,13 @@ def values_table(features: list[int], names: list[str], std: np.ndarray, query: 
 
 
 def card_values(features: list[int], names: list[str], query: Values, row: Values) -> str:
-    """A card's few values: each feature's value at the query against the row's."""
+    """A card's few values: each feature's value at the query against the row's (the
+    columns of the log are in the values table)."""
     lines = "".join(
         f"<tr><td>{esc(names[j])}</td>{cell(query.observation[j], _imp(query, j))}"
         f"{cell(row.observation[j], _imp(row, j))}</tr>" for j in features)
-    cols = "".join(f"<tr><td>{esc(c)} <span class=\"muted\">(column)</span></td>"
-                   f"<td>{num(query.columns[c], 4) if c in query.columns else '-'}</td>"
-                   f"<td>{num(v, 4)}</td></tr>" for c, v in row.columns.items())
     return (f'<table class="kv vals"><tr><th>feature</th><th>query</th><th>this row</th></tr>'
-            f"{lines}{cols}</table>")
+            f"{lines}</table>")
 
 
 def legend(rule: str | None, any_imputed: bool, query_known: bool,

@@ -84,7 +84,7 @@ def main() -> None:
 
     def decision_page(i: int) -> int:
         records = explain_logged_step(session, ward, 7 + i, 3)
-        write_html(out / "ward.html", records, ward)
+        write_html(out / "ward.html", records, ward, source=ward)
         return len(records[0]["support"])
 
     runs = h.repeat(decision_page, args.repeats)

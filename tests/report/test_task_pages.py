@@ -15,7 +15,7 @@ import pytest
 
 import aoc_cli
 from aoc_cli.envs import collect
-from aoc_cli.report.html import num
+from aoc_cli.report.values import measured
 from aoc_cli.store import Store
 
 TASKS = ["maze", "two-gates", "pendulum-het", "pendulum-het-upright", "lunar", "ward",
@@ -57,24 +57,24 @@ def _check_decision(browser, rec: dict, corpus, query_obs: np.ndarray, history: 
                              "[+c.dataset.row, c.querySelectorAll('svg polyline').length, "
                              "c.querySelectorAll('table.vals tr').length])")
     assert [r for r, _, _ in cards] == [s["row"] for s in support]
-    # each card: its values against the query's (3 features, the numeric columns); a model
-    # with a history draws it, one without (icu-sepsis) draws none
+    # each card: its values of 3 features against the query's; a model with a history draws
+    # it, one without (icu-sepsis) draws none
     n_cols = len(corpus.manifest.get("columns") or [])
-    assert all(vals == 1 + min(3, d_o) + min(n_cols, 4) for _, _, vals in cards)
+    assert all(vals == 1 + min(3, d_o) for _, _, vals in cards)
     assert all((lines >= 2) == history for _, lines, _ in cards)
     table = browser.evaluate(
-        "[...document.querySelectorAll('#decision table.values tr')].map(tr => "
-        "[...tr.children].map(c => c.innerText))")
-    head, body = table[0], table[1:]
+        "[...document.querySelectorAll('#decision table.values tr:not(.columns)')].map(tr "
+        "=> [tr.className, ...[...tr.children].map(c => c.innerText)])")
+    head, body = table[0][1:], table[1:]
     assert len(head) == 2 + len(support)   # feature, the query, one column per row
-    features = [r for r in body if not r[0].endswith("(column)")]
+    features = [r[1:] for r in body if r[0] != "column"]
     assert len(features) == min(d_o, 16)
+    assert len(body) - len(features) == min(n_cols, 4)  # the corpus's numeric columns
     for r in features:                     # the query's values as stored, by name
-        j = names.index(r[0]) if names else int(r[0].split("_")[1])
-        assert r[1] == num(float(query_obs[j]), 4)
+        assert r[1] == measured(query_obs[names.index(r[0])])
     obs = corpus.read("observations", np.asarray([s["row"] for s in support]))
-    j = names.index(features[0][0]) if names else 0
-    assert [r for r in features[0][2:]] == [num(float(v), 4) for v in obs[:, j]]
+    j = names.index(features[0][0])
+    assert features[0][2:] == [measured(v) for v in obs[:, j]]
     assert browser.evaluate("document.querySelectorAll('.imputed').length") == 0
 
 
@@ -103,13 +103,16 @@ def test_every_page_of_a_task_in_the_browser(task, tmp_path, aoc_inproc, browser
     assert browser.problems() == CLEAN
     _check_decision(browser, recs[0], corpus, held.read("observations", [row])[0], history)
     assert browser.evaluate("document.querySelectorAll('section').length") == len(recs)
+    if task == "ward":  # one action column's name labels both actions
+        assert "Recommended: act_oxygen=" in browser.evaluate(
+            "document.querySelector('#decision .lede').innerText")
     if task == "icu-sepsis":  # the tabular state: the query's and each row's, as a column
         state = browser.evaluate("[...document.querySelectorAll('#decision table.values "
                                  "tr.column')].map(tr => [...tr.children].map(c => "
-                                 "c.innerText)).find(r => r[0].startsWith('state'))")
+                                 "c.innerText)).find(r => r[0] === 'state')")
         rows = [s["row"] for s in recs[0]["support"]]
-        assert state[1:] == [num(float(held.read("columns/state", [row])[0]), 4)] + \
-            [num(float(v), 4) for v in corpus.read("columns/state", rows)]
+        assert state[1:] == [measured(held.read("columns/state", [row])[0])] + \
+            [measured(v) for v in corpus.read("columns/state", rows)]
         assert "normalised values, not raw measurements" in browser.evaluate(
             "document.querySelector('#decision .legend').innerText")
 
@@ -175,7 +178,8 @@ def test_imputed_cells_are_marked_wherever_the_page_shows_them(tmp_path, aoc_inp
     d_o, rows = corpus.observation_dim, [s["row"] for s in rec["support"]]
     imputed = [row % 3 == 0] + [r % 3 == 0 for r in rows]  # query, then each row
     table = browser.evaluate(
-        "[...document.querySelectorAll('#decision table.values tr:not(.column)')].slice(1)"
+        "[...document.querySelectorAll('#decision table.values tr:not(.column):not(.columns)')]"
+        ".slice(1)"
         ".map(tr => [...tr.querySelectorAll('td')].map(c => c.classList.contains('imputed')"
         " && c.innerText.endsWith('\u2020')))")
     assert True in imputed and False in imputed  # the seeds give both kinds of cell
@@ -196,3 +200,11 @@ def test_imputed_cells_are_marked_wherever_the_page_shows_them(tmp_path, aoc_inp
         assert rings == 3 * sum(t % 3 == 0 for t in mine + theirs)
     legend = browser.evaluate("document.querySelector('#decision .legend').innerText")
     assert "\u2020 imputed" in legend and "rule: median" in legend
+
+
+@pytest.mark.parametrize("value, text", [
+    (24470.0, "24470"), (147.5, "147.5"), (138.04, "138"), (2.1434, "2.143"),
+    (0.04248, "0.04248"), (-0.0123456, "-0.01235"), (4.03e9, "4030000000"),
+    (15000000.5, "1.5e+07"), (0.00001234, "1.234e-05"), (float("nan"), "nan")])
+def test_measured_values_read_as_a_chart_does(value, text):
+    assert measured(value) == text
