@@ -26,7 +26,7 @@ from aoc_cli.lazy import exports
 #: Where each public name lives; loaded on first use (PEP 562), so that a command imports only
 #: what its entry needs (``aoc info`` no torch, FAISS or matplotlib).
 _WHERE = {
-    "ingest": "data", "tasks": "collection", "collect": "collection", "info": "data", "corpora": "data",
+    "ingest": "data", "split": "data", "tasks": "collection", "collect": "collection", "info": "data", "corpora": "data",
     "verify": "data", "export": "data", "Verified": "data",
     "train": "model", "build_index": "model", "Indexed": "model",
     "open_session": "control", "rollout": "control", "RolledOut": "control",

@@ -34,7 +34,7 @@ from aoc_cli.cli.errors import message, showing_warnings  # noqa: E402
 from aoc_cli.errors import AocError  # noqa: E402
 
 #: Command modules in the order of the data flow.
-COMMANDS = ["ingest", "collect", "train", "index", "explain", "evaluate", "rollout", "bench",
+COMMANDS = ["ingest", "split", "collect", "train", "index", "explain", "evaluate", "rollout", "bench",
             "info", "verify", "export"]
 
 app = typer.Typer(
