@@ -16,7 +16,7 @@ import numpy as np
 
 from aoc_cli.errors import AocError, BadInput, call
 from aoc_cli.report.html import esc, num
-from aoc_cli.report.svg import chart
+from aoc_cli.report.svg import chart, tick_margin
 
 
 @dataclass
@@ -24,7 +24,9 @@ class Episode:
     """T decisions of one episode. ``residual`` (T,), ``upper`` (T,) the OOD band's upper edge
     (inf or NaN where none), ``flagged`` (T,) bool, ``decision`` (T,) the decided action (the
     first coordinate of a continuous one), ``logged`` (T,) or None, ``value`` (T,) or None,
-    ``support`` T lists of (who, tags, weight), ``labels`` T action labels."""
+    ``support`` T lists of (who, tags, weight), ``labels`` T action labels; ``actions``
+    {action: label} of a discrete corpus (the decisions chart then draws one labelled row per
+    action taken)."""
 
     title: str
     key: str
@@ -38,6 +40,7 @@ class Episode:
     value: np.ndarray | None = None
     steps: np.ndarray | None = None
     notes: list[str] = field(default_factory=list)
+    actions: dict[int, str] | None = None
 
 
 def _who(corpus, rows: np.ndarray) -> tuple[list[str], list[str]]:
@@ -74,6 +77,13 @@ def _labels(corpus, actions: np.ndarray) -> list[str]:
         return [names[int(a)] if int(a) < len(names) else f"action {int(a)}"
                 for a in np.asarray(actions).reshape(-1)]
     return [num(np.asarray(a).reshape(-1).tolist(), 3) for a in actions]
+
+
+def action_names(corpus) -> dict[int, str] | None:
+    """{action: label} of a discrete corpus (the decisions chart's rows), else None."""
+    if not corpus.discrete:
+        return None
+    return dict(enumerate(_labels(corpus, np.arange(corpus.n_actions))))
 
 
 def audit_episode(corpus, path, episode: int, upper: np.ndarray) -> Episode:
@@ -135,6 +145,32 @@ def steps_episodes(corpus, path, typical: dict) -> list[Episode]:
     return out
 
 
+def _decisions_chart(ep: Episode, steps: np.ndarray, href: list[str]) -> tuple[str, int]:
+    """The decisions over time (and the logged actions): the first coordinate of a continuous
+    action; a discrete corpus's actions one labelled row each, in the order of their numbers.
+    And its left margin (the residual chart's, so that the steps line up)."""
+    decision, logged, yticks, height = ep.decision, ep.logged, None, 150
+    title = "decisions over time (the first coordinate of an action)"
+    if ep.actions is not None:
+        taken = np.concatenate([decision, [] if logged is None else logged]).astype(np.int64)
+        order = {int(a): i for i, a in enumerate(np.unique(taken))}
+        decision = np.array([order[int(a)] for a in decision], np.float64)
+        logged = None if logged is None else \
+            np.array([order[int(a)] for a in logged], np.float64)
+        yticks = [(i, ep.actions.get(a, f"action {a}")) for a, i in order.items()]
+        height = max(height, 46 + 16 * len(order))
+        title = "decisions over time (one row per action taken)"
+    series = [{"y": decision, "colour": "#009E73", "label": "decision"}]
+    if logged is not None:
+        series.append({"y": logged, "colour": "#555", "dash": True, "label": "logged"})
+    points = [{"x": float(t), "y": float(d), "colour": "#009E73", "href": h,
+               "label": f"step {int(t)}: {lab}"}
+              for t, d, h, lab in zip(steps, decision, href, ep.labels)]
+    left = tick_margin(yticks)
+    return chart(steps, series, width=1000, height=height, points=points, title=title,
+                 ylabel="step", yticks=yticks, left=left), left
+
+
 def episode_section(ep: Episode, typical: dict, detail: int | None = None) -> str:
     """Charts and step sections of one episode; ``detail`` a step whose full decision
     section (``#decision``) is on the page."""
@@ -145,21 +181,14 @@ def episode_section(ep: Episode, typical: dict, detail: int | None = None) -> st
                "label": f"step {int(t)}: flagged, residual {r:.3g}"}
               for t, r, h, f in zip(steps, ep.residual, href, ep.flagged) if f]
     band = (np.zeros(len(steps)), upper, "OOD band")
+    dec_chart, left = _decisions_chart(ep, steps, href)
     res_chart = chart(steps, [{"y": ep.residual, "colour": "#0072B2", "label": "residual"},
                               {"y": upper, "colour": "#777", "dash": True,
                                "label": "OOD band (upper edge)"}],
                       width=1000, height=200, band=band, points=points,
                       title=f"{ep.title}: residual over time; flagged steps marked x "
-                            f"(typical p50 {num(typical.get('p50'), 3)})", ylabel="step")
-    series = [{"y": ep.decision, "colour": "#009E73", "label": "decision"}]
-    if ep.logged is not None:
-        series.append({"y": ep.logged, "colour": "#555", "dash": True, "label": "logged"})
-    dec_points = [{"x": float(t), "y": float(d), "colour": "#009E73", "href": h,
-                   "label": f"step {int(t)}: {lab}"}
-                  for t, d, h, lab in zip(steps, ep.decision, href, ep.labels)]
-    dec_chart = chart(steps, series, width=1000, height=150, points=dec_points,
-                      title="decisions over time (the first coordinate of an action)",
-                      ylabel="step")
+                            f"(typical p50 {num(typical.get('p50'), 3)})", ylabel="step",
+                      left=left)
     rows, flag = [], ' &middot; <b class="bad">flagged</b>'
     for i, t in enumerate(steps):
         sup = "; ".join(f"{esc(w)} ({esc(tg)}) {wt:.0%}" if tg else f"{esc(w)} {wt:.0%}"

@@ -19,7 +19,7 @@ from aoc_cli.report.values import measured
 from aoc_cli.store import Store
 
 TASKS = ["maze", "two-gates", "pendulum-het", "pendulum-het-upright", "lunar", "ward",
-         "icu-sepsis"]
+         "icu-sepsis", "icu-sepsis-terminate"]
 LONG = {"pendulum-het", "pendulum-het-upright", "lunar"}
 #: Small and fast, no validation run: the pages are under test, not the model.
 TRAIN = dict(max_epochs=2, hidden=16, weight_decay=0.0, patience=1, threads=1, seed=0)
@@ -87,12 +87,13 @@ def test_every_page_of_a_task_in_the_browser(task, tmp_path, aoc_inproc, browser
     aoc_cli.collect(task, "held", store=root, seed=1,
                     **({"steps": 80} if task in LONG else {"episodes": 6}))
     # icu-sepsis: the task's history length 0, its value target the return (FQE's is slow)
-    aoc_cli.train("c", store=root, **TRAIN, **({"value": "return"} if task == "icu-sepsis"
+    icu = task.startswith("icu-sepsis")
+    aoc_cli.train("c", store=root, **TRAIN, **({"value": "return"} if icu
                                                else {"history_length": 2}))
     aoc_cli.build_index("c", store=root)
     store = Store(root)
     corpus, held = store.corpus("c"), store.corpus("held")
-    history = task != "icu-sepsis"        # its value belief reads the current state only
+    history = not icu                     # its value belief reads the current state only
 
     # the decision page of a held-out step (icu-sepsis: history length 0, the IndexError)
     e, step, row = _logged_step(held)
@@ -106,7 +107,7 @@ def test_every_page_of_a_task_in_the_browser(task, tmp_path, aoc_inproc, browser
     if task == "ward":  # one action column's name labels both actions
         assert "Recommended: act_oxygen=" in browser.evaluate(
             "document.querySelector('#decision .lede').innerText")
-    if task == "icu-sepsis":  # the tabular state: the query's and each row's, as a column
+    if icu:  # the tabular state: the query's and each row's, as a column
         state = browser.evaluate("[...document.querySelectorAll('#decision table.values "
                                  "tr.column')].map(tr => [...tr.children].map(c => "
                                  "c.innerText)).find(r => r[0] === 'state')")
@@ -130,6 +131,15 @@ def test_every_page_of_a_task_in_the_browser(task, tmp_path, aoc_inproc, browser
         [f"step-0-{t}" for t in range(n)]
     assert browser.evaluate(f"!!document.querySelector('#step-0-{at} a[href=\"#decision\"]')")
     _check_decision(browser, recs[0], corpus, np.asarray(recs[0]["observation"]), history)
+    if corpus.discrete:  # the decisions chart: one row per action taken, by its label
+        with h5py.File(log) as f:
+            taken = np.unique(np.asarray(f["episode_0/actions"]).reshape(-1))
+        names = corpus.action_space["names"]
+        labels = [names[a] if len(names) == corpus.n_actions else f"{names[0]}={a}"
+                  for a in taken]
+        ticks = browser.evaluate("[...document.querySelectorAll('#episode-0 svg')[1]"
+                                 ".querySelectorAll('text')].map(t => t.textContent)")
+        assert all(lab in ticks for lab in labels) and any("=" in t for t in ticks)
 
     # the overview of an `aoc evaluate --steps` file
     steps, page = out / "steps.jsonl", out / "steps.html"
