@@ -260,3 +260,14 @@ def test_a_cohort_ingested_with_gaps_shows_its_imputed_cells(tmp_path, aoc_inpro
         assert [c[1] for c in cells] == mask[:, j].tolist()
     assert mask.any() and "rule: hold" in browser.evaluate(
         "document.querySelector('#decision .legend').innerText")
+    # a query from a file: which of its cells were measured is not recorded, and said so
+    query, page = tmp_path / "q.jsonl", tmp_path / "query.html"
+    query.write_text(json.dumps({"observation": obs[0].tolist(), "history": []}) + "\n")
+    _aoc(aoc_inproc, root, "explain", "icu", "--input", str(query), "--html", str(page))
+    browser.open(page)
+    assert browser.problems() == CLEAN
+    assert browser.evaluate("[...document.querySelectorAll('#decision table.values "
+                            "tr:not(.column):not(.columns)')].slice(1).every(tr => !tr"
+                            ".querySelector('td').classList.contains('imputed'))")
+    assert "is not known" in browser.evaluate(
+        "document.querySelector('#decision .legend').innerText")
