@@ -10,13 +10,14 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from aoc_cli.control.config import ControllerConfig
+from aoc_cli.formats.impute import fill_query
 from aoc_cli.control.controller import Decision
 from aoc_cli.control.monitor import OODMonitor, band_limits, reference_band
 from aoc_cli.control.records import (decision_record, episode_ids, label_of, read_audit_residuals,
                                      write_audit)
 from aoc_cli.control.episodes import (EpisodeResult, HistoryBuffer, Policy, check_same_spaces,
                                      check_spaces, run_episode, summarize)
-from aoc_cli.errors import AocError, BadInput, call
+from aoc_cli.errors import AocError, BadInput, call, param
 from aoc_cli.progress import Progress
 from aoc_cli.store import action_labels
 from aoc_cli.threads import thread_limits
@@ -187,16 +188,34 @@ def replay_decision(session: Session, recorded: dict) -> Decision:
                                      candidates=cand)
 
 
-def _numbers(value, what: str) -> np.ndarray:
-    """A JSON list of finite numbers -> (n,) float64; anything else is an AocError."""
+def _numbers(value, what: str, nulls: bool = False) -> np.ndarray:
+    """A JSON list of finite numbers -> (n,) float64 (``nulls``: ``null`` allowed, NaN);
+    anything else is an AocError."""
     try:
         arr = np.asarray(value, dtype=np.float64).reshape(-1)
     except (TypeError, ValueError):
         raise AocError(f"{what} must be a list of numbers, got {json.dumps(value)[:60]}") \
             from None
+    if nulls:
+        if np.isinf(arr).any():
+            raise AocError(f"{what} holds inf: give finite numbers (or null where unmeasured)")
+        return arr
     if not np.isfinite(arr).all():
-        raise AocError(f"{what} holds NaN or inf: give finite numbers")
+        raise AocError(f"{what} holds null, NaN or inf: give finite numbers (a corpus "
+                       f"ingested with {param('impute')} takes null for an unmeasured value)")
     return arr
+
+
+def _observation(value, what: str, corpus, previous=None) -> np.ndarray | None:
+    """A query's observation, or None when its length is not the corpus's: with an imputed
+    corpus ``null`` is allowed where unmeasured (filled by the corpus's rule and medians, never
+    the query's own; its ``COL?measured`` features may be left out:
+    :func:`aoc_cli.formats.impute.fill_query`)."""
+    spec = corpus.preprocessing.get("impute") if hasattr(corpus, "preprocessing") else None
+    obs = _numbers(value, what, nulls=spec is not None)
+    if spec is not None and obs.shape[0] in (len(spec["names"]), corpus.observation_dim):
+        obs = fill_query(obs[None, :], spec, previous)[0]
+    return obs if obs.shape[0] == corpus.observation_dim else None
 
 
 def parse_query(line: str, lineno: int, corpus, history_length: int):
@@ -207,10 +226,6 @@ def parse_query(line: str, lineno: int, corpus, history_length: int):
         raise AocError(f"line {lineno} of the input is not valid JSON: {err.msg}") from None
     if not isinstance(q, dict) or "observation" not in q:
         raise AocError(f"line {lineno}: a query is an object with an \"observation\" list")
-    obs = _numbers(q["observation"], f"line {lineno}: \"observation\"")
-    if obs.shape[0] != corpus.observation_dim:
-        raise AocError(f"line {lineno}: observation has {obs.shape[0]} numbers, corpus "
-                       f"{corpus.name!r} has {corpus.observation_dim}")
     d_a = corpus.action_dim
     buf = HistoryBuffer(history_length, corpus.observation_dim, d_a, corpus.discrete)
     width = corpus.observation_dim + d_a + 1
@@ -218,13 +233,23 @@ def parse_query(line: str, lineno: int, corpus, history_length: int):
     if not isinstance(history, list):
         raise AocError(f"line {lineno}: \"history\" must be a list of steps "
                        "[observation..., action..., reward]")
+    previous = None
     for j, step in enumerate(history):
-        step = _numbers(step, f"line {lineno}: history step {j}")
-        if step.shape[0] != width:
-            raise AocError(f"line {lineno}: history step {j} has {step.shape[0]} numbers, "
-                           f"expected {width} (observation, action, reward)")
-        o, a, r = step[:corpus.observation_dim], step[corpus.observation_dim:-1], step[-1]
-        buf.push(o, int(a[0]) if corpus.discrete else a, float(r))
+        what = f"line {lineno}: history step {j}"
+        step = step if isinstance(step, list) else _numbers(step, what)
+        _numbers([0.0 if v is None else v for v in step], what)  # numbers or null
+        o = _observation(step[:len(step) - d_a - 1], what, corpus, previous) \
+            if len(step) > d_a + 1 else None
+        if o is None:
+            raise AocError(f"{what} has {len(step)} numbers, expected {width} (observation, "
+                           "action, reward)")
+        a, r = _numbers(step[len(step) - d_a - 1:-1], what), _numbers(step[-1:], what)
+        buf.push(o, int(a[0]) if corpus.discrete else a, float(r[0]))
+        previous = o
+    obs = _observation(q["observation"], f"line {lineno}: \"observation\"", corpus, previous)
+    if obs is None:
+        raise AocError(f"line {lineno}: observation has {len(np.ravel(q['observation']))} "
+                       f"numbers, corpus {corpus.name!r} has {corpus.observation_dim}")
     action = q.get("action")
     compare = q.get("compare")
     return obs.astype(np.float32), buf.history(), action, compare
