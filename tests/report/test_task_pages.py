@@ -218,3 +218,56 @@ def test_imputed_cells_are_marked_wherever_the_page_shows_them(tmp_path, aoc_inp
     (15000000.5, "1.5e+07"), (0.00001234, "1.234e-05"), (float("nan"), "nan")])
 def test_measured_values_read_as_a_chart_does(value, text):
     assert measured(value) == text
+
+
+def test_a_cohort_ingested_with_gaps_shows_its_imputed_cells(tmp_path, aoc_inproc, browser):
+    """The clinical path: a cohort table with empty cells ingested with `--impute hold`, a
+    held-out table with the corpus's medians; the values table shows the stored (imputed)
+    values and marks exactly the cells the corpora record as imputed."""
+    from tests.formats.cohorts import cohort, roles, write
+
+    root = tmp_path / "store"
+    opts = roles(act_columns=["input_4hourly"], bin_actions="input_4hourly=3",
+                 outcome="died_in_hosp", outcome_reward="1=-1,0=1")
+    aoc_cli.ingest(write(cohort(stays=40, seed=0), tmp_path / "a.csv"), "icu", store=root,
+                   options={**opts, "impute": "hold"})
+    held_opts = {k: v for k, v in opts.items() if k != "bin_actions"}
+    aoc_cli.ingest(write(cohort(stays=8, seed=1), tmp_path / "b.csv"), "held", store=root,
+                   options={**held_opts, "impute_like": "icu", "bin_like": "icu"})
+    aoc_cli.train("icu", store=root, **TRAIN, history_length=2)
+    aoc_cli.build_index("icu", store=root)
+    store = Store(root)
+    corpus, held = store.corpus("icu"), store.corpus("held")
+    e, step, row = _logged_step(held)
+    page = tmp_path / "cohort.html"
+    rec = _records(_aoc(aoc_inproc, root, "explain", "icu", "--data", "held", "--episode",
+                        str(e), "--step", str(step), "--html", str(page), "-f", "json"))[0]
+    browser.open(page)
+    assert browser.problems() == CLEAN
+    names = corpus.observation_space["names"]
+    rows = [s["row"] for s in rec["support"]]
+    obs = np.vstack([held.read("observations", [row]), corpus.read("observations", rows)])
+    mask = np.vstack([held.imputed_mask[[row]], corpus.imputed_mask[rows]])
+    table = browser.evaluate(
+        "[...document.querySelectorAll('#decision table.values tr:not(.column):not(.columns)')]"
+        ".slice(1).map(tr => [tr.querySelector('th').innerText, ...[...tr.querySelectorAll("
+        "'td')].map(c => [c.innerText, c.classList.contains('imputed')])])")
+    assert len(table) == len(names)
+    for name, *cells in table:
+        j = names.index(name)
+        assert [c[0] for c in cells] == [measured(v) + ("\u2020" if m else "")
+                                        for v, m in zip(obs[:, j], mask[:, j])]
+        assert [c[1] for c in cells] == mask[:, j].tolist()
+    assert mask.any() and "rule: hold" in browser.evaluate(
+        "document.querySelector('#decision .legend').innerText")
+    # a query from a file: which of its cells were measured is not recorded, and said so
+    query, page = tmp_path / "q.jsonl", tmp_path / "query.html"
+    query.write_text(json.dumps({"observation": obs[0].tolist(), "history": []}) + "\n")
+    _aoc(aoc_inproc, root, "explain", "icu", "--input", str(query), "--html", str(page))
+    browser.open(page)
+    assert browser.problems() == CLEAN
+    assert browser.evaluate("[...document.querySelectorAll('#decision table.values "
+                            "tr:not(.column):not(.columns)')].slice(1).every(tr => !tr"
+                            ".querySelector('td').classList.contains('imputed'))")
+    assert "is not known" in browser.evaluate(
+        "document.querySelector('#decision .legend').innerText")
