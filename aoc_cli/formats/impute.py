@@ -133,16 +133,20 @@ def counts(imputed: np.ndarray, names: list[str]) -> dict[str, int]:
     return {n: int(c) for n, c in zip(names, per) if c}
 
 
-def fill_query(obs: np.ndarray, spec: dict) -> np.ndarray:
+def fill_query(obs: np.ndarray, spec: dict, previous: np.ndarray | None = None) -> np.ndarray:
     """(Q, d) query observations whose unmeasured cells are NaN (``null`` in JSON) -> filled
-    with the corpus's medians, and the ``COL?measured`` features set (0 where the cell was
-    null) when the corpus has them; a query already of the corpus's full width has its NaN
-    cells filled and its measured features kept."""
+    by the corpus's rule: ``hold`` the query's ``previous`` observation (its history's last
+    step, itself filled) where given, else the corpus's medians; and the ``COL?measured``
+    features set (0 where the cell was null) when the corpus has them; a query already of the
+    corpus's full width has its NaN cells filled and its given measured features kept."""
     d = len(spec["names"])
     obs = np.asarray(obs, dtype=np.float64)
     base = obs[:, :d]
     empty = np.isnan(base)
-    filled = np.where(empty, np.asarray(spec["medians"])[None, :], base)
+    fallback = np.asarray(spec["medians"], dtype=np.float64)[None, :]
+    if spec["rule"] == "hold" and previous is not None:
+        fallback = np.asarray(previous, dtype=np.float64)[None, :d]
+    filled = np.where(empty, fallback, base)
     if not spec.get("mask") or not spec["measured"]:
         return filled
     cols = [spec["names"].index(n) for n in spec["measured"]]
