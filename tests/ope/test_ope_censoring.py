@@ -47,12 +47,11 @@ def test_pdwis_and_wdr_censor_truncated_episodes_and_recover_the_exact_value():
 
 
 def test_a_censored_step_counts_at_its_step_and_then_leaves():
-    """By hand: episode 0 (1 step, survives: reward 1), episode 1 censored after 1 step
-    (reward 0, known to run on), episode 2 (2 steps, then dies: 0). Step 0: mean reward 1/3,
-    continuing (episodes 1, 2) 2/3; step 1: only episode 2, ends with 0. Kaplan-Meier's
-    value: 1/3 + 2/3 * 0 = 1/3; with episode 1 counted as ended, also 1/3 here, but its share
-    of the end: the behaviour's PDWIS conditional share is 1 either way; with a reward of 1 at
-    episode 2's end the censored estimate is 1/3 + 2/3 * 1 = 1, counted as ended 2/3."""
+    """By hand: episode 0 survives at its one step (reward 1); episode 1 is cut after its
+    first step (reward 0 there, known to go on); episode 2 survives at its second step
+    (rewards 0, 1). Step 0: mean reward 1/3, episodes 1 and 2 go on (c_0 = 2/3); step 1:
+    episode 2 alone, reward 1. Kaplan-Meier: 1/3 + 2/3 * 1 = 1 (every episode seen to its end
+    survived). Counted as ended, episode 1 scores 0: 1/3 + 1/3 * 1 = 2/3."""
     starts = np.array([0, 1, 2, 4])
     rewards = np.array([1.0, 0.0, 0.0, 1.0])
     censored = Log(starts, rewards, truncated=np.array([False, True, False]))
