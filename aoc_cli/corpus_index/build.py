@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -33,9 +32,6 @@ from aoc_cli.progress import Progress
 from aoc_cli.rows import episode_multiplicity
 from aoc_cli.store import (DEFAULT_INDEX, Corpus, atomic_dir, derived, index_dir, model_dir,
                            writing_model)
-
-if TYPE_CHECKING:
-    from aoc_cli.belief.artefact import BeliefModel
 
 #: Rows sampled to measure the corpus's typical residual (leave-those-rows-out).
 TYPICAL_SAMPLE = 500
