@@ -4,6 +4,7 @@ decision page (HTML)."""
 
 from __future__ import annotations
 
+import json
 import os
 import sys
 from dataclasses import dataclass
@@ -142,14 +143,34 @@ def _queries(session, source, compare: list, removal) -> list[dict]:
     if not lines:
         raise AocError("the input holds no queries")
     records = []
+    imputes = bool((getattr(corpus, "preprocessing", None) or {}).get("impute"))
     for lineno, line in lines:
         obs, hist, action, q_compare = parse_query(line, lineno, corpus,
                                                    session.model.history_length)
         for rec in explain_query(session, obs, hist, action, compare=compare or q_compare,
                                  removal=removal):
             rec["query"] = lineno
+            if imputes:
+                rec["query_imputed"], rec["query_history_imputed"] = _null_cells(
+                    line, corpus, session.model.history_length)
             records.append(rec)
     return records
+
+
+def _null_cells(line: str, corpus, length: int) -> tuple[list, list]:
+    """Which cells of a query (parsed already) held null and were filled by the corpus's
+    imputation: the observation's (d_o,) and its history's (L, d_o), oldest first and padded
+    at the front as the query's history is (the decision page marks them)."""
+    q = json.loads(line)
+    d_o, d_a = corpus.observation_dim, corpus.action_dim
+
+    def nulls(values) -> list[bool]:
+        values = list(values)[:d_o]
+        return [v is None for v in values] + [False] * (d_o - len(values))
+
+    steps = [nulls(s[:len(s) - d_a - 1]) for s in q.get("history") or []][-length:] \
+        if length else []
+    return nulls(q["observation"]), [[False] * d_o] * (length - len(steps)) + steps
 
 
 def _read_lines(source) -> list[tuple[int, str]]:
