@@ -41,6 +41,7 @@ from aoc_cli.ope.fqe import (
 )
 from aoc_cli.ope.parts import MAX_PARTS
 from aoc_cli.ope.propensity import fit_propensities
+from aoc_cli.ope.support import fqe_refusal
 from aoc_cli.ope.value import _as_probs, fqe_values, policy_value
 from aoc_cli.settings import Settings, setting
 from aoc_cli.threads import one_thread
@@ -257,11 +258,15 @@ def off_policy_values(data, logged: np.ndarray, policies: dict, settings: OPESet
         out["behaviour_fqe"] = own
         out["behaviour_value"]["fqe"] = own["estimate"]
         low, high = out["behaviour_value"]["low"], out["behaviour_value"]["high"]
-        if not low <= own["estimate"] <= high:
+        off = fqe_refusal(own["estimate"], low, high)
+        if off is not None:
             out["ope_warnings"].append(
                 f"fqe values the logged behaviour at {own['estimate']:.4g}, outside the 95% "
                 f"interval of its mean return ({low:.4g} to {high:.4g}): the direct method "
-                "is off on this log, and so may be its values of the policies")
+                "is off on this log, and so may be its values of the policies (withheld)")
+            for rec in fqes:
+                if rec is not None:
+                    rec["withheld"] = off
     for i, ((name, policy), fqe) in enumerate(zip(probs.items(), fqes)):
         try:
             rec = policy_value(log, data.observations, logged, propensity, policy,

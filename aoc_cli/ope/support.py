@@ -18,7 +18,10 @@ An importance-sampling estimate (PDWIS, WDR) is shown only when
 
 FQE needs no overlap and is kept when importance sampling is refused; it is shown only with
 its refits (``fqe_refits`` >= 2): one fit's interval leaves the model's own error out and
-covered the truth on 0 to 2 of 10 icu-sepsis logs (docs/results.md).
+covered the truth on 0 to 2 of 10 icu-sepsis logs (docs/results.md); and only where its value
+of the logged behaviour (fitted beside the policies) lies within the 95% interval of the
+log's mean return (:func:`fqe_refusal`): its interval does not hold its bias, and this is the
+one policy whose value the log gives directly.
 """
 
 from __future__ import annotations
@@ -68,6 +71,16 @@ def refusal(name: str, diag: dict, n_episodes: int, undefined: float = 0.0,
         return (f"mean first-step weight {diag['first_step_weight']:.3g}, not about 1 (the "
                 "propensities do not look like the behaviour's)")
     return None
+
+
+def fqe_refusal(behaviour_fqe: float, low: float, high: float) -> str | None:
+    """Why FQE is withheld on this log (None: shown): its value of the logged behaviour
+    ``behaviour_fqe`` outside [``low``, ``high``], the 95% interval of the log's mean return."""
+    if low <= behaviour_fqe <= high:
+        return None
+    return (f"FQE off on the logged behaviour ({behaviour_fqe:.4g}, outside its mean "
+            f"return's 95% interval [{low:.4g}, {high:.4g}]: a bias its interval does not "
+            "hold)")
 
 
 def withheld(reason: str) -> dict:

@@ -76,6 +76,9 @@ def policy_value(log: ope.Log, observations, logged, propensity, policy, n_actio
             why = ("one fit (fqe_refits 0): its interval would leave the model's own error "
                    f"out; its start values give {fqe['fit_estimate']:.4g}")
             value["fqe"] = gain["fqe"] = withheld(why)
+    if value.get("fqe", {}).get("estimate") is not None and fqe.get("withheld"):
+        # FQE off on the logged behaviour (support.fqe_refusal)
+        value["fqe"] = gain["fqe"] = withheld(fqe["withheld"])
     out["policy_value"] = value
     out["improvement"] = gain
     out["verdict"] = verdict(gain)

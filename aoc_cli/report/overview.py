@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from aoc_cli.control.audit import read_audit_episode
 from aoc_cli.errors import AocError, BadInput, call
 from aoc_cli.report.html import esc, num
 from aoc_cli.report.svg import chart, tick_margin
@@ -89,15 +90,9 @@ def action_names(corpus) -> dict[int, str] | None:
 def audit_episode(corpus, path, episode: int, upper: np.ndarray) -> Episode:
     """Episode ``episode`` of an audit log; ``upper`` (T,) its OOD band, replayed by the
     caller with the session's monitor settings."""
-    import h5py
-
-    with h5py.File(path, "r") as f:
-        g = f[f"episode_{episode}"]
-        residual = np.asarray(g["residuals"], np.float64)
-        actions = np.asarray(g["actions"])
-        values = np.asarray(g["values"], np.float64)
-        flagged = np.asarray(g["ood"], bool)[:len(residual)]
-        rows, weights = np.asarray(g["support_rows"]), np.asarray(g["support_weights"])
+    recorded = read_audit_episode(path, episode)  # the audit log's one reader
+    residual, actions, values = recorded.residuals, recorded.actions, recorded.values
+    flagged, rows, weights = recorded.ood, recorded.support_rows, recorded.support_weights
     first = actions.reshape(len(actions), -1)[:, 0].astype(np.float64)
     return Episode(f"episode {episode}", f"{episode}", residual, upper, flagged, first,
                    _labels(corpus, actions), _supports(corpus, rows, weights),

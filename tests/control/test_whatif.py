@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from aoc_cli.control import Controller, open_session
-from aoc_cli.control.run import explain_logged_step
+from aoc_cli.control.explain import explain_logged_step
 from aoc_cli.control.whatif import redecide, removal
 from aoc_cli.corpus_index import CorpusIndex
 from aoc_cli.errors import AocError
