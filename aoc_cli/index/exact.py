@@ -1,8 +1,9 @@
 """Exact k nearest corpus rows of a batch of queries with no index: one pass over the beliefs.
 
 What ``decompose(beliefs, queries)`` uses when it is given no index. A prebuilt flat index
-answers a batch by its cell search (cells.py), whose k-means cells cost far more to build (about
-100 ms at 100k rows) than one control step's search; built for a single call they dominate it.
+answers a batch by its cell search (cells.py), whose k-means cells cost far more to build than
+one control step's search; built for a single call they dominate it (docs/benchmarks.md,
+"`decompose` without an index").
 This search builds nothing that outlives the call, in four steps for the Q queries of a batch:
 
 1. the batch's centre c (the mean query) and every row's distance rho = ||b - c|| (one pass);
