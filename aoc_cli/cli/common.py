@@ -23,7 +23,7 @@ from aoc_cli.belief.config import BeliefConfig
 from aoc_cli.cli.fields import TASK, choices_of, from_field
 from aoc_cli.control.config import ControllerConfig
 from aoc_cli.errors import AocError
-from aoc_cli.index.config import IndexConfig
+from aoc_cli.neighbours.config import IndexConfig
 
 
 @dataclass

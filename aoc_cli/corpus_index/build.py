@@ -26,8 +26,8 @@ from aoc_cli import belief
 from aoc_cli.corpus_index.index import CorpusIndex
 from aoc_cli.decompose.k_rule import index_k
 from aoc_cli.errors import AocError, BadSetting, IndexMissing, IndexStale, call, param
-from aoc_cli.index import BeliefIndex
-from aoc_cli.index.strata import NEAREST, PER_ACTION
+from aoc_cli.neighbours import BeliefIndex
+from aoc_cli.neighbours.strata import NEAREST, PER_ACTION
 from aoc_cli.progress import Progress
 from aoc_cli.rows import episode_multiplicity
 from aoc_cli.store import (DEFAULT_INDEX, Corpus, atomic_dir, derived, index_dir, model_dir,

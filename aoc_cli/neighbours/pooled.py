@@ -14,7 +14,7 @@ import math
 import faiss
 import numpy as np
 
-from aoc_cli.index.scan_kernels import pool_knn
+from aoc_cli.neighbours.scan_kernels import pool_knn
 from aoc_cli.threads import faiss_threads
 
 
