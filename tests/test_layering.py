@@ -16,7 +16,7 @@ ROOT = Path(__file__).resolve().parents[1] / "aoc_cli"
 #: Modules any stage may import; each imports only the ones before it in this list.
 LOW = ["lazy", "errors", "settings", "progress", "metrics", "rows", "threads", "parallel"]  # docs/design.md, "Module map"
 #: The stages, in the order of the flow: each may import the low modules and the stages before it.
-STAGES = ["store", "formats", "envs", "index", "decompose", "belief", "corpus_index", "ope", "control",
+STAGES = ["store", "formats", "envs", "neighbours", "decompose", "belief", "corpus_index", "ope", "control",
           "evaluation", "baselines", "report", "experiments", "api", "cli"]
 
 
@@ -223,6 +223,6 @@ def test_the_inner_import_count_sees_a_lazy_import_and_its_reason(tmp_path):
     module = tmp_path / "m.py"
     module.write_text("def f():\n    # lazy: torch\n    import torch\n"
                       "    from aoc_cli.belief import train_model\n"
-                      "    from aoc_cli.index import BeliefIndex\n\n"
+                      "    from aoc_cli.neighbours import BeliefIndex\n\n"
                       "def g():\n    from aoc_cli.store import Store\n    return Store\n")
     assert _inner_imports(module) == [(4, True), (5, True), (8, False)]

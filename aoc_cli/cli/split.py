@@ -9,7 +9,7 @@ import typer
 
 import aoc_cli
 from aoc_cli.cli.common import CorpusArgument, FormatOption, OverwriteOption, state
-from aoc_cli.report.output import resolve_format, write_records
+from aoc_cli.cli.output import resolve_format, write_records
 
 
 def register(app: typer.Typer) -> None:

@@ -139,14 +139,34 @@ def explain_queries(session: Session, source, compare: list | None = None,
     if not lines:
         raise AocError("the input holds no queries")
     records = []
+    imputes = bool((getattr(corpus, "preprocessing", None) or {}).get("impute"))
     for lineno, line in lines:
         obs, hist, action, q_compare = parse_query(line, lineno, corpus,
                                                    session.model.history_length)
         for rec in explain_query(session, obs, hist, action, compare=compare or q_compare,
                                  removal=removal):
             rec["query"] = lineno
+            if imputes:  # which cells held null (the decision page marks them imputed)
+                rec["query_imputed"], rec["query_history_imputed"] = null_cells(
+                    line, corpus, session.model.history_length)
             records.append(rec)
     return records
+
+
+def null_cells(line: str, corpus, length: int) -> tuple[list, list]:
+    """Which cells of a query (already parsed by :func:`parse_query`) held null and were
+    filled by the corpus's imputation: the observation's (d_o,) and its history's (L, d_o),
+    oldest first and padded at the front as the query's history is."""
+    q = json.loads(line)
+    d_o, d_a = corpus.observation_dim, corpus.action_dim
+
+    def nulls(values) -> list[bool]:
+        values = list(values)[:d_o]
+        return [v is None for v in values] + [False] * (d_o - len(values))
+
+    steps = [nulls(s[:len(s) - d_a - 1]) for s in q.get("history") or []][-length:] \
+        if length else []
+    return nulls(q["observation"]), [[False] * d_o] * (length - len(steps)) + steps
 
 
 def explain_recorded(session: Session, recorded: dict, episode: int, step: int,

@@ -120,6 +120,52 @@ def fill(obs: np.ndarray, starts: np.ndarray, spec: dict) -> np.ndarray:
     return imputed
 
 
+def fill_columns(obs: np.ndarray, column, names: list[str], starts: np.ndarray, rule: str,
+                 mask: bool, measured: list[str], where,
+                 medians: list[float] | None = None) -> tuple[np.ndarray, dict]:
+    """:func:`fit` (unless ``medians`` are given) and :func:`fill` in one pass, column by
+    column: ``column(j)`` (N,) float64, NaN where empty, is filled while contiguous and written
+    once into ``obs`` (N, d + m) with its ``COL?measured`` feature. Returns (imputed (N, d + m)
+    bool, the spec) as the two would; a column empty for every row is an AocError."""
+    if rule not in RULES:
+        raise AocError(f"unknown {param('impute', rule)}: use one of {', '.join(RULES)}")
+    d = len(names)
+    features = {name: d + k for k, name in enumerate(measured if mask else [])}
+    imputed = np.zeros(obs.shape, bool)
+    rows = np.arange(len(obs))
+    stay_start = np.repeat(starts[:-1], np.diff(starts)) if rule == "hold" else None
+    fitted, gaps = [], []
+    for j, name in enumerate(names):
+        x = np.array(column(j), dtype=np.float64)
+        empty = np.isnan(x)
+        if medians is None:
+            present = x[~empty]
+            if present.size == 0:
+                raise AocError(f"{where}: column {name!r} is empty for every stay: "
+                               f"{param('impute', rule)} has no measured value to fill it "
+                               "from; drop the column")
+            fitted.append(float(np.median(present)))
+        median = fitted[j] if medians is None else medians[j]
+        if name in features:
+            obs[:, features[name]] = ~empty
+        if empty.any():
+            gaps.append(name)
+            imputed[:, j] = empty
+            still = empty
+            if stay_start is not None:  # the last measured row at or before each row
+                last = np.where(empty, -1, rows)
+                np.maximum.accumulate(last, out=last)
+                held = empty & (last >= stay_start)
+                x[held] = x[last[held]]
+                still = empty & ~held
+            x[still] = median
+        obs[:, j] = x
+    spec = {"rule": rule, "mask": bool(mask), "names": list(names),
+            "medians": list(fitted if medians is None else medians),
+            "measured": list(measured if mask else gaps)}
+    return imputed, spec
+
+
 def names_with_mask(spec: dict | None, names: list[str]) -> list[str]:
     """Observation names after filling: ``names`` plus ``COL?measured`` features."""
     if not spec or not spec.get("mask"):

@@ -1,12 +1,12 @@
 """Many fitted Q evaluations trained at once: d3rlpy's DiscreteFQE update, batched over an
 ensemble of members that share one log.
 
-Why: one DiscreteFQE update of icu-sepsis's network (48 -> 64 -> 64 -> 25, batch 256) costs
-~1.7 ms, nearly all of it per-call overhead (Python, autograd, Adam's per-tensor loop), not
-arithmetic; :func:`aoc_cli.ope.fqe.bootstrap_fqe` runs a fit and 10 refits per
-policy, three policies an ``aoc evaluate``: ~48,000 updates, ~80 s of a 45,000-step
-evaluation. Stacking the members' weights along a leading dimension (``torch.bmm``) costs
-one update's overhead for all of them.
+Why: one DiscreteFQE update of a small network (icu-sepsis's: 48 -> 64 -> 64 -> 25) is
+nearly all per-call overhead (Python, autograd, Adam's per-tensor loop), not arithmetic, and
+:func:`aoc_cli.ope.fqe.bootstrap_fqe` runs a fit and its refits per policy, several policies
+an ``aoc evaluate``: tens of thousands of updates. Stacking the members' weights along a
+leading dimension (``torch.bmm``) costs one update's overhead for all of them (the figures:
+docs/benchmarks.md, "FQE as one batched ensemble").
 
 Each member is d3rlpy's DiscreteFQE, not a re-design of it: its network is the one d3rlpy
 built and initialised (:class:`aoc_cli.ope.fqe.FQEFit`: a ``VectorEncoder`` of ReLU

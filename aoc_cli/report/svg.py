@@ -2,8 +2,8 @@
 
 Hand-written rather than matplotlib: a decision page draws one chart per supporting row (up
 to d_b + 1 = 21) and an overview page links every step's marker to its section; matplotlib
-takes ~40 ms to render a small figure to SVG (~1 s a page of cards) and cannot put a link on
-a marker. These are polylines and circles with escaped labels, a few hundred bytes each,
+renders a small figure to SVG slowly for a page of cards (docs/benchmarks.md, "Figures once
+in docstrings") and cannot put a link on a marker. These are polylines and circles with escaped labels, a few hundred bytes each,
 crisp when printed.
 """
 

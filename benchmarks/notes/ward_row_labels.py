@@ -36,7 +36,7 @@ from scipy.spatial import cKDTree
 from aoc_cli.belief.row_labels import subset_scores
 from aoc_cli.decompose import decompose, per_action_k
 from aoc_cli.experiments.ward import history_features
-from aoc_cli.index import BeliefIndex, PerAction
+from aoc_cli.neighbours import BeliefIndex, PerAction
 from aoc_cli.threads import one_thread
 
 sys.path.insert(0, str(Path(__file__).parent))

@@ -15,7 +15,7 @@ import pytest
 
 import aoc_cli
 from aoc_cli.envs import collect
-from aoc_cli.report.values import measured
+from aoc_cli.report.values import legend, measured
 from aoc_cli.store import Store
 
 TASKS = ["maze", "two-gates", "pendulum-het", "pendulum-het-upright", "lunar", "ward",
@@ -260,14 +260,29 @@ def test_a_cohort_ingested_with_gaps_shows_its_imputed_cells(tmp_path, aoc_inpro
         assert [c[1] for c in cells] == mask[:, j].tolist()
     assert mask.any() and "rule: hold" in browser.evaluate(
         "document.querySelector('#decision .legend').innerText")
-    # a query from a file: which of its cells were measured is not recorded, and said so
+    # a query from a file holding null: the cells the corpus's rule filled are marked
+    cells = obs[0].tolist()
+    nulls = [names.index("HR"), names.index("SpO2")]
+    for j in nulls:
+        cells[j] = None
     query, page = tmp_path / "q.jsonl", tmp_path / "query.html"
-    query.write_text(json.dumps({"observation": obs[0].tolist(), "history": []}) + "\n")
-    _aoc(aoc_inproc, root, "explain", "icu", "--input", str(query), "--html", str(page))
+    query.write_text(json.dumps({"observation": cells}) + "\n")
+    rec = _records(_aoc(aoc_inproc, root, "explain", "icu", "--input", str(query), "--html",
+                        str(page), "-f", "json"))[0]
+    assert [j for j, m in enumerate(rec["query_imputed"]) if m] == sorted(nulls)
     browser.open(page)
     assert browser.problems() == CLEAN
-    assert browser.evaluate("[...document.querySelectorAll('#decision table.values "
-                            "tr:not(.column):not(.columns)')].slice(1).every(tr => !tr"
-                            ".querySelector('td').classList.contains('imputed'))")
-    assert "is not known" in browser.evaluate(
+    marked = browser.evaluate(
+        "[...document.querySelectorAll('#decision table.values tr:not(.column):not(.columns)')]"
+        ".slice(1).map(tr => [tr.querySelector('th').innerText, tr.querySelector('td')"
+        ".classList.contains('imputed')])")
+    assert sorted(n for n, m in marked if m) == sorted(names[j] for j in nulls)
+    assert "not known" not in browser.evaluate(
         "document.querySelector('#decision .legend').innerText")
+
+
+def test_the_legend_says_when_the_query_cells_are_not_known():
+    text = legend("hold", any_imputed=True, query_known=False)
+    assert "rule: hold" in text and "not known" in text
+    assert "not known" not in legend("hold", any_imputed=True, query_known=True)
+    assert "imputed" not in legend(None, any_imputed=False, query_known=False)

@@ -4,7 +4,7 @@ JSON, one CSV row per method, or tables."""
 from __future__ import annotations
 
 from aoc_cli.ope.support import cell
-from aoc_cli.report.output import write_object, write_records
+from aoc_cli.cli.output import write_object, write_records
 
 IMITATION_COLUMNS = ["method", "accuracy", "balanced_accuracy", "auc", "majority_accuracy",
                      "mae", "r2"]

@@ -1,7 +1,7 @@
 """What ``aoc evaluate`` prints as tables: the OPE's rows (each policy's estimates with their
 intervals, the logged behaviour's mean return and FQE's value of it) and the value target."""
 
-from aoc_cli.report.evaluate_view import _ope_rows, write_evaluation
+from aoc_cli.cli.evaluate_view import _ope_rows, write_evaluation
 
 
 def _summary(fqe=0.7754):
