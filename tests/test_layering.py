@@ -171,7 +171,7 @@ def test_the_module_map_of_the_design_lists_the_stages_in_this_order():
 #: input, listing the experiments, a rollout without --plot, the command line reading the
 #: settings' help), with its reason in a ``# lazy:`` comment on the line or just above the
 #: block (docs/design.md, "Module map").
-LIBRARY_INNER_IMPORTS = 13
+LIBRARY_INNER_IMPORTS = 11
 #: The same in cli/: none; a command calls its entry as ``aoc_cli.<entry>``, which the package
 #: loads on first use, so ``aoc --help`` stays quick.
 CLI_INNER_IMPORTS = 0

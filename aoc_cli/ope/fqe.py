@@ -370,9 +370,7 @@ def student_quantile(df: int) -> float:
     """The 97.5% quantile of Student's t with ``df`` degrees of freedom: the half-width, in
     standard deviations, of a 95% interval whose standard deviation comes from df + 1
     replicates (1.96 for many; 2.26 for 10 refits, 4.30 for 3)."""
-    from scipy.special import (
-        stdtrit,  # scipy.special: ~0.2 s to import, only where refits run
-    )
+    from scipy.special import stdtrit  # slow to import: only where refits run
 
     return float(stdtrit(int(df), 0.975))
 
