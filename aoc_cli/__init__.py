@@ -12,7 +12,8 @@ from aoc_cli.errors import AocError  # noqa: E402
 
 #: The entries of :mod:`aoc_cli.api`, loaded on first use (PEP 562): ``import aoc_cli`` and
 #: ``aoc --help`` stay light (no torch, FAISS or environments until an entry is called).
-API = ("ingest", "collect", "train", "build_index", "open_session", "rollout", "explain",
+API = ("ingest", "split", "collect", "train", "build_index", "open_session", "rollout",
+       "explain", "explain_queries", "explain_recorded", "explain_logged", "explain_steps",
        "evaluate", "bench", "verify", "export", "tasks", "info", "corpora")
 
 __all__ = ["AocError", "__version__", *API]

@@ -87,34 +87,12 @@ class AocError(Exception):
     def __reduce__(self):  # subclasses take other arguments: rebuild from the state
         return _rebuild, (type(self), self.args, self.__dict__)
 
-    def for_command_line(self) -> str:
-        """The message with its parameters as flags (``residual_cap`` -> ``--residual-cap``);
-        ``aoc_cli.cli.errors.message`` adds the hints of the typed errors."""
-        from_text = render(self.marked, _flag_param, _command_call)
-        if self.param and self.marked.startswith(self.param):
-            return _flag_param(self.param) + from_text[len(self.param):]
-        return from_text
-
 
 def _rebuild(cls, args, state):
     err = cls.__new__(cls)
     err.args = args
     err.__dict__.update(state)
     return err
-
-
-def _flag_param(name: str, *value) -> str:
-    flag = "--" + name.replace("_", "-")
-    if not value or value[0] is True:
-        return flag
-    return f"{flag} {value[0]}"
-
-
-def _command_call(function: str, args: list, kwargs: dict) -> str:
-    words = ["aoc", function.replace("_", "-")] + [str(a) for a in args]
-    for key, value in kwargs.items():
-        words.append(_flag_param(key, value))
-    return " ".join(words)
 
 
 class CorpusNotFound(AocError):
@@ -245,9 +223,6 @@ class AocWarning(UserWarning):
     def __init__(self, message: str):
         super().__init__(plain(message))
         self.marked = message
-
-    def for_command_line(self) -> str:
-        return render(self.marked, _flag_param, _command_call)
 
 
 def warn(text: str, stacklevel: int = 2) -> None:

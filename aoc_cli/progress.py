@@ -8,7 +8,7 @@ imports a terminal library or writes to the terminal. A function that takes ``pr
 reports nothing without one. Work in stages reports each stage with its own total and label
 to the same callable (a bench: collect, train, index, roll out).
 
-The command line implements it as a bar on stderr (:class:`aoc_cli.report.ProgressBar`);
+The command line implements it as a bar on stderr (:class:`aoc_cli.cli.output.ProgressBar`);
 a test or a program may pass any function of that signature, e.g. ``lambda *a: None``.
 """
 

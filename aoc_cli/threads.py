@@ -138,8 +138,7 @@ def faiss_threads(n: int):
     """FAISS's OpenMP thread count set to n (0: unchanged) for the block, then restored.
 
     A single-query search gains nothing from threads and, on a busy 2-core machine, loses a
-    lot to their synchronisation (measured: 30 ms with 2 threads against 2.4 ms with 1 for one
-    query against 100k rows).
+    lot to their synchronisation (docs/benchmarks.md, "Figures once in docstrings").
     """
     if n <= 0:
         yield

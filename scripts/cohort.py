@@ -12,7 +12,8 @@ cut short, ``censored`` share of them). 51 columns in all with the default 40 vi
 
 Each stay follows a latent severity s_t (an AR(1) walk): vitals and labs read it with noise;
 the clinicians' doses rise with it (fluids at about 70% of blocs, vasopressors when it is high)
-and lower it a little; the probability of death rises with the last s_t. Vitals are empty at
+and lower it a little; the probability of death rises with the last s_t (logit 2.5 s_T - 1.2).
+Vitals are empty at
 ``gap / 3`` of the blocs, labs at ``gap * 1.6`` (overall about ``gap`` of those cells); the
 first bloc may be empty too (``--impute hold`` then falls back to the median). Used by
 docs/guide/clinical.md, the tests (``tests/formats/test_cohort.py``) and
@@ -87,7 +88,7 @@ def cohort(stays: int = 300, seed: int = 0, gap: float = 0.15, censored: float =
     cols["input_4hourly"] = fluid.round(1)
     cols["max_dose_vaso"] = vaso.round(3)
     last = starts[1:] - 1
-    p_death = 1 / (1 + np.exp(-(1.2 * s[last] - 1.0)))
+    p_death = 1 / (1 + np.exp(-(2.5 * s[last] - 1.2)))
     died = (rng.random(stays) < p_death).astype(float)
     late = np.where(rng.random(stays) < 0.3, 1.0, died)
     cut = rng.random(stays) < censored

@@ -173,9 +173,17 @@ def test_rollout_explain_and_evaluate_return_what_the_commands_print(trained, tm
     rec, = replay.records
     assert rec["recorded_action"] == pytest.approx(rec["action"], abs=1e-6)
     assert rec["support"] and abs(sum(s["weight"] for s in rec["support"]) - 1) < 1e-4
+    again, = api.explain_recorded("g", audit, 1, 2, store=store).records
+    assert again["action"] == rec["action"] and again["residual"] == rec["residual"]
     logged = api.explain("g", store=store, data="g", episode=1, step=3,
                          without={"policy": ["upper-gate"]})
     assert all("what_if" in r for r in logged.records)
+    entry = api.explain_logged("g", "g", 1, 3, store=store, without={"policy": ["upper-gate"]})
+    assert [r["action"] for r in entry.records] == [r["action"] for r in logged.records]
+    queries = tmp_path / "q.jsonl"
+    queries.write_text(json.dumps({"observation": rec["observation"]}) + "\n")
+    asked, = api.explain_queries("g", queries, store=store, compare=[[0.5, 0.5]]).records
+    assert asked["query"] == 1 and asked["action"] == [0.5, 0.5]
     summary = api.evaluate("g", "g", store=store, baselines=["knn"])
     assert summary["steps"] == Store(store).corpus("g").n_rows
     assert set(summary["baselines"]) == {"knn"}

@@ -16,7 +16,7 @@ ROOT = Path(__file__).resolve().parents[1] / "aoc_cli"
 #: Modules any stage may import; each imports only the ones before it in this list.
 LOW = ["lazy", "errors", "settings", "progress", "metrics", "rows", "threads", "parallel"]  # docs/design.md, "Module map"
 #: The stages, in the order of the flow: each may import the low modules and the stages before it.
-STAGES = ["store", "formats", "envs", "index", "decompose", "belief", "corpus_index", "ope", "control",
+STAGES = ["store", "formats", "envs", "neighbours", "decompose", "belief", "corpus_index", "ope", "control",
           "evaluation", "baselines", "report", "experiments", "api", "cli"]
 
 
@@ -171,7 +171,7 @@ def test_the_module_map_of_the_design_lists_the_stages_in_this_order():
 #: input, listing the experiments, a rollout without --plot, the command line reading the
 #: settings' help), with its reason in a ``# lazy:`` comment on the line or just above the
 #: block (docs/design.md, "Module map").
-LIBRARY_INNER_IMPORTS = 13
+LIBRARY_INNER_IMPORTS = 11
 #: The same in cli/: none; a command calls its entry as ``aoc_cli.<entry>``, which the package
 #: loads on first use, so ``aoc --help`` stays quick.
 CLI_INNER_IMPORTS = 0
@@ -223,6 +223,6 @@ def test_the_inner_import_count_sees_a_lazy_import_and_its_reason(tmp_path):
     module = tmp_path / "m.py"
     module.write_text("def f():\n    # lazy: torch\n    import torch\n"
                       "    from aoc_cli.belief import train_model\n"
-                      "    from aoc_cli.index import BeliefIndex\n\n"
+                      "    from aoc_cli.neighbours import BeliefIndex\n\n"
                       "def g():\n    from aoc_cli.store import Store\n    return Store\n")
     assert _inner_imports(module) == [(4, True), (5, True), (8, False)]

@@ -13,7 +13,8 @@ a function of one line of text, for the notes a command prints on stderr. Errors
 :class:`aoc_cli.errors.AocError`. The ``aoc`` commands parse their options, make one call
 here and print what it returns (aoc_cli/cli/); docs/design.md, "Library API", lists them.
 The entries live in data.py (ingest, info, verify, export), collection.py (collect, tasks),
-model.py (train, build_index), control.py (open_session, rollout), explanation.py, evaluation.py
+model.py (train, build_index), control.py (open_session, rollout), explanation.py (explain
+and its entries per source), evaluation.py
 and experiment.py (bench), each loaded when its entry is first used. No module here is named
 after an entry: importing a submodule binds its name in this package, which would hide the
 entry of that name.
@@ -26,11 +27,13 @@ from aoc_cli.lazy import exports
 #: Where each public name lives; loaded on first use (PEP 562), so that a command imports only
 #: what its entry needs (``aoc info`` no torch, FAISS or matplotlib).
 _WHERE = {
-    "ingest": "data", "tasks": "collection", "collect": "collection", "info": "data", "corpora": "data",
+    "ingest": "data", "split": "data", "tasks": "collection", "collect": "collection", "info": "data", "corpora": "data",
     "verify": "data", "export": "data", "Verified": "data",
     "train": "model", "build_index": "model", "Indexed": "model",
     "open_session": "control", "rollout": "control", "RolledOut": "control",
-    "explain": "explanation", "Explained": "explanation",
+    "explain": "explanation", "explain_queries": "explanation",
+    "explain_recorded": "explanation", "explain_logged": "explanation",
+    "explain_steps": "explanation", "Explained": "explanation",
     "evaluate": "evaluation",
     "bench": "experiment", "Benched": "experiment",
 }

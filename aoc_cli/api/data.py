@@ -12,6 +12,8 @@ from aoc_cli.api.common import StoreLike, open_store
 from aoc_cli.formats import ExportResult, IngestResult, ReadOptions
 from aoc_cli.formats import export as _export
 from aoc_cli.formats import ingest as _ingest
+from aoc_cli.formats.split import SplitResult
+from aoc_cli.formats.split import split as _split
 from aoc_cli.progress import Progress
 from aoc_cli.store import list_corpora, summarize
 from aoc_cli.store.verify import cleared_rows, corpora_to_verify, verify_corpus
@@ -32,6 +34,17 @@ def ingest(path: str | os.PathLike, name: str, *, store: StoreLike = None,
         options.progress = progress
     return _ingest(path, name, store=open_store(store), fmt=fmt, options=options,
                    overwrite=overwrite, append=append)
+
+
+def split(name: str, *, test: float = 0.2, seed: int = 0, by: str | None = None,
+          names: tuple[str, str] | None = None, store: StoreLike = None,
+          overwrite: bool = False) -> SplitResult:
+    """Split corpus ``name`` into ``NAME-train`` and ``NAME-test`` (or ``names``): a share
+    ``test`` of its stays drawn with ``seed``, or (``by``) of a tag's values; imputation
+    medians and dose bins fitted again on the training part alone; the split recorded in both
+    manifests (``aoc split``)."""
+    return _split(name, store=open_store(store), test=test, seed=seed, by=by, names=names,
+                  overwrite=overwrite)
 
 
 def info(name: str, *, store: StoreLike = None) -> dict:

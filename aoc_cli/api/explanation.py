@@ -1,26 +1,33 @@
-"""The API's explain entry: the supporting rows, weights and residual behind decisions, from
-JSONL queries, a recorded step of an audit log, or a logged step of a corpus; optionally the
-decision page (HTML)."""
+"""The API's explain entries, one per source of the decisions explained (the supporting rows,
+weights and residual behind each; the library is :mod:`aoc_cli.control.explain`):
+
+* :func:`explain_queries`: JSONL queries;
+* :func:`explain_recorded`: a decision an ``aoc rollout --audit`` log recorded;
+* :func:`explain_logged`: a logged step of a corpus;
+* :func:`explain_steps`: the overview page of an ``aoc evaluate --steps`` file.
+
+:func:`explain` is ``aoc explain``'s: the one of them its source names.
+"""
 
 from __future__ import annotations
 
 import os
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
 from aoc_cli.api.common import StoreLike, controller_config, open_store
-from aoc_cli.control import (ControllerConfig, explain_logged_step, explain_query, open_session,
-                             parse_query, read_audit_step, replay_decision)
+from aoc_cli.control import open_session
 from aoc_cli.control.config import ControllerLike
-from aoc_cli.control.explain import explain_decisions
-from aoc_cli.control.records import label_of
+from aoc_cli.control.explain import explain_logged_step
+from aoc_cli.control.explain import explain_queries as _explain_queries
+from aoc_cli.control.explain import explain_recorded as _explain_recorded
+from aoc_cli.control.explain import recorded_session
 from aoc_cli.control.whatif import removal as removal_of
-from aoc_cli.errors import AocError, BadSetting, call, param
+from aoc_cli.errors import AocError, BadSetting, param
 from aoc_cli.report.explain_pages import check_html, steps_overview, write_html
-from aoc_cli.store import DEFAULT_INDEX, action_labels
+from aoc_cli.store import DEFAULT_INDEX
+
+PathLike = str | os.PathLike
 
 
 @dataclass
@@ -33,130 +40,122 @@ class Explained:
     html: Path | None = None
 
 
-def explain(name: str, *, store: StoreLike = None, queries: str | os.PathLike | None = None,
-            audit: str | os.PathLike | None = None, data: str | None = None,
-            episode: int = 0, step: int = 0, compare: list | None = None,
-            model: str | None = None, index_id: str = DEFAULT_INDEX,
-            controller: ControllerLike = None, seed: int = 0,
-            without: dict[str, list[str]] | None = None,
-            without_episodes: list[str] | None = None, html: str | os.PathLike | None = None,
-            steps_file: str | os.PathLike | None = None) -> Explained:
-    """Explain decisions of corpus ``name``'s controller, from one source:
+def explain_queries(name: str, queries: PathLike, *, store: StoreLike = None,
+                    compare: list | None = None, model: str | None = None,
+                    index_id: str = DEFAULT_INDEX, controller: ControllerLike = None,
+                    seed: int = 0, without: dict[str, list[str]] | None = None,
+                    without_episodes: list[str] | None = None,
+                    html: PathLike | None = None) -> Explained:
+    """Explain the decisions of corpus ``name``'s controller on ``queries``: a JSONL file (or
+    "-": stdin), one query a line (observation, history, optionally an action or actions to
+    compare); ``compare``: actions (numbers, or lists for several dimensions) explained side
+    by side for every query. ``controller``: its settings, as
+    :func:`~aoc_cli.api.open_session` (over the settings saved with the model).
+    ``without`` ({tag: [values]}) / ``without_episodes`` (ids or numbers): decide again
+    without those rows and report what changes. ``html``: also write the decision page."""
+    s, corpus, opened, removal = _opened(name, store, html, model, index_id, controller, seed,
+                                         without, without_episodes)
+    records = _explain_queries(open_session(corpus, **opened), queries, compare or [], removal)
+    return _written(corpus, records, html)
 
-    * ``queries``: a JSONL file (or "-": stdin), one query a line (observation, history,
-      optionally an action or actions to compare); ``compare``: actions (numbers, or lists
-      for several dimensions) explained side by side for every query;
-    * ``audit`` + ``episode`` + ``step``: a decision an ``aoc rollout --audit`` log recorded,
-      replayed with its recorded inputs and settings;
-    * ``data`` + ``episode`` + ``step``: the decision at a logged step of corpus ``data``
-      (``name`` itself or held-out episodes) and what supports the logged action there.
 
-    ``controller``: the controller settings, as :func:`~aoc_cli.api.open_session` (over the
-    settings saved with the model; a recorded decision is replayed with its recorded
-    settings). ``without`` ({tag: [values]}) / ``without_episodes`` (ids or numbers):
-    decide again without those rows and report what changes. ``html``: also write the
-    decision page; with ``steps_file`` (an ``aoc evaluate --steps`` file) and no source,
-    write that file's overview page only."""
+def explain_recorded(name: str, audit: PathLike, episode: int = 0, step: int = 0, *,
+                     store: StoreLike = None, model: str | None = None,
+                     index_id: str = DEFAULT_INDEX, controller: ControllerLike = None,
+                     seed: int = 0, without: dict[str, list[str]] | None = None,
+                     without_episodes: list[str] | None = None,
+                     html: PathLike | None = None) -> Explained:
+    """Explain step ``step`` of episode ``episode`` of ``audit``, a log ``aoc rollout --audit``
+    wrote: the decision replayed with its recorded inputs, rows and settings (``model``,
+    ``index_id`` and ``controller`` where the log does not record them). ``html``: also the
+    decision page, with the episode's overview. Other arguments as
+    :func:`explain_queries`."""
+    s, corpus, opened, removal = _opened(name, store, html, model, index_id, controller, seed,
+                                         without, without_episodes)
+    recorded, replay = recorded_session(corpus, Path(audit), episode, step, opened["config"],
+                                        opened["model_id"], opened["index_id"])
+    session = open_session(corpus, **replay, seed=seed)
+    records = _explain_recorded(session, recorded, episode, step, removal)
+    return _written(corpus, records, html, session=session, audit=audit, episode=episode,
+                    step=step)
+
+
+def explain_logged(name: str, data: str, episode: int = 0, step: int = 0, *,
+                   store: StoreLike = None, model: str | None = None,
+                   index_id: str = DEFAULT_INDEX, controller: ControllerLike = None,
+                   seed: int = 0, without: dict[str, list[str]] | None = None,
+                   without_episodes: list[str] | None = None,
+                   html: PathLike | None = None) -> Explained:
+    """Explain step ``step`` of episode ``episode`` of corpus ``data`` (``name`` itself, each
+    episode then decided without its own rows, or held-out episodes of the same spaces): the
+    controller's decision there and what supports the logged action. Other arguments as
+    :func:`explain_queries`."""
+    s, corpus, opened, removal = _opened(name, store, html, model, index_id, controller, seed,
+                                         without, without_episodes)
+    source = corpus if data == name else s.corpus(data)
+    records = explain_logged_step(open_session(corpus, **opened), source, episode, step,
+                                  removal=removal)
+    return _written(corpus, records, html, source=source)
+
+
+def explain_steps(name: str, steps_file: PathLike, html: PathLike, *, store: StoreLike = None,
+                  model: str | None = None, index_id: str = DEFAULT_INDEX) -> Explained:
+    """Write the overview page of ``steps_file`` (an ``aoc evaluate --steps`` file of corpus
+    ``name``'s decisions) to ``html``, against the index's typical residual."""
     s = open_store(store)
-    if html is not None:
-        check_html(Path(html), s.root)
+    check_html(Path(html), s.root)
+    corpus = s.corpus(name)
+    steps_overview(corpus, Path(steps_file), Path(html), model, index_id)
+    return Explained(corpus.name, [], Path(html))
+
+
+def explain(name: str, *, store: StoreLike = None, queries: PathLike | None = None,
+            audit: PathLike | None = None, data: str | None = None, episode: int = 0,
+            step: int = 0, compare: list | None = None, model: str | None = None,
+            index_id: str = DEFAULT_INDEX, controller: ControllerLike = None, seed: int = 0,
+            without: dict[str, list[str]] | None = None,
+            without_episodes: list[str] | None = None, html: PathLike | None = None,
+            steps_file: PathLike | None = None) -> Explained:
+    """``aoc explain``: the entry its one source names, ``queries``
+    (:func:`explain_queries`), ``audit`` + ``episode`` + ``step`` (:func:`explain_recorded`),
+    ``data`` + ``episode`` + ``step`` (:func:`explain_logged`), or ``steps_file`` with
+    ``html`` and no other source (:func:`explain_steps`)."""
     if steps_file is not None:
         if html is None or any(x is not None for x in (queries, audit, data)):
             raise BadSetting("steps_file", str(steps_file),
                              f"{param('steps_file', 'FILE')} writes an overview page: give "
                              f"{param('html', 'FILE')} and none of {param('queries')}, "
                              f"{param('audit')}, {param('data')}")
-        corpus = s.corpus(name)
-        steps_overview(corpus, Path(steps_file), Path(html), model, index_id)
-        return Explained(corpus.name, [], Path(html))
+        return explain_steps(name, steps_file, html, store=store, model=model,
+                             index_id=index_id)
     if sum(x is not None for x in (queries, audit, data)) != 1:
         raise AocError(f"give one of {param('queries', 'FILE|-')} (JSONL queries), "
                        f"{param('audit', 'FILE')} {param('episode', 'E')} {param('step', 'T')} "
                        f"(a recorded decision) or {param('data', 'CORPUS')} "
                        f"{param('episode', 'E')} {param('step', 'T')} (a logged step)")
-    corpus = s.corpus(name)
-    config = controller_config(controller)
-    opened = dict(model_id=model, index_id=index_id, config=config, seed=seed)
-    removal = removal_of(corpus, without, without_episodes)
-    session = source = None
-    if data is not None:
-        source = corpus if data == name else s.corpus(data)
-        records = explain_logged_step(open_session(corpus, **opened), source, episode, step,
-                                      removal=removal)
-    elif audit is not None:
-        records, session = _recorded_step(corpus, Path(audit), episode, step, opened, removal)
-    else:
-        records = _queries(open_session(corpus, **opened), queries, compare or [], removal)
+    shared = dict(store=store, model=model, index_id=index_id, controller=controller,
+                  seed=seed, without=without, without_episodes=without_episodes, html=html)
+    if queries is not None:
+        return explain_queries(name, queries, compare=compare, **shared)
+    if audit is not None:
+        return explain_recorded(name, audit, episode, step, **shared)
+    return explain_logged(name, data, episode, step, **shared)
+
+
+def _opened(name, store, html, model, index_id, controller, seed, without, without_episodes):
+    """(the store, the corpus, how to open its session, the rows removed or None), the page's
+    path checked first."""
+    s = open_store(store)
     if html is not None:
-        write_html(Path(html), records, corpus, session=session, audit=audit,
-                   episode=episode, step=step, source=source)
+        check_html(Path(html), s.root)
+    corpus = s.corpus(name)
+    opened = dict(model_id=model, index_id=index_id,
+                  config=controller_config(controller), seed=seed)
+    return s, corpus, opened, removal_of(corpus, without, without_episodes)
+
+
+def _written(corpus, records: list[dict], html, **page) -> Explained:
+    """The records, and the decision page written where ``html`` says."""
+    if html is not None:
+        write_html(Path(html), records, corpus, **page)
     return Explained(corpus.name, records, None if html is None else Path(html))
-
-
-def _recorded_step(corpus, audit: Path, episode: int, step: int, opened: dict,
-                   removal) -> tuple[list[dict], object]:
-    """``audit``: a recorded decision replayed with its recorded inputs and settings;
-    (records, the session)."""
-    recorded = read_audit_step(audit, episode, step)
-    meta = recorded["meta"]
-    config = ControllerConfig.from_dict(meta["config"], strict=False) if meta.get("config") \
-        else opened["config"]
-    session = open_session(corpus, meta.get("model", opened["model_id"]),
-                           meta.get("index", opened["index_id"]), config,
-                           selection=_recorded_selection(recorded["selection"], corpus, audit),
-                           seed=opened["seed"])
-    decision = replay_decision(session, recorded)
-    rec, = explain_decisions(session, recorded["observation"], recorded["history"],
-                             [decision], removal=removal, step=step)
-    rec["episode"] = episode
-    rec["recorded_action"] = recorded["action"].tolist()
-    rec.update(label_of(action_labels(corpus.action_space), recorded["action"],
-                        "recorded_action_label"))
-    return [rec], session
-
-
-def _recorded_selection(kept, corpus, audit: Path) -> np.ndarray | None:
-    """The (N,) row mask a recorded decision was made from (``read_audit_step``'s
-    ``selection``), or None for every row; an AocError where the log cannot say."""
-    if kept is None:
-        return None
-    if isinstance(kept, str):
-        raise AocError(f"audit log {audit} was recorded from a selection of the corpus rows "
-                       f"that it does not hold (written by an older aoc): record it again "
-                       f"with `{call('rollout', '...', audit='FILE')}`")
-    if isinstance(kept, list):                  # rows listed by an older aoc
-        rows = np.asarray(kept, np.int64)
-        kept = np.zeros(max(corpus.n_rows, int(rows.max(initial=-1)) + 1), bool)
-        kept[rows] = True
-    if len(kept) != corpus.n_rows:
-        raise AocError(f"audit log {audit} was recorded from a corpus of {len(kept)} rows, "
-                       f"{corpus.name!r} has {corpus.n_rows}: it cannot be replayed against it")
-    return kept
-
-
-def _queries(session, source, compare: list, removal) -> list[dict]:
-    """JSONL queries, each its own decision or the given actions compared."""
-    corpus = session.corpus
-    lines = _read_lines(source)
-    if not lines:
-        raise AocError("the input holds no queries")
-    records = []
-    for lineno, line in lines:
-        obs, hist, action, q_compare = parse_query(line, lineno, corpus,
-                                                   session.model.history_length)
-        for rec in explain_query(session, obs, hist, action, compare=compare or q_compare,
-                                 removal=removal):
-            rec["query"] = lineno
-            records.append(rec)
-    return records
-
-
-def _read_lines(source) -> list[tuple[int, str]]:
-    if str(source) == "-":
-        text = sys.stdin.read()
-    else:
-        path = Path(source)
-        if not path.is_file():
-            raise AocError(f"no such input file: {source}")
-        text = path.read_text()
-    return [(i + 1, line) for i, line in enumerate(text.splitlines()) if line.strip()]

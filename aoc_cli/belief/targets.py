@@ -129,8 +129,8 @@ def held_out_targets(corpus, value: str, gamma: float, progress=None) -> np.ndar
     """(N,) :func:`value_targets` of a corpus used as a held-out log (``aoc evaluate``'s
     value target, where no other estimate is given), computed once and kept beside it
     (:func:`kept_values`): a fitted Q evaluation of a held-out log costs what fitting the model's
-    own values did (icu-sepsis, 45,000 held-out rows: ~50 s, 60 backups of 300 gradient
-    steps). The other targets cost a pass over the rewards and are not kept."""
+    own values did (60 backups of gradient steps; docs/benchmarks.md, "Figures once in
+    docstrings"). The other targets cost a pass over the rewards and are not kept."""
     if value not in KEPT_TARGETS:
         return value_targets(corpus, value, gamma, progress=progress)
     import torch  # lazy: torch, for fqe targets only (its version is part of the record)

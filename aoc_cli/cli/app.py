@@ -1,5 +1,5 @@
 """The typer app. Each command lives in its own module ``aoc_cli.cli.<command>`` exposing
-``register(app)``; this module only wires them up and turns errors into exit codes:
+``register(app)``; this module only imports and registers them and turns errors into exit codes:
 0 success, 1 a failed run, 2 bad input or usage (one line ``aoc: error: ...`` on stderr, no
 traceback unless ``--debug``): a library error (:class:`aoc_cli.errors.AocError`) and a usage
 error (an unknown command or option, a missing argument, a value that is not one of the
@@ -9,8 +9,6 @@ comes from :mod:`aoc_cli.cli.errors`.
 
 from __future__ import annotations
 
-import importlib
-import importlib.util
 import os
 import sys
 from pathlib import Path
@@ -29,13 +27,15 @@ except ImportError:  # pragma: no cover - older typer on click
     from click import exceptions as usage  # noqa: E402
 
 from aoc_cli import __version__  # noqa: E402
+from aoc_cli.cli import (bench, collect, evaluate, explain, export, index, info,  # noqa: E402
+                         ingest, rollout, split, train, verify)
 from aoc_cli.cli.common import state  # noqa: E402
 from aoc_cli.cli.errors import message, showing_warnings  # noqa: E402
 from aoc_cli.errors import AocError  # noqa: E402
 
-#: Command modules in the order of the data flow.
-COMMANDS = ["ingest", "collect", "train", "index", "explain", "evaluate", "rollout", "bench",
-            "info", "verify", "export"]
+#: The command modules, in the order of the data flow (``aoc --help`` lists them so).
+COMMANDS = [ingest, split, collect, train, index, explain, evaluate, rollout, bench, info,
+            verify, export]
 
 app = typer.Typer(
     name="aoc",
@@ -65,9 +65,8 @@ def _global(
     state.store = store
 
 
-for _name in COMMANDS:
-    if importlib.util.find_spec(f"aoc_cli.cli.{_name}") is not None:
-        importlib.import_module(f"aoc_cli.cli.{_name}").register(app)
+for _command in COMMANDS:
+    _command.register(app)
 
 
 def usage_message(err: usage.UsageError) -> str:

@@ -12,7 +12,7 @@ import aoc_cli
 from aoc_cli.cli.common import (EpisodesOption, FormatOption, RayAddressOption, WorkersOption,
                                 deciding, state)
 from aoc_cli.errors import AocError
-from aoc_cli.report import ProgressBar, message, resolve_format, write_records
+from aoc_cli.cli.output import ProgressBar, message, resolve_format, write_records
 
 
 def register(app: typer.Typer) -> None:

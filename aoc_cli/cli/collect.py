@@ -12,7 +12,7 @@ import aoc_cli
 from aoc_cli.cli.common import (EpisodesOption, FormatOption, RayAddressOption, WorkersOption,
                                 state)
 from aoc_cli.errors import AocError
-from aoc_cli.report.output import ProgressBar, message, write_records
+from aoc_cli.cli.output import ProgressBar, message, write_records
 
 LIST_COLUMNS = ["name", "gym_id", "horizon", "default_steps", "default_episodes", "policies",
                 "success"]

@@ -23,7 +23,7 @@ from aoc_cli.belief.config import BeliefConfig
 from aoc_cli.cli.fields import MODEL, choices_of, from_field
 from aoc_cli.control.config import ControllerConfig
 from aoc_cli.errors import AocError
-from aoc_cli.index.config import IndexConfig
+from aoc_cli.neighbours.config import IndexConfig
 
 
 @dataclass
@@ -89,10 +89,10 @@ def choice(value: Enum | str | None) -> str | None:
 # -- the controller's settings, every one, on every command that decides ------------------
 #: The option of each ControllerConfig field: None unless given (then: the model's, else the
 #: field's default), flag, help, range and choices from the field (``-K`` for candidates).
-_TYPES = get_type_hints(ControllerConfig)
+_TYPES = {**get_type_hints(ControllerConfig), "sampler": SamplerName}
 CONTROLLER_OPTIONS = {
     item.name: Annotated[
-        Optional[SamplerName if item.name == "sampler" else _TYPES[item.name]],
+        Optional[_TYPES[item.name]],
         from_field(ControllerConfig, item.name,
                    *(("--candidates", "-K") if item.name == "candidates" else ()),
                    given=MODEL, annotated=True)]

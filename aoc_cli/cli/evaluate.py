@@ -16,8 +16,8 @@ from aoc_cli.cli.common import (CorpusArgument, FormatOption, IndexOption, Model
 from aoc_cli.cli.fields import from_field
 from aoc_cli.errors import warn
 from aoc_cli.ope.policies import OPESettings
-from aoc_cli.report import ProgressBar, resolve_format
-from aoc_cli.report.evaluate_view import write_evaluation
+from aoc_cli.cli.output import ProgressBar, resolve_format
+from aoc_cli.cli.evaluate_view import write_evaluation
 from aoc_cli.settings import SMALL_LOG_ROWS
 from aoc_cli.store import DEFAULT_INDEX
 

@@ -1,6 +1,6 @@
 """`aoc explain NAME`: the supporting examples, weights and residual behind a decision.
 Parses and prints only; the work is in :func:`aoc_cli.api.explain`, the tables in
-:mod:`aoc_cli.report.explain_view`."""
+:mod:`aoc_cli.cli.explain_view`."""
 
 from __future__ import annotations
 
@@ -14,8 +14,8 @@ from aoc_cli.cli.common import (CorpusArgument, FormatOption, IndexOption, Model
                                 WithoutEpisodesOption, WithoutOption, deciding, parse_episodes,
                                 parse_selection, state)
 from aoc_cli.errors import AocError
-from aoc_cli.report import message, resolve_format
-from aoc_cli.report.explain_view import write_explained
+from aoc_cli.cli.output import message, resolve_format
+from aoc_cli.cli.explain_view import write_explained
 from aoc_cli.store import DEFAULT_INDEX
 
 

@@ -13,7 +13,7 @@ import aoc_cli
 from aoc_cli.cli.common import (CorpusArgument, ExcludeOption, FormatOption, OverwriteOption,
                                 SelectOption, choice, parse_selection, state)
 from aoc_cli.errors import AocError
-from aoc_cli.report.output import ProgressBar, resolve_format, write_object
+from aoc_cli.cli.output import ProgressBar, resolve_format, write_object
 
 
 class ExportFormat(str, Enum):

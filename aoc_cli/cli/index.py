@@ -11,8 +11,8 @@ from aoc_cli.cli.common import (CorpusArgument, FormatOption, IndexKind, ModelOp
                                 StepCandidates, choice, parse_rates, state)
 from aoc_cli.cli.fields import from_field
 from aoc_cli.errors import AocError
-from aoc_cli.index.config import IndexConfig
-from aoc_cli.report import ProgressBar, write_object
+from aoc_cli.neighbours.config import IndexConfig
+from aoc_cli.cli.output import ProgressBar, write_object
 from aoc_cli.settings import SMALL_LOG_ROWS
 from aoc_cli.store import DEFAULT_INDEX
 

@@ -6,7 +6,7 @@ import typer
 
 import aoc_cli
 from aoc_cli.cli.common import CorpusArgument, FormatOption, state
-from aoc_cli.report.output import message, resolve_format, write_object, write_records
+from aoc_cli.cli.output import message, resolve_format, write_object, write_records
 from aoc_cli.store.summary import space_text
 
 

@@ -11,7 +11,7 @@ import typer
 import aoc_cli
 from aoc_cli.cli.common import FormatOption, parse_key_values, state
 from aoc_cli.cli.info import imputed_rows
-from aoc_cli.report.output import ProgressBar, resolve_format, write_object, write_records
+from aoc_cli.cli.output import ProgressBar, resolve_format, write_object, write_records
 
 
 def _names(text: Optional[str]) -> Optional[list[str]]:

@@ -12,7 +12,7 @@ import aoc_cli
 from aoc_cli.cli.common import (CorpusArgument, EpisodesOption, ExcludeOption, FormatOption,
                                 IndexOption, ModelOption, PolicyName, PolicyOption, SelectOption,
                                 choice, deciding, parse_selection, state)
-from aoc_cli.report import (ProgressBar, message, resolve_format, write_object,
+from aoc_cli.cli.output import (ProgressBar, message, resolve_format, write_object,
                             write_records)
 from aoc_cli.store import DEFAULT_INDEX
 

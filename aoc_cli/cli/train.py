@@ -16,8 +16,8 @@ from aoc_cli.belief.config import BeliefConfig
 from aoc_cli.cli.common import (BeliefKind, BeliefMode, ClassWeight, CorpusArgument, Device,
                                 FormatOption, choice, state)
 from aoc_cli.cli.fields import EVIDENCE, from_field
-from aoc_cli.report import train_view
-from aoc_cli.report.output import ProgressBar, message, resolve_format, write_object
+from aoc_cli.cli import train_view
+from aoc_cli.cli.output import ProgressBar, message, resolve_format, write_object
 from aoc_cli.settings import SMALL_LOG_ROWS
 from aoc_cli.store import DEFAULT_MODEL
 

@@ -12,7 +12,7 @@ import typer
 import aoc_cli
 from aoc_cli.cli.common import FormatOption, state
 from aoc_cli.errors import AocError
-from aoc_cli.report.output import ProgressBar, message, write_records
+from aoc_cli.cli.output import ProgressBar, message, write_records
 
 
 def register(app: typer.Typer) -> None:

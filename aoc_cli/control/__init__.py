@@ -1,4 +1,5 @@
-"""The accountable controller: candidates, decisions, decision records, OOD monitor, rollouts.
+"""The accountable controller: candidates, the decision rule, decision records, OOD monitor,
+rollouts, explanations and the audit log.
 
 Names are imported lazily (PEP 562), so that reading the controller's settings
 (:mod:`aoc_cli.control.config`, as every CLI start does for its help) imports neither FAISS
@@ -21,21 +22,23 @@ _WHERE = {
     "OODMonitor": "monitor",
     "Session": "session",
     "decision_record": "records",
-    "explain_logged_step": "run",
-    "explain_query": "run",
+    "explain_logged_step": "explain",
+    "explain_queries": "explain",
+    "explain_query": "explain",
+    "explain_recorded": "explain",
     "flags_against": "monitor",
     "given_settings": "config",
     "model_controller": "session",
     "model_free_session": "session",
     "open_session": "session",
-    "parse_query": "run",
-    "read_audit_step": "records",
+    "parse_query": "explain",
+    "read_audit_step": "audit",
     "reference_band": "monitor",
-    "replay_decision": "run",
+    "replay_decision": "explain",
     "rollout": "run",
     "run_episode": "episodes",
     "summarize": "episodes",
-    "write_audit": "records",
+    "write_audit": "audit",
 }
 
 __all__ = sorted(_WHERE)

@@ -12,7 +12,8 @@ import numpy as np
 
 from aoc_cli.control.config import ControllerConfig
 from aoc_cli.control.controller import Controller
-from aoc_cli.corpus_index import CorpusIndex, load_index, load_model
+from aoc_cli import belief
+from aoc_cli.corpus_index import CorpusIndex, load_index
 from aoc_cli.errors import AocError, call, param, warn
 from aoc_cli.store import DEFAULT_INDEX, Corpus
 
@@ -86,7 +87,7 @@ def open_session(corpus: Corpus, model_id: str | None = None, index_id: str = DE
              "use it")
     bc_model = None
     if config.sampler == "bc" and index.model.mode == "value" and not corpus.discrete:
-        bc_model = load_model(corpus, config.bc_model)
+        bc_model = belief.load_model(corpus, config.bc_model)  # torch, loaded here
         if bc_model.mode != "imitation":
             raise AocError(f"model {config.bc_model!r} is not an imitation-mode model: the bc "
                            "sampler needs "

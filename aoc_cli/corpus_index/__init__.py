@@ -8,7 +8,6 @@ from aoc_cli.corpus_index.build import (
     TYPICAL_SAMPLE,
     build_index,
     load_index,
-    load_model,
     neighbours,
     typical_residual,
 )
@@ -22,7 +21,6 @@ __all__ = [
     "TypicalResidual",
     "build_index",
     "load_index",
-    "load_model",
     "neighbours",
     "typical_residual",
 ]

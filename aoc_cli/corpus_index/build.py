@@ -19,22 +19,19 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
+from aoc_cli import belief
 from aoc_cli.corpus_index.index import CorpusIndex
 from aoc_cli.decompose.k_rule import index_k
 from aoc_cli.errors import AocError, BadSetting, IndexMissing, IndexStale, call, param
-from aoc_cli.index import BeliefIndex
-from aoc_cli.index.strata import NEAREST, PER_ACTION
+from aoc_cli.neighbours import BeliefIndex
+from aoc_cli.neighbours.strata import NEAREST, PER_ACTION
 from aoc_cli.progress import Progress
 from aoc_cli.rows import episode_multiplicity
 from aoc_cli.store import (DEFAULT_INDEX, Corpus, atomic_dir, derived, index_dir, model_dir,
                            writing_model)
-
-if TYPE_CHECKING:
-    from aoc_cli.belief.artefact import BeliefModel
 
 #: Rows sampled to measure the corpus's typical residual (leave-those-rows-out).
 TYPICAL_SAMPLE = 500
@@ -57,13 +54,6 @@ def neighbours(corpus: Corpus, model, candidates: str = "auto") -> tuple[int, st
     return index_k(model.d_b, corpus, imitation, candidates)
 
 
-def load_model(corpus: Corpus, model_id: str | None) -> BeliefModel:
-    """The model to index or control with."""
-    from aoc_cli.belief import load_model as load  # lazy: torch, only once a model is loaded
-
-    return load(corpus, model_id)
-
-
 def build_index(corpus: Corpus, model_id: str | None = None, kind: str = "auto",
                 index_id: str = DEFAULT_INDEX, episode_rates: dict | None = None,
                 seed: int = 0, progress: Progress | None = None, *,
@@ -82,7 +72,7 @@ def build_index(corpus: Corpus, model_id: str | None = None, kind: str = "auto",
     from aoc_cli.belief.stream import write_row_beliefs  # lazy: torch (a model is loaded)
 
     episode_rates = {**(resample or {}), **(subsample or {}), **(episode_rates or {})}
-    model = load_model(corpus, model_id)
+    model = belief.load_model(corpus, model_id)  # torch, loaded here (the package is lazy)
     model_k = neighbours(corpus, model, candidates)
     if episode_rates and index_id == DEFAULT_INDEX:
         raise AocError("index_id must name a new index for a re-sampled or sub-sampled one "
@@ -150,7 +140,7 @@ def typical_residual(ci: CorpusIndex, seed: int = 0) -> dict:
 def load_index(corpus: Corpus, model_id: str | None = None,
                index_id: str = DEFAULT_INDEX) -> CorpusIndex:
     """Load a built index, refusing one built from another corpus or model, or damaged."""
-    model = load_model(corpus, model_id)
+    model = belief.load_model(corpus, model_id)  # torch, loaded here (the package is lazy)
     out = index_dir(corpus.path, model.id, index_id)
     hint = call("build_index", corpus.name, model=model.id)
     if index_id != DEFAULT_INDEX:

@@ -10,8 +10,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from aoc_cli.decompose import decompose, default_k
-from aoc_cli.index import BeliefIndex
-from aoc_cli.index.strata import NEAREST, candidate_search
+from aoc_cli.neighbours import BeliefIndex
+from aoc_cli.neighbours.strata import NEAREST, candidate_search
 
 if TYPE_CHECKING:
     from aoc_cli.belief.artefact import BeliefModel
@@ -54,7 +54,7 @@ class CorpusIndex:
     def candidates(self) -> str:
         """Step 1's candidates (``index.json`` ``candidates``): "nearest", the k nearest rows;
         "per_action", the k / n nearest rows of each of the n actions
-        (:mod:`aoc_cli.index.strata`). An index that recorded none: "nearest"."""
+        (:mod:`aoc_cli.neighbours.strata`). An index that recorded none: "nearest"."""
         return self.meta.get("candidates") or NEAREST
 
     @property

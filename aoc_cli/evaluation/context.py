@@ -13,8 +13,8 @@ from aoc_cli.control.controller import action_bounds, support_disagreement
 from aoc_cli.control.episodes import check_same_spaces
 from aoc_cli.decompose import subset_size
 from aoc_cli.errors import AocError, NoRewards, call
-from aoc_cli.index import BeliefIndex
-from aoc_cli.index.strata import candidate_search
+from aoc_cli.neighbours import BeliefIndex
+from aoc_cli.neighbours.strata import candidate_search
 from aoc_cli.ope.policies import behaviour_targets
 from aoc_cli.settings import SMALL_LOG_ROWS
 
@@ -160,7 +160,7 @@ class KNNBaseline:
         self.mean, self.std = obs.mean(0), np.where(obs.std(0) > 1e-9, obs.std(0), 1.0)
         self.value = ctx.mode == "value"
         x = self.features(ctx, obs, ctx.corpus_actions)
-        # exact (flat: a batch is searched cell by cell, aoc_cli/index/cells.py), or IVF when large
+        # exact (flat: a batch is searched cell by cell, aoc_cli/neighbours/cells.py), or IVF when large
         x = x.astype(np.float32)
         self.nn = search_structure(None, x, ctx.exact, ctx.seed) or \
             BeliefIndex.build(x, kind="flat")
@@ -236,7 +236,7 @@ class EvalContext:
         self.index = self.session.index
         self.search = search_structure(self.index.index, self.index.beliefs, self.exact,
                                        self.seed)
-        # step 1 as the index takes its candidates (aoc_cli.index.strata), prepared once;
+        # step 1 as the index takes its candidates (aoc_cli.neighbours.strata), prepared once;
         # per action with the run's IVF structure: one search per action (IVF above
         # EXACT_MAX_ROWS rows of the action, else exact)
         split = None

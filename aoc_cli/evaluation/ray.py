@@ -74,7 +74,8 @@ def evaluate_on_ray(store_root, name: str, data: str, model: str | None, index_i
     res = merge([part for parts in results for part in parts])
     decided = time.perf_counter()
     with one_thread():
-        block = ope_block(ctx.mode, ctx.data, res, ope, seed)
+        block = ope_block(ctx.mode, ctx.data, res, ope, seed,
+                          history_length=ctx.history_length)
     ope_seconds = time.perf_counter() - decided
     res.target = ctx.targets(res.row, block)  # the driver's alone: the tasks never compute them
     summary = summarise(ctx, res)

@@ -49,7 +49,7 @@ from aoc_cli.evaluation.context import (
     heterogeneity,
 )
 from aoc_cli.evaluation.records import step_records  # noqa: F401 (re-exported)
-from aoc_cli.index.strata import PerAction
+from aoc_cli.neighbours.strata import PerAction
 from aoc_cli.ope.policies import ope_block, put_ope, wanted
 from aoc_cli.threads import one_thread
 
@@ -384,7 +384,7 @@ def evaluate(session, data, baselines=BASELINES, seed: int = 0, progress=None,
     res = merge(parts)
     decided = time.perf_counter()
     with one_thread():
-        block = ope_block(ctx.mode, data, res, ope, seed)
+        block = ope_block(ctx.mode, data, res, ope, seed, history_length=ctx.history_length)
     ope_seconds = time.perf_counter() - decided
     res.target = ctx.targets(res.row, block)  # value mode: the held-out log's targets, once
     summary = summarise(ctx, res)

@@ -52,6 +52,9 @@ class Cohort:
     outcome: np.ndarray | None = None
     censored: np.ndarray | None = None
     measured: list[str] = field(default_factory=list)
+    #: when given, ``observations`` is an empty buffer and ``column(j)`` (N,) the raw values
+    #: of its column j (read once, filled while contiguous: :func:`impute.fill_columns`)
+    column: Callable[[int], np.ndarray] | None = None
 
 
 def measured_planned(options, names: list[str], gaps) -> list[str]:
@@ -143,18 +146,31 @@ def prepare(c: Cohort, options) -> Prepared:
     if spec is not None:
         impute.check_like(spec, names, options.impute, options.impute_mask, c.where, source)
         pre.setdefault("like", {})["impute"] = source.split("'")[1]
-    elif options.impute is not None:
-        spec = impute.fit(obs[:, :d], names, options.impute, options.impute_mask, c.where,
-                          measured=c.measured if options.impute_mask else None)
-    elif options.impute_mask:
+    elif options.impute_mask and options.impute is None:
         raise AocError(f"{param('impute_mask', True)} needs {param('impute', 'hold')} or "
                        f"{param('impute', 'median')}")
-    elif not options.drop_nonfinite:
-        impute.refuse_gaps(obs, names, c.where)
+    mask = None
+    if c.column is not None and (spec is not None or options.impute is not None):
+        rule = spec["rule"] if spec is not None else options.impute
+        mask, spec = impute.fill_columns(
+            obs, c.column, names, c.starts, rule,
+            spec["mask"] if spec is not None else options.impute_mask, list(c.measured),
+            c.where, medians=None if spec is None else spec["medians"])
+        if _like(options, "impute")[0] is not None:
+            spec = _like(options, "impute")[0]  # the reused spec, as it was recorded
+    elif c.column is not None:
+        for j in range(d):
+            obs[:, j] = c.column(j)
+    if mask is None and spec is None and options.impute is not None:
+        spec = impute.fit(obs[:, :d], names, options.impute, options.impute_mask, c.where,
+                          measured=c.measured if options.impute_mask else None)
+    if spec is None and not options.drop_nonfinite:
+        impute.refuse_gaps(obs[:, :d], names, c.where)
     if spec is not None:
         if impute.planned_measured(spec) != list(c.measured):
             raise AssertionError("the observations were made for other measured features")
-        mask = impute.fill(obs, c.starts, spec)
+        if mask is None:
+            mask = impute.fill(obs, c.starts, spec)
         names = impute.names_with_mask(spec, names)
         cells = impute.counts(mask, names)
         imputed = mask if mask.any() else None

@@ -311,20 +311,25 @@ def read_columns(table: Table, options: ReadOptions, source: dict) -> CorpusData
     other_roles = set(roles.tags) | set(roles.actions) | {
         roles.id, roles.time, roles.reward, roles.terminal, options.outcome,
         options.censored_column}
-    for j, c in enumerate(roles.observations):
-        observations[:, j] = numeric(cols[c], c, where, eps.row_label)[eps.order]
+
+    def column(j: int) -> np.ndarray:
+        """Observation column j in stay order, read once (its table column then dropped)."""
+        if j >= len(roles.observations):  # a static feature, per stay
+            return np.repeat(static_feats[:, j - len(roles.observations)], np.diff(eps.starts))
+        c = roles.observations[j]
+        x = numeric(cols[c], c, where, eps.row_label)[eps.order]
         if c not in other_roles:
             del cols[c]
-    if static_feats is not None:
-        observations[:, len(roles.observations):len(obs_names)] = np.repeat(
-            static_feats, np.diff(eps.starts), axis=0)
+        return x
+
     terminals, truncations = _flags(table, roles, eps)
     cohort = Cohort(
         where=where, starts=eps.starts, observations=observations, obs_names=obs_names,
         rewards=numeric(cols[roles.reward], roles.reward, where, eps.row_label)[eps.order]
         if roles.reward else None,
         terminals=terminals, truncations=truncations, row_label=eps.corpus_row_label,
-        stay_label=lambda e: f"{roles.id or 'episode'} {eps.ids[e]}", measured=measured)
+        stay_label=lambda e: f"{roles.id or 'episode'} {eps.ids[e]}", measured=measured,
+        column=column)
     if bin_cols:
         cohort.doses = {c: numeric(cols[c], c, where, eps.row_label)[eps.order]
                         for c in roles.actions}

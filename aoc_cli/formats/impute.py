@@ -120,6 +120,52 @@ def fill(obs: np.ndarray, starts: np.ndarray, spec: dict) -> np.ndarray:
     return imputed
 
 
+def fill_columns(obs: np.ndarray, column, names: list[str], starts: np.ndarray, rule: str,
+                 mask: bool, measured: list[str], where,
+                 medians: list[float] | None = None) -> tuple[np.ndarray, dict]:
+    """:func:`fit` (unless ``medians`` are given) and :func:`fill` in one pass, column by
+    column: ``column(j)`` (N,) float64, NaN where empty, is filled while contiguous and written
+    once into ``obs`` (N, d + m) with its ``COL?measured`` feature. Returns (imputed (N, d + m)
+    bool, the spec) as the two would; a column empty for every row is an AocError."""
+    if rule not in RULES:
+        raise AocError(f"unknown {param('impute', rule)}: use one of {', '.join(RULES)}")
+    d = len(names)
+    features = {name: d + k for k, name in enumerate(measured if mask else [])}
+    imputed = np.zeros(obs.shape, bool)
+    rows = np.arange(len(obs))
+    stay_start = np.repeat(starts[:-1], np.diff(starts)) if rule == "hold" else None
+    fitted, gaps = [], []
+    for j, name in enumerate(names):
+        x = np.array(column(j), dtype=np.float64)
+        empty = np.isnan(x)
+        if medians is None:
+            present = x[~empty]
+            if present.size == 0:
+                raise AocError(f"{where}: column {name!r} is empty for every stay: "
+                               f"{param('impute', rule)} has no measured value to fill it "
+                               "from; drop the column")
+            fitted.append(float(np.median(present)))
+        median = fitted[j] if medians is None else medians[j]
+        if name in features:
+            obs[:, features[name]] = ~empty
+        if empty.any():
+            gaps.append(name)
+            imputed[:, j] = empty
+            still = empty
+            if stay_start is not None:  # the last measured row at or before each row
+                last = np.where(empty, -1, rows)
+                np.maximum.accumulate(last, out=last)
+                held = empty & (last >= stay_start)
+                x[held] = x[last[held]]
+                still = empty & ~held
+            x[still] = median
+        obs[:, j] = x
+    spec = {"rule": rule, "mask": bool(mask), "names": list(names),
+            "medians": list(fitted if medians is None else medians),
+            "measured": list(measured if mask else gaps)}
+    return imputed, spec
+
+
 def names_with_mask(spec: dict | None, names: list[str]) -> list[str]:
     """Observation names after filling: ``names`` plus ``COL?measured`` features."""
     if not spec or not spec.get("mask"):
@@ -133,16 +179,20 @@ def counts(imputed: np.ndarray, names: list[str]) -> dict[str, int]:
     return {n: int(c) for n, c in zip(names, per) if c}
 
 
-def fill_query(obs: np.ndarray, spec: dict) -> np.ndarray:
+def fill_query(obs: np.ndarray, spec: dict, previous: np.ndarray | None = None) -> np.ndarray:
     """(Q, d) query observations whose unmeasured cells are NaN (``null`` in JSON) -> filled
-    with the corpus's medians, and the ``COL?measured`` features set (0 where the cell was
-    null) when the corpus has them; a query already of the corpus's full width has its NaN
-    cells filled and its measured features kept."""
+    by the corpus's rule: ``hold`` the query's ``previous`` observation (its history's last
+    step, itself filled) where given, else the corpus's medians; and the ``COL?measured``
+    features set (0 where the cell was null) when the corpus has them; a query already of the
+    corpus's full width has its NaN cells filled and its given measured features kept."""
     d = len(spec["names"])
     obs = np.asarray(obs, dtype=np.float64)
     base = obs[:, :d]
     empty = np.isnan(base)
-    filled = np.where(empty, np.asarray(spec["medians"])[None, :], base)
+    fallback = np.asarray(spec["medians"], dtype=np.float64)[None, :]
+    if spec["rule"] == "hold" and previous is not None:
+        fallback = np.asarray(previous, dtype=np.float64)[None, :d]
+    filled = np.where(empty, fallback, base)
     if not spec.get("mask") or not spec["measured"]:
         return filled
     cols = [spec["names"].index(n) for n in spec["measured"]]

@@ -44,6 +44,13 @@ def read_dataset(path: str | os.PathLike, fmt: str | None = None,
         raise AocError(f"unknown format {fmt!r}: use {param('fmt')} {'|'.join(FORMATS)}")
     elif fmt != "minari" and not Path(path).exists():
         raise AocError(f"no such file or folder: {path}; check the path")
+    tabular = ("impute", "impute_like", "outcome", "outcome_reward", "bin_actions", "bin_like",
+               "censored_column")
+    asked = [name for name in tabular if getattr(options, name) is not None] + (
+        ["impute_mask"] if options.impute_mask else [])
+    if asked and fmt not in ("csv", "parquet", "frame"):
+        raise AocError(f"{param(asked[0])} applies to tables (CSV, Parquet, a DataFrame), not "
+                       f"to {fmt} data")
     reader = {"minari": read_minari, "d4rl": read_d4rl, "d3rlpy": read_d3rlpy, "npz": read_npz,
               "csv": read_csv, "parquet": read_csv, "frame": read_frame}[fmt]
     data = reader(Path(path) if fmt not in ("minari", "frame") else path, options)

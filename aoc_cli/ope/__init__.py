@@ -7,5 +7,8 @@ evaluation").
 - :mod:`aoc_cli.ope.fqe`: FQE of one or more policies, with its interval by refits;
 - :mod:`aoc_cli.ope.ensemble`: the FQE networks of several policies trained as one batch;
 - :mod:`aoc_cli.ope.parts`: that ensemble split over processes;
+- :mod:`aoc_cli.ope.propensity`: the behaviour estimated from a log without propensities;
+- :mod:`aoc_cli.ope.support`: what the log supports (the rule that withholds), the verdict;
+- :mod:`aoc_cli.ope.value`: one policy's estimates, improvement and verdict;
 - :mod:`aoc_cli.ope.policies`: the OPE block of ``aoc evaluate`` (settings, behaviour fit).
 """

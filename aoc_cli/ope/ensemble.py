@@ -1,12 +1,12 @@
 """Many fitted Q evaluations trained at once: d3rlpy's DiscreteFQE update, batched over an
 ensemble of members that share one log.
 
-Why: one DiscreteFQE update of icu-sepsis's network (48 -> 64 -> 64 -> 25, batch 256) costs
-~1.7 ms, nearly all of it per-call overhead (Python, autograd, Adam's per-tensor loop), not
-arithmetic; :func:`aoc_cli.ope.fqe.bootstrap_fqe` runs a fit and 10 refits per
-policy, three policies an ``aoc evaluate``: ~48,000 updates, ~80 s of a 45,000-step
-evaluation. Stacking the members' weights along a leading dimension (``torch.bmm``) costs
-one update's overhead for all of them.
+Why: one DiscreteFQE update of a small network (icu-sepsis's: 48 -> 64 -> 64 -> 25) is
+nearly all per-call overhead (Python, autograd, Adam's per-tensor loop), not arithmetic, and
+:func:`aoc_cli.ope.fqe.bootstrap_fqe` runs a fit and its refits per policy, several policies
+an ``aoc evaluate``: tens of thousands of updates. Stacking the members' weights along a
+leading dimension (``torch.bmm``) costs one update's overhead for all of them (the figures:
+docs/benchmarks.md, "FQE as one batched ensemble").
 
 Each member is d3rlpy's DiscreteFQE, not a re-design of it: its network is the one d3rlpy
 built and initialised (:class:`aoc_cli.ope.fqe.FQEFit`: a ``VectorEncoder`` of ReLU
@@ -71,7 +71,7 @@ class FQEEnsemble:
         self.interval = int(fit.fqe.config.target_update_interval)
         self.x = torch.from_numpy(fit.x)                                     # (N, d_o)
 
-    def repeat(self, r: int, members=None) -> "FQEEnsemble":
+    def repeat(self, r: int, members=None) -> FQEEnsemble:
         """A new ensemble of len(members) * r members, each of ``members`` (None: all M) here r
         times in a row (weights, target, Adam's moments, step count): the warm starts of r
         refits per member."""
@@ -96,7 +96,7 @@ class FQEEnsemble:
                                          for k in ("exp_avg", "exp_avg_sq")}}
         return out
 
-    def put(self, members, part: "FQEEnsemble") -> None:
+    def put(self, members, part: FQEEnsemble) -> None:
         """Write ``part``'s members (a :meth:`repeat` ``(1, members)`` of this ensemble,
         trained since) back at ``members``: weights, target, Adam's moments and step count
         (a part trains every step, as the whole would), step counts."""
@@ -251,7 +251,7 @@ class FQEEnsemble:
             torch._foreach_addcdiv_(self.params, avg, denom,
                                     [(group["lr"] / (1 - beta1 ** t)) * -1] * len(denom))
 
-    def _next_table(self) -> "_TargetTable | None":
+    def _next_table(self) -> _TargetTable | None:
         """The target network's Q of every distinct next observation, when computing it at
         each sync costs less than the target's forward pass over every mini-batch until the
         next sync (distinct observations at most ``interval`` x B: a log whose states repeat,
@@ -314,8 +314,10 @@ class _TargetTable:
 
 
 def sampler(fit, cums: np.ndarray, policy_of: np.ndarray, pools: list, rng, M: int,
-            keep=None):
-    """draw() -> (rows (M, B), next actions (M, B)): member m's B rows uniform over its pool,
+            keep=None, weights: np.ndarray | None = None):
+    """draw() -> (rows (M, B), next actions (M, B)): member m's B rows uniform over its pool
+    (or, with ``weights`` (N,) >= 0, each entry of the pool drawn in proportion to its row's
+    weight: the inverse of its chance to have been kept, :func:`aoc_cli.ope.fqe.fqe_policies`),
     the next action of each drawn from member m's policy at the row's next logged step.
     ``keep`` (member indices, None: all): the draw of those members only, ``(len(keep), B)``
     each, the generator still drawn for all M (the kept members' rows and actions are those
@@ -333,10 +335,19 @@ def sampler(fit, cums: np.ndarray, policy_of: np.ndarray, pools: list, rng, M: i
     # count of entries below u in [0, 1) is that action (0 where u is 0): the same draw with
     # no (M, B, n) gather, where every policy is deterministic (aoc evaluate's decisions)
     chosen = _deterministic(cums)                                           # (P, N) or None
+    if weights is not None:     # inverse CDF over the pools' weights, end to end
+        cum = np.cumsum(np.asarray(weights, np.float64)[flat])
+        ends = offsets + lens - 1                                           # (K, 1)
+        first = np.where(offsets > 0, cum[np.maximum(offsets - 1, 0)], 0.0)
+        total = cum[ends] - first
 
     def draw():
         u_rows, u = rng.random((M, B))[keep], rng.random((M, B, 1))[keep]
-        rows = flat[offsets + (u_rows * lens).astype(np.int64)]             # (K, B)
+        if weights is None:
+            rows = flat[offsets + (u_rows * lens).astype(np.int64)]         # (K, B)
+        else:
+            at = np.searchsorted(cum, first + u_rows * total, side="right")
+            rows = flat[np.minimum(at, ends)]
         if chosen is not None:
             return rows, np.where(u[..., 0] > 0, chosen[pol, fit.nxt[rows]], 0)
         nxt_a = (cums[pol, fit.nxt[rows]] < u).sum(2).clip(0, n - 1)         # (K, B)

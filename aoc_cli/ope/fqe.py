@@ -9,7 +9,8 @@ instead of d3rlpy's per-transition sampler) and the next action of each drawn tr
 the evaluated policy's at the next logged step, handed to FQE through :class:`_NextActions`;
 a stochastic policy's next action is drawn from its distribution there (an unbiased target).
 The update itself is d3rlpy's (``DiscreteFQE.update``, :meth:`FQEFit.train`). The last step
-of an episode, ended or truncated, is terminal (no bootstrap past the log).
+of an ended episode is terminal; that of a truncated one is censored (never drawn: its next
+state is not in the log; :func:`fqe_policies`).
 
 ``aoc evaluate`` runs :func:`fqe_policies`: every policy's fit, then every refit, trained at
 once as a batched ensemble of d3rlpy's networks (:mod:`aoc_cli.ope.ensemble`; each
@@ -29,6 +30,7 @@ import numpy as np
 
 from aoc_cli.errors import AocError
 from aoc_cli.ope.ensemble import FQEEnsemble, joined, sampler
+from aoc_cli.ope.estimators import censoring_weights
 from aoc_cli.ope.parts import train_parts
 
 #: FQE settings: mini-batch, learning rate, target network sync, hidden layers.
@@ -240,7 +242,8 @@ def fqe_policies(observations, actions, rewards, starts, policies: list, gamma: 
                  steps: int | None = None, refits: int = REFITS,
                  refit_step_count: int | None = None, seed: int = 0, progress=None,
                  schedule: str = SCHEDULE, behaviour: bool = False,
-                 n_actions: int | None = None, parts: int | None = None) -> list:
+                 n_actions: int | None = None, parts: int | None = None,
+                 truncated: np.ndarray | None = None) -> list:
     """The direct method for each of P policies on one log, with an interval that holds the
     fitted model's own error. Per policy: Q_hat (N, n) of the full fit, its estimate (the mean
     start value of the policy), and ``refits`` refits, each on the log's episodes resampled
@@ -263,14 +266,20 @@ def fqe_policies(observations, actions, rewards, starts, policies: list, gamma: 
     ensemble trains in (:func:`aoc_cli.ope.parts.train_parts`; None: the cores, at
     most 4): the same values in any number.
     Returns per policy {"q" (the full fit's), "estimate", "fit_estimate", "low", "high",
-    "replicates" (refits,), "bagged", "steps", "refit_steps", "seconds"}.
+    "replicates" (refits,), "counts" (refits, E) (each refit's resampled episodes: a paired
+    difference with another estimate over the same resamples), "bagged", "steps",
+    "refit_steps", "seconds"}.
 
     ``behaviour``: one more member in the fit's ensemble, the logged behaviour (the next
     action the log's own: SARSA; ``n_actions`` actions when no policy is given), no refits, drawing its mini-batches from its own
     generator (seeded by ``seed``), so that its Q_hat is the same whatever policies train
     beside it (:func:`behaviour_fqe` alone); its record, last in the list, holds "q" (N, n),
     "logged" (N,) Q_hat of each logged step, "estimate" (the mean Q_hat of the episodes' first
-    logged steps: the behaviour's value, which the log's mean return also estimates), "steps"."""
+    logged steps: the behaviour's value, which the log's mean return also estimates), "steps".
+
+    ``truncated`` (E,): episodes cut short (:func:`aoc_cli.ope.estimators.censoring_weights`): the last step of one is
+    never drawn, and the transitions that continue are drawn in proportion to the inverse of
+    their chance to have escaped the cut."""
     import time
 
     started = time.perf_counter()
@@ -291,13 +300,16 @@ def fqe_policies(observations, actions, rewards, starts, policies: list, gamma: 
     tick = (lambda base, m: None) if progress is None else \
         (lambda base, m: lambda done: progress(base + m * done, grand))
     behaviour_seed = [seed, 1]
+    weights = None if truncated is None or not np.any(truncated) else \
+        censoring_weights(fit.starts, truncated)
 
     def fit_draw(keep, rng):        # members keep of [policies..., behaviour]: their draws
         draws = [] if not P else [sampler(fit, cums, np.arange(P), [None] * P, rng, P,
-                                          keep=keep[keep < P])]
+                                          keep=keep[keep < P], weights=weights)]
         if logged is not None and np.any(keep == P):
-            draws.append(sampler(fit, cumulative(logged)[None], np.zeros(1, np.int64), [None],
-                                 np.random.default_rng(behaviour_seed), 1))
+            draws.append(sampler(fit, cumulative(logged)[None], np.zeros(1, np.int64),
+                                 [None], np.random.default_rng(behaviour_seed), 1,
+                                 weights=weights))
         return joined(*draws)
 
     ens = FQEEnsemble(fit, [fit.snapshot()] * M, [fit.fqe._grad_step] * M)
@@ -321,7 +333,8 @@ def fqe_policies(observations, actions, rewards, starts, policies: list, gamma: 
         boot = ens.repeat(refits, range(P))             # member i * refits + b: policy i, refit b
         policy_of, boot_pools = np.repeat(np.arange(P), refits), pools * P
         train_parts(boot, k, lambda keep, rng: sampler(fit, cums, policy_of, boot_pools, rng,
-                                                       P * refits, keep=keep),
+                                                       P * refits, keep=keep,
+                                                       weights=weights),
                     fit.rng, parts, progress=tick(M * total, P * refits), schedule=schedule)
         q0 = boot.q(first).reshape(P, refits, n_episodes, -1)               # (P, refits, E, n)
         quantile = student_quantile(refits - 1)
@@ -331,7 +344,7 @@ def fqe_policies(observations, actions, rewards, starts, policies: list, gamma: 
             half = quantile * float(np.std(reps, ddof=1))
             bagged = float(v0.mean())
             rec.update(estimate=bagged, low=bagged - half, high=bagged + half, replicates=reps,
-                       bagged=bagged, refit_steps=k)
+                       bagged=bagged, refit_steps=k, counts=counts)
     if logged is not None:
         at = q[P][np.arange(fit.n_rows), act]                              # (N,)
         out.append({"q": q[P], "logged": at, "estimate": float(np.mean(at[first])),
@@ -344,22 +357,20 @@ def fqe_policies(observations, actions, rewards, starts, policies: list, gamma: 
 
 def behaviour_fqe(observations, actions, rewards, starts, n_actions: int, gamma: float = 1.0,
                   steps: int | None = None, seed: int = 0, progress=None,
-                  schedule: str = SCHEDULE) -> dict:
+                  schedule: str = SCHEDULE, truncated: np.ndarray | None = None) -> dict:
     """The behaviour's record of :func:`fqe_policies` (``behaviour=True``) with no policy
     beside it: the same Q_hat as when it trains beside policies (its own draws, the same
     initialisation), to float rounding."""
     return fqe_policies(observations, actions, rewards, starts, [], gamma, steps, 0, seed=seed,
                         progress=progress, schedule=schedule, behaviour=True,
-                        n_actions=n_actions)[-1]
+                        n_actions=n_actions, truncated=truncated)[-1]
 
 
 def student_quantile(df: int) -> float:
     """The 97.5% quantile of Student's t with ``df`` degrees of freedom: the half-width, in
     standard deviations, of a 95% interval whose standard deviation comes from df + 1
     replicates (1.96 for many; 2.26 for 10 refits, 4.30 for 3)."""
-    from scipy.special import (
-        stdtrit,  # scipy.special: ~0.2 s to import, only where refits run
-    )
+    from scipy.special import stdtrit  # slow to import: only where refits run
 
     return float(stdtrit(int(df), 0.975))
 

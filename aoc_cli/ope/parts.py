@@ -14,8 +14,10 @@ members in every part, :func:`aoc_cli.ope.ensemble.sampler`'s ``keep``), and a f
 starts each child with a copy of that generator in this process's state. So each member
 trains on the same rows, next actions and learning rates, in the same floats, whatever the
 number of parts (tests/ope/test_ope_parts.py), and this process's generator ends where
-one process's would. A child that fails is trained again here from a copy of the generator's
-starting state. Forking needs Linux (elsewhere: one part); each child runs one thread, as
+one process's would. A child that fails, or has not answered :data:`PATIENCE` times as long
+as this process took for its own part (at least :data:`GRACE_SECONDS`) after it, is ended and
+its part trained again here from a copy of the generator's starting state: a hung child never
+hangs ``aoc evaluate``. Forking needs Linux (elsewhere: one part); each child runs one thread, as
 the caller does (the FQE runs under :func:`aoc_cli.threads.one_thread`), and leaves by
 ``os._exit`` so that nothing of this process (progress bars, temporary files) runs twice.
 Results come back as ``.npz`` bytes (``allow_pickle=False``).
@@ -28,6 +30,7 @@ import io
 import multiprocessing
 import os
 import sys
+import time
 
 import numpy as np
 
@@ -35,6 +38,10 @@ from aoc_cli.threads import cores
 
 #: The most parts by default: the fit trains one member per policy (4 in ``aoc evaluate``).
 MAX_PARTS = 4
+#: How long the children may take beyond this process's own part: PATIENCE times its time,
+#: at least GRACE_SECONDS (the parts are the same size; a busy machine slows them unevenly).
+PATIENCE = 4.0
+GRACE_SECONDS = 60.0
 
 
 def default_parts() -> int:
@@ -67,15 +74,21 @@ def train_parts(ens, steps: int, make_draw, rng: np.random.Generator, parts: int
         send.close()
         children.append((keep, part, receive, child))
     try:
+        began = time.monotonic()
         mine = ens.repeat(1, groups[0])
         mine.train(steps, None, None, None, None, draw=make_draw(groups[0], rng),
                    progress=progress, schedule=schedule)
         ens.put(groups[0], mine)
+        deadline = time.monotonic() + max(GRACE_SECONDS, PATIENCE * (time.monotonic() - began))
         for keep, part, receive, child in children:
+            packed = b""
             try:
-                packed = receive.recv_bytes()
-            except EOFError:
+                if receive.poll(max(0.0, deadline - time.monotonic())):
+                    packed = receive.recv_bytes()
+            except (EOFError, OSError):
                 packed = b""
+            if not packed and child.is_alive():       # hung: ended, its part trained here
+                child.terminate()
             child.join()
             if packed:
                 _unpack(part, packed)

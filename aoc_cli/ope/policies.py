@@ -6,13 +6,17 @@ Inputs, for a log of E episodes and N steps (discrete actions, n of them): obser
 (N, d_o), logged actions (N,), rewards (N,), ``starts`` (E + 1,), and per evaluated policy
 its decisions (N,) (deterministic: pi_e(a | h_t) = 1 for the decided action) or its
 probabilities (N, n). The behaviour's propensity of each logged action comes from a corpus
-column when the log has one (``propensity``), else from an imitation model fitted to the log
-(:func:`imitation_propensities`); the output says which.
+column when the log has one (``propensity``), else from a cross-fitted, calibrated model
+of the log (:func:`aoc_cli.ope.propensity.fit_propensities`); the output says which, and
+how well that model predicts held-out steps.
 
-Output (JSON-ready): ``policy_value`` {estimator: {estimate, low, high}}, ``ess`` (the
-whole-trajectory weights' effective sample size, of E), ``behaviour_value`` (the log's mean
-return with its interval), ``ope`` (settings, the propensities' source, notes) and
-``ope_warnings`` (a small ESS; estimators whose intervals do not overlap).
+Output (JSON-ready), per policy: ``policy_value`` {estimator: {estimate, low, high}, or
+{estimate: null, reason} where the log does not support it (:mod:`aoc_cli.ope.support`)},
+``improvement`` {estimator: V(policy) - V(logged behaviour), its interval paired (the same
+resamples for both)}, ``verdict`` (one line: better than the logged behaviour, shown or not),
+``support`` (ESS, per-step ESS, the share reached, the mean first-step weight, the undefined
+replicates); ``behaviour_value`` (the log's mean return with its interval), ``ope``
+(settings, the propensities' source and model, notes) and ``ope_warnings``.
 """
 
 from __future__ import annotations
@@ -34,19 +38,17 @@ from aoc_cli.ope.fqe import (
     available,
     behaviour_fqe,
     default_steps,
-    fqe_policies,
-    student_quantile,
 )
 from aoc_cli.ope.parts import MAX_PARTS
+from aoc_cli.ope.propensity import fit_propensities
+from aoc_cli.ope.support import fqe_refusal
+from aoc_cli.ope.value import _as_probs, fqe_values, policy_value
 from aoc_cli.settings import Settings, setting
 from aoc_cli.threads import one_thread
 
 ESTIMATORS = ("pdwis", "wdr", "fqe")
 #: The propensity column looked for when none is named.
 PROPENSITY_COLUMN = "propensity"
-#: Estimated propensities are floored here (a logged action the model finds near impossible
-#: would otherwise carry an unbounded weight).
-PROPENSITY_FLOOR = 1e-3
 #: An ESS below this share of the episodes (or below 30) is warned about.
 ESS_WARN_SHARE = 0.01
 
@@ -94,7 +96,7 @@ class OPESettings(Settings):
                                         help="Processes FQE's fits train in (the same values "
                                              "in any number; 1 on a busy machine).")
 
-    def check(self) -> "OPESettings":
+    def check(self) -> OPESettings:
         super().check()
         bad = [name for name in self.estimators if name not in ESTIMATORS]
         if bad:
@@ -121,113 +123,25 @@ def parse_estimators(text: str | None) -> tuple:
     return tuple(dict.fromkeys(names))
 
 
-def imitation_propensities(observations, actions, n_actions: int, seed: int = 0) -> np.ndarray:
-    """(N, n) the behaviour policy estimated from the log: a multinomial logistic regression
-    (scikit-learn) of the logged action on the standardised observation; probabilities
-    floored at :data:`PROPENSITY_FLOOR` and renormalised."""
-    # scikit-learn only here (its import costs ~1 s; the column path never needs it)
-    from sklearn.linear_model import LogisticRegression
-    from sklearn.preprocessing import StandardScaler
-
-    x = StandardScaler().fit_transform(np.asarray(observations, np.float64))
-    y = np.asarray(actions, np.int64)
-    probs = np.full((len(y), n_actions), 0.0)
-    present = np.unique(y)
-    if len(present) == 1:
-        probs[:, present[0]] = 1.0
-    else:
-        model = LogisticRegression(max_iter=300, random_state=seed).fit(x, y)
-        probs[:, model.classes_] = model.predict_proba(x)
-    probs = np.maximum(probs, PROPENSITY_FLOOR)
-    return probs / probs.sum(1, keepdims=True)
-
-
-def behaviour_propensities(data, logged: np.ndarray, settings: OPESettings):
-    """((N,) the behaviour's probability of each logged action, source text)."""
+def behaviour_propensities(data, logged: np.ndarray, settings: OPESettings,
+                           history_length: int = 0):
+    """((N,) the behaviour's probability of each logged action, source text, the estimated
+    model's record (None for a column): held-out log-loss, calibration)."""
     columns = list(getattr(data, "manifest", {}).get("columns", []))
     name = settings.propensity
     if name is None and PROPENSITY_COLUMN in columns:
         name = PROPENSITY_COLUMN
     if name is not None:
         p = np.asarray(data.column(name), np.float64)
-        return p, f"column {name!r} of {data.name!r}"
-    probs = imitation_propensities(data.observations, logged, data.n_actions, settings.seed)
+        return p, f"column {name!r} of {data.name!r}", None
+    fit = fit_propensities(data.observations, logged, data.episode_starts, data.n_actions,
+                           settings.seed, history_length)
+    probs = fit.pop("probs")
+    history = f" and the last {history_length} steps" if history_length else ""
     return (probs[np.arange(len(logged)), logged],
-            "estimated by an imitation model (multinomial logistic regression of the logged "
-            f"action on the observation, fitted to {data.name!r}; floored at "
-            f"{PROPENSITY_FLOOR})")
-
-
-def _as_probs(policy: np.ndarray, n_actions: int) -> np.ndarray:
-    policy = np.asarray(policy)
-    if policy.ndim == 1:
-        return np.eye(n_actions)[policy.astype(np.int64)]
-    return np.asarray(policy, np.float64)
-
-
-def policy_value(log: ope.Log, observations, logged, propensity, policy, n_actions: int,
-                 settings: OPESettings, progress=None, fqe: dict | None | str = "fit") -> dict:
-    """One policy's ``policy_value`` {estimator: Estimate dict}, ``ess`` and notes.
-    ``policy`` (N,) decisions or (N, n) probabilities at the logged steps; ``fqe`` its direct
-    method (one entry of :func:`fqe_values`, computed with the other policies'; "fit": fitted
-    here for this policy alone)."""
-    probs = _as_probs(policy, n_actions)                          # (N, n)
-    rows = np.arange(len(logged))
-    rho = ope.ratios(probs[rows, logged], propensity)
-    out: dict = {"ess": ope.ess(log, rho), "notes": []}
-    specs: dict = {}
-    if "pdwis" in settings.estimators:
-        specs["pdwis"] = ("pdwis", rho)
-    if isinstance(fqe, str):
-        fqe = fqe_values(log, observations, logged, [probs], settings, progress)[0]
-    q = None if fqe is None else fqe["q"]                                     # (N, n)
-    if fqe is not None and fqe.get("note"):
-        out["notes"].append(fqe["note"])
-    refitted = q is not None and len(fqe["replicates"]) > 1
-    if "wdr" in settings.estimators:
-        if q is None:
-            out["notes"].append("wdr: no Q model (needs fqe), so it equals pdwis")
-            specs["wdr"] = ("wdr", rho, np.zeros(len(rho)), np.zeros(len(rho)))
-        else:
-            specs["wdr"] = ("wdr", rho, q[rows, logged], (probs * q).sum(1))
-    if "fqe" in settings.estimators and q is not None and not refitted:
-        first = log.starts[:-1]
-        specs["fqe"] = ("mean", (probs[first] * q[first]).sum(1))
-        out["notes"].append("fqe: the interval resamples episodes' start values of one fitted "
-                            "Q model (the model's own error is not in it)")
-    est = ope.bootstrap(log, specs, n_boot=settings.n_boot, seed=settings.seed)
-    out["policy_value"] = {k: v.as_dict() for k, v in est.items()}
-    if refitted and "fqe" in settings.estimators:
-        out["policy_value"]["fqe"] = {k: fqe[k] for k in ("estimate", "low", "high")}
-        b, k, n = len(fqe["replicates"]), fqe["refit_steps"], fqe["steps"]
-        out["notes"].append(
-            f"fqe: the estimate is the mean of {b} refits' start values (bagged; one fit's: "
-            f"{fqe['fit_estimate']:.4g}), the interval +- {student_quantile(b - 1):.3g} sd of the "
-            f"refits' estimates (Student's t, {b - 1} degrees of freedom), each "
-            f"refit on the log's episodes resampled with replacement, {k:,} steps on from the "
-            f"full fit's "
-            f"{n:,}-step weights (the model's own sampling and training error is in it; cost "
-            f"{(n + b * k) / n:.1f}x one fit)")
-    return out
-
-
-def fqe_values(log: ope.Log, observations, logged, policies: list, settings: OPESettings,
-               progress=None, behaviour: bool = False) -> list:
-    """The direct method for each policy (N, n) at once
-    (:func:`aoc_cli.ope.fqe.fqe_policies`: one batched ensemble), when an estimator needs it: with refits when FQE is asked for and
-    ``settings.fqe_refits`` > 1. Each entry None (no estimator needs a Q model) or a record;
-    without d3rlpy, a record with ``q`` None and the reason as its ``note``. ``behaviour``:
-    the logged behaviour's record last (``fqe_policies``'s), when FQE runs."""
-    if "fqe" not in settings.estimators and "wdr" not in settings.estimators:
-        return [None] * len(policies)
-    reason = available()
-    if reason is not None:
-        return [{"q": None, "note": reason, "replicates": ()} for _ in policies]
-    refits = settings.fqe_refits if "fqe" in settings.estimators else 0
-    return fqe_policies(observations, logged, log.rewards, log.starts, policies,
-                        settings.gamma, settings.fqe_steps, refits if refits > 1 else 0,
-                        seed=settings.seed, progress=progress, schedule=settings.fqe_schedule,
-                        behaviour=behaviour, parts=settings.fqe_processes)
+            "estimated: multinomial logistic regression of the logged action on the "
+            f"observation{history}, cross-fitted over {fit['folds']} folds of "
+            f"{data.name!r}'s episodes, temperature-calibrated", fit)
 
 
 def fqe_record(settings: OPESettings, n_rows: int, starts: np.ndarray, gamma: float) -> dict:
@@ -241,7 +155,7 @@ def fqe_record(settings: OPESettings, n_rows: int, starts: np.ndarray, gamma: fl
             "steps": int(settings.fqe_steps or default_steps(n_rows, starts, gamma)),
             "batch": BATCH, "learning_rate": LEARNING_RATE, "target_update": TARGET_UPDATE,
             "hidden": list(HIDDEN), "schedule": settings.fqe_schedule,
-            "seed": int(settings.seed), "torch": torch.__version__,
+            "seed": int(settings.seed), "truncated": "censored", "torch": torch.__version__,
             "d3rlpy": d3rlpy.__version__}
 
 
@@ -273,7 +187,8 @@ def behaviour_targets(data, gamma: float, seed: int = 0,
             return behaviour_fqe(data.observations, np.asarray(data.actions, np.int64),
                                  data.rewards, data.episode_starts, data.n_actions, gamma,
                                  record["steps"], settings.seed,
-                                 schedule=settings.fqe_schedule)["logged"]
+                                 schedule=settings.fqe_schedule,
+                                 truncated=truncated(data))["logged"]
 
     return kept_values(data, "fqe-behaviour", record, compute)
 
@@ -285,7 +200,7 @@ def warnings_for(name: str, rec: dict, n_episodes: int) -> list[str]:
     if rec["ess"] < small:
         out.append(f"policy {name!r}: effective sample size {rec['ess']:.1f} of {n_episodes} episodes "
                    "(few logged episodes follow this policy; its estimates are unreliable)")
-    items = list(rec["policy_value"].items())
+    items = [(k, e) for k, e in rec["policy_value"].items() if e.get("estimate") is not None]
     for i, (a, ea) in enumerate(items):
         for b, eb in items[i + 1:]:
             if ea["high"] < eb["low"] or eb["high"] < ea["low"]:
@@ -307,24 +222,28 @@ def check_log(data) -> None:
 
 
 def off_policy_values(data, logged: np.ndarray, policies: dict, settings: OPESettings,
-                      progress=None) -> dict:
+                      progress=None, history_length: int = 0) -> dict:
     """The OPE block of ``aoc evaluate`` for held-out corpus ``data`` (every row, in order):
     ``policies`` name -> decisions (N,) or probabilities (N, n). Returns {"ope": ...,
     "behaviour_value": ... (with "fqe", the direct method's value of the logged behaviour,
     when FQE ran: a check of FQE against the log's mean return), "policies": {name:
     {policy_value, ess, notes}}, "ope_warnings"} and, when FQE ran, "behaviour_fqe" (the
-    behaviour's record of :func:`aoc_cli.ope.fqe.fqe_policies`)."""
+    behaviour's record of :func:`aoc_cli.ope.fqe.fqe_policies`). ``history_length``: the
+    steps of history the policies decide from (the propensity model's too). Truncated
+    episodes are censored (:mod:`aoc_cli.ope.estimators`)."""
     check_log(data)
     logged = np.asarray(logged, np.int64)
     if len(logged) != data.n_rows:
         raise AocError(f"{len(logged)} decided steps for a log of {data.n_rows} rows")
-    log = ope.Log(data.episode_starts, data.rewards, settings.gamma)
-    propensity, source = behaviour_propensities(data, logged, settings)
+    log = ope.Log(data.episode_starts, data.rewards, settings.gamma, truncated(data))
+    propensity, source, model = behaviour_propensities(data, logged, settings, history_length)
     ope.ratios(np.ones(len(logged)), propensity)       # refuses a zero propensity up front
     mean = ope.bootstrap(log, {"mean": ("mean", log.returns())}, n_boot=settings.n_boot,
                          seed=settings.seed)["mean"]
     out = {"ope": {"estimators": list(settings.estimators), "gamma": settings.gamma,
-                   "propensity": source, "bootstrap": settings.n_boot,
+                   "propensity": source, "propensity_model": model,
+                   "truncated_episodes": int(log.truncated.sum()),
+                   "bootstrap": settings.n_boot,
                    "fqe_steps": (settings.fqe_steps or default_steps(
                        data.n_rows, data.episode_starts, settings.gamma))
                    if "fqe" in settings.estimators or "wdr" in settings.estimators else None,
@@ -339,11 +258,15 @@ def off_policy_values(data, logged: np.ndarray, policies: dict, settings: OPESet
         out["behaviour_fqe"] = own
         out["behaviour_value"]["fqe"] = own["estimate"]
         low, high = out["behaviour_value"]["low"], out["behaviour_value"]["high"]
-        if not low <= own["estimate"] <= high:
+        off = fqe_refusal(own["estimate"], low, high)
+        if off is not None:
             out["ope_warnings"].append(
                 f"fqe values the logged behaviour at {own['estimate']:.4g}, outside the 95% "
                 f"interval of its mean return ({low:.4g} to {high:.4g}): the direct method "
-                "is off on this log, and so may be its values of the policies")
+                "is off on this log, and so may be its values of the policies (withheld)")
+            for rec in fqes:
+                if rec is not None:
+                    rec["withheld"] = off
     for i, ((name, policy), fqe) in enumerate(zip(probs.items(), fqes)):
         try:
             rec = policy_value(log, data.observations, logged, propensity, policy,
@@ -356,6 +279,18 @@ def off_policy_values(data, logged: np.ndarray, policies: dict, settings: OPESet
         out["policies"][name] = rec
         out["ope_warnings"] += warnings_for(name, rec, log.n_episodes)
     return out
+
+
+def truncated(data) -> np.ndarray:
+    """(E,) whether each episode of ``data`` was cut short (its last row a truncation, not a
+    terminal): censored by the estimators."""
+    last = np.asarray(data.episode_starts, np.int64)[1:] - 1
+    trunc = getattr(data, "truncations", None)
+    if trunc is None:
+        return np.zeros(len(last), bool)
+    term = getattr(data, "terminals", None)
+    out = np.asarray(trunc, bool)[last]
+    return out & ~np.asarray(term, bool)[last] if term is not None else out
 
 
 def wanted(settings: OPESettings | None, mode: str, data) -> bool:
@@ -382,7 +317,7 @@ def wanted(settings: OPESettings | None, mode: str, data) -> bool:
 
 
 def ope_block(mode: str, data, res, settings: OPESettings | None, seed: int = 0,
-              progress=None) -> dict | None:
+              progress=None, history_length: int = 0) -> dict | None:
     """The OPE of the controller's decisions (``res.decided``) and of each baseline's on
     held-out log ``data`` (:func:`off_policy_values`, with the settings used under
     "settings"), when :func:`wanted` (``seed``: of the default settings); else None."""
@@ -395,7 +330,7 @@ def ope_block(mode: str, data, res, settings: OPESettings | None, seed: int = 0,
     for name, b in res.baselines.items():
         if b.get("decided") is not None:
             policies[name] = b["decided"]
-    block = off_policy_values(data, res.logged, policies, settings, progress)
+    block = off_policy_values(data, res.logged, policies, settings, progress, history_length)
     block["settings"] = settings
     return block
 
@@ -405,12 +340,12 @@ def put_ope(summary: dict, block: dict | None) -> None:
     if block is None:
         return
     own = block["policies"]["aoc"]
-    summary["policy_value"] = own["policy_value"]
-    summary["ess"] = own["ess"]
+    keys = ("policy_value", "improvement", "verdict", "ess", "support")
+    summary.update({k: own.get(k) for k in keys})
     summary["behaviour_value"] = block["behaviour_value"]
     summary["ope"] = {**block["ope"], "notes": own["notes"]}
     for name, rec in block["policies"].items():
         if name != "aoc":
-            summary["baselines"][name].update(policy_value=rec["policy_value"],
-                                              ess=rec["ess"], ope_notes=rec["notes"])
+            summary["baselines"][name].update({k: rec.get(k) for k in keys},
+                                              ope_notes=rec["notes"])
     summary["ope_warnings"] = block["ope_warnings"]

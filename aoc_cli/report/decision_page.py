@@ -55,9 +55,14 @@ class PageContext:
 
     def query(self, rec: dict) -> tuple[Values, np.ndarray | None, bool]:
         """The decision's query as a column of values, its history's imputed cells (L, d_o)
-        (None: none or not known), and whether its cells' imputation is known: read from the
-        ``--data`` corpus when the record is a step of it, else unknown."""
+        (None: none or not known), and whether its cells' imputation is known: the record's
+        ``query_imputed`` (a JSONL query's nulls), or read from the ``--data`` corpus when
+        the record is a step of it, else unknown."""
         obs = np.asarray(rec["observation"], np.float64)
+        if rec.get("query_imputed") is not None:  # a JSONL query's null cells, filled
+            hist = rec.get("query_history_imputed")
+            return (Values("this step", "the query", obs, np.asarray(rec["query_imputed"], bool),
+                           {}), None if not hist else np.asarray(hist, bool), True)
         src, row = self.source, rec.get("row")
         if src is None or row is None or rec.get("data") != src.name:
             return Values("this step", "the query", obs, None, {}), None, False

@@ -10,7 +10,7 @@ from aoc_cli.control.explain import audit_band
 from aoc_cli.corpus_index import load_index
 from aoc_cli.errors import BadInput, call
 from aoc_cli.report.html import check_html_path, write_page
-from aoc_cli.report.overview import audit_episode, steps_episodes
+from aoc_cli.report.overview import action_names, audit_episode, steps_episodes
 from aoc_cli.report.pages import decision_page, overview_page
 
 
@@ -29,6 +29,7 @@ def write_html(path: Path, records: list[dict], corpus, session=None, audit=None
     if audit is not None and session is not None:
         ep = audit_episode(corpus, audit, episode, upper=None)
         ep.upper = audit_band(session, ep.residual)
+        ep.actions = action_names(corpus)
         episodes = [ep]
         t = session.index.typical
         typical = {"p50": t.p50, "p90": t.p90, "p99": t.p99}
@@ -46,4 +47,6 @@ def steps_overview(corpus, steps_file: Path, path: Path, model, index_id: str) -
     t = load_index(corpus, model, index_id).typical
     typical = {"p50": t.p50, "p90": t.p90, "p99": t.p99}
     episodes = steps_episodes(corpus, steps_file, typical)
+    for ep in episodes:
+        ep.actions = action_names(corpus)
     write_page(path, overview_page(corpus, episodes, typical, Path(steps_file).name))

@@ -46,6 +46,8 @@ td.imputed{font-style:italic;color:#6b4c9a;text-decoration:underline dotted}
 .legend{font-size:12.5px;margin:2px 0 10px}
 a{color:#2a5aa0}
 @media print{body{margin:0;max-width:none}.cards{grid-template-columns:1fr 1fr}
+ .scroll{overflow:visible}table.values{width:100%;table-layout:fixed}
+ table.values td,table.values th{font-size:8px;padding:1px 2px;overflow-wrap:anywhere}
  a{color:inherit;text-decoration:none}.lede{border-left-color:#000}}
 """
 

@@ -14,9 +14,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from aoc_cli.control.audit import read_audit_episode
 from aoc_cli.errors import AocError, BadInput, call
 from aoc_cli.report.html import esc, num
-from aoc_cli.report.svg import chart
+from aoc_cli.report.svg import chart, tick_margin
 
 
 @dataclass
@@ -24,7 +25,9 @@ class Episode:
     """T decisions of one episode. ``residual`` (T,), ``upper`` (T,) the OOD band's upper edge
     (inf or NaN where none), ``flagged`` (T,) bool, ``decision`` (T,) the decided action (the
     first coordinate of a continuous one), ``logged`` (T,) or None, ``value`` (T,) or None,
-    ``support`` T lists of (who, tags, weight), ``labels`` T action labels."""
+    ``support`` T lists of (who, tags, weight), ``labels`` T action labels; ``actions``
+    {action: label} of a discrete corpus (the decisions chart then draws one labelled row per
+    action taken)."""
 
     title: str
     key: str
@@ -38,6 +41,7 @@ class Episode:
     value: np.ndarray | None = None
     steps: np.ndarray | None = None
     notes: list[str] = field(default_factory=list)
+    actions: dict[int, str] | None = None
 
 
 def _who(corpus, rows: np.ndarray) -> tuple[list[str], list[str]]:
@@ -76,18 +80,19 @@ def _labels(corpus, actions: np.ndarray) -> list[str]:
     return [num(np.asarray(a).reshape(-1).tolist(), 3) for a in actions]
 
 
+def action_names(corpus) -> dict[int, str] | None:
+    """{action: label} of a discrete corpus (the decisions chart's rows), else None."""
+    if not corpus.discrete:
+        return None
+    return dict(enumerate(_labels(corpus, np.arange(corpus.n_actions))))
+
+
 def audit_episode(corpus, path, episode: int, upper: np.ndarray) -> Episode:
     """Episode ``episode`` of an audit log; ``upper`` (T,) its OOD band, replayed by the
     caller with the session's monitor settings."""
-    import h5py
-
-    with h5py.File(path, "r") as f:
-        g = f[f"episode_{episode}"]
-        residual = np.asarray(g["residuals"], np.float64)
-        actions = np.asarray(g["actions"])
-        values = np.asarray(g["values"], np.float64)
-        flagged = np.asarray(g["ood"], bool)[:len(residual)]
-        rows, weights = np.asarray(g["support_rows"]), np.asarray(g["support_weights"])
+    recorded = read_audit_episode(path, episode)  # the audit log's one reader
+    residual, actions, values = recorded.residuals, recorded.actions, recorded.values
+    flagged, rows, weights = recorded.ood, recorded.support_rows, recorded.support_weights
     first = actions.reshape(len(actions), -1)[:, 0].astype(np.float64)
     return Episode(f"episode {episode}", f"{episode}", residual, upper, flagged, first,
                    _labels(corpus, actions), _supports(corpus, rows, weights),
@@ -135,6 +140,32 @@ def steps_episodes(corpus, path, typical: dict) -> list[Episode]:
     return out
 
 
+def _decisions_chart(ep: Episode, steps: np.ndarray, href: list[str]) -> tuple[str, int]:
+    """The decisions over time (and the logged actions): the first coordinate of a continuous
+    action; a discrete corpus's actions one labelled row each, in the order of their numbers.
+    And its left margin (the residual chart's, so that the steps line up)."""
+    decision, logged, yticks, height = ep.decision, ep.logged, None, 150
+    title = "decisions over time (the first coordinate of an action)"
+    if ep.actions is not None:
+        taken = np.concatenate([decision, [] if logged is None else logged]).astype(np.int64)
+        order = {int(a): i for i, a in enumerate(np.unique(taken))}
+        decision = np.array([order[int(a)] for a in decision], np.float64)
+        logged = None if logged is None else \
+            np.array([order[int(a)] for a in logged], np.float64)
+        yticks = [(i, ep.actions.get(a, f"action {a}")) for a, i in order.items()]
+        height = max(height, 46 + 16 * len(order))
+        title = "decisions over time (one row per action taken)"
+    series = [{"y": decision, "colour": "#009E73", "label": "decision"}]
+    if logged is not None:
+        series.append({"y": logged, "colour": "#555", "dash": True, "label": "logged"})
+    points = [{"x": float(t), "y": float(d), "colour": "#009E73", "href": h,
+               "label": f"step {int(t)}: {lab}"}
+              for t, d, h, lab in zip(steps, decision, href, ep.labels)]
+    left = tick_margin(yticks)
+    return chart(steps, series, width=1000, height=height, points=points, title=title,
+                 ylabel="step", yticks=yticks, left=left), left
+
+
 def episode_section(ep: Episode, typical: dict, detail: int | None = None) -> str:
     """Charts and step sections of one episode; ``detail`` a step whose full decision
     section (``#decision``) is on the page."""
@@ -145,21 +176,14 @@ def episode_section(ep: Episode, typical: dict, detail: int | None = None) -> st
                "label": f"step {int(t)}: flagged, residual {r:.3g}"}
               for t, r, h, f in zip(steps, ep.residual, href, ep.flagged) if f]
     band = (np.zeros(len(steps)), upper, "OOD band")
+    dec_chart, left = _decisions_chart(ep, steps, href)
     res_chart = chart(steps, [{"y": ep.residual, "colour": "#0072B2", "label": "residual"},
                               {"y": upper, "colour": "#777", "dash": True,
                                "label": "OOD band (upper edge)"}],
                       width=1000, height=200, band=band, points=points,
                       title=f"{ep.title}: residual over time; flagged steps marked x "
-                            f"(typical p50 {num(typical.get('p50'), 3)})", ylabel="step")
-    series = [{"y": ep.decision, "colour": "#009E73", "label": "decision"}]
-    if ep.logged is not None:
-        series.append({"y": ep.logged, "colour": "#555", "dash": True, "label": "logged"})
-    dec_points = [{"x": float(t), "y": float(d), "colour": "#009E73", "href": h,
-                   "label": f"step {int(t)}: {lab}"}
-                  for t, d, h, lab in zip(steps, ep.decision, href, ep.labels)]
-    dec_chart = chart(steps, series, width=1000, height=150, points=dec_points,
-                      title="decisions over time (the first coordinate of an action)",
-                      ylabel="step")
+                            f"(typical p50 {num(typical.get('p50'), 3)})", ylabel="step",
+                      left=left)
     rows, flag = [], ' &middot; <b class="bad">flagged</b>'
     for i, t in enumerate(steps):
         sup = "; ".join(f"{esc(w)} ({esc(tg)}) {wt:.0%}" if tg else f"{esc(w)} {wt:.0%}"

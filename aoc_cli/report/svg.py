@@ -2,8 +2,8 @@
 
 Hand-written rather than matplotlib: a decision page draws one chart per supporting row (up
 to d_b + 1 = 21) and an overview page links every step's marker to its section; matplotlib
-takes ~40 ms to render a small figure to SVG (~1 s a page of cards) and cannot put a link on
-a marker. These are polylines and circles with escaped labels, a few hundred bytes each,
+renders a small figure to SVG slowly for a page of cards (docs/benchmarks.md, "Figures once
+in docstrings") and cannot put a link on a marker. These are polylines and circles with escaped labels, a few hundred bytes each,
 crisp when printed.
 """
 
@@ -24,12 +24,15 @@ def _fmt(v: float) -> str:
 
 def chart(x, series: list[dict], width: int = 320, height: int = 130, title: str = "",
           band: tuple | None = None, points: list[dict] | None = None,
-          ylabel: str = "", legend: bool = True) -> str:
+          ylabel: str = "", legend: bool = True, yticks: list[tuple] | None = None,
+          left: int = 40) -> str:
     """An SVG line chart. ``x`` (T,); ``series``: dicts with ``y`` (T,) (NaN: a gap),
     ``colour``, optional ``dash`` (bool), ``label``; ``band`` (lower (T,), upper (T,), label)
     shaded; ``points``: dicts with ``x``, ``y``, ``colour``, optional ``href`` (a link, e.g.
-    ``#step-12``), ``label`` (its tooltip) and ``shape`` ("x", "o", or "ring": hollow, an imputed
-    value)."""
+    ``#step-12``), ``label`` (its tooltip) and ``shape`` ("x", "o", or "ring": hollow, an
+    imputed value); ``yticks``: (y, label) pairs written on the y axis, each with a faint line
+    (a discrete action's label at its row), instead of the range's two numbers; ``left`` the
+    margin before the plot (at least the longest tick label's), to align charts stacked."""
     x = np.asarray(x, np.float64)
     ys = [np.asarray(s["y"], np.float64) for s in series]
     allv = [v[np.isfinite(v)] for v in ys]
@@ -46,7 +49,8 @@ def chart(x, series: list[dict], width: int = 320, height: int = 130, title: str
     x0, x1 = (float(x.min()), float(x.max())) if len(x) else (0.0, 1.0)
     if x1 - x0 < 1e-12:
         x0, x1 = x0 - 1, x1 + 1
-    left, right, top = 40, 8, 16 if title else 6
+    right, top = 8, 16 if title else 6
+    left = max(left, tick_margin(yticks))
     bottom = 18 + (12 * ((len(series) + 2) // 3) if legend and any(
         s.get("label") for s in series) else 0)
     w, h = width - left - right, height - top - bottom
@@ -63,8 +67,17 @@ def chart(x, series: list[dict], width: int = 320, height: int = 130, title: str
         out.append(f'<text x="{left}" y="11">{esc(title)}</text>')
     out.append(f'<rect x="{left}" y="{top}" width="{w}" height="{h}" fill="none" '
                'stroke="#bbb"/>')
-    out.append(f'<text x="{left - 3}" y="{top + 8}" text-anchor="end">{_fmt(hi - pad)}</text>')
-    out.append(f'<text x="{left - 3}" y="{top + h}" text-anchor="end">{_fmt(lo + pad)}</text>')
+    if yticks:
+        for v, t in yticks:
+            y = float(py(v))
+            out.append(f'<line x1="{left}" y1="{y:.1f}" x2="{left + w}" y2="{y:.1f}" '
+                       f'stroke="#e3e6ec"/><text x="{left - 3}" y="{y + 3:.1f}" '
+                       f'text-anchor="end">{esc(t)}</text>')
+    else:
+        out.append(f'<text x="{left - 3}" y="{top + 8}" text-anchor="end">{_fmt(hi - pad)}'
+                   '</text>')
+        out.append(f'<text x="{left - 3}" y="{top + h}" text-anchor="end">{_fmt(lo + pad)}'
+                   '</text>')
     out.append(f'<text x="{left}" y="{top + h + 11}">{_fmt(x0)}</text>')
     out.append(f'<text x="{left + w}" y="{top + h + 11}" text-anchor="end">{_fmt(x1)}</text>')
     if ylabel:
@@ -114,6 +127,12 @@ def chart(x, series: list[dict], width: int = 320, height: int = 130, title: str
                        f'<text x="{lx + 17:.1f}" y="{ly}">{esc(s["label"])}</text>')
     out.append("</svg>")
     return "".join(out)
+
+
+def tick_margin(yticks: list[tuple] | None) -> int:
+    """The left margin the longest of ``yticks``' labels needs (about 5.5 px a character at
+    10 px), 40 at least."""
+    return max([40] + [int(8 + 5.5 * len(str(t))) for _, t in yticks or []])
 
 
 def _segments(ok: np.ndarray) -> list[np.ndarray]:

@@ -151,8 +151,8 @@ def hash_arrays(*arrays: np.ndarray | None) -> str:
 def array_checksum(a: np.ndarray) -> str:
     """CRC-32 (hex) of an array's dtype, shape and bytes: recorded per array of a corpus so that
     ``aoc verify`` names the changed ones. A checksum that finds damage, not a content identity
-    (that is :func:`hash_arrays`); CRC-32 as HDF5's and zlib's own, ~2.4x faster than SHA-256
-    here, so recording it adds about 40% to the hashing of an ingest."""
+    (that is :func:`hash_arrays`); CRC-32 as HDF5's and zlib's own, faster than SHA-256
+    (docs/benchmarks.md, "Figures once in docstrings")."""
     a = np.ascontiguousarray(a)
     crc = zlib.crc32(f"{a.dtype.str}{a.shape}".encode())
     return f"{zlib.crc32(memoryview(a).cast('B'), crc):08x}"

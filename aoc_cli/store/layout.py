@@ -63,6 +63,14 @@ def store_root(root: str | os.PathLike | None = None) -> Path:
     return Path(root)
 
 
+def holds_anything(corpus_path: str | os.PathLike) -> bool:
+    """Whether a corpus's folder holds anything of a corpus (its manifest, its corpus file or
+    models); the lock file of a name that holds nothing may go (:mod:`aoc_cli.store.sweep`)."""
+    path = Path(corpus_path)
+    return (path / MANIFEST_FILE).is_file() or (path / CORPUS_FILE).exists() \
+        or models_dir(path).exists()
+
+
 def models_dir(corpus_path: str | os.PathLike) -> Path:
     """``<corpus>/models/``: every model of a corpus."""
     return Path(corpus_path) / MODELS

@@ -31,7 +31,7 @@ from pathlib import Path
 from typing import Callable, Iterator
 
 from aoc_cli.errors import AocError, Locked
-from aoc_cli.store.layout import models_dir
+from aoc_cli.store.layout import holds_anything, models_dir
 from aoc_cli.store.lockfiles import pid_alive, remove_locked, same_file
 from aoc_cli.store.sweep import clear_dead
 
@@ -130,11 +130,11 @@ def corpus_lock_path(root: Path, name: str) -> Path:
 @contextlib.contextmanager
 def writing_corpus(root: str | os.PathLike, name: str, shared: bool = False) -> Iterator[None]:
     """The corpus lock: exclusive for ingest/collect, shared for train/index. Its file goes
-    when the corpus does not exist as the lock is let go; taking it clears the temporaries of
+    when the name holds nothing as the lock is let go; taking it clears the temporaries of
     dead writers anywhere in the store."""
     root = Path(root)
     with file_lock(corpus_lock_path(root, name), f"corpus {name!r}", shared=shared,
-                   keep=lambda: (root / name).exists()) as taken:
+                   keep=lambda: holds_anything(root / name)) as taken:
         if taken:
             with contextlib.suppress(OSError):
                 clear_dead(root)

@@ -8,9 +8,10 @@ them store-wide when it takes its corpus lock (:func:`aoc_cli.store.lock.writing
 ``aoc verify`` lists what it cleared. A temporary of a live process is never touched. (Pids
 are this machine's: a store written from two machines at once is not supported.)
 
-A lock file ``.<name>.lock`` (``.<name>.model-<id>.lock``) whose corpus folder (model folder)
-does not exist and that no process holds is removed too: a command lets go of such a lock
-file itself; these are left by an older aoc or a killed process.
+A lock file ``.<name>.lock`` (``.<name>.model-<id>.lock``) of a name that holds nothing (no
+corpus folder, or one without a manifest, corpus file or models; no model folder) and that no
+process holds is removed too: a command lets go of such a lock file itself; these are left by
+an older aoc or a killed process (``tests/store/test_sweep.py`` kills one).
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ import re
 import shutil
 from pathlib import Path
 
-from aoc_cli.store.layout import models_dir
+from aoc_cli.store.layout import holds_anything, models_dir
 from aoc_cli.store.lockfiles import pid_alive, remove_locked
 
 #: A temporary that records its writer's pid: ``.<name>.p<pid>.<random>.tmp[suffix]`` / ``.old``.
@@ -68,9 +69,9 @@ def clear_dead(root: str | os.PathLike) -> list[dict]:
 
 
 def _orphan(root: Path, name: str, model: str | None) -> bool:
-    """The corpus (or its model) a lock file guards does not exist."""
+    """The corpus (or its model) a lock file guards does not exist: its name holds nothing."""
     corpus = root / name
-    return not (models_dir(corpus) / model).exists() if model else not corpus.exists()
+    return not (models_dir(corpus) / model).exists() if model else not holds_anything(corpus)
 
 
 def _remove_unheld(path: Path) -> bool:

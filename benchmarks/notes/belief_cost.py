@@ -49,8 +49,8 @@ import aoc_cli.decompose.engine as engine  # noqa: E402
 import aoc_cli.decompose.hull as hull  # noqa: E402
 from aoc_cli.control import HistoryBuffer  # noqa: E402
 from aoc_cli.envs import make_env  # noqa: E402
-from aoc_cli.control import open_session  # noqa: E402
-from aoc_cli.store import DEFAULT_INDEX, Store  # noqa: E402
+import aoc_cli  # noqa: E402
+from aoc_cli.store import Store  # noqa: E402
 
 
 def old_steps(tree: str) -> dict:
@@ -102,7 +102,8 @@ def main() -> None:
     args = p.parse_args()
     corpus = Store.open(args.store).corpus(args.corpus)
     models = args.models.split(",")
-    sessions = {m: open_session(corpus, m, DEFAULT_INDEX) for m in models}  # each model its index
+    # each model its index, the paper's settings (pendulum-het sets none), the public entry
+    sessions = {m: aoc_cli.open_session(args.corpus, store=args.store, model=m) for m in models}
     solvers = {"new": {"min_norm_point": engine.min_norm_point,
                        "minimal_subset": engine.minimal_subset}}
     if args.old:

@@ -31,9 +31,9 @@ from aoc_cli.threads import wait_passively  # noqa: E402
 
 wait_passively()  # OpenMP threads wait passively, as under the aoc command (aoc_cli/threads.py)
 
+import aoc_cli  # noqa: E402
 from aoc_cli.envs.pendulum_het import swingup_action  # noqa: E402
-from aoc_cli.control import open_session  # noqa: E402
-from aoc_cli.store import DEFAULT_INDEX, Store  # noqa: E402
+from aoc_cli.store import Store  # noqa: E402
 
 
 def main() -> None:
@@ -60,7 +60,8 @@ def main() -> None:
     rows, sign = rows[keep], np.sign(acts[keep])
     cand = np.linspace(-2, 2, 41, dtype=np.float32)[:, None]
     for m in args.models.split(","):
-        s = open_session(corpus, m, DEFAULT_INDEX)
+        # the paper's settings (pendulum-het sets none of its own), the public entry
+        s = aoc_cli.open_session(args.corpus, store=args.store, model=m)
         hist_len = s.model.history_length
         hull, head, q_sign = [], [], []
         q_head = s.model.meta.get("critic", {}).get("q_head")

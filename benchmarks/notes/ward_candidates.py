@@ -32,7 +32,7 @@ from aoc_cli.belief.fit import train_corpus
 from aoc_cli.belief.select import abc_scores
 from aoc_cli.decompose import decompose
 from aoc_cli.envs import collect
-from aoc_cli.index import BeliefIndex, PerAction
+from aoc_cli.neighbours import BeliefIndex, PerAction
 from aoc_cli.store import DEFAULT_MODEL, Store
 from aoc_cli.threads import one_thread
 

@@ -27,8 +27,6 @@ logs 0 and 1; of the variants within 0.001 of it, the smallest lambda.
 from __future__ import annotations
 
 import json
-import sys
-from pathlib import Path
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -36,11 +34,10 @@ from scipy.spatial import cKDTree
 from aoc_cli.belief.row_labels import subset_scores
 from aoc_cli.decompose import decompose, per_action_k
 from aoc_cli.experiments.ward import history_features
-from aoc_cli.index import BeliefIndex, PerAction
+from aoc_cli.neighbours import BeliefIndex, PerAction
 from aoc_cli.threads import one_thread
 
-sys.path.insert(0, str(Path(__file__).parent))
-from ward_candidates import split_beliefs, split_parser, store_and_log  # noqa: E402
+from ward_candidates import split_beliefs, split_parser, store_and_log  # this folder's
 
 VARIANTS = ["logged"] + [f"head:{x}" for x in (0.25, 0.5, 0.75, 1.0)] + \
            [f"knn:{m}" for m in (5, 11, 21)]

@@ -113,7 +113,7 @@ def compare_compression(src: Path, root: Path, repeats: int) -> list[dict]:
 
 #: A child process: the imports, then one timed case; prints seconds and memory as JSON.
 CHILD = """
-import json, sys, time
+import json, resource, sys, time
 from pathlib import Path
 case, src, store = sys.argv[1], sys.argv[2], sys.argv[3]
 import numpy, pyarrow, pyarrow.csv
@@ -124,7 +124,11 @@ def hwm():
     for line in Path("/proc/self/status").read_text().splitlines():
         if line.startswith("VmHWM"):
             return int(line.split()[1]) / 1024
+def cpu():
+    r = resource.getrusage(resource.RUSAGE_SELF)  # every thread of the process
+    return r.ru_utime + r.ru_stime
 before = hwm()
+c0 = cpu()
 t0 = time.perf_counter()
 if case == "pyarrow":
     table = pyarrow.csv.read_csv(src)
@@ -139,7 +143,8 @@ else:
                                          bin_actions="input_4hourly=5,max_dose_vaso=5",
                                          outcome="died_in_hosp", outcome_reward="1=-1,0=1"))
     rows = result.rows
-print(json.dumps({"seconds": time.perf_counter() - t0, "rows": rows, "hwm_imports_mb": before,
+print(json.dumps({"seconds": time.perf_counter() - t0, "cpu": cpu() - c0, "rows": rows,
+                  "hwm_imports_mb": before,
                   "hwm_mb": hwm()}))
 """
 
@@ -172,18 +177,19 @@ def cohort_rows(tmp: Path, stays: int, repeats: int) -> list[dict]:
         r = runs[case]
         t = h.Runs()
         for x in r:
-            t.add(x["seconds"], float("nan"))
+            t.add(x["seconds"], x["cpu"])
         peak = sorted(x["hwm_mb"] - x["hwm_imports_mb"] for x in r)[len(r) // 2]
         rows.append(h.row(label, r[0]["rows"], t, file_mb=round(size_mb, 1),
                           peak_above_imports_mb=round(peak, 1),
                           peak_over_file=round(peak / size_mb, 2),
                           peak_total_mb=round(sorted(x["hwm_mb"] for x in r)[len(r) // 2], 1)))
-    ratios = sorted(a["seconds"] / p["seconds"] for a, p in zip(runs["aoc"], runs["pyarrow"]))
-    print(f"ingest / read_csv, paired by round: median {ratios[len(ratios) // 2]:.2f} "
-          f"(rounds {', '.join(f'{x:.2f}' for x in ratios)}); load {h.load():.1f}",
-          file=sys.stderr)
-    rows.append({"case": "ratio ingest / read_csv (median of rounds)",
-                 "median_s": ratios[len(ratios) // 2]})
+    for key, what in (("seconds", "wall"), ("cpu", "CPU")):
+        ratios = sorted(a[key] / p[key] for a, p in zip(runs["aoc"], runs["pyarrow"]))
+        print(f"ingest / read_csv, {what} seconds paired by round: median "
+              f"{ratios[len(ratios) // 2]:.2f} (rounds {', '.join(f'{x:.2f}' for x in ratios)}); "
+              f"load {h.load():.1f}", file=sys.stderr)
+        rows.append({"case": f"ratio ingest / read_csv, {what} s (median of rounds)",
+                     "median_s": ratios[len(ratios) // 2]})
     return rows
 
 

@@ -108,7 +108,8 @@ def table(runs: list, truth: dict) -> list[dict]:
     rows = []
     for pname in dict.fromkeys(x["policy"] for x in runs):
         for est in ("pdwis", "wdr", "fqe", "fqe_fit"):
-            r = [x for x in runs if x["policy"] == pname and est in x]
+            r = [x for x in runs if x["policy"] == pname and est in x
+                 and (est == "fqe_fit" or x[est].get("estimate") is not None)]  # shown only
             if est == "fqe_fit":        # one fit's value as the point, FQE's interval around it
                 half = [(x["fqe"]["high"] - x["fqe"]["low"]) / 2 for x in r]
                 r = [{**x, est: {"estimate": x[est], "low": x[est] - h, "high": x[est] + h}}

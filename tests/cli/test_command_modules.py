@@ -9,11 +9,14 @@ import ast
 from pathlib import Path
 
 import pytest
+import typer.main
 
 import aoc_cli
-from aoc_cli.cli.app import COMMANDS
+from aoc_cli.cli.app import COMMANDS, app
 
 CLI = Path(__file__).resolve().parents[2] / "aoc_cli" / "cli"
+#: The command modules' names, as the app imports them.
+NAMES = [module.__name__.rsplit(".", 1)[1] for module in COMMANDS]
 
 
 def _inner_imports(tree: ast.AST) -> list[ast.AST]:
@@ -33,7 +36,14 @@ def _commands(tree: ast.AST) -> list[ast.FunctionDef]:
         f.name in named or any("app.command" in ast.unparse(d) for d in f.decorator_list))]
 
 
-@pytest.mark.parametrize("command", COMMANDS)
+def test_every_command_module_is_imported_and_registered_by_name():
+    """The app imports each command module by name (no silent skip of a missing one)."""
+    modules = sorted(p.stem for p in CLI.glob("*.py") if "def register(" in p.read_text())
+    assert sorted(NAMES) == modules
+    assert set(typer.main.get_command(app).commands) >= set(NAMES)
+
+
+@pytest.mark.parametrize("command", NAMES)
 def test_a_command_makes_one_api_call_and_imports_nothing_inside_its_functions(command):
     tree = ast.parse((CLI / f"{command}.py").read_text())
     inner = _inner_imports(tree)

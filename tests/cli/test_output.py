@@ -2,7 +2,7 @@
 
 import json
 
-from aoc_cli.report import write_object, write_records
+from aoc_cli.cli.output import write_object, write_records
 
 
 def test_table_rounds_vectors_and_csv_keeps_full_precision(capsys):

@@ -55,8 +55,8 @@ def test_the_choices_are_the_librarys():
     from aoc_cli.baselines import BASELINES
     from aoc_cli.belief.config import MODES
     from aoc_cli.cli.common import BeliefMode, IndexKind, OutputFormat, PolicyName, SamplerName
-    from aoc_cli.index.config import KINDS
-    from aoc_cli.report.output import FORMATS
+    from aoc_cli.neighbours.config import KINDS
+    from aoc_cli.cli.output import FORMATS
 
     assert [p.value for p in PolicyName] == ["aoc", *BASELINES]
     assert tuple(m.value for m in BeliefMode) == MODES

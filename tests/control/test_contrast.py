@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from aoc_cli.control import ControllerConfig
-from aoc_cli.control.run import explain_query
+from aoc_cli.control.explain import explain_query
 from aoc_cli.control import open_session
 from tests.control.corpora import corridor_store
 from tests.control.test_whatif import logged_query, maze  # noqa: F401 (fixture)

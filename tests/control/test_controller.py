@@ -5,6 +5,7 @@ import pytest
 
 from aoc_cli.control import ControllerConfig, HistoryBuffer, rollout
 from aoc_cli.envs import make_env
+from aoc_cli.cli.errors import message
 from aoc_cli.errors import AocError
 from aoc_cli.rows import row_selection
 from aoc_cli.control import open_session
@@ -193,10 +194,10 @@ def test_a_models_settings_under_the_flags_given():
     with pytest.raises(AocError, match="^epsilon must be in") as err:
         ControllerConfig.for_model(saved, epsilon=2.0)
     # the library names its parameter; the command line shows the flag
-    assert err.value.for_command_line().startswith("--epsilon must be in")
+    assert message(err.value).startswith("--epsilon must be in")
     with pytest.raises(AocError, match="^residual_cap must be > 0") as err:
         ControllerConfig(residual_cap=-1.0)
-    assert err.value.for_command_line().startswith("--residual-cap must be > 0")
+    assert message(err.value).startswith("--residual-cap must be > 0")
 
 
 def test_the_typical_residual_has_one_typed_accessor(maze):

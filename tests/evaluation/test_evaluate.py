@@ -132,7 +132,7 @@ def test_own_corpus_leaves_each_episode_out_as_explain_does(ward):
 
 
 def test_leave_episode_out_search_drops_only_the_own_episode():
-    from aoc_cli.index import BeliefIndex
+    from aoc_cli.neighbours import BeliefIndex
 
     rng = np.random.default_rng(0)
     beliefs = rng.standard_normal((60, 3)).astype(np.float32)

@@ -46,19 +46,25 @@ def test_policy_value_is_the_estimators_on_the_decisions(sepsis):
     summary, res = evaluate(_session(store), held, ["bc"], ope=settings)
     log = ope.Log(held.episode_starts, held.rewards)
     rho = ope.ratios((res.decided == held.actions).astype(float), held.column("propensity"))
-    assert summary["policy_value"]["pdwis"]["estimate"] == pytest.approx(ope.pdwis(log, rho),
-                                                                         abs=1e-12)
     assert summary["ess"] == pytest.approx(ope.ess(log, rho), abs=1e-9)
-    e = summary["policy_value"]["wdr"]
-    assert e["low"] <= e["estimate"] <= e["high"]
+    # 150 episodes: an ESS under the rule's 500, so PDWIS and WDR are withheld, with why
+    for name in ("pdwis", "wdr"):
+        assert summary["policy_value"][name] == {
+            "estimate": None, "low": None, "high": None,
+            "reason": f"ESS {summary['ess']:,.1f} of 150 (the rule asks 500)"}
+    assert summary["verdict"].startswith("better than the logged behaviour: not estimable")
+    assert summary["support"]["reached"] <= 1.0
+    assert len(summary["support"]["ess_per_step"]) == np.diff(held.episode_starts).max()
     assert summary["behaviour_value"]["estimate"] == pytest.approx(
         np.mean(held.episode_returns()), abs=1e-12)
     assert summary["ope"]["propensity"] == "column 'propensity' of 'held'"
     bc = summary["baselines"]["bc"]
     rho_bc = ope.ratios((res.baselines["bc"]["decided"] == held.actions).astype(float),
                         held.column("propensity"))
-    assert bc["policy_value"]["pdwis"]["estimate"] == pytest.approx(ope.pdwis(log, rho_bc),
-                                                                    abs=1e-12)
+    assert bc["ess"] == pytest.approx(ope.ess(log, rho_bc), abs=1e-9)
+    assert bc["policy_value"]["pdwis"]["estimate"] is None
+    assert bc["policy_value"]["pdwis"]["reason"].startswith(("ESS", "undefined"))
+    assert "verdict" in bc and "improvement" in bc
 
 
 def test_fqe_interval_is_from_refits_and_says_so(sepsis):
@@ -68,20 +74,35 @@ def test_fqe_interval_is_from_refits_and_says_so(sepsis):
     settings = OPESettings(estimators=("fqe",), fqe_steps=300, fqe_refits=3)
     summary, res = evaluate(_session(store), held, [], ope=settings)
     e = summary["policy_value"]["fqe"]
-    assert e["low"] < e["estimate"] < e["high"]
+    # 300 steps on 150 episodes: FQE may be off on the logged behaviour, and then withheld
+    off = summary["behaviour_value"]["fqe"]
+    low, high = summary["behaviour_value"]["low"], summary["behaviour_value"]["high"]
+    if low <= off <= high:
+        assert e["low"] < e["estimate"] < e["high"]
+        gain = summary["improvement"]["fqe"]
+        assert gain["estimate"] == pytest.approx(
+            e["estimate"] - summary["behaviour_value"]["estimate"], abs=1e-12)
+        assert "(FQE)" in summary["verdict"]
+    else:
+        assert e["estimate"] is None and e["reason"].startswith(
+            f"FQE off on the logged behaviour ({off:.4g}, outside its mean return's")
     assert summary["ope"]["fqe_refits"] == 3
     note = [n for n in summary["ope"]["notes"] if n.startswith("fqe:")]
     one, _ = evaluate(_session(store), held, [], ope=OPESettings(
         estimators=("fqe",), fqe_steps=300, fqe_refits=0))
-    assert any("start values of one fitted Q model" in n for n in one["ope"]["notes"])
-    fit = one["policy_value"]["fqe"]["estimate"]        # the same full fit, without refits
+    reason = one["policy_value"]["fqe"]["reason"]      # one fit: withheld, its value said
+    assert one["policy_value"]["fqe"]["estimate"] is None
+    assert reason.startswith("one fit (fqe_refits 0): its interval would leave the model's "
+                             "own error out; its start values give ")
+    fit = float(reason.rsplit(" ", 1)[1])               # the same full fit, without refits
     assert note == [f"fqe: the estimate is the mean of 3 refits' start values (bagged; one "
                     f"fit's: {fit:.4g}), the interval +- 4.3 sd of the refits' estimates "
                     "(Student's t, 2 degrees of freedom), each "
                     "refit on the log's episodes resampled with replacement, 300 steps on from "
-                    "the full fit's 300-step weights (the model's own sampling and training "
+                    "the full fit's 300-step weights (the refits' sampling and training "
                     "error is in it; cost 4.0x one fit)"]
-    assert abs(e["estimate"] - fit) > 1e-6
+    if e["estimate"] is not None:
+        assert abs(e["estimate"] - fit) > 1e-6
 
 
 def test_cli_fqe_refits_reach_the_estimator(sepsis, capsys):
@@ -110,8 +131,12 @@ def test_without_a_propensity_column_an_imitation_model_estimates_them(sepsis, t
     store.write("bare", bare)
     settings = OPESettings(estimators=("pdwis",), n_boot=100)
     summary, _ = evaluate(_session(store), store.corpus("bare"), [], ope=settings)
-    assert summary["ope"]["propensity"].startswith("estimated by an imitation model")
+    assert summary["ope"]["propensity"].startswith("estimated: multinomial logistic "
+                                                   "regression of the logged action")
     assert 0 < summary["ess"] <= held.n_episodes
+    model = summary["ope"]["propensity_model"]
+    assert model["folds"] == 3 and 0 <= model["ece"] < 0.1
+    assert model["log_loss"] < model["log_loss_frequencies"]
 
 
 def test_each_distinct_observation_is_decided_once_with_the_per_step_results(sepsis):
@@ -140,7 +165,9 @@ def test_json_has_policy_value_behaviour_value_and_ess(sepsis, capsys):
     code, out, _err = _ope_cli(capsys, root, "held", "-f", "json")
     assert code == 0
     doc = json.loads(out)
-    assert set(doc["policy_value"]["pdwis"]) == {"estimate", "low", "high"}
+    assert set(doc["policy_value"]["pdwis"]) == {"estimate", "low", "high", "reason"}
+    assert doc["policy_value"]["pdwis"]["estimate"] is None       # ESS under 500: withheld
+    assert set(doc["improvement"]) == {"pdwis"} and isinstance(doc["verdict"], str)
     assert set(doc["behaviour_value"]) == {"estimate", "low", "high"}
     assert 0 < doc["ess"] <= 150
 
@@ -154,8 +181,21 @@ def test_zero_propensity_of_a_logged_action_is_one_line(sepsis, capsys):
     code, out, err = _ope_cli(capsys, root, "zero")
     assert code == 2 and out == ""
     assert err.strip().splitlines() == [
-        "aoc: error: the behaviour propensity of logged step 3 is 0.0: a logged action must "
-        "have a probability above 0 (1 such steps)"]
+        "aoc: error: the behaviour propensity of logged step 3 is 0.0: a logged action's "
+        "probability must be in (0, 1] (1 such steps)"]
+
+
+def test_a_propensity_above_one_is_one_line(sepsis, capsys):
+    root, store, held = sepsis
+    p = held.columns["propensity"].copy()
+    p[5] = 1.25
+    store.write("above", type(held)(**{**held.__dict__, "columns": {**held.columns,
+                                                                    "propensity": p}}))
+    code, out, err = _ope_cli(capsys, root, "above")
+    assert code == 2 and out == ""
+    assert err.strip().splitlines() == [
+        "aoc: error: the behaviour propensity of logged step 5 is 1.25: a logged action's "
+        "probability must be in (0, 1] (1 such steps)"]
 
 
 def test_a_propensity_column_the_log_lacks_is_one_line_before_any_step_is_decided(sepsis,
@@ -170,7 +210,8 @@ def test_a_propensity_column_the_log_lacks_is_one_line_before_any_step_is_decide
     assert "propensity" in lines[0] and "Traceback" not in err
 
 
-def test_a_policy_that_never_takes_the_logged_action_is_one_line(sepsis, capsys, tmp_path):
+def test_a_policy_that_never_takes_the_logged_action_is_null_not_an_error(sepsis, capsys,
+                                                                          tmp_path):
     root, store, held = sepsis
     steps = tmp_path / "steps.jsonl"          # the command's own decisions (its task settings)
     code, _, _ = run_in_process(capsys, "--store", str(root), "evaluate", "icu", "--data",
@@ -180,10 +221,13 @@ def test_a_policy_that_never_takes_the_logged_action_is_one_line(sepsis, capsys,
     decided = np.array([json.loads(line)["decision"] for line in steps.read_text().splitlines()])
     other = (decided + 1) % 25                 # decisions depend on the observation alone
     store.write("never", type(held)(**{**held.__dict__, "actions": other}))
-    code, out, err = _ope_cli(capsys, root, "never")
-    assert code == 2 and out == ""
-    assert len(err.strip().splitlines()) == 1
-    assert "never takes the logged action" in err
+    code, out, err = _ope_cli(capsys, root, "never", "-f", "json")
+    assert code == 0
+    doc = json.loads(out)
+    assert doc["policy_value"]["pdwis"] == {
+        "estimate": None, "low": None, "high": None,
+        "reason": "undefined: no logged episode follows the policy"}
+    assert doc["ess"] == 0.0
 
 
 def test_a_log_without_rewards_asked_for_ope_is_one_line(sepsis, capsys):
@@ -272,23 +316,31 @@ def test_an_fqe_models_held_out_target_is_the_behaviours_fqe_kept_beside_the_log
     assert alone == {"gamma": 1.0, "steps": steps} and np.all(got == 0.5)
 
 
-def test_fqe_off_on_the_logged_behaviour_is_a_warning(sepsis, monkeypatch):
+def test_fqe_off_on_the_logged_behaviour_is_a_warning_and_withheld(sepsis, monkeypatch):
     """The direct method values the logged behaviour beside the policies; outside the
-    interval of the log's mean return, the OPE says so."""
+    interval of the log's mean return, the OPE says so and withholds FQE's values."""
     from aoc_cli.ope import policies as ope_eval
 
     _root, store, _ = sepsis
     held = store.corpus("held")
     n = held.n_rows
 
+    e = held.n_episodes
+    counts = np.random.default_rng(0).multinomial(e, np.full(e, 1 / e), size=3)
+
     def fake(_log, _obs, _logged, policies, _settings, _progress=None, behaviour=False):
-        recs = [{"q": None, "note": "no model here", "replicates": ()} for _ in policies]
+        recs = [{"q": np.zeros((n, held.n_actions)), "replicates": np.array([0.1, 0.2, 0.3]),
+                 "counts": counts, "estimate": 0.2, "low": 0.0, "high": 0.4,
+                 "fit_estimate": 0.2, "steps": 10, "refit_steps": 2} for _ in policies]
         return recs + [{"q": np.zeros((n, held.n_actions)), "logged": np.zeros(n),
                         "estimate": 5.0}] if behaviour else recs
 
     monkeypatch.setattr(ope_eval, "fqe_values", fake)
     out = ope_eval.off_policy_values(held, held.actions, {"aoc": held.actions},
-                                     OPESettings(estimators=("pdwis",), n_boot=50))
+                                     OPESettings(estimators=("pdwis", "fqe"), n_boot=50))
+    fqe = out["policies"]["aoc"]["policy_value"]["fqe"]
+    assert fqe["estimate"] is None and fqe["reason"].startswith(
+        "FQE off on the logged behaviour (5, outside its mean return's 95% interval")
     assert out["behaviour_value"]["fqe"] == 5.0
     assert any(w.startswith("fqe values the logged behaviour at 5,") or
                w.startswith("fqe values the logged behaviour at 5 ")

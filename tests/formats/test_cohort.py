@@ -204,3 +204,12 @@ def test_the_generator_cohort_keeps_at_least_99_percent_of_its_stays(tmp_path):
     assert data.n_episodes == 100 and data.n_rows == len(cols["bloc"])
     assert np.isfinite(data.observations).all() and np.isfinite(data.rewards).all()
     assert script.cohort(5, 0)["icustayid"].dtype.kind == "i"
+
+
+def test_the_table_flags_are_refused_on_other_formats(tmp_path):
+    from tests.formats.sources import flat_arrays
+
+    path = tmp_path / "x.npz"
+    np.savez(path, **{k: v for k, v in flat_arrays()[0].items() if v is not None})
+    with pytest.raises(AocError, match="applies to tables"):
+        read_dataset(path, options=ReadOptions(impute="median"))

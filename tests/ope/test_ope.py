@@ -167,6 +167,14 @@ def test_zero_propensity_of_a_logged_action_is_refused():
         ratios(np.ones(3), np.array([0.5, 0.0, 0.2]))
 
 
-def test_a_policy_that_never_matches_the_log_is_refused():
-    with pytest.raises(AocError, match="never takes the logged action"):
-        pdwis(Log(STARTS, REWARDS), np.zeros(5))
+def test_a_propensity_above_one_is_refused():
+    with pytest.raises(AocError, match=r"propensity of logged step 2 is 1.5: a logged "
+                                       r"action's probability must be in \(0, 1\]"):
+        ratios(np.ones(3), np.array([0.5, 1.0, 1.5]))
+
+
+def test_a_policy_that_never_matches_the_log_is_undefined_not_zero():
+    log = Log(STARTS, REWARDS)
+    assert np.isnan(pdwis(log, np.zeros(5)))
+    assert np.isnan(wdr(log, np.zeros(5), Q, V))
+    assert ess(log, np.zeros(5)) == 0.0

@@ -81,3 +81,18 @@ def test_fqe_policies_gives_the_same_estimates_in_any_number_of_parts(log):
         np.testing.assert_allclose(b["q"], a["q"], rtol=0, atol=ULP)
     for a, b in zip(one[:3], two[:3]):
         np.testing.assert_allclose(b["replicates"], a["replicates"], rtol=0, atol=ULP)
+
+
+def test_a_child_that_hangs_is_ended_and_its_part_trained_here(log, monkeypatch):
+    """A child that never answers does not hang the caller: after the grace period it is
+    ended and its part trained here, to the same floats."""
+    import time
+
+    monkeypatch.setattr(ope_parts, "_child", lambda *args: time.sleep(3600))
+    monkeypatch.setattr(ope_parts, "GRACE_SECONDS", 1.0)
+    monkeypatch.setattr(ope_parts, "PATIENCE", 0.0)
+    one, _ = trained(log, 4, 1)
+    began = time.monotonic()
+    split, _ = trained(log, 4, 2)
+    assert time.monotonic() - began < 60
+    np.testing.assert_allclose(split.q(), one.q(), rtol=0, atol=ULP)

@@ -15,11 +15,11 @@ import pytest
 
 import aoc_cli
 from aoc_cli.envs import collect
-from aoc_cli.report.values import measured
+from aoc_cli.report.values import legend, measured
 from aoc_cli.store import Store
 
 TASKS = ["maze", "two-gates", "pendulum-het", "pendulum-het-upright", "lunar", "ward",
-         "icu-sepsis"]
+         "icu-sepsis", "icu-sepsis-terminate"]
 LONG = {"pendulum-het", "pendulum-het-upright", "lunar"}
 #: Small and fast, no validation run: the pages are under test, not the model.
 TRAIN = dict(max_epochs=2, hidden=16, weight_decay=0.0, patience=1, threads=1, seed=0)
@@ -87,12 +87,13 @@ def test_every_page_of_a_task_in_the_browser(task, tmp_path, aoc_inproc, browser
     aoc_cli.collect(task, "held", store=root, seed=1,
                     **({"steps": 80} if task in LONG else {"episodes": 6}))
     # icu-sepsis: the task's history length 0, its value target the return (FQE's is slow)
-    aoc_cli.train("c", store=root, **TRAIN, **({"value": "return"} if task == "icu-sepsis"
+    icu = task.startswith("icu-sepsis")
+    aoc_cli.train("c", store=root, **TRAIN, **({"value": "return"} if icu
                                                else {"history_length": 2}))
     aoc_cli.build_index("c", store=root)
     store = Store(root)
     corpus, held = store.corpus("c"), store.corpus("held")
-    history = task != "icu-sepsis"        # its value belief reads the current state only
+    history = not icu                     # its value belief reads the current state only
 
     # the decision page of a held-out step (icu-sepsis: history length 0, the IndexError)
     e, step, row = _logged_step(held)
@@ -106,7 +107,7 @@ def test_every_page_of_a_task_in_the_browser(task, tmp_path, aoc_inproc, browser
     if task == "ward":  # one action column's name labels both actions
         assert "Recommended: act_oxygen=" in browser.evaluate(
             "document.querySelector('#decision .lede').innerText")
-    if task == "icu-sepsis":  # the tabular state: the query's and each row's, as a column
+    if icu:  # the tabular state: the query's and each row's, as a column
         state = browser.evaluate("[...document.querySelectorAll('#decision table.values "
                                  "tr.column')].map(tr => [...tr.children].map(c => "
                                  "c.innerText)).find(r => r[0] === 'state')")
@@ -130,6 +131,15 @@ def test_every_page_of_a_task_in_the_browser(task, tmp_path, aoc_inproc, browser
         [f"step-0-{t}" for t in range(n)]
     assert browser.evaluate(f"!!document.querySelector('#step-0-{at} a[href=\"#decision\"]')")
     _check_decision(browser, recs[0], corpus, np.asarray(recs[0]["observation"]), history)
+    if corpus.discrete:  # the decisions chart: one row per action taken, by its label
+        with h5py.File(log) as f:
+            taken = np.unique(np.asarray(f["episode_0/actions"]).reshape(-1))
+        names = corpus.action_space["names"]
+        labels = [names[a] if len(names) == corpus.n_actions else f"{names[0]}={a}"
+                  for a in taken]
+        ticks = browser.evaluate("[...document.querySelectorAll('#episode-0 svg')[1]"
+                                 ".querySelectorAll('text')].map(t => t.textContent)")
+        assert all(lab in ticks for lab in labels) and any("=" in t for t in ticks)
 
     # the overview of an `aoc evaluate --steps` file
     steps, page = out / "steps.jsonl", out / "steps.html"
@@ -208,3 +218,71 @@ def test_imputed_cells_are_marked_wherever_the_page_shows_them(tmp_path, aoc_inp
     (15000000.5, "1.5e+07"), (0.00001234, "1.234e-05"), (float("nan"), "nan")])
 def test_measured_values_read_as_a_chart_does(value, text):
     assert measured(value) == text
+
+
+def test_a_cohort_ingested_with_gaps_shows_its_imputed_cells(tmp_path, aoc_inproc, browser):
+    """The clinical path: a cohort table with empty cells ingested with `--impute hold`, a
+    held-out table with the corpus's medians; the values table shows the stored (imputed)
+    values and marks exactly the cells the corpora record as imputed."""
+    from tests.formats.cohorts import cohort, roles, write
+
+    root = tmp_path / "store"
+    opts = roles(act_columns=["input_4hourly"], bin_actions="input_4hourly=3",
+                 outcome="died_in_hosp", outcome_reward="1=-1,0=1")
+    aoc_cli.ingest(write(cohort(stays=40, seed=0), tmp_path / "a.csv"), "icu", store=root,
+                   options={**opts, "impute": "hold"})
+    held_opts = {k: v for k, v in opts.items() if k != "bin_actions"}
+    aoc_cli.ingest(write(cohort(stays=8, seed=1), tmp_path / "b.csv"), "held", store=root,
+                   options={**held_opts, "impute_like": "icu", "bin_like": "icu"})
+    aoc_cli.train("icu", store=root, **TRAIN, history_length=2)
+    aoc_cli.build_index("icu", store=root)
+    store = Store(root)
+    corpus, held = store.corpus("icu"), store.corpus("held")
+    e, step, row = _logged_step(held)
+    page = tmp_path / "cohort.html"
+    rec = _records(_aoc(aoc_inproc, root, "explain", "icu", "--data", "held", "--episode",
+                        str(e), "--step", str(step), "--html", str(page), "-f", "json"))[0]
+    browser.open(page)
+    assert browser.problems() == CLEAN
+    names = corpus.observation_space["names"]
+    rows = [s["row"] for s in rec["support"]]
+    obs = np.vstack([held.read("observations", [row]), corpus.read("observations", rows)])
+    mask = np.vstack([held.imputed_mask[[row]], corpus.imputed_mask[rows]])
+    table = browser.evaluate(
+        "[...document.querySelectorAll('#decision table.values tr:not(.column):not(.columns)')]"
+        ".slice(1).map(tr => [tr.querySelector('th').innerText, ...[...tr.querySelectorAll("
+        "'td')].map(c => [c.innerText, c.classList.contains('imputed')])])")
+    assert len(table) == len(names)
+    for name, *cells in table:
+        j = names.index(name)
+        assert [c[0] for c in cells] == [measured(v) + ("\u2020" if m else "")
+                                        for v, m in zip(obs[:, j], mask[:, j])]
+        assert [c[1] for c in cells] == mask[:, j].tolist()
+    assert mask.any() and "rule: hold" in browser.evaluate(
+        "document.querySelector('#decision .legend').innerText")
+    # a query from a file holding null: the cells the corpus's rule filled are marked
+    cells = obs[0].tolist()
+    nulls = [names.index("HR"), names.index("SpO2")]
+    for j in nulls:
+        cells[j] = None
+    query, page = tmp_path / "q.jsonl", tmp_path / "query.html"
+    query.write_text(json.dumps({"observation": cells}) + "\n")
+    rec = _records(_aoc(aoc_inproc, root, "explain", "icu", "--input", str(query), "--html",
+                        str(page), "-f", "json"))[0]
+    assert [j for j, m in enumerate(rec["query_imputed"]) if m] == sorted(nulls)
+    browser.open(page)
+    assert browser.problems() == CLEAN
+    marked = browser.evaluate(
+        "[...document.querySelectorAll('#decision table.values tr:not(.column):not(.columns)')]"
+        ".slice(1).map(tr => [tr.querySelector('th').innerText, tr.querySelector('td')"
+        ".classList.contains('imputed')])")
+    assert sorted(n for n, m in marked if m) == sorted(names[j] for j in nulls)
+    assert "not known" not in browser.evaluate(
+        "document.querySelector('#decision .legend').innerText")
+
+
+def test_the_legend_says_when_the_query_cells_are_not_known():
+    text = legend("hold", any_imputed=True, query_known=False)
+    assert "rule: hold" in text and "not known" in text
+    assert "not known" not in legend("hold", any_imputed=True, query_known=True)
+    assert "imputed" not in legend(None, any_imputed=False, query_known=False)

@@ -102,7 +102,7 @@ def test_any_write_clears_dead_writers_temporaries_anywhere(tmp_path):
 
 def test_clear_dead_reports_what_it_removed(tmp_path):
     pid = dead_pid()
-    (tmp_path / "a").mkdir()
+    (tmp_path / "a" / "models").mkdir(parents=True)  # holds a model folder: something
     (tmp_path / f".a.p{pid}.r1.old").mkdir()
     (tmp_path / ".gone.lock").write_text("123\n")  # no corpus 'gone', nobody holds it
     (tmp_path / ".a.lock").write_text("")  # corpus 'a' exists: kept
@@ -114,6 +114,48 @@ def test_clear_dead_reports_what_it_removed(tmp_path):
     assert hidden(tmp_path) == [".a.lock"]
     with writing_corpus(tmp_path, "held"):  # a held lock of a missing corpus stays
         assert clear_dead(tmp_path) == [] and (tmp_path / ".held.lock").exists()
+
+
+#: A writer of a new corpus (and of a new model of corpus "c") that is killed mid-write: it holds
+#: the locks and has half-written temporaries when it says "ready".
+KILLED_WRITER = """
+import sys, time
+from pathlib import Path
+from aoc_cli.store import atomic_dir
+from aoc_cli.store.lock import writing_corpus, writing_model
+root = Path(sys.argv[1])
+with writing_corpus(root, "new"), atomic_dir(root / "new") as tmp, \\
+        writing_model(root / "c", "m"), atomic_dir(root / "c" / "models" / "m") as tmp_m:
+    (tmp / "corpus.h5").write_bytes(b"half")
+    (tmp_m / "model.pt").write_bytes(b"half")
+    (root / "empty").mkdir()  # a name that holds nothing but a folder
+    (root / ".empty.lock").write_text("")
+    print("ready", flush=True)
+    time.sleep(120)
+"""
+
+
+def test_a_killed_writers_lock_files_and_temporaries_go_with_the_next_write(tmp_path):
+    store = Store(tmp_path)
+    store.write("c", make_data())
+    writer = subprocess.Popen([sys.executable, "-c", KILLED_WRITER, str(tmp_path)],
+                              stdout=subprocess.PIPE, text=True)
+    try:
+        assert writer.stdout.readline().strip() == "ready"
+        held = hidden(tmp_path)
+        assert {".new.lock", ".c.model-m.lock", ".empty.lock"} <= set(held)
+        assert any(n.startswith(".new.p") for n in held)
+        assert clear_dead(tmp_path) == [  # alive: nothing of it goes but the unheld lock
+            {"path": ".empty.lock", "corpus": "empty", "what": "lock", "pid": None}]
+        (tmp_path / ".empty.lock").write_text("")
+    finally:
+        writer.kill()  # SIGKILL: no cleanup of its own
+        writer.wait()
+        writer.stdout.close()
+    assert ".new.lock" in hidden(tmp_path)  # left behind by the killed writer
+    store.write("other", make_data())  # any later write sweeps the store
+    assert hidden(tmp_path) == [".c.lock", ".other.lock"]
+    assert not any(p.name.startswith(".") for p in (tmp_path / "c" / "models").iterdir())
 
 
 def test_the_manifest_records_a_checksum_per_array(tmp_path):

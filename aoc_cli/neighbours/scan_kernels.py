@@ -1,6 +1,8 @@
-"""Compiled pieces shared by the exact searches (numba, single-threaded): the k nearest rows
-of a pool (``pool_knn``, pooled.py's ``exact_among``) and the heap of the k best ordered by
-(distance, position) that it and the cell search (cells.py) keep.
+"""Compiled pieces shared by the exact searches (numba, single-threaded), in one place: the k
+nearest rows of a pool (``pool_knn``, pooled.py's ``exact_among``); the heap of the k best
+ordered by (distance, position) that it, the cell search (cells.py) and the scan of every row
+(exact.py) keep (``replace_top``, ``sort_heaps``); the float32 squared distance they compare
+(``sq32``) and a float64 bound rounded up to float32 (``up32``).
 """
 
 from __future__ import annotations
@@ -38,17 +40,17 @@ def pool_knn(Y, V, k, out_rows, out_d2):  # pragma: no cover - compiled
                 diff = np.float64(V[m, t]) - np.float64(y[t])
                 e = e + diff * diff
             if e < hd[0]:  # rows come in order: a tie with the top keeps the earlier row
-                _replace_top(hd, hr, e, m)
+                replace_top(hd, hr, e, m)
                 if hd[0] < np.inf:
                     bound = hd[0] * slack + 1e-30
                     top = np.float32(bound)
                     if np.float64(top) < bound:
                         top = np.nextafter(top, np.float32(np.inf))
-    _sort_heaps(heap_d, heap_r, out_d2, out_rows)
+    sort_heaps(heap_d, heap_r, out_d2, out_rows)
 
 
 @numba.njit(cache=True, nogil=True)
-def _sort_heaps(heap_d, heap_r, out_d2, out_rows):  # pragma: no cover - compiled
+def sort_heaps(heap_d, heap_r, out_d2, out_rows):  # pragma: no cover - compiled
     """Each query's k kept (distance, row) pairs ascending by (distance, row): an insertion sort."""
     Q, k = heap_d.shape
     for i in range(Q):
@@ -64,7 +66,7 @@ def _sort_heaps(heap_d, heap_r, out_d2, out_rows):  # pragma: no cover - compile
 
 
 @numba.njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
-def _sq32(a, b):  # pragma: no cover - compiled
+def sq32(a, b):  # pragma: no cover - compiled
     """||a - b||^2 of two float32 vectors (summed in any order: vectorised)."""
     e = np.float32(0.0)
     for t in range(a.shape[0]):
@@ -74,7 +76,7 @@ def _sq32(a, b):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
-def _replace_top(hd, hr, e, m):  # pragma: no cover - compiled
+def replace_top(hd, hr, e, m):  # pragma: no cover - compiled
     """Replace the largest entry of the max-heap (hd, hr), ordered by (distance, row), by
     (e, m) and restore the heap (the entry evicted among equal distances is the latest row)."""
     k = hd.shape[0]
@@ -104,3 +106,12 @@ def _sq32_rows(V, y, out):  # pragma: no cover - compiled
             x = V[m, t] - y[t]
             e += x * x
         out[m] = e
+
+
+@numba.njit(cache=True, nogil=True)
+def up32(x):  # pragma: no cover - compiled
+    """x (float64) as a float32 not below it."""
+    out = np.float32(x)
+    if np.float64(out) < x:
+        out = np.nextafter(out, np.float32(np.inf))
+    return out

@@ -34,7 +34,7 @@ import numba
 import numpy as np
 from numba.typed import List
 
-from aoc_cli.index.scan_kernels import _replace_top, _sort_heaps, _sq32
+from aoc_cli.neighbours.scan_kernels import replace_top, sort_heaps, sq32, up32
 
 #: Principal coordinates kept per row for the projection bound.
 HEAD = 4
@@ -267,7 +267,7 @@ def cells_knn(Y32, Y, seq, lo, hi, YH, shift, radius, offsets, rho, rows, head, 
             if hd[0] < np.inf:
                 break
         prev, reach_prev = i, np.sqrt(hd[0])
-        _sort_heaps(hd.reshape(1, k), hr.reshape(1, k), out_d2[i:i + 1], out_pos[i:i + 1])
+        sort_heaps(hd.reshape(1, k), hr.reshape(1, k), out_d2[i:i + 1], out_pos[i:i + 1])
 
 
 @numba.njit(cache=True, nogil=True)
@@ -303,14 +303,14 @@ def _visit(y32, y, lo, hi, yh, shift, T, radius, offsets, rho, rows, head, ids, 
                 continue
             # float32 (all terms >= 0: within (d + 2) 2^-24 of the exact value,
             # relatively) filters; the float64 distance, summed in order, ranks
-            if _sq32(V[m - a0], y32) > top:
+            if sq32(V[m - a0], y32) > top:
                 continue
             e = 0.0
             for t in range(d):
                 diff = np.float64(V[m - a0, t]) - y[t]
                 e = e + diff * diff
             if e < hd[0] or (e == hd[0] and p < hr[0]):
-                _replace_top(hd, hr, e, p)
+                replace_top(hd, hr, e, p)
                 if hd[0] < np.inf:
                     T = min(T, np.sqrt(hd[0]))
                     slack = SLACK * (hi[l] + T) + 1e-30
@@ -322,7 +322,7 @@ def _bounds(T, shift):  # pragma: no cover - compiled
     """float32 thresholds not below T^2 and (T + shift)^2 (with the float32 filters' margin)."""
     if T == np.inf:
         return np.float32(np.inf), np.float32(np.inf)
-    return _up32(T * T * (1.0 + 1e-5) + 1e-30), _up32((T + shift) ** 2 * (1.0 + 1e-5) + 1e-30)
+    return up32(T * T * (1.0 + 1e-5) + 1e-30), up32((T + shift) ** 2 * (1.0 + 1e-5) + 1e-30)
 
 
 @numba.njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
@@ -335,15 +335,6 @@ def _head_dists(head, yh, a, b, out):  # pragma: no cover - compiled
             x = head[m, t] - yh[t]
             e += x * x
         out[m - a] = e
-
-
-@numba.njit(cache=True, nogil=True)
-def _up32(x):  # pragma: no cover - compiled
-    """x (float64) as a float32 not below it."""
-    out = np.float32(x)
-    if np.float64(out) < x:
-        out = np.nextafter(out, np.float32(np.inf))
-    return out
 
 
 @numba.njit(cache=True, nogil=True)

@@ -3,7 +3,8 @@ JSON, one CSV row per method, or tables."""
 
 from __future__ import annotations
 
-from aoc_cli.report.output import write_object, write_records
+from aoc_cli.ope.support import cell
+from aoc_cli.cli.output import write_object, write_records
 
 IMITATION_COLUMNS = ["method", "accuracy", "balanced_accuracy", "auc", "majority_accuracy",
                      "mae", "r2"]
@@ -21,16 +22,19 @@ def _method_rows(summary: dict) -> list[dict]:
 
 
 def _ope_rows(summary: dict) -> list[dict]:
-    """One row per policy: each estimator's estimate [low, high] and the ESS."""
-    def cell(e):
-        return None if e is None else f"{e['estimate']:.4f} [{e['low']:.4f}, {e['high']:.4f}]"
+    """One row per policy: each estimator's estimate [low, high] (or why the log cannot
+    support it), the ESS, the share of its episodes the log follows to their end, and the
+    verdict against the logged behaviour."""
+    def row(name, rec):
+        support = rec.get("support") or {}
+        return {"policy": name, "ess": rec["ess"],
+                **{k: cell(v) for k, v in (rec["policy_value"] or {}).items()},
+                "reached": support.get("reached")}
 
-    rows = [{"policy": "aoc", "ess": summary["ess"],
-             **{k: cell(v) for k, v in summary["policy_value"].items()}}]
+    rows = [row("aoc", summary)]
     for name, rec in summary["baselines"].items():
         if "policy_value" in rec:
-            rows.append({"policy": name, "ess": rec["ess"],
-                         **{k: cell(v) for k, v in (rec["policy_value"] or {}).items()}})
+            rows.append(row(name, rec))
     own = summary["behaviour_value"]
     rows.append({"policy": "behaviour", "mean_return": cell(own),
                  **({"fqe": f"{own['fqe']:.4f}"} if own.get("fqe") is not None else {})})
@@ -79,9 +83,19 @@ def write_evaluation(summary: dict, fmt: str) -> None:
         head.update({f"{k} after": v for k, v in w["after"].items()})
         write_object(head, "table", title="what if")
     if "policy_value" in summary:
+        ope = summary["ope"]
+        fit = ope.get("propensity_model")
+        model = "" if not fit else (f"; held-out log-loss {fit['log_loss']:.4g} (action "
+                                    f"frequencies: {fit['log_loss_frequencies']:.4g}), "
+                                    f"calibration error {fit['ece']:.3g}")
         write_records(_ope_rows(summary), "table",
                       title=f"policy value from the log alone (propensities: "
-                            f"{summary['ope']['propensity']})")
+                            f"{ope['propensity']}{model})")
+        verdicts = [{"policy": "aoc", "verdict": summary.get("verdict")}] + [
+            {"policy": name, "verdict": rec.get("verdict")}
+            for name, rec in summary["baselines"].items() if rec.get("verdict")]
+        write_records(verdicts, "table", title="better than the logged behaviour? "
+                                              "(the paired difference of the values)")
     if "confusion" in summary:
         n = len(summary["confusion"])
         write_records([{"logged": i, **{f"decided {j}": summary["confusion"][i][j]

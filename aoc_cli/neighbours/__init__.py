@@ -7,7 +7,7 @@ selection)` returns the k nearest corpus rows, optionally restricted to a row ma
 map back to corpus rows (`row_of`); `save` / `load` persist atomically.
 
 Names are imported lazily (PEP 562), so that reading the index's settings
-(:mod:`aoc_cli.index.config`, as ``aoc index --help`` does) does not import FAISS.
+(:mod:`aoc_cli.neighbours.config`, as ``aoc index --help`` does) does not import FAISS.
 """
 
 from __future__ import annotations

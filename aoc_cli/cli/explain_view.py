@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from aoc_cli.report.output import console, write_object, write_records
+from aoc_cli.cli.output import console, write_object, write_records
 
 
 def _flat(rec: dict) -> list[dict]:

@@ -10,11 +10,9 @@ from __future__ import annotations
 import csv
 import io
 import json
-import math
 import sys
 from typing import Any, Sequence
 
-import numpy as np
 from rich.console import Console
 from rich.progress import (
     BarColumn,
@@ -27,6 +25,7 @@ from rich.progress import (
 from rich.table import Table
 
 from aoc_cli.errors import BadSetting, param
+from aoc_cli.report import to_jsonable
 
 FORMATS = ("table", "json", "jsonl", "csv")
 
@@ -48,21 +47,6 @@ def resolve_format(fmt: str | None) -> str:
         raise BadSetting("format", fmt, f"unknown {param('format')} {fmt!r}: use one of "
                          f"{', '.join(FORMATS)}")
     return fmt
-
-
-def to_jsonable(value: Any) -> Any:
-    """numpy scalars and arrays to plain Python; non-finite floats to None (JSON has no NaN)."""
-    if isinstance(value, dict):
-        return {str(k): to_jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [to_jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return to_jsonable(value.tolist())
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
 
 
 def _cell(value: Any, table: bool = False) -> str:

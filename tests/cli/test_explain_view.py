@@ -1,6 +1,6 @@
 """The explain tables (aoc_cli/report/explain_view.py): the subset's rows as records."""
 
-from aoc_cli.report.explain_view import _support_rows
+from aoc_cli.cli.explain_view import _support_rows
 
 
 def _row(value):

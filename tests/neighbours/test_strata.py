@@ -1,4 +1,4 @@
-"""Step 1 per action (aoc_cli.index.strata): the nearest rows of each action, against a brute
+"""Step 1 per action (aoc_cli.neighbours.strata): the nearest rows of each action, against a brute
 force; a rare action far from a query is among its candidates (the k nearest rows hold none);
 the row selection and the evaluation's IVF structure restrict it alike."""
 
@@ -10,8 +10,8 @@ import pytest
 from aoc_cli.decompose import decompose
 from aoc_cli.errors import AocError
 from aoc_cli.evaluation.context import BatchSearch
-from aoc_cli.index import BeliefIndex
-from aoc_cli.index.strata import PerAction, candidate_search
+from aoc_cli.neighbours import BeliefIndex
+from aoc_cli.neighbours.strata import PerAction, candidate_search
 
 
 def _corpus(n=600, seed=0):

@@ -14,7 +14,7 @@ import math
 import faiss
 import numpy as np
 
-from aoc_cli.index.scan_kernels import pool_knn
+from aoc_cli.neighbours.scan_kernels import pool_knn
 from aoc_cli.threads import faiss_threads
 
 
@@ -62,7 +62,8 @@ def _split(ix, Y: np.ndarray, k: int, sel, available: int, depth: int):
     eighth of its spread can, for the price of one more index scan. Queries still
     uncertified are grouped again (three rounds at most), then searched directly.
     IVF: one round of 16 groups with six times the pool (an IVF search costs its probed
-    lists whatever k; measured 1.4x faster on pendulum control steps, same recall).
+    lists whatever k; faster on pendulum control steps than three rounds, the same recall:
+    docs/benchmarks.md, "Figures once in docstrings").
     """
     n = Y.shape[0]
     ivf = ix.kind == "ivf"

@@ -1,7 +1,7 @@
 """What ``aoc evaluate`` prints as tables: the OPE's rows (each policy's estimates with their
 intervals, the logged behaviour's mean return and FQE's value of it) and the value target."""
 
-from aoc_cli.report.evaluate_view import _ope_rows, write_evaluation
+from aoc_cli.cli.evaluate_view import _ope_rows, write_evaluation
 
 
 def _summary(fqe=0.7754):
@@ -33,3 +33,22 @@ def test_the_table_says_what_value_r2_was_measured_against(capsys):
     out = capsys.readouterr().out
     assert "value target" in out and "the logged behaviour's Q(o, a) by d3rlpy" in out
     assert "0.7754" in out
+
+
+def test_a_withheld_estimate_reads_not_estimable_and_the_verdict_has_its_line(capsys):
+    summary = _summary()
+    summary["policy_value"] = {"pdwis": {"estimate": None, "low": None, "high": None,
+                                         "reason": "ESS 4.6 of 3,000 (the rule asks 500)"},
+                               "fqe": {"estimate": 0.81, "low": 0.8, "high": 0.82}}
+    summary["verdict"] = ("better than the logged behaviour by 0.019 [-0.004, 0.041] (FQE): "
+                          "not shown by this log")
+    summary["support"] = {"reached": 0.93}
+    rows = _ope_rows(summary)
+    assert rows[0]["pdwis"] == "not estimable: ESS 4.6 of 3,000"
+    assert rows[0]["reached"] == 0.93
+    write_evaluation(summary, "table")
+    out = capsys.readouterr().out
+    assert "not estimable: ESS 4.6 of 3,000" in out
+    assert "better than the logged behaviour by 0.019 [-0.004, 0.041] (FQE): not shown by " \
+           "this log" in out
+    assert "0.0000" not in out

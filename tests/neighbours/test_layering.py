@@ -13,7 +13,7 @@ def _modules_after(statement: str) -> set[str]:
 
 
 def test_index_depends_on_numpy_and_faiss_only():
-    mods = _modules_after("from aoc_cli.index import BeliefIndex, IndexConfig, PerAction")
+    mods = _modules_after("from aoc_cli.neighbours import BeliefIndex, IndexConfig, PerAction")
     assert "faiss" in mods and "numpy" in mods
     assert "torch" not in mods
     above = {m for m in mods if m.startswith(("aoc_cli.decompose", "aoc_cli.control",
@@ -29,5 +29,5 @@ def test_belief_artefact_and_train_import_in_either_order():
 
 def test_the_index_settings_load_without_faiss():
     # the package loads its names on first use: aoc index --help reads IndexConfig's fields
-    mods = _modules_after("from aoc_cli.index.config import IndexConfig")
+    mods = _modules_after("from aoc_cli.neighbours.config import IndexConfig")
     assert "faiss" not in mods and "torch" not in mods

@@ -1,8 +1,9 @@
 """Exact k nearest corpus rows of a batch of queries with no index: one pass over the beliefs.
 
 What ``decompose(beliefs, queries)`` uses when it is given no index. A prebuilt flat index
-answers a batch by its cell search (cells.py), whose k-means cells cost far more to build (about
-100 ms at 100k rows) than one control step's search; built for a single call they dominate it.
+answers a batch by its cell search (cells.py), whose k-means cells cost far more to build than
+one control step's search; built for a single call they dominate it (docs/benchmarks.md,
+"`decompose` without an index").
 This search builds nothing that outlives the call, in four steps for the Q queries of a batch:
 
 1. the batch's centre c (the mean query) and every row's distance rho = ||b - c|| (one pass);
@@ -29,10 +30,9 @@ import numba
 import numpy as np
 
 from aoc_cli.errors import AocError
-from aoc_cli.index.faiss_kinds import as_queries
-from aoc_cli.index.pooled import exact_among, within_pool
-from aoc_cli.index.cells import _up32
-from aoc_cli.index.scan_kernels import _replace_top, _sort_heaps, _sq32
+from aoc_cli.neighbours.faiss_kinds import as_queries
+from aoc_cli.neighbours.pooled import exact_among, within_pool
+from aoc_cli.neighbours.scan_kernels import replace_top, sort_heaps, sq32, up32
 
 #: Rows in the pool searched at the batch's centre, as a multiple of k (and at least POOL_MIN).
 POOL_FACTOR = 4
@@ -183,18 +183,18 @@ def _slice_knn(V, near, rho, Y32, Y, seq, spread, T, out_pos, out_d2):  # pragma
         hd[:] = np.inf
         hr[:] = -1
         y32 = Y32[i]
-        top = _up32(bound * bound * (1.0 + 1e-5) + 1e-30)
+        top = up32(bound * bound * (1.0 + 1e-5) + 1e-30)
         for jj in range(a, b):
             m = near[jj]
-            if _sq32(V[m], y32) > top:
+            if sq32(V[m], y32) > top:
                 continue
             e = 0.0
             for t in range(d):
                 diff = np.float64(V[m, t]) - Y[i, t]
                 e = e + diff * diff
             if e < hd[0] or (e == hd[0] and m < hr[0]):
-                _replace_top(hd, hr, e, m)
+                replace_top(hd, hr, e, m)
                 if hd[0] < np.inf:
-                    top = min(top, _up32(hd[0] * (1.0 + 1e-5) + 1e-30))
+                    top = min(top, up32(hd[0] * (1.0 + 1e-5) + 1e-30))
         prev, reach_prev = i, np.sqrt(hd[0])
-        _sort_heaps(hd.reshape(1, k), hr.reshape(1, k), out_d2[i:i + 1], out_pos[i:i + 1])
+        sort_heaps(hd.reshape(1, k), hr.reshape(1, k), out_d2[i:i + 1], out_pos[i:i + 1])

@@ -1,0 +1,122 @@
+"""One policy's offline evaluation on a log (:func:`policy_value`): PDWIS and WDR with their
+bootstrap intervals, FQE with its refits' (:func:`fqe_values`), each shown where the log
+supports it (:mod:`aoc_cli.ope.support`), V(policy) - V(logged behaviour) by each with a
+paired interval, and the verdict line. ``settings`` is an
+:class:`aoc_cli.ope.policies.OPESettings` (its estimators, gamma, bootstrap, seed and FQE
+settings)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from aoc_cli.ope import estimators as ope
+from aoc_cli.ope.fqe import available, fqe_policies, student_quantile
+from aoc_cli.ope.support import refusal, verdict, withheld
+
+
+def _as_probs(policy: np.ndarray, n_actions: int) -> np.ndarray:
+    policy = np.asarray(policy)
+    if policy.ndim == 1:
+        return np.eye(n_actions)[policy.astype(np.int64)]
+    return np.asarray(policy, np.float64)
+
+
+def policy_value(log: ope.Log, observations, logged, propensity, policy, n_actions: int,
+                 settings, progress=None, fqe: dict | None | str = "fit") -> dict:
+    """One policy's ``policy_value`` {estimator: Estimate dict, or withheld}, ``improvement``
+    (over the logged behaviour, paired), ``verdict``, ``ess``, ``support`` and notes.
+    ``policy`` (N,) decisions or (N, n) probabilities at the logged steps; ``fqe`` its direct
+    method (one entry of :func:`fqe_values`, computed with the other policies'; "fit": fitted
+    here for this policy alone)."""
+    probs = _as_probs(policy, n_actions)                          # (N, n)
+    rows = np.arange(len(logged))
+    rho = ope.ratios(probs[rows, logged], propensity)
+    diag = ope.diagnostics(log, rho)
+    out: dict = {"ess": diag["ess"], "notes": []}
+    returns = log.returns()
+    specs: dict = {"behaviour": ("mean", returns)}      # paired: every estimator's same draws
+    if "pdwis" in settings.estimators:
+        specs["pdwis"] = ("pdwis", rho)
+    if isinstance(fqe, str):
+        fqe = fqe_values(log, observations, logged, [probs], settings, progress)[0]
+    q = None if fqe is None else fqe["q"]                                     # (N, n)
+    if fqe is not None and fqe.get("note"):
+        out["notes"].append(fqe["note"])
+    refitted = q is not None and len(fqe["replicates"]) > 1
+    if "wdr" in settings.estimators and q is not None:
+        specs["wdr"] = ("wdr", rho, q[rows, logged], (probs * q).sum(1))
+    est = ope.bootstrap(log, specs, n_boot=settings.n_boot, seed=settings.seed)
+    mean = est.pop("behaviour")
+    value, gain = {}, {}
+    for name in ("pdwis", "wdr"):
+        if name not in settings.estimators:
+            continue
+        if name not in est:
+            value[name] = gain[name] = withheld("no Q model (" + (fqe or {}).get(
+                "note", "fqe did not run") + ")")
+            continue
+        e = est[name]
+        why = refusal(name, diag, log.n_episodes, e.undefined, e.estimate)
+        value[name] = withheld(why) if why else e.as_dict()
+        gain[name] = withheld(why) if why else e.minus(mean).as_dict()
+    if "fqe" in settings.estimators and q is not None:
+        if refitted:
+            value["fqe"] = {k: fqe[k] for k in ("estimate", "low", "high")}
+            gain["fqe"] = _fqe_gain(fqe, returns)
+            b, k, n = len(fqe["replicates"]), fqe["refit_steps"], fqe["steps"]
+            out["notes"].append(
+                f"fqe: the estimate is the mean of {b} refits' start values (bagged; one "
+                f"fit's: {fqe['fit_estimate']:.4g}), the interval +- "
+                f"{student_quantile(b - 1):.3g} sd of the refits' estimates (Student's t, "
+                f"{b - 1} degrees of freedom), each refit on the log's episodes resampled "
+                f"with replacement, {k:,} steps on from the full fit's {n:,}-step weights "
+                f"(the refits' sampling and training error is in it; cost "
+                f"{(n + b * k) / n:.1f}x one fit)")
+        else:
+            why = ("one fit (fqe_refits 0): its interval would leave the model's own error "
+                   f"out; its start values give {fqe['fit_estimate']:.4g}")
+            value["fqe"] = gain["fqe"] = withheld(why)
+    if value.get("fqe", {}).get("estimate") is not None and fqe.get("withheld"):
+        # FQE off on the logged behaviour (support.fqe_refusal)
+        value["fqe"] = gain["fqe"] = withheld(fqe["withheld"])
+    out["policy_value"] = value
+    out["improvement"] = gain
+    out["verdict"] = verdict(gain)
+    out["support"] = {"ess": diag["ess"],
+                      "ess_per_step": [round(x, 2) for x in diag["ess_per_step"]],
+                      "reached": diag["reached"], "first_step_weight": diag["first_step_weight"],
+                      "undefined_replicates": {k: e.undefined for k, e in est.items()}}
+    return out
+
+
+def _fqe_gain(fqe: dict, returns: np.ndarray) -> dict:
+    """V(policy) - V(behaviour) by FQE: each refit's estimate less the log's mean return over
+    the same resampled episodes (the refit's ``counts``), +- Student's t sd of those paired
+    differences, around the bagged estimate less the log's mean return."""
+    counts = np.asarray(fqe["counts"], np.float64)                    # (refits, E)
+    diffs = np.asarray(fqe["replicates"]) - counts @ returns / counts.sum(1)
+    point = fqe["estimate"] - float(np.mean(returns))
+    half = student_quantile(len(diffs) - 1) * float(np.std(diffs, ddof=1))
+    return {"estimate": point, "low": point - half, "high": point + half}
+
+
+def fqe_values(log: ope.Log, observations, logged, policies: list, settings,
+               progress=None, behaviour: bool = False) -> list:
+    """The direct method for each policy (N, n) at once
+    (:func:`aoc_cli.ope.fqe.fqe_policies`: one batched ensemble), when an estimator needs it: with refits when FQE is asked for and
+    ``settings.fqe_refits`` > 1. Each entry None (no estimator needs a Q model) or a record;
+    without d3rlpy, a record with ``q`` None and the reason as its ``note``. ``behaviour``:
+    the logged behaviour's record last (``fqe_policies``'s), when FQE runs."""
+    if "fqe" not in settings.estimators and "wdr" not in settings.estimators:
+        return [None] * len(policies)
+    reason = available()
+    if reason is not None:
+        return [{"q": None, "note": reason, "replicates": ()} for _ in policies]
+    refits = settings.fqe_refits if "fqe" in settings.estimators else 0
+    return fqe_policies(observations, logged, log.rewards, log.starts, policies,
+                        settings.gamma, settings.fqe_steps, refits if refits > 1 else 0,
+                        seed=settings.seed, progress=progress, schedule=settings.fqe_schedule,
+                        behaviour=behaviour, parts=settings.fqe_processes,
+                        truncated=log.truncated)
+
+

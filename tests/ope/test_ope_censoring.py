@@ -1,0 +1,87 @@
+"""Censoring (aoc_cli.ope.estimators, aoc_cli.ope.fqe): episodes a random clock cuts short,
+marked truncated, are censored by PDWIS, WDR and FQE, which then recover a small MDP's exact
+value; counted as ended, they are far off."""
+
+import numpy as np
+import pytest
+
+from aoc_cli.ope.estimators import Log, bootstrap, pdwis, ratios, wdr
+from tests.ope.mdps import SmallMDP
+
+
+def _cut(data, rng, hazard=0.15):
+    """The log with each episode cut after a geometric number of steps (a clock independent of
+    the outcome): (rows kept, starts, truncated (E,))."""
+    starts = data["starts"]
+    lengths = np.diff(starts)
+    cut = rng.geometric(hazard, size=len(lengths))
+    kept = np.minimum(lengths, cut)
+    rows = np.concatenate([np.arange(s, s + k) for s, k in zip(starts[:-1], kept)])
+    return rows, np.concatenate([[0], np.cumsum(kept)]), cut < lengths
+
+
+def test_pdwis_and_wdr_censor_truncated_episodes_and_recover_the_exact_value():
+    mdp = SmallMDP.random(seed=1, end=0.35)
+    s, a = mdp.P.shape[:2]
+    rng = np.random.default_rng(1)
+    greedy = np.eye(a)[rng.integers(0, a, size=s)]
+    pi_b = 0.5 * greedy + 0.5 * rng.dirichlet(np.full(a, 2.0), size=s)
+    truth, q = mdp.exact(greedy)
+    behaviour, _ = mdp.exact(pi_b)
+    data = mdp.sample(pi_b, 20000, seed=2)
+    rows, starts, truncated = _cut(data, rng)
+    assert 0.1 < truncated.mean() < 0.4
+    st, ac, r = data["state"][rows], data["action"][rows], data["reward"][rows]
+    rho = ratios(greedy[st, ac], data["propensity"][rows])
+    v = (greedy * q).sum(1)
+    censored = Log(starts, r, truncated=truncated)
+    as_ended = Log(starts, r)
+    # 20,000 episodes: the tolerance is 3-4 standard errors; counted as ended, 0.1 off
+    assert pdwis(censored, rho) == pytest.approx(truth, abs=0.02)
+    assert wdr(censored, rho, q[st, ac], v[st]) == pytest.approx(truth, abs=0.02)
+    assert pdwis(censored, np.ones(len(r))) == pytest.approx(behaviour, abs=0.02)
+    assert pdwis(as_ended, rho) < truth - 0.06
+    assert wdr(as_ended, rho, q[st, ac], v[st]) < truth - 0.06
+    est = bootstrap(censored, {"pdwis": ("pdwis", rho)}, n_boot=200)["pdwis"]
+    assert est.low <= truth <= est.high
+
+
+def test_a_censored_step_counts_at_its_step_and_then_leaves():
+    """By hand: episode 0 survives at its one step (reward 1); episode 1 is cut after its
+    first step (reward 0 there, known to go on); episode 2 survives at its second step
+    (rewards 0, 1). Step 0: mean reward 1/3, episodes 1 and 2 go on (c_0 = 2/3); step 1:
+    episode 2 alone, reward 1. Kaplan-Meier: 1/3 + 2/3 * 1 = 1 (every episode seen to its end
+    survived). Counted as ended, episode 1 scores 0: 1/3 + 1/3 * 1 = 2/3."""
+    starts = np.array([0, 1, 2, 4])
+    rewards = np.array([1.0, 0.0, 0.0, 1.0])
+    censored = Log(starts, rewards, truncated=np.array([False, True, False]))
+    assert pdwis(censored, np.ones(4)) == pytest.approx(1.0, abs=1e-12)
+    assert pdwis(Log(starts, rewards), np.ones(4)) == pytest.approx(2 / 3, abs=1e-12)
+
+
+def test_fqe_draws_no_censored_step_and_makes_up_for_the_continuing_ones_cut():
+    """Inverse probability of censoring weights (aoc_cli.ope.fqe.censoring_weights): three
+    episodes, lengths 2, 3, 1; the second cut short. Continuing transitions: rows 0, 2, 3
+    spared, row 4 (the cut one's last) censored: h = 1 / 4, each spared one weighs 4 / 3, the
+    ending rows 1 and 5 weigh 1, the censored row 0. FQE's sampler then draws rows in those
+    proportions and never the censored one."""
+    from aoc_cli.ope.ensemble import sampler
+    from aoc_cli.ope.fqe import censoring_weights
+
+    starts = np.array([0, 2, 5, 6])
+    w = censoring_weights(starts, np.array([False, True, False]))
+    np.testing.assert_allclose(w, [4 / 3, 1, 4 / 3, 4 / 3, 0, 1], rtol=1e-15)
+
+    class Fit:                              # what the sampler reads of a fit
+        n_rows, batch, n_actions = 6, 4000, 2
+        nxt = np.array([1, 1, 3, 4, 4, 5])
+
+    cums = np.ones((1, 6, 2))
+    draw = sampler(Fit, cums, np.zeros(2, np.int64), [None, np.array([0, 0, 4, 5])],
+                   np.random.default_rng(0), 2, weights=w)
+    rows, _ = draw()
+    assert not np.any(rows == 4)
+    share = np.bincount(rows[0], minlength=6) / Fit.batch
+    np.testing.assert_allclose(share, w / w.sum(), atol=0.03)
+    pooled = np.bincount(rows[1], minlength=6) / Fit.batch     # the pool's 0, 0, 4, 5
+    np.testing.assert_allclose(pooled[[0, 5]], [8 / 11, 3 / 11], atol=0.03)
