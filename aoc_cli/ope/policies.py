@@ -40,7 +40,7 @@ from aoc_cli.ope.fqe import (
     default_steps,
 )
 from aoc_cli.ope.parts import MAX_PARTS
-from aoc_cli.ope.propensity import fit_propensities
+from aoc_cli.ope.propensity import features, fit_propensities
 from aoc_cli.ope.support import fqe_refusal
 from aoc_cli.ope.value import _as_probs, fqe_values, policy_value
 from aoc_cli.settings import Settings, setting
@@ -177,8 +177,9 @@ def behaviour_targets(data, gamma: float, seed: int = 0,
     fresh = None if block is None else block.get("behaviour_fqe")
     if fresh is not None:
         ran = block["settings"]
-        if fqe_record(ran, data.n_rows, data.episode_starts, ran.gamma) != record:
-            fresh = None                # the OPE's FQE ran at other settings
+        if fqe_record(ran, data.n_rows, data.episode_starts, ran.gamma) != record \
+                or block.get("history_length", 0):
+            fresh = None                # the OPE's FQE ran at other settings or inputs
 
     def compute():
         if fresh is not None:
@@ -251,7 +252,13 @@ def off_policy_values(data, logged: np.ndarray, policies: dict, settings: OPESet
                    else None},
            "behaviour_value": mean.as_dict(), "policies": {}, "ope_warnings": []}
     probs = {name: _as_probs(p, data.n_actions) for name, p in policies.items()}
-    fqes = fqe_values(log, data.observations, logged, list(probs.values()), settings, progress,
+    # FQE's Q from what the policies decide from: the observation and, with a history, the
+    # last history_length observations and actions (the propensity model's features)
+    inputs = features(data.observations, logged, data.episode_starts, data.n_actions,
+                      history_length)
+    out["ope"]["fqe_inputs"] = "the observation" + (
+        f" and the last {history_length} steps" if history_length else "")
+    fqes = fqe_values(log, inputs, logged, list(probs.values()), settings, progress,
                       behaviour=True)
     if len(fqes) > len(probs):          # the logged behaviour's, last
         own = fqes.pop()
@@ -269,7 +276,7 @@ def off_policy_values(data, logged: np.ndarray, policies: dict, settings: OPESet
                     rec["withheld"] = off
     for i, ((name, policy), fqe) in enumerate(zip(probs.items(), fqes)):
         try:
-            rec = policy_value(log, data.observations, logged, propensity, policy,
+            rec = policy_value(log, inputs, logged, propensity, policy,
                                data.n_actions, settings, progress, fqe=fqe)
         except AocError as err:
             if i == 0:          # the first policy is the one asked about: its error is the run's
@@ -332,6 +339,7 @@ def ope_block(mode: str, data, res, settings: OPESettings | None, seed: int = 0,
             policies[name] = b["decided"]
     block = off_policy_values(data, res.logged, policies, settings, progress, history_length)
     block["settings"] = settings
+    block["history_length"] = history_length
     return block
 
 

@@ -347,3 +347,26 @@ def test_fqe_off_on_the_logged_behaviour_is_a_warning_and_withheld(sepsis, monke
                for w in out["ope_warnings"]), out["ope_warnings"]
     low, high = out["behaviour_value"]["low"], out["behaviour_value"]["high"]
     assert low <= out["behaviour_value"]["estimate"] <= high
+
+
+def test_fqe_is_given_the_history_the_policies_decide_from(sepsis, monkeypatch):
+    """With a history length, FQE's Q is a function of the observation and the last steps'
+    observations and actions (the propensity model's features), as the policy's decision is."""
+    from aoc_cli.ope import policies as ope_eval
+
+    _root, store, _ = sepsis
+    held = store.corpus("held")
+    seen = {}
+
+    def fake(_log, obs, _logged, policies, _settings, _progress=None, behaviour=False):
+        seen["width"] = np.asarray(obs).shape[1]
+        return [None] * len(policies)
+
+    monkeypatch.setattr(ope_eval, "fqe_values", fake)
+    d = held.observations.shape[1]
+    for length, width in ((0, d), (2, d + 2 * (d + held.n_actions))):
+        out = ope_eval.off_policy_values(held, held.actions, {"aoc": held.actions},
+                                         OPESettings(estimators=("pdwis",), n_boot=20),
+                                         history_length=length)
+        assert seen["width"] == width
+        assert out["ope"]["fqe_inputs"].startswith("the observation")
