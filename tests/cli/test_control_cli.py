@@ -125,11 +125,12 @@ def test_explain_a_logged_step_of_the_corpus_and_of_held_out_episodes(run, maze_
     decision, logged = [json.loads(x) for x in out.splitlines()]
     assert (decision["role"], logged["role"]) == ("decision", "logged action")
     assert decision["row"] == logged["row"] == row and decision["episode_left_out"]
-    # the corpus was collected from the maze task: its epsilon (0.1) is the default, as in rollout
-    assert decision["candidates"]["passed"] == 10
+    # the model (trained by the library's train_model) carries no controller settings: the
+    # paper's epsilon 0.5, as in rollout; a flag overrides it
+    assert decision["candidates"]["passed"] == 50
     code, out, err = run("explain", "maze", "--data", "maze", "--episode", str(episode),
-                         "--step", str(step), "--epsilon", "0.5", "-f", "jsonl")
-    assert json.loads(out.splitlines()[0])["candidates"]["passed"] == 50
+                         "--step", str(step), "--epsilon", "0.1", "-f", "jsonl")
+    assert json.loads(out.splitlines()[0])["candidates"]["passed"] == 10
     np.testing.assert_allclose(decision["logged_action"], corpus.actions[row])
     np.testing.assert_allclose(logged["action"], corpus.actions[row])
     for rec in (decision, logged):
