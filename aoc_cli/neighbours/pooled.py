@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import math
 
-import faiss
 import numpy as np
 
 from aoc_cli.neighbours.scan_kernels import pool_knn

@@ -23,7 +23,7 @@ from pathlib import Path
 
 from aoc_cli.errors import AocError, call
 from aoc_cli.store.atomic import seal_status, sha256_file
-from aoc_cli.store.layout import CORPUS_FILE, INDEXES, models_dir
+from aoc_cli.store.layout import INDEXES, models_dir
 from aoc_cli.store.reader import Corpus
 from aoc_cli.store.sweep import clear_dead
 
