@@ -87,14 +87,17 @@ def epsilon_validation(corpus, seed: int = 0):
     return inspect
 
 
-def recording_hook(corpus, seed: int, extra: dict):
+def recording_hook(corpus, seed: int, extra: dict, progress=None):
     """:func:`epsilon_validation`'s hook, also recording its choice in ``extra`` (the
     ``controller`` settings and the ``settings`` reasons that ``aoc train`` saves with the
-    model: training merges ``extra`` into the metrics after the hook ran)."""
+    model: training merges ``extra`` into the metrics after the hook ran). ``progress``
+    (:mod:`aoc_cli.progress`): a label while it measures."""
     measure = epsilon_validation(corpus, seed)
 
     def inspect(net, inputs, data, norm) -> dict:
         started = time.perf_counter()
+        if progress is not None:
+            progress(0, None, f"deciding epsilon: {ROWS} held-out steps x {K + 1} actions")
         out = measure(net, inputs, data, norm)
         q = out["val_epsilon_q"]
         extra["controller"]["epsilon"] = out["val_epsilon"]

@@ -134,7 +134,7 @@ def _train(corpus, config: BeliefConfig, model: str, overwrite: bool, open_names
                                        prepared, progress, extra)
     if defaults_note:
         extra = {**extra, "selection": {"searched": [], "why": defaults_note}}
-    inspect = epsilon_rule.recording_hook(corpus, config.seed, extra) \
+    inspect = epsilon_rule.recording_hook(corpus, config.seed, extra, progress) \
         if measure and not stream.streams(corpus, config) else None
     return trainer.train_model(corpus, config, model, overwrite=overwrite, progress=progress,
                                prepared=prepared, extra=extra or None, inspect=inspect)

@@ -188,3 +188,14 @@ def test_the_controller_settings_travel_with_the_model(aoc, store, tmp_path):
     code, loose, err = aoc(*base, "--residual-cap", "1000", "--support-penalty", "0")
     assert code == 0, err
     assert json.loads(out) != json.loads(loose)
+
+
+def test_the_held_out_epsilon_shows_on_the_progress_bar(store):
+    from aoc_cli.belief.fit import train_corpus
+
+    corpus = Store(store).write("m", _data("maze", episodes=30))
+    labels = []
+    trained = train_corpus(corpus, threads=1, max_epochs=1, hidden=8,
+                           progress=lambda done, total=None, label=None: labels.append(label))
+    assert any(label and label.startswith("deciding epsilon") for label in labels)
+    assert 0.1 <= trained.metrics["controller"]["epsilon"] <= 0.5
