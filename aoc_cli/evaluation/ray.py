@@ -23,11 +23,11 @@ from aoc_cli.evaluation.score import (
     CHUNK_STEPS,
     chunk_size,
     chunks,
+    conclude,
     merge,
     score_episodes,
-    summarise,
 )
-from aoc_cli.ope.policies import ope_block, put_ope, wanted
+from aoc_cli.ope.policies import wanted
 from aoc_cli.parallel import capacity, map_chunks, start_ray
 from aoc_cli.store import Store
 from aoc_cli.threads import one_thread
@@ -72,15 +72,5 @@ def evaluate_on_ray(store_root, name: str, data: str, model: str | None, index_i
     results = map_chunks(_score, [(spec, [groups[i] for i in run]) for run in runs],
                          workers=workers, address=address, retries=1, done=done)
     res = merge([part for parts in results for part in parts])
-    decided = time.perf_counter()
-    with one_thread():
-        block = ope_block(ctx.mode, ctx.data, res, ope, seed,
-                          history_length=ctx.history_length)
-    ope_seconds = time.perf_counter() - decided
-    res.target = ctx.targets(res.row, block)  # the driver's alone: the tasks never compute them
-    summary = summarise(ctx, res)
-    put_ope(summary, block)
-    summary["ope_seconds"] = ope_seconds
-    summary["seconds"] = time.perf_counter() - started
-    summary["steps_per_second"] = summary["steps"] / max(summary["seconds"], 1e-9)
-    return summary, res
+    # the OPE and the value targets are the driver's alone: the tasks never compute them
+    return conclude(ctx, ctx.data, res, ope, seed, started)

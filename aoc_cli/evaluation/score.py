@@ -12,18 +12,14 @@ For a chunk of whole episodes of the held-out corpus (S steps):
    its own row;
 4. the decision: imitation, the weighted action of the minimal corpus subset (discrete: the
    argmax of the actions' scores, the subset's weighted sum of its rows' labels,
-   aoc_cli.belief.row_labels); value, the controller's rule (epsilon-quantile filter on the
-   residuals, capped by ``residual_cap`` x the typical p90 residual when set, with
-   ``min_support`` the support filter, then the best v_hat, or with ``support_penalty`` the
-   best penalised v_hat) over the candidates;
-5. baselines on the same steps: ``knn`` (the k = d_b + 1 nearest corpus rows on standardised
-   inputs, own episode left out likewise) and ``bc`` (the model's own head: the black box ABC
-   explains).
+   aoc_cli.belief.row_labels); value, the controller's one rule over the candidates
+   (:func:`aoc_cli.control.rule.choose`, batched);
+5. baselines on the same steps: ``knn`` (the k = d_b + 1 nearest corpus rows, standardised,
+   own episode left out likewise) and ``bc`` (the model's own head, the black box ABC explains).
 
-The work splits into independent chunks of episodes: :func:`score_episodes` scores one chunk
-(a list of held-out episode numbers) and returns a :class:`StepScores`; :func:`merge` joins the
-chunks' results in any grouping; :func:`summarise` computes the metrics. :func:`evaluate` runs
-the three in one process (a parallel runner can farm the chunks out instead).
+Independent chunks of episodes: :func:`score_episodes` scores one (a :class:`StepScores`),
+:func:`merge` joins chunks in any grouping, :func:`conclude` adds the OPE and the summary;
+:func:`evaluate` runs them in one process (aoc_cli.evaluation.ray farms the chunks out).
 """
 
 from __future__ import annotations
@@ -381,7 +377,11 @@ def evaluate(session, data, baselines=BASELINES, seed: int = 0, progress=None,
             done += len(part.row)
             if progress is not None:
                 progress(done, ctx.data.n_rows)
-    res = merge(parts)
+    return conclude(ctx, data, merge(parts), ope, seed, started)
+
+
+def conclude(ctx: EvalContext, data, res: StepScores, ope, seed: int, started: float):
+    """The decided steps' OPE, targets and summary, once, here (Ray too): (summary, res)."""
     decided = time.perf_counter()
     with one_thread():
         block = ope_block(ctx.mode, data, res, ope, seed, history_length=ctx.history_length)
@@ -396,4 +396,5 @@ def evaluate(session, data, baselines=BASELINES, seed: int = 0, progress=None,
 
 
 __all__ = ["BASELINES", "EXACT_MAX_ROWS", "LeaveEpisodeOut", "StepScores", "check_inputs",
-           "chunks", "evaluate", "merge", "score_episodes", "step_records", "summarise"]
+           "chunks", "conclude", "evaluate", "merge", "score_episodes", "step_records",
+           "summarise"]
