@@ -109,15 +109,23 @@ def fill(obs: np.ndarray, starts: np.ndarray, spec: dict) -> np.ndarray:
         if not empty.any():
             continue
         imputed[:, j] = empty
-        still = empty
-        if stay_start is not None:  # the last measured row at or before each row
-            last = np.where(empty, -1, rows)
-            np.maximum.accumulate(last, out=last)
-            held = empty & (last >= stay_start)
-            col[held] = col[last[held]]
-            still = empty & ~held
-        col[still] = spec["medians"][j]
+        _fill_column(col, empty, rows, stay_start, spec["medians"][j])
     return imputed
+
+
+def _fill_column(x: np.ndarray, empty: np.ndarray, rows: np.ndarray,
+                 stay_start: np.ndarray | None, median: float) -> None:
+    """Fill the empty cells of one column ``x`` (N,) in place: with ``stay_start`` (N,) (the
+    ``hold`` rule) the last measured value at or before each row within its stay, else (and
+    where the stay has none yet) the ``median``."""
+    still = empty
+    if stay_start is not None:
+        last = np.where(empty, -1, rows)
+        np.maximum.accumulate(last, out=last)
+        held = empty & (last >= stay_start)
+        x[held] = x[last[held]]
+        still = empty & ~held
+    x[still] = median
 
 
 def fill_columns(obs: np.ndarray, column, names: list[str], starts: np.ndarray, rule: str,
@@ -151,14 +159,7 @@ def fill_columns(obs: np.ndarray, column, names: list[str], starts: np.ndarray, 
         if empty.any():
             gaps.append(name)
             imputed[:, j] = empty
-            still = empty
-            if stay_start is not None:  # the last measured row at or before each row
-                last = np.where(empty, -1, rows)
-                np.maximum.accumulate(last, out=last)
-                held = empty & (last >= stay_start)
-                x[held] = x[last[held]]
-                still = empty & ~held
-            x[still] = median
+            _fill_column(x, empty, rows, stay_start, median)
         obs[:, j] = x
     spec = {"rule": rule, "mask": bool(mask), "names": list(names),
             "medians": list(fitted if medians is None else medians),
