@@ -63,11 +63,6 @@ RULE = ("the highest lower bound of the 95% interval of FQE on the held-out epis
         "equal bounds the more conservative")
 
 
-def why_not(corpus) -> str | None:
-    """None when the selection can run on ``corpus``, else why not (its FQE needs d3rlpy)."""
-    return available()
-
-
 def held_out_steps(corpus, data) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(rows (R,), starts (E_v + 1,), truncated (E_v,)) of the validation episodes, in the
     order of ``data.val_rows``."""
@@ -191,6 +186,12 @@ def recording_hook(corpus, config, k: int, extra: dict, progress=None):
     settings saved with the model, the ``settings`` reasons ``aoc train`` prints)."""
 
     def inspect(net, inputs, data, norm) -> dict:
+        reason = available()
+        if reason is not None:  # no FQE: rule 2's controller stands, and says why
+            for r in extra["settings"]["decided"]:
+                if r["setting"] in CHOSEN:
+                    r["why"] += f" (not chosen on held-out episodes: {reason})"
+            return {}
         out = select_controller(net, inputs, data, norm, corpus, config, k, progress)
         extra["controller"].update(out["chosen"])
         decided = [r for r in extra["settings"]["decided"] if r["setting"] not in CHOSEN]

@@ -34,75 +34,97 @@ def test_each_candidate_decides_by_the_controllers_rule():
     assert chosen == [0, 1, 0, 2]
 
 
-@pytest.fixture
-def icu(store, tmp_path):
+@pytest.fixture(scope="module")
+def icu(tmp_path_factory):
+    """A plain-file icu-sepsis log (150 episodes, 30 held out) and its model trained once as
+    ``aoc train`` trains it, the selection's FQE cut short (200 steps, 3 refits), and indexed;
+    the progress labels it showed."""
     from tests.conftest import run_aoc
 
-    data, _ = collect("icu-sepsis", episodes=300, seed=0)
-    path = write_plain_npz(data, tmp_path / "icu.npz")
-    code, _out, err = run_aoc("ingest", str(path), "--name", "icu")
+    root = tmp_path_factory.mktemp("select")
+    data, _ = collect("icu-sepsis", episodes=150, seed=0)
+    path = write_plain_npz(data, root / "icu.npz")
+    code, _out, err = run_aoc("--store", str(root / "store"), "ingest", str(path), "--name",
+                              "icu")
     assert code == 0, err
-    return Store(store)
-
-
-QUICK = dict(threads=1, max_epochs=1, hidden=8)
-
-
-def test_train_chooses_the_controller_on_held_out_episodes(icu, store, monkeypatch):
-    monkeypatch.setattr(selection, "FQE_STEPS", 200)
-    monkeypatch.setattr(selection, "FQE_REFITS", 3)
+    steps, refits = selection.FQE_STEPS, selection.FQE_REFITS
+    selection.FQE_STEPS, selection.FQE_REFITS = 200, 3
     labels = []
-    trained = aoc_cli.train("icu", store=store, **QUICK,
-                            progress=lambda done, total=None, label=None: labels.append(label))
-    metrics = trained.metrics
+    try:
+        trained = aoc_cli.train("icu", store=root / "store", threads=1, max_epochs=1, hidden=8,
+                                progress=lambda done, total=None, label=None:
+                                labels.append(label))
+    finally:
+        selection.FQE_STEPS, selection.FQE_REFITS = steps, refits
+    aoc_cli.build_index("icu", store=root / "store")
+    return root / "store", trained.metrics, labels
+
+
+def test_train_chooses_the_controller_on_held_out_episodes(icu):
+    store, metrics, labels = icu
     chosen = metrics["settings"]["controller_selection"]
     lows = [c["low"] for c in chosen["candidates"]]
     assert len(lows) == 4 and all(np.isfinite(lows))
     best = selection.CANDIDATES[int(np.argmax(lows))]
     assert chosen["chosen"] == best
     assert {k: metrics["controller"][k] for k in best} == best
-    assert chosen["episodes"] == 60 and chosen["steps"] == metrics["val_rows"]
+    assert chosen["episodes"] == 30 and chosen["steps"] == metrics["val_rows"]
     why = {r["setting"]: r["why"] for r in metrics["settings"]["decided"]}
     assert why["support_penalty"].startswith("chosen among 4 controllers by the highest lower")
     assert any(label and label.startswith("choosing the controller: FQE") for label in labels)
-    # the choice is saved with the model and every decision takes it
-    aoc_cli.build_index("icu", store=store)
+    # the choice is saved with the model and every decision takes it, each flag over it
     own = aoc_cli.open_session("icu", store=store).controller.config
     assert (own.residual_cap, own.support_penalty) == (best["residual_cap"],
                                                         best["support_penalty"])
+    flag = aoc_cli.open_session("icu", store=store, controller={"support_penalty": 1.0})
+    assert flag.controller.config.support_penalty == 1.0
 
 
-@pytest.mark.parametrize("given, no_select", [({"support_penalty": 2.0}, False), ({}, True)])
-def test_a_setting_given_or_no_select_skips_the_choice(icu, store, given, no_select):
-    metrics = aoc_cli.train("icu", store=store, **QUICK, controller=given,
-                            no_select=no_select).metrics
-    assert "controller_selection" not in metrics["settings"]
-    expected = {"residual_cap": 0.01, "support_penalty": 5.0, **given}
-    assert {k: metrics["controller"][k] for k in expected} == expected
-
-
-def test_the_k_saved_with_the_model_reaches_every_decision(icu, store, aoc):
-    code, out, err = aoc("train", "icu", "--no-select", "--k", "7", "--threads", "1",
-                         "--epochs", "1", "--hidden", "8", "--format", "json")
-    assert code == 0, err
-    assert json.loads(out)["controller"]["k"] == 7
-    code, out, err = aoc("index", "icu", "--format", "json")
-    assert code == 0, err
-    assert json.loads(out)["k"] == 7
-    assert aoc_cli.open_session("icu", store=store).controller.k == 7
-    assert aoc_cli.open_session("icu", store=store, controller={"k": 9}).controller.k == 9
-    # without --k: the k rule's (the paper's 2 (d_b + 1) for a value model), saved and used
-    metrics = aoc_cli.train("icu", store=store, **QUICK, no_select=True,
-                            overwrite=True).metrics
-    d_b = icu.corpus("icu").models_dir / "default" / "config.json"
-    rule = 2 * (json.loads(d_b.read_text())["config"]["belief_dim"] + 1)
-    assert metrics["controller"]["k"] == rule
-    aoc_cli.build_index("icu", store=store)
+def test_the_k_rule_is_saved_with_the_model_and_the_index_takes_it(icu):
+    store, metrics, _ = icu
+    config = json.loads((Store(store).corpus("icu").models_dir / "default" / "config.json")
+                        .read_text())
+    rule = 2 * (config["config"]["belief_dim"] + 1)  # the paper's, for a value model
+    assert metrics["controller"]["k"] == config["metrics"]["controller"]["k"] == rule
     assert aoc_cli.open_session("icu", store=store).controller.k == rule
 
 
-def test_train_refuses_a_controller_setting_it_does_not_save(icu, store, aoc):
-    code, _out, err = aoc("train", "icu", "--residual-cap", "0", "--epochs", "1")
+def test_a_setting_given_skips_the_choice_and_k_travels_with_the_model(icu, aoc):
+    store = str(icu[0])
+    code, out, err = aoc("--store", store, "train", "icu", "--model", "given",
+                         "--support-penalty", "2", "--k", "7", "--threads", "1", "--epochs",
+                         "1", "--hidden", "8", "--format", "json")
+    assert code == 0, err
+    metrics = json.loads(out)
+    assert "controller_selection" not in metrics["settings"]
+    # what was given, and rule 2's cap for the setting not given
+    assert metrics["controller"] == {"support_penalty": 2.0, "residual_cap": 0.01, "k": 7}
+    code, out, err = aoc("--store", store, "index", "icu", "--model", "given", "--format",
+                         "json")
+    assert code == 0, err
+    assert json.loads(out)["k"] == 7
+    session = aoc_cli.open_session("icu", model="given", store=store)
+    assert session.controller.k == 7 and session.controller.config.support_penalty == 2.0
+    over = aoc_cli.open_session("icu", model="given", store=store, controller={"k": 9})
+    assert over.controller.k == 9
+
+
+def test_train_refuses_a_controller_setting_it_does_not_save(icu, aoc):
+    store = str(icu[0])
+    code, _out, err = aoc("--store", store, "train", "icu", "--residual-cap", "0")
     assert code == 2 and err.strip().startswith("aoc: error:") and "--residual-cap" in err
     with pytest.raises(Exception, match="sampler"):
         aoc_cli.train("icu", store=store, controller={"sampler": "bc"})
+
+
+def test_without_d3rlpy_rule_2s_controller_stands_and_says_why(monkeypatch):
+    monkeypatch.setattr(selection, "available", lambda: "fqe: d3rlpy is not installed")
+    extra = {"controller": {"residual_cap": 0.01, "support_penalty": 5.0},
+             "settings": {"decided": [{"setting": "residual_cap", "value": 0.01, "why": "a"},
+                                      {"setting": "support_penalty", "value": 5.0, "why": "b"}]}}
+    assert selection.recording_hook(None, None, 42, extra)(None, None, None, None) == {}
+    assert extra["controller"] == {"residual_cap": 0.01, "support_penalty": 5.0}
+    assert [r["why"] for r in extra["settings"]["decided"]] == [
+        "a (not chosen on held-out episodes: fqe: d3rlpy is not installed)",
+        "b (not chosen on held-out episodes: fqe: d3rlpy is not installed)"]
+    assert "controller_selection" not in extra["settings"]
