@@ -106,8 +106,8 @@ class FQEEnsemble:
         h = x
         for i, (w, b) in enumerate(pairs):
             h = torch.baddbmm(b, h, w)
-            if i < len(pairs) - 1:
-                h = torch.relu(h)
+            if i < len(pairs) - 1:      # in place: baddbmm's backward needs its inputs, not
+                h = torch.relu_(h)      # its output, and ReLU's needs its output (3-5% a step)
         return h
 
     def train(self, steps: int, cums: np.ndarray, policy_of: np.ndarray, pools: list,

@@ -3,7 +3,8 @@ of aoc paired: is the new one's OPE slower than the old one's? (issue 36, item 7
 torch against its hand-written backpropagation and Adam)
 
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/perf/ope_paired.py --old DIR [--new DIR]
-        [--also DIR] [--rounds 5] [--store DIR] [--held-episodes 5000] [-f json]
+        [--also DIR] [--rounds 5] [--no-warm-up] [--store DIR] [--held-episodes 5000]
+        [-f json]
 
 ``--old`` / ``--new``: the roots of two checkouts (``--new`` defaults to this one's), e.g. the
 old from ``git archive 3832a90 | tar -x -C /tmp/old``; ``--also``: a third, timed in the same
@@ -15,7 +16,8 @@ it opens the session as ``aoc evaluate`` does (:func:`aoc_cli.open_session`, the
 settings) and times :func:`aoc_cli.evaluation.score.evaluate` of ``held0`` with the knn and bc
 baselines and the default OPE (PDWIS, WDR, FQE with its 10 refits for AOC and both baselines,
 and the behaviour's FQE), as a later ``aoc evaluate`` of the log runs it (each checkout's
-held-out targets kept by an untimed first run). Wall and CPU seconds (this process's and its
+held-out targets kept by an untimed first run; ``--no-warm-up`` where an earlier run of the
+same checkouts kept them). Wall and CPU seconds (this process's and its
 forked FQE parts'), and the OPE's own seconds (the summary's ``ope_seconds``). The rounds
 interleave the two (old first in even rounds, new first in odd ones), so that the shared
 machine's load hits both alike (with ``--also``: old, new, also, rotated); printed: each
@@ -82,6 +84,8 @@ def main() -> None:
     ap.add_argument("--new", default=str(h.ROOT), help="root of the new checkout (this one)")
     ap.add_argument("--also", default=None, help="root of a third checkout")
     ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--no-warm-up", action="store_true",
+                    help="no untimed first run (the store keeps each side's targets already)")
     ap.add_argument("--store", default="/tmp/aoc-evaluate-sepsis")
     ap.add_argument("--held-episodes", type=int, default=5000)
     args = ap.parse_args()
@@ -92,7 +96,7 @@ def main() -> None:
     trees = {"old": Path(args.old).resolve(), "new": Path(args.new).resolve()}
     if args.also:
         trees["also"] = Path(args.also).resolve()
-    for side, tree in trees.items():            # untimed: each side's held-out targets kept
+    for side, tree in trees.items() if not args.no_warm_up else ():   # untimed: targets kept
         print(f"warm-up {side}: {run(tree, args.store, held)['wall']:.1f} s", file=sys.stderr)
     runs: dict = {side: [] for side in trees}
     sides = list(trees)
