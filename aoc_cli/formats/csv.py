@@ -47,6 +47,7 @@ from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.compute as pc
 
 from aoc_cli.errors import AocError, param, warn
 from aoc_cli.formats.bins import parse as parse_bins
@@ -55,8 +56,8 @@ from aoc_cli.formats.common import ReadOptions, action_space_of, encode_labels
 from aoc_cli.formats.csv_exported import exported_mapping, restore_exported
 from aoc_cli.formats.spec import parse_spec
 from aoc_cli.formats.static import read_static
-from aoc_cli.formats.table import (Table, from_frame, has_gaps, is_numeric, numeric, read_table,
-                                   text)
+from aoc_cli.formats.table import (Table, from_frame, has_gaps, is_numeric, is_text_type,
+                                   numeric, read_table, text)
 from aoc_cli.formats.text_actions import text_actions
 from aoc_cli.store import CorpusData
 
@@ -66,6 +67,8 @@ MAPPING_KEYS = {"id", "time", "observations", "actions", "reward", "terminal", "
 
 def _sort_key(col: pa.ChunkedArray, name: str, where, dates: bool) -> np.ndarray:
     """Numbers if every value is a number, else (time only) dates, else (ids) the text."""
+    if isinstance(col, np.ndarray):  # a streamed column of numbers
+        return col
     if pa.types.is_timestamp(col.type) or pa.types.is_date(col.type):
         return col.cast(pa.timestamp("ns")).cast(pa.int64()).to_numpy(zero_copy_only=False)
     if is_numeric(col):
@@ -177,20 +180,31 @@ def _roles(where, header: list[str], options: ReadOptions, bins: list[str] | Non
 
 @dataclass
 class Episodes:
-    """Rows ordered by (id, time): ``order`` (N,) file row of each corpus row, ``starts``
-    (E + 1,), the id of each episode as text and as its sort key, and ``row_ids`` (N,) the
-    id text of each file row (messages name a row's stay by it)."""
+    """Rows ordered by (id, time): ``order`` (N,) file row of each corpus row (``in_order``:
+    the file already is), ``starts`` (E + 1,), the id of each episode as text and as its sort
+    key; ``row_codes`` (N,) index each file row's id text in ``texts`` (messages name a row's
+    stay by it)."""
 
     order: np.ndarray
     starts: np.ndarray
     ids: list[str]
     keys: np.ndarray
-    row_ids: np.ndarray
+    row_codes: np.ndarray
+    texts: np.ndarray
     id_name: str | None
+    in_order: bool = False
+
+    def take(self, x: np.ndarray) -> np.ndarray:
+        """A column's file rows in corpus order (itself when the file is in order)."""
+        return x if self.in_order else x[self.order]
+
+    def row_id(self, i: int) -> str:
+        """File row ``i``'s id text."""
+        return str(self.texts[self.row_codes[i]])
 
     def row_label(self, i: int) -> str:
         """Text naming file row ``i``'s episode: ``icustayid 1007``."""
-        return f"{self.id_name} {self.row_ids[i]}" if self.id_name else "the only episode"
+        return f"{self.id_name} {self.row_id(i)}" if self.id_name else "the only episode"
 
     def corpus_row_label(self, r: int) -> str:
         """``data row 12 (icustayid 1007)`` for corpus row ``r``."""
@@ -198,35 +212,61 @@ class Episodes:
         return f"data row {i + 1} ({self.row_label(i)})"
 
 
+def _ids(col: pa.ChunkedArray, name: str, where) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """An id column -> (codes (N,) int64 indexing ``texts``, texts (U,) the distinct ids,
+    stripped, empty cells ``''``; keys (U,) their sort keys: numbers when every id is one,
+    else the text). Hashed by Arrow, so only the U distinct ids become Python text."""
+    if is_text_type(col.type):  # the distinct cells found first, then only they trimmed
+        distinct = pc.unique(col)
+        codes = pc.index_in(col, value_set=distinct).to_numpy().astype(np.int64)
+        trimmed = pc.fill_null(pc.utf8_trim_whitespace(distinct), "")
+        texts = np.array(trimmed.to_pylist(), dtype=str) if len(distinct) else \
+            np.array([], dtype=str)
+        keys = _sort_key(pa.chunked_array([trimmed]), name, where, dates=False)
+        return codes, texts, keys  # " 7" and "7": two texts of one key, one episode
+    values = text(col)
+    texts, codes = np.unique(values, return_inverse=True)
+    keys = _sort_key(col, name, where, dates=False)
+    first = np.zeros(len(texts), np.int64)
+    first[codes[::-1]] = np.arange(len(codes))[::-1]
+    return codes.astype(np.int64), texts, np.asarray(keys)[first]
+
+
 def _episodes(table: Table, roles: Roles) -> Episodes:
     """Order the rows by episode id and time (stable); warn about empty ids; two rows of one
     episode at one time are an AocError naming them."""
     n, cols, where = table.n, table.cols, table.where
-    ids_text = text(cols[roles.id]) if roles.id else np.full(n, "0")
-    if roles.id and (ids_text == "").any():
-        rows = np.flatnonzero(ids_text == "")
+    if roles.id:
+        codes, texts, keys = _ids(cols[roles.id], roles.id, where)
+    else:
+        codes, texts, keys = np.zeros(n, np.int64), np.array(["0"]), np.zeros(1)
+    if roles.id and "" in texts:
+        rows = np.flatnonzero(codes == int(np.flatnonzero(texts == "")[0]))
         warn(f"{where}: {len(rows)} rows have an empty {roles.id!r} cell (first: data row "
              f"{int(rows[0]) + 1}); they form one episode with the id ''")
-    id_key = _sort_key(cols[roles.id], roles.id, where, dates=False) if roles.id \
-        else np.zeros(n)
-    uniq_keys, id_codes = np.unique(id_key, return_inverse=True)
-    time_key = _sort_key(cols[roles.time], roles.time, where, dates=True) if roles.time \
-        else np.arange(n)
-    order = np.lexsort((time_key, id_codes))
-    id_codes = id_codes[order]
-    if roles.time:
-        same = (np.diff(id_codes) == 0) & (np.diff(np.asarray(time_key)[order]) == 0)
+    uniq_keys, rank = np.unique(keys, return_inverse=True)  # ids of one number: one episode
+    id_codes = rank.reshape(-1)[codes]
+    time_key = np.asarray(_sort_key(cols[roles.time], roles.time, where, dates=True)) \
+        if roles.time else np.arange(n)
+    d_id, d_time = np.diff(id_codes), np.diff(time_key)
+    in_order = bool(((d_id > 0) | ((d_id == 0) & (d_time > 0))).all())  # no sort, no repeat
+    order = np.arange(n) if in_order else np.lexsort((time_key, id_codes))
+    if not in_order:
+        id_codes = id_codes[order]
+    if roles.time and not in_order:
+        same = (np.diff(id_codes) == 0) & (np.diff(time_key[order]) == 0)
         if same.any():
             k = int(np.flatnonzero(same)[0])
             a, b = sorted((int(order[k]), int(order[k + 1])))
-            stay = f"{roles.id} {ids_text[a]}, " if roles.id else ""
+            stay = f"{roles.id} {texts[codes[a]]}, " if roles.id else ""
             raise AocError(f"{where}: data rows {a + 1} and {b + 1} are both at ({stay}"
                            f"{roles.time} {text(cols[roles.time])[a]}) ({int(same.sum())} "
                            "such repeats): one row per stay and time; remove the duplicates")
     bounds = np.flatnonzero(np.diff(id_codes)) + 1
     starts = np.concatenate([[0], bounds, [n]]).astype(np.int64)
-    return Episodes(order, starts, [str(ids_text[r]) for r in order[starts[:-1]]],
-                    uniq_keys[id_codes[starts[:-1]]], ids_text, roles.id)
+    first = order[starts[:-1]]
+    return Episodes(order, starts, [str(t) for t in texts[codes[first]]],
+                    uniq_keys[id_codes[starts[:-1]]], codes, texts, roles.id, in_order)
 
 
 def _flags(table: Table, roles: Roles, eps: Episodes):
@@ -239,8 +279,8 @@ def _flags(table: Table, roles: Roles, eps: Episodes):
     if roles.terminal is None:
         terminals[last] = True
     else:
-        terminals = numeric(table.cols[roles.terminal], roles.terminal, table.where,
-                            eps.row_label)[eps.order] != 0
+        terminals = eps.take(numeric(table.cols[roles.terminal], roles.terminal, table.where,
+                                     eps.row_label)) != 0
         truncations[last] = ~terminals[last]
     return terminals, truncations
 
@@ -251,7 +291,7 @@ def _tags(table: Table, roles: Roles, eps: Episodes, static_tags: dict,
     tags = {}
     for c in roles.tags:
         if c in table.cols:
-            tags[c] = encode_labels(text(table.cols[c])[eps.order])
+            tags[c] = encode_labels(eps.take(text(table.cols[c])))
         elif c in static_tags:
             tags[c] = encode_labels(np.repeat(static_tags[c], lengths))
         else:
@@ -306,8 +346,7 @@ def read_columns(table: Table, options: ReadOptions, source: dict) -> CorpusData
         if static_feats is not None else {}
     measured = measured_planned(options, obs_names, lambda c: static_gaps[c]
                                 if c in static_gaps else has_gaps(cols[c]))
-    # made once at full width; each table column dropped once read (memory: about one copy)
-    observations = np.empty((table.n, len(obs_names) + len(measured)))
+    # each table column dropped once read: its values kept as one column (memory: one copy)
     other_roles = set(roles.tags) | set(roles.actions) | {
         roles.id, roles.time, roles.reward, roles.terminal, options.outcome,
         options.censored_column}
@@ -317,27 +356,27 @@ def read_columns(table: Table, options: ReadOptions, source: dict) -> CorpusData
         if j >= len(roles.observations):  # a static feature, per stay
             return np.repeat(static_feats[:, j - len(roles.observations)], np.diff(eps.starts))
         c = roles.observations[j]
-        x = numeric(cols[c], c, where, eps.row_label)[eps.order]
+        x = eps.take(numeric(cols[c], c, where, eps.row_label))
         if c not in other_roles:
             del cols[c]
         return x
 
     terminals, truncations = _flags(table, roles, eps)
     cohort = Cohort(
-        where=where, starts=eps.starts, observations=observations, obs_names=obs_names,
-        rewards=numeric(cols[roles.reward], roles.reward, where, eps.row_label)[eps.order]
+        where=where, starts=eps.starts, observations=None, obs_names=obs_names,
+        rewards=eps.take(numeric(cols[roles.reward], roles.reward, where, eps.row_label))
         if roles.reward else None,
         terminals=terminals, truncations=truncations, row_label=eps.corpus_row_label,
         stay_label=lambda e: f"{roles.id or 'episode'} {eps.ids[e]}", measured=measured,
         column=column)
     if bin_cols:
-        cohort.doses = {c: numeric(cols[c], c, where, eps.row_label)[eps.order]
+        cohort.doses = {c: eps.take(numeric(cols[c], c, where, eps.row_label))
                         for c in roles.actions}
         actions, act_space = None, None
     else:
         labelled = text_actions(where, cols, roles.actions, eps.order, eps.row_label)
         if labelled is None:
-            act_raw = np.stack([numeric(cols[c], c, where, eps.row_label)[eps.order]
+            act_raw = np.stack([eps.take(numeric(cols[c], c, where, eps.row_label))
                                 for c in roles.actions], 1)
             labelled = action_space_of(act_raw, roles.discrete, names=roles.actions)
         actions, act_space = labelled
@@ -345,12 +384,12 @@ def read_columns(table: Table, options: ReadOptions, source: dict) -> CorpusData
         if c is not None:
             setattr(cohort, role, _truthy(cols[c]) if role == "censored" else
                     numeric(cols[c], c, where, eps.row_label))
-            setattr(cohort, role, getattr(cohort, role)[eps.order])
+            setattr(cohort, role, eps.take(getattr(cohort, role)))
     prepared = prepare(cohort, options)
     tags = _tags(table, roles, eps, static_tags, options.static is not None)
     used = set(roles.observations) | set(roles.actions) | set(roles.tags) | {
         roles.id, roles.time, roles.reward, roles.terminal, options.censored_column}
-    columns = {c: numeric(cols[c], c, where)[eps.order] for c in table.header
+    columns = {c: eps.take(numeric(cols[c], c, where)) for c in table.header
                if c not in used and c in cols and is_numeric(cols[c])}
     columns.update(prepared.columns)
     if actions is None:
