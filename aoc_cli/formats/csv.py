@@ -47,40 +47,22 @@ from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
-import pyarrow.compute as pc
 
-from aoc_cli.errors import AocError, param, warn
+from aoc_cli.errors import AocError, param
 from aoc_cli.formats.bins import parse as parse_bins
 from aoc_cli.formats.cohort import Cohort, measured_planned, prepare
 from aoc_cli.formats.common import ReadOptions, action_space_of, encode_labels
 from aoc_cli.formats.csv_exported import exported_mapping, restore_exported
+from aoc_cli.formats.episodes import Episodes, order_episodes
 from aoc_cli.formats.spec import parse_spec
 from aoc_cli.formats.static import read_static
-from aoc_cli.formats.table import (Table, from_frame, has_gaps, is_numeric, is_text_type,
-                                   numeric, read_table, text)
+from aoc_cli.formats.table import (Table, from_frame, has_gaps, is_numeric, numeric,
+                                   read_table, text)
 from aoc_cli.formats.text_actions import text_actions
 from aoc_cli.store import CorpusData
 
 MAPPING_KEYS = {"id", "time", "observations", "actions", "reward", "terminal", "tags",
                 "discrete_actions", "static_id", "static", "aoc"}
-
-
-def _sort_key(col: pa.ChunkedArray, name: str, where, dates: bool) -> np.ndarray:
-    """Numbers if every value is a number, else (time only) dates, else (ids) the text."""
-    if isinstance(col, np.ndarray):  # a streamed column of numbers
-        return col
-    if pa.types.is_timestamp(col.type) or pa.types.is_date(col.type):
-        return col.cast(pa.timestamp("ns")).cast(pa.int64()).to_numpy(zero_copy_only=False)
-    if is_numeric(col):
-        return numeric(col, name, where)
-    values = text(col)
-    if dates:
-        try:
-            return np.array(values, dtype="datetime64[ns]").astype(np.int64)
-        except ValueError:
-            raise AocError(f"{where}: time column {name!r} holds neither numbers nor ISO dates "
-                           f"(e.g. {str(values[0])!r})") from None
-    return values
 
 
 def _mapping(options: ReadOptions) -> dict:
@@ -178,97 +160,6 @@ def _roles(where, header: list[str], options: ReadOptions, bins: list[str] | Non
                  m.get("static_id") or id_col)
 
 
-@dataclass
-class Episodes:
-    """Rows ordered by (id, time): ``order`` (N,) file row of each corpus row (``in_order``:
-    the file already is), ``starts`` (E + 1,), the id of each episode as text and as its sort
-    key; ``row_codes`` (N,) index each file row's id text in ``texts`` (messages name a row's
-    stay by it)."""
-
-    order: np.ndarray
-    starts: np.ndarray
-    ids: list[str]
-    keys: np.ndarray
-    row_codes: np.ndarray
-    texts: np.ndarray
-    id_name: str | None
-    in_order: bool = False
-
-    def take(self, x: np.ndarray) -> np.ndarray:
-        """A column's file rows in corpus order (itself when the file is in order)."""
-        return x if self.in_order else x[self.order]
-
-    def row_id(self, i: int) -> str:
-        """File row ``i``'s id text."""
-        return str(self.texts[self.row_codes[i]])
-
-    def row_label(self, i: int) -> str:
-        """Text naming file row ``i``'s episode: ``icustayid 1007``."""
-        return f"{self.id_name} {self.row_id(i)}" if self.id_name else "the only episode"
-
-    def corpus_row_label(self, r: int) -> str:
-        """``data row 12 (icustayid 1007)`` for corpus row ``r``."""
-        i = int(self.order[r])
-        return f"data row {i + 1} ({self.row_label(i)})"
-
-
-def _ids(col: pa.ChunkedArray, name: str, where) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """An id column -> (codes (N,) int64 indexing ``texts``, texts (U,) the distinct ids,
-    stripped, empty cells ``''``; keys (U,) their sort keys: numbers when every id is one,
-    else the text). Hashed by Arrow, so only the U distinct ids become Python text."""
-    if is_text_type(col.type):  # the distinct cells found first, then only they trimmed
-        distinct = pc.unique(col)
-        codes = pc.index_in(col, value_set=distinct).to_numpy().astype(np.int64)
-        trimmed = pc.fill_null(pc.utf8_trim_whitespace(distinct), "")
-        texts = np.array(trimmed.to_pylist(), dtype=str) if len(distinct) else \
-            np.array([], dtype=str)
-        keys = _sort_key(pa.chunked_array([trimmed]), name, where, dates=False)
-        return codes, texts, keys  # " 7" and "7": two texts of one key, one episode
-    values = text(col)
-    texts, codes = np.unique(values, return_inverse=True)
-    keys = _sort_key(col, name, where, dates=False)
-    first = np.zeros(len(texts), np.int64)
-    first[codes[::-1]] = np.arange(len(codes))[::-1]
-    return codes.astype(np.int64), texts, np.asarray(keys)[first]
-
-
-def _episodes(table: Table, roles: Roles) -> Episodes:
-    """Order the rows by episode id and time (stable); warn about empty ids; two rows of one
-    episode at one time are an AocError naming them."""
-    n, cols, where = table.n, table.cols, table.where
-    if roles.id:
-        codes, texts, keys = _ids(cols[roles.id], roles.id, where)
-    else:
-        codes, texts, keys = np.zeros(n, np.int64), np.array(["0"]), np.zeros(1)
-    if roles.id and "" in texts:
-        rows = np.flatnonzero(codes == int(np.flatnonzero(texts == "")[0]))
-        warn(f"{where}: {len(rows)} rows have an empty {roles.id!r} cell (first: data row "
-             f"{int(rows[0]) + 1}); they form one episode with the id ''")
-    uniq_keys, rank = np.unique(keys, return_inverse=True)  # ids of one number: one episode
-    id_codes = rank.reshape(-1)[codes]
-    time_key = np.asarray(_sort_key(cols[roles.time], roles.time, where, dates=True)) \
-        if roles.time else np.arange(n)
-    d_id, d_time = np.diff(id_codes), np.diff(time_key)
-    in_order = bool(((d_id > 0) | ((d_id == 0) & (d_time > 0))).all())  # no sort, no repeat
-    order = np.arange(n) if in_order else np.lexsort((time_key, id_codes))
-    if not in_order:
-        id_codes = id_codes[order]
-    if roles.time and not in_order:
-        same = (np.diff(id_codes) == 0) & (np.diff(time_key[order]) == 0)
-        if same.any():
-            k = int(np.flatnonzero(same)[0])
-            a, b = sorted((int(order[k]), int(order[k + 1])))
-            stay = f"{roles.id} {texts[codes[a]]}, " if roles.id else ""
-            raise AocError(f"{where}: data rows {a + 1} and {b + 1} are both at ({stay}"
-                           f"{roles.time} {text(cols[roles.time])[a]}) ({int(same.sum())} "
-                           "such repeats): one row per stay and time; remove the duplicates")
-    bounds = np.flatnonzero(np.diff(id_codes)) + 1
-    starts = np.concatenate([[0], bounds, [n]]).astype(np.int64)
-    first = order[starts[:-1]]
-    return Episodes(order, starts, [str(t) for t in texts[codes[first]]],
-                    uniq_keys[id_codes[starts[:-1]]], codes, texts, roles.id, in_order)
-
-
 def _flags(table: Table, roles: Roles, eps: Episodes):
     """(terminals, truncations) (N,): each episode's last row ends it, a terminal unless the
     terminal column says otherwise (then a truncation)."""
@@ -326,7 +217,7 @@ def read_columns(table: Table, options: ReadOptions, source: dict) -> CorpusData
     roles = _roles(where, table.header, options, bin_cols)
     if table.n == 0:
         raise AocError(f"{where} has zero rows: nothing to store")
-    eps = _episodes(table, roles)
+    eps = order_episodes(table, roles.id, roles.time)
     static_names: list[str] = []
     static_feats = None
     static_tags: dict[str, np.ndarray] = {}

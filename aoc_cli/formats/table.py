@@ -6,8 +6,9 @@ and its static covariates (:mod:`aoc_cli.formats.static`) build on.
 pyarrow's readers are typed and null-aware: an empty cell of a number column is a null (NaN
 once converted), a column holding text stays text. A CSV is streamed block by block first
 (the types inferred from the first block): each block's number columns (integers, floats,
-booleans) are written straight into one float64 numpy array per column, made once at a bound
-on the rows (the file's line breaks), and its other columns kept as Arrow chunks; so the peak
+booleans) are written straight into one float64 numpy array per column, made at the row count
+estimated from the file's first MB (grown if short), and its other columns kept as Arrow
+chunks; so the peak
 memory is the columns plus a block, never the whole Arrow table beside numpy copies of it.
 When streaming fails (a later block holds what the first one's types cannot, a quoted line
 break) the whole file is read at once, allowing quoted line breaks (a spreadsheet's free-text
@@ -144,57 +145,60 @@ def _as_numbers(t) -> bool:
     return pa.types.is_integer(t) or pa.types.is_floating(t) or pa.types.is_boolean(t)
 
 
-def _line_bound(path: Path) -> int | None:
-    """An upper bound on a plain file's data rows (its line breaks + 1; a gzip file: None)."""
+def _rows_estimate(path: Path) -> int | None:
+    """About how many rows a plain file holds, from the line breaks of its first MB (~10%
+    over; a gzip file: None). Only a first size: the arrays grow if it is short, and pages
+    never written are never resident."""
     if path.suffix.lower() == ".gz":
         return None
-    lines, buf = 1, bytearray(1 << 20)  # one buffer: no large allocation churned
-    with open(path, "rb", buffering=0) as fh:
-        while k := fh.readinto(buf):
-            lines += buf.count(b"\n", 0, k)
-    return lines
+    size = path.stat().st_size
+    with open(path, "rb") as fh:
+        sample = fh.read(1 << 20)
+    return int(size * max(sample.count(b"\n"), 1) / max(len(sample), 1) * 1.1) + 1024
 
 
 class _Numbers:
-    """One numeric column as it streams in: written into an array made once (``capacity``
-    rows), else (a gzip file, no bound known) kept as parts joined at the end."""
+    """One numeric column as it streams in: written into one float64 array made at the
+    estimated row count, grown 1.5x (one copy) when the rows outrun it."""
 
-    def __init__(self, capacity: int | None):
-        self.out = np.empty(capacity) if capacity is not None else None
-        self.parts: list[np.ndarray] = []
+    def __init__(self, capacity: int):
+        self.out = np.empty(capacity)
 
     def add(self, col: pa.Array, start: int) -> None:
         if not pa.types.is_float64(col.type):
             col = pc.cast(col, pa.float64())
         values = col.to_numpy(zero_copy_only=False)  # nulls: NaN
-        if self.out is not None and start + len(values) <= len(self.out):
-            self.out[start:start + len(values)] = values
-        else:
-            if self.out is not None:  # more rows than bounded: parts from here on
-                self.parts, self.out = [self.out[:start]], None
-            self.parts.append(np.array(values))  # its own copy, not the batch's buffer
+        end = start + len(values)
+        if end > len(self.out):
+            grown = np.empty(max(end, len(self.out) * 3 // 2))
+            grown[:start] = self.out[:start]
+            self.out = grown
+        self.out[start:end] = values
 
     def array(self, n: int) -> np.ndarray:
-        if self.out is not None:
-            return self.out[:n]
-        return np.concatenate(self.parts) if self.parts else np.zeros(0)
+        return self.out[:n]
 
 
 def _streamed(path: Path, parse, convert) -> Table:
     """A CSV read block by block (the types inferred from the first block): each numeric
-    column converted at once into one float64 array (the bound on its rows counted first),
+    column converted at once into one float64 array (made at the estimated row count),
     other columns kept as Arrow chunks. So the parse never holds more than a block beside the
     columns (memory about the columns' size; the whole file in Arrow, then numpy copies of its
     columns, would be twice that)."""
     read = pacsv.ReadOptions(block_size=BLOCK_BYTES)
-    capacity = _line_bound(path)
+    estimate = _rows_estimate(path)
     with pacsv.open_csv(path, read_options=read, parse_options=parse,
                         convert_options=convert) as reader:
         schema = reader.schema
-        numbers = {i: _Numbers(capacity) for i, f in enumerate(schema) if _as_numbers(f.type)}
-        chunks: dict[int, list] = {i: [] for i in range(len(schema)) if i not in numbers}
+        numbers: dict[int, _Numbers] = {}
+        chunks: dict[int, list] = {i: [] for i, f in enumerate(schema)
+                                   if not _as_numbers(f.type)}
         n = 0
         for batch in reader:
+            if not numbers:  # a gzip file: its first block's rows x 64 to start with
+                capacity = estimate or 64 * batch.num_rows
+                numbers = {i: _Numbers(capacity) for i in range(len(schema))
+                           if i not in chunks}
             for i, col in numbers.items():
                 col.add(batch.column(i), n)
             for i, parts in chunks.items():
@@ -205,8 +209,10 @@ def _streamed(path: Path, parse, convert) -> Table:
     _check_names(names, str(path))
     cols: dict = {}
     for i, name in enumerate(names):
-        cols[name] = numbers[i].array(n) if i in numbers else \
-            pa.chunked_array(chunks.pop(i), type=schema.field(i).type)
+        if i in chunks:
+            cols[name] = pa.chunked_array(chunks.pop(i), type=schema.field(i).type)
+        else:
+            cols[name] = numbers[i].array(n) if i in numbers else np.zeros(0)
     return Table(str(path), names, cols, n)
 
 

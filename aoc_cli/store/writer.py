@@ -15,6 +15,7 @@ import json
 import shutil
 import time
 import zlib
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import h5py
@@ -22,7 +23,7 @@ import numpy as np
 
 from aoc_cli.store.atomic import (array_bytes, array_checksum, atomic_dir, content_hash,
                                   file_record, seal, write_json)
-from aoc_cli.store.columns import ColumnStack
+from aoc_cli.store.columns import BLOCK_ROWS, ColumnStack
 from aoc_cli.store.corpus import CorpusData, action_labels, episode_starts_from_lengths
 from aoc_cli.store.layout import models_dir
 from aoc_cli.store.lock import writing_corpus
@@ -136,7 +137,7 @@ def _write_h5(path: Path, data: CorpusData, float_opts: dict) -> tuple[str, str]
 
     The observations are written, SHA-256-hashed and CRC-32-summed in one pass, block by block
     while each block is in the CPU's cache (a :class:`ColumnStack` is only ever made into rows
-    so: never the whole (N, d_o) matrix beside its columns)."""
+    so: never the whole (N, d_o) matrix beside its columns; :func:`_write_rows`)."""
 
     def put(f, key, arr):
         arr = np.ascontiguousarray(arr)
@@ -156,18 +157,7 @@ def _write_h5(path: Path, data: CorpusData, float_opts: dict) -> tuple[str, str]
             put(f, "observations", obs)
         ds = f.create_dataset("observations", shape=obs.shape, dtype=obs.dtype) \
             if not float_opts else None
-        crc = 0
-        parts = array_bytes(obs)
-        header = next(parts)
-        sha.update(header)
-        crc = zlib.crc32(header, crc)
-        for start, block in (obs.blocks() if isinstance(obs, ColumnStack) else
-                             _row_blocks(np.ascontiguousarray(obs))):
-            if ds is not None:
-                ds.write_direct(block, dest_sel=np.s_[start:start + len(block)])
-            view = memoryview(block).cast("B")
-            sha.update(view)
-            crc = zlib.crc32(view, crc)
+        crc = _write_rows(ds, obs, sha)
         put(f, "actions", data.actions)
         if data.rewards is not None:
             put(f, "rewards", data.rewards)
@@ -200,10 +190,41 @@ def _write_h5(path: Path, data: CorpusData, float_opts: dict) -> tuple[str, str]
     return digest, f"{crc:08x}"
 
 
-def _row_blocks(arr: np.ndarray, rows: int = 1 << 16):
-    """(first row, rows) blocks of a C-ordered array (views: no copy)."""
-    for a in range(0, len(arr), rows):
-        yield a, arr[a:a + rows]
+def _write_rows(ds, obs, sha) -> int:
+    """Write ``obs`` (an array or a :class:`ColumnStack`) into dataset ``ds`` (None: only
+    hash) block by block, feeding ``sha`` its :func:`array_bytes`; return their CRC-32.
+
+    The hashing of each block runs in one worker thread while the next block is made and
+    written (hashlib and zlib let go of the GIL on large buffers), in order: two buffers
+    alternate, a buffer reused only once its hashing is done."""
+    header = next(array_bytes(obs))
+    sha.update(header)
+    crc = [zlib.crc32(header)]
+
+    def digest(view) -> None:
+        sha.update(view)
+        crc[0] = zlib.crc32(view, crc[0])
+
+    stack = obs if isinstance(obs, ColumnStack) else None
+    arr = None if stack is not None else np.ascontiguousarray(obs)
+    n, size = len(obs), BLOCK_ROWS if stack is not None else 1 << 16
+    buffers = [np.empty((min(size, n), obs.shape[1]), obs.dtype) for _ in range(2)] \
+        if stack is not None else [None, None]
+    pending: list = [None, None]
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        for k, start in enumerate(range(0, n, size)):
+            stop = min(start + size, n)
+            if pending[k % 2] is not None:
+                pending[k % 2].result()  # its buffer hashed: free to refill
+            block = stack.rows(start, stop, buffers[k % 2]) if stack is not None \
+                else arr[start:stop]
+            if ds is not None:
+                ds.write_direct(block, dest_sel=np.s_[start:stop])
+            pending[k % 2] = pool.submit(digest, memoryview(block).cast("B"))
+        for job in pending:
+            if job is not None:
+                job.result()
+    return crc[0]
 
 
 def hashed_arrays(data: CorpusData) -> dict[str, np.ndarray]:
