@@ -117,8 +117,9 @@ import json, resource, sys, time
 from pathlib import Path
 case, src, store = sys.argv[1], sys.argv[2], sys.argv[3]
 import numpy, pyarrow, pyarrow.csv
+import pandas  # pyarrow imports it (~0.3 s) on its first conversion of a Python value
 if case == "aoc":
-    import aoc_cli, aoc_cli.store
+    import aoc_cli, aoc_cli.store, aoc_cli.formats.ingest
     ingest = aoc_cli.ingest  # the API's lazy import, before the clock starts
 def hwm():
     for line in Path("/proc/self/status").read_text().splitlines():

@@ -142,6 +142,24 @@ def test_reading_reports_progress_in_bytes_up_to_the_whole_file(tmp_path):
     path.write_text("a,b\n" + "".join(f"{i},{i}\n" for i in range(7)))
     seen = []
     table = read_table(path, lambda *a: seen.append(a))
-    assert table.header == ["a", "b"] and table.cols["a"].to_pylist() == list(range(7))
+    assert table.header == ["a", "b"] and list(table.cols["a"]) == list(range(7))
     size = path.stat().st_size
     assert seen == [(0, size, "reading p.csv"), (size, size, "reading p.csv")]
+
+
+def test_a_file_with_more_rows_than_its_first_mb_suggests_reads_every_row(tmp_path):
+    """The streamed reader sizes its arrays from the first MB's lines (long notes there, short
+    rows after): the arrays grow, and every row's numbers come back in order."""
+    from aoc_cli.formats.table import read_table
+
+    path = tmp_path / "grow.csv"
+    n_long, n = 2_000, 60_000
+    with path.open("w") as fh:
+        fh.write("id,t,obs_a,act_u,note\n")
+        for i in range(n):
+            note = "x" * 600 if i < n_long else ""
+            fh.write(f"p{i // 10},{i % 10},{i * 0.5},{i % 3},{note}\n")
+    table = read_table(path, text_columns=["id"])
+    assert table.n == n
+    np.testing.assert_array_equal(table.cols["obs_a"], np.arange(n) * 0.5)
+    np.testing.assert_array_equal(table.cols["act_u"], np.arange(n) % 3)
