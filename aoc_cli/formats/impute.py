@@ -19,6 +19,9 @@ Actions and rewards are never imputed.
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 
 from aoc_cli.errors import AocError, param
@@ -116,6 +119,28 @@ def fill(obs: np.ndarray, starts: np.ndarray, spec: dict) -> np.ndarray:
     return imputed
 
 
+def _filled(x: np.ndarray, name: str, rows: np.ndarray, stay_start: np.ndarray | None,
+            rule: str, where, median: float | None) -> tuple:
+    """(one column ``x`` filled, its empty cells or None when it has none, the median used:
+    ``median``, else that of its measured cells) as :func:`fill_columns` keeps them."""
+    empty = np.isnan(x)
+    any_empty = bool(empty.any())
+    if median is None:
+        present = x[~empty] if any_empty else x
+        if present.size == 0:
+            raise AocError(f"{where}: column {name!r} is empty for every stay: "
+                           f"{param('impute', rule)} has no measured value to fill it from; "
+                           "drop the column")
+        # partitioned in place when ``present`` is a copy already
+        median = float(np.median(present, overwrite_input=any_empty))
+    if not any_empty:
+        return x, None, median
+    if not x.flags.writeable:
+        x = x.copy()
+    _fill_column(x, empty, rows, stay_start, median)
+    return x, empty, median
+
+
 def _fill_column(x: np.ndarray, empty: np.ndarray, rows: np.ndarray,
                  stay_start: np.ndarray | None, median: float) -> None:
     """Fill the empty cells of one column ``x`` (N,) in place: with ``stay_start`` (N,) (the
@@ -135,8 +160,9 @@ def fill_columns(column, names: list[str], starts: np.ndarray, rule: str, mask: 
                  measured: list[str], where, medians: list[float] | None = None
                  ) -> tuple[ColumnStack, np.ndarray, dict]:
     """:func:`fit` (unless ``medians`` are given) and :func:`fill` in one pass, column by
-    column: ``column(j)`` (N,) float64, NaN where empty, is filled while contiguous and kept
-    as a column, with its ``COL?measured`` feature (bool). Returns (the observations: a
+    column: ``column(j)`` (N,) float64, NaN where empty, is filled while contiguous (the
+    columns on the machine's cores: each is its own) and kept as a column, with its
+    ``COL?measured`` feature (bool). Returns (the observations: a
     :class:`ColumnStack` of the d filled columns then the m features of ``measured``, the
     imputed cells (N, d + m) as a bool ColumnStack, the spec) as :func:`fit` and :func:`fill`
     would make them; a column empty for every row is an AocError."""
@@ -144,31 +170,22 @@ def fill_columns(column, names: list[str], starts: np.ndarray, rule: str, mask: 
         raise AocError(f"unknown {param('impute', rule)}: use one of {', '.join(RULES)}")
     d, n = len(names), int(starts[-1])
     features = {name: k for k, name in enumerate(measured if mask else [])}
-    values: list[np.ndarray] = []
-    empties: list[np.ndarray | None] = [None] * d  # each column's empty cells (None: none)
     rows = np.arange(n)
     stay_start = np.repeat(starts[:-1], np.diff(starts)) if rule == "hold" else None
-    fitted, gaps = [], []
-    for j, name in enumerate(names):
-        x = np.asarray(column(j), dtype=np.float64)
-        empty = np.isnan(x)
-        any_empty = bool(empty.any())
-        if medians is None:
-            present = x[~empty] if any_empty else x
-            if present.size == 0:
-                raise AocError(f"{where}: column {name!r} is empty for every stay: "
-                               f"{param('impute', rule)} has no measured value to fill it "
-                               "from; drop the column")
-            # partitioned in place when ``present`` is a copy already
-            fitted.append(float(np.median(present, overwrite_input=any_empty)))
-        median = fitted[j] if medians is None else medians[j]
-        if any_empty:
-            if not x.flags.writeable:
-                x = x.copy()
-            gaps.append(name)
-            empties[j] = empty
-            _fill_column(x, empty, rows, stay_start, median)
-        values.append(x)
+
+    def one(j: int, x: np.ndarray):
+        return _filled(x, names[j], rows, stay_start, rule, where,
+                       None if medians is None else medians[j])
+
+    raw = [np.asarray(column(j), dtype=np.float64) for j in range(d)]  # read here, in order
+    # columns are independent and numpy lets go of the GIL: filled on the cores (<= 4)
+    with ThreadPoolExecutor(max_workers=max(1, min(4, os.cpu_count() or 1))) as pool:
+        done = list(pool.map(one, range(d), raw))  # the first failing column's error
+    del raw
+    values = [x for x, _e, _m in done]
+    empties = [e for _x, e, _m in done]  # each column's empty cells (None: none)
+    fitted = [m for _x, _e, m in done]
+    gaps = [name for name, e in zip(names, empties) if e is not None]
     unknown = [m for m in features if m not in names]
     if unknown:
         raise AssertionError(f"measured features of columns that are not read: {unknown}")

@@ -20,9 +20,13 @@ frames, the whole-file read, text); :func:`numeric`, :func:`text`, :func:`has_ga
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import gzip
+import io
+import os
 import zlib
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -39,6 +43,8 @@ from aoc_cli.errors import AocError
 #: blocks left ~30 MB resident after the read, 1 MB ~40 MB and 4 MB ~85 MB, for the same CPU
 #: time within the noise (4 MB the slowest).
 BLOCK_BYTES = 256 << 10
+#: A plain CSV of at least this size is read as two halves in two threads (:func:`_halves`).
+SPLIT_BYTES = 8 << 20
 #: A Parquet file starts (and ends) with these bytes.
 PARQUET_MAGIC = b"PAR1"
 
@@ -159,10 +165,12 @@ def _rows_estimate(path: Path) -> int | None:
 
 class _Numbers:
     """One numeric column as it streams in: written into one float64 array made at the
-    estimated row count, grown 1.5x (one copy) when the rows outrun it."""
+    estimated row count, grown 1.5x (one copy) when the rows outrun it; ``fixed`` (two
+    halves writing into one array): made at a true bound, never grown."""
 
-    def __init__(self, capacity: int):
+    def __init__(self, capacity: int, fixed: bool = False):
         self.out = np.empty(capacity)
+        self.fixed = fixed
 
     def add(self, col: pa.Array, start: int) -> None:
         if not pa.types.is_float64(col.type):
@@ -170,6 +178,8 @@ class _Numbers:
         values = col.to_numpy(zero_copy_only=False)  # nulls: NaN
         end = start + len(values)
         if end > len(self.out):
+            if self.fixed:
+                raise AssertionError("more rows than the file's line breaks")
             grown = np.empty(max(end, len(self.out) * 3 // 2))
             grown[:start] = self.out[:start]
             self.out = grown
@@ -179,31 +189,82 @@ class _Numbers:
         return self.out[:n]
 
 
+@dataclass
+class _Halves:
+    """A plain CSV that can be read as two halves: ``middle`` the offset just after the line
+    break nearest its middle, ``lines`` its line breaks + 1 (a bound on its rows: the last
+    line may lack its break) and ``before`` the first half's line breaks (its header and rows:
+    a bound on its rows, + 1, where the second half's rows are written)."""
+
+    middle: int
+    lines: int
+    before: int
+
+
+def _halves(path: Path) -> _Halves | None:
+    """How to cut a plain CSV in two: when it is at least :data:`SPLIT_BYTES`, the machine has
+    two cores or more and the file holds no quote character (then every line break ends a row
+    or is a blank line; a quoted field may hold one). Else None: one stream."""
+    if path.suffix.lower() == ".gz" or (os.cpu_count() or 1) < 2:
+        return None
+    size = path.stat().st_size
+    if size < SPLIT_BYTES:
+        return None
+    buf, lines, before, middle = bytearray(1 << 20), 1, 0, None
+    with open(path, "rb", buffering=0) as fh:
+        while k := fh.readinto(buf):
+            if buf.find(b'"', 0, k) >= 0:
+                return None
+            start = fh.tell() - k
+            if middle is None and start + k > size // 2:
+                at = buf.find(b"\n", max(size // 2 - start, 0), k)
+                if at >= 0:
+                    middle = start + at + 1
+                    before = lines - 1 + buf.count(b"\n", 0, at + 1)
+            lines += buf.count(b"\n", 0, k)
+    if middle is None or middle >= size:
+        return None
+    return _Halves(middle, lines, before)
+
+
 def _streamed(path: Path, parse, convert) -> Table:
     """A CSV read block by block (the types inferred from the first block): each numeric
     column converted at once into one float64 array (made at the estimated row count),
     other columns kept as Arrow chunks. So the parse never holds more than a block beside the
     columns (memory about the columns' size; the whole file in Arrow, then numpy copies of its
-    columns, would be twice that)."""
+    columns, would be twice that). A file :func:`_halves` can cut is read as two halves in two
+    threads into the same arrays (the second half from the first's bound on, with the first's
+    column names and types, as one stream would read it), then its rows moved up to follow
+    the first half's."""
     read = pacsv.ReadOptions(block_size=BLOCK_BYTES)
-    estimate = _rows_estimate(path)
-    with pacsv.open_csv(path, read_options=read, parse_options=parse,
-                        convert_options=convert) as reader:
-        schema = reader.schema
-        numbers: dict[int, _Numbers] = {}
+    halves = _halves(path)
+    with contextlib.ExitStack() as stack:
+        first = stack.enter_context(pacsv.open_csv(
+            path if halves is None else _Range(path, 0, halves.middle), read_options=read,
+            parse_options=parse, convert_options=convert))
+        schema = first.schema
         chunks: dict[int, list] = {i: [] for i, f in enumerate(schema)
                                    if not _as_numbers(f.type)}
-        n = 0
-        for batch in reader:
-            if not numbers:  # a gzip file: its first block's rows x 64 to start with
-                capacity = estimate or 64 * batch.num_rows
-                numbers = {i: _Numbers(capacity) for i in range(len(schema))
-                           if i not in chunks}
-            for i, col in numbers.items():
-                col.add(batch.column(i), n)
-            for i, parts in chunks.items():
-                parts.append(batch.column(i))
-            n += batch.num_rows
+        numbers = {i: _Numbers(halves.lines, fixed=True) for i in range(len(schema))
+                   if i not in chunks} if halves is not None else {}
+        later = None
+        if halves is not None:
+            second = stack.enter_context(pacsv.open_csv(
+                _Range(path, halves.middle, path.stat().st_size), parse_options=parse,
+                read_options=pacsv.ReadOptions(block_size=BLOCK_BYTES,
+                                               column_names=schema.names),
+                convert_options=_typed(convert, schema)))
+            pool = stack.enter_context(ThreadPoolExecutor(max_workers=1))
+            later = pool.submit(_consume, second, numbers, {i: [] for i in chunks},
+                                halves.before, None)
+        n = _consume(first, numbers, chunks, 0, _rows_estimate(path))
+        if later is not None:
+            n_second, more = later.result()
+            for col in numbers.values():  # close the gap between the halves
+                col.out[n:n + n_second] = col.out[halves.before:halves.before + n_second]
+            for i, parts in more.items():
+                chunks[i] += parts
+            n += n_second
     pa.default_memory_pool().release_unused()  # the blocks' buffers, kept by the pool
     names = [str(h).strip() for h in schema.names]
     _check_names(names, str(path))
@@ -214,6 +275,58 @@ def _streamed(path: Path, parse, convert) -> Table:
         else:
             cols[name] = numbers[i].array(n) if i in numbers else np.zeros(0)
     return Table(str(path), names, cols, n)
+
+
+def _consume(reader, numbers: dict, chunks: dict, offset: int, estimate: int | None):
+    """Read a streaming reader to its end: each block's numeric columns into ``numbers``
+    from row ``offset`` on (made at ``estimate`` rows, or the first block's x 64, when
+    empty), its other columns appended to ``chunks``. Returns the rows read (and, from row
+    ``offset`` > 0, the chunks too: the second half)."""
+    n = 0
+    for batch in reader:
+        if not numbers:
+            capacity = estimate or 64 * batch.num_rows
+            numbers.update({i: _Numbers(capacity) for i in range(batch.num_columns)
+                            if i not in chunks})
+        for i, col in numbers.items():
+            col.add(batch.column(i), offset + n)
+        for i, parts in chunks.items():
+            parts.append(batch.column(i))
+        n += batch.num_rows
+    return (n, chunks) if offset else n
+
+
+def _typed(convert, schema):
+    """``convert`` with every column's type set to ``schema``'s (the second half's reader
+    infers nothing: it reads what the first half's types say, as one stream would)."""
+    return pacsv.ConvertOptions(
+        column_types={f.name: f.type for f in schema},
+        strings_can_be_null=convert.strings_can_be_null,
+        quoted_strings_can_be_null=convert.quoted_strings_can_be_null)
+
+
+class _Range(io.RawIOBase):
+    """Bytes [start, stop) of a file, as a readable stream (one half of a CSV)."""
+
+    def __init__(self, path: Path, start: int, stop: int):
+        super().__init__()
+        self._fh = open(path, "rb", buffering=0)
+        self._fh.seek(start)
+        self._left = stop - start
+
+    def readable(self) -> bool:
+        return True
+
+    def readinto(self, b) -> int:
+        if self._left <= 0:
+            return 0
+        k = self._fh.readinto(memoryview(b)[:min(len(b), self._left)])
+        self._left -= k
+        return k
+
+    def close(self) -> None:
+        self._fh.close()
+        super().close()
 
 
 def _first(err: Exception) -> str:
