@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from aoc_cli.ope import estimators as ope
-from aoc_cli.ope.fqe import available, fqe_policies, student_quantile
+from aoc_cli.ope.fqe import fqe_policies, student_quantile
 from aoc_cli.ope.support import refusal, verdict, withheld
 
 
@@ -44,7 +44,8 @@ def policy_value(log: ope.Log, observations, logged, propensity, policy, n_actio
         out["notes"].append(fqe["note"])
     refitted = q is not None and len(fqe["replicates"]) > 1
     if "wdr" in settings.estimators and q is not None:
-        specs["wdr"] = ("wdr", rho, q[rows, logged], (probs * q).sum(1))
+        qw = fqe.get("q_cross", q)          # cross-fitted: no episode corrects by its own fit
+        specs["wdr"] = ("wdr", rho, qw[rows, logged], (probs * qw).sum(1))
     est = ope.bootstrap(log, specs, n_boot=settings.n_boot, seed=settings.seed)
     mean = est.pop("behaviour")
     value, gain = {}, {}
@@ -104,19 +105,17 @@ def fqe_values(log: ope.Log, observations, logged, policies: list, settings,
                progress=None, behaviour: bool = False) -> list:
     """The direct method for each policy (N, n) at once
     (:func:`aoc_cli.ope.fqe.fqe_policies`: one batched ensemble), when an estimator needs it: with refits when FQE is asked for and
-    ``settings.fqe_refits`` > 1. Each entry None (no estimator needs a Q model) or a record;
-    without d3rlpy, a record with ``q`` None and the reason as its ``note``. ``behaviour``:
+    ``settings.fqe_refits`` > 1, and cross-fitted over two folds of episodes when WDR is
+    asked for (its ``q_cross``). Each entry None (no estimator needs a Q model) or a record.
+    ``behaviour``:
     the logged behaviour's record last (``fqe_policies``'s), when FQE runs."""
     if "fqe" not in settings.estimators and "wdr" not in settings.estimators:
         return [None] * len(policies)
-    reason = available()
-    if reason is not None:
-        return [{"q": None, "note": reason, "replicates": ()} for _ in policies]
     refits = settings.fqe_refits if "fqe" in settings.estimators else 0
     return fqe_policies(observations, logged, log.rewards, log.starts, policies,
                         settings.gamma, settings.fqe_steps, refits if refits > 1 else 0,
                         seed=settings.seed, progress=progress, schedule=settings.fqe_schedule,
                         behaviour=behaviour, parts=settings.fqe_processes,
-                        truncated=log.truncated)
+                        truncated=log.truncated, cross="wdr" in settings.estimators)
 
 
