@@ -13,7 +13,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 
 from aoc_cli.errors import AocError, warn
-from aoc_cli.formats.table import Table, is_numeric, is_text_type, numeric, text
+from aoc_cli.formats.table import Table, arrow_values, is_numeric, is_text_type, numeric, text
 
 
 def sort_key(col: pa.ChunkedArray, name: str, where, dates: bool) -> np.ndarray:
@@ -75,18 +75,36 @@ def _ids(col: pa.ChunkedArray, name: str, where) -> tuple[np.ndarray, np.ndarray
     else the text). Hashed by Arrow, so only the U distinct ids become Python text."""
     if is_text_type(col.type):  # the distinct cells found first, then only they trimmed
         distinct = pc.unique(col)
-        codes = pc.index_in(col, value_set=distinct).to_numpy().astype(np.int64)
-        trimmed = pc.fill_null(pc.utf8_trim_whitespace(distinct), "")
-        texts = np.array(trimmed.to_pylist(), dtype=str) if len(distinct) else \
-            np.array([], dtype=str)
-        keys = sort_key(pa.chunked_array([trimmed]), name, where, dates=False)
-        return codes, texts, keys  # " 7" and "7": two texts of one key, one episode
+        found = pc.index_in(col, value_set=distinct)  # every cell is one of them
+        parts = [arrow_values(c) for c in found.chunks]
+        if any(valid is not None for _v, valid in parts):
+            raise AssertionError("an id cell not among the column's distinct cells")
+        codes = np.concatenate([v for v, _valid in parts] or [np.zeros(0, np.int32)])
+        trimmed = pc.utf8_trim_whitespace(distinct)
+        texts = np.array(["" if t is None else t for t in trimmed.to_pylist()], dtype=str)
+        return codes.astype(np.int64), texts, _id_keys(trimmed, texts)
+        # " 7" and "7": two texts of one key, one episode
     values = text(col)
     texts, codes = np.unique(values, return_inverse=True)
     keys = sort_key(col, name, where, dates=False)
     first = np.zeros(len(texts), np.int64)
     first[codes[::-1]] = np.arange(len(codes))[::-1]
     return codes.astype(np.int64), texts, np.asarray(keys)[first]
+
+
+def _id_keys(trimmed: pa.Array, texts: np.ndarray) -> np.ndarray:
+    """The sort keys of the distinct ids: numbers (NaN for the empty id) when every other id
+    reads as one, else their text; Arrow's casts, no Python value made an Arrow one (that
+    would import pandas, ~0.5 s)."""
+    present = pc.filter(trimmed, pc.cast(pc.utf8_length(trimmed), pa.bool_()))  # not empty
+    try:
+        numbers = pc.cast(present, pa.float64())
+    except pa.ArrowInvalid:
+        return texts
+    keys = np.full(len(texts), np.nan)
+    values, _valid = arrow_values(numbers)  # no nulls: the empty ids were filtered out
+    keys[texts != ""] = values
+    return keys
 
 
 def order_episodes(table: Table, id_col: str | None, time_col: str | None) -> Episodes:

@@ -7,13 +7,16 @@ order and compression."""
 
 import csv
 import gzip
+import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
 
 import aoc_cli
 from aoc_cli.store import Store
-from tests.formats.cohorts import OBS, cohort, roles, write
+from tests.formats.cohorts import OBS, ROOT, cohort, roles, write
 
 BINS = {"input_4hourly": 4, "max_dose_vaso": 3}
 REWARD = {1.0: -1.0, 0.0: 1.0}
@@ -105,3 +108,21 @@ def test_the_columnar_ingest_gives_the_reference_arrays(tmp_path, rule, order, s
         np.testing.assert_array_equal(c.column(name), values)
     # the hash recomputed from the arrays read back is the one the writer computed as it went
     assert c.content_hash() == c.hash
+
+
+def test_a_cohort_csv_is_ingested_without_importing_pandas(tmp_path):
+    """pyarrow's ``to_numpy`` goes through its pandas layer, which imports pandas (~0.5 s and
+    ~50 MB in a fresh process, more than a small ingest); the CSV path reads Arrow buffers."""
+    path = write(cohort(20, seed=2), tmp_path / "c.csv")
+    options = roles(impute="hold", impute_mask=True, outcome="died_in_hosp",
+                    outcome_reward="1=-1,0=1", bin_actions="input_4hourly=3,max_dose_vaso=3")
+    store = str(tmp_path / "s")
+    code = "\n".join([
+        "import sys, aoc_cli",
+        "from aoc_cli.store import Store",
+        f"aoc_cli.ingest({str(path)!r}, 'icu', store=Store({store!r}), options={options!r})",
+        f"assert Store({store!r}).corpus('icu').n_rows > 0",
+        "print('pandas' in sys.modules)"])
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         env={**os.environ, "PYTHONPATH": str(ROOT)}, check=True)
+    assert out.stdout.strip() == "False"
