@@ -37,7 +37,7 @@ from aoc_cli.control.rule import choose, residual_cap
 from aoc_cli.control.support import row_episodes, support_episodes
 from aoc_cli.decompose import decompose
 from aoc_cli.neighbours import BeliefIndex
-from aoc_cli.ope.fqe import REFITS, available, fqe_policies, student_quantile
+from aoc_cli.ope.fqe import REFITS, fqe_policies, student_quantile
 from aoc_cli.ope.policies import truncated
 from aoc_cli.threads import one_thread
 
@@ -186,12 +186,6 @@ def recording_hook(corpus, config, k: int, extra: dict, progress=None):
     settings saved with the model, the ``settings`` reasons ``aoc train`` prints)."""
 
     def inspect(net, inputs, data, norm) -> dict:
-        reason = available()
-        if reason is not None:  # no FQE: rule 2's controller stands, and says why
-            for r in extra["settings"]["decided"]:
-                if r["setting"] in CHOSEN:
-                    r["why"] += f" (not chosen on held-out episodes: {reason})"
-            return {}
         out = select_controller(net, inputs, data, norm, corpus, config, k, progress)
         extra["controller"].update(out["chosen"])
         decided = [r for r in extra["settings"]["decided"] if r["setting"] not in CHOSEN]

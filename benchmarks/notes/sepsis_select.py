@@ -17,16 +17,19 @@ import numpy as np
 import torch
 
 import aoc_cli
+from aoc_cli.control import ControllerConfig
+from aoc_cli.envs import sepsis_tables
+from aoc_cli.experiments import state_policy
+from aoc_cli.store import Store
+
+# the selection's own steps on a saved model (its network, encoded inputs and split), as
+# internal: training hands them to the selection's hook
 from aoc_cli.belief import load_model
-from aoc_cli.belief.evidence import label
 from aoc_cli.belief.data import TrainingData, episode_rows, split_episodes
+from aoc_cli.belief.evidence import label
 from aoc_cli.belief.inputs import encode_corpus
 from aoc_cli.belief.model import Normalisation
-from aoc_cli.control.config import ControllerConfig
-from aoc_cli.envs.icu_sepsis import tables
 from aoc_cli.evaluation import selection
-from aoc_cli.experiments import sepsis_policies as sp
-from aoc_cli.store import Store
 
 
 def main() -> None:
@@ -48,11 +51,11 @@ def main() -> None:
     k = int((model.meta["metrics"].get("controller") or {}).get("k") or 2 * (model.d_b + 1))
     with torch.no_grad():
         out = selection.select_controller(model.net, inputs, data, norm, corpus, config, k)
-    t = tables("terminate" if args.task.endswith("terminate") else "mean")
+    t = sepsis_tables("terminate" if args.task.endswith("terminate") else "mean")
     for cand in out["candidates"]:
         session = aoc_cli.open_session(args.name, store=args.store,
                                        controller=ControllerConfig(**cand["settings"]))
-        cand["exact"] = round(float(t.mdp.value(sp.state_policy(session.controller.decide, t))), 4)
+        cand["exact"] = round(float(t.mdp.value(state_policy(session.controller.decide, t))), 4)
     print(json.dumps({"chosen": out["chosen"], "seconds": round(out["seconds"], 1),
                       "episodes": out["episodes"], "steps": out["steps"],
                       "candidates": [{**c, "settings": label(c["settings"])}

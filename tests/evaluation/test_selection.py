@@ -116,15 +116,3 @@ def test_train_refuses_a_controller_setting_it_does_not_save(icu, aoc):
     with pytest.raises(Exception, match="sampler"):
         aoc_cli.train("icu", store=store, controller={"sampler": "bc"})
 
-
-def test_without_d3rlpy_rule_2s_controller_stands_and_says_why(monkeypatch):
-    monkeypatch.setattr(selection, "available", lambda: "fqe: d3rlpy is not installed")
-    extra = {"controller": {"residual_cap": 0.01, "support_penalty": 5.0},
-             "settings": {"decided": [{"setting": "residual_cap", "value": 0.01, "why": "a"},
-                                      {"setting": "support_penalty", "value": 5.0, "why": "b"}]}}
-    assert selection.recording_hook(None, None, 42, extra)(None, None, None, None) == {}
-    assert extra["controller"] == {"residual_cap": 0.01, "support_penalty": 5.0}
-    assert [r["why"] for r in extra["settings"]["decided"]] == [
-        "a (not chosen on held-out episodes: fqe: d3rlpy is not installed)",
-        "b (not chosen on held-out episodes: fqe: d3rlpy is not installed)"]
-    assert "controller_selection" not in extra["settings"]
