@@ -49,8 +49,7 @@ def main() -> None:
     data = TrainingData(np.asarray(model.values, np.float64), train_eps, val_eps,
                         episode_rows(starts, train_eps), episode_rows(starts, val_eps))
     k = int((model.meta["metrics"].get("controller") or {}).get("k") or 2 * (model.d_b + 1))
-    with torch.no_grad():
-        out = selection.select_controller(model.net, inputs, data, norm, corpus, config, k)
+    out = selection.select_controller(model.net, inputs, data, norm, corpus, config, k)
     t = sepsis_tables("terminate" if args.task.endswith("terminate") else "mean")
     for cand in out["candidates"]:
         session = aoc_cli.open_session(args.name, store=args.store,
