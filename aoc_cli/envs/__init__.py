@@ -103,4 +103,10 @@ def collect(task: str, steps: int | None = None, episodes: int | None = None, se
     return data.validate(), summary
 
 
-__all__ = ["TASKS", "Episode", "Task", "collect", "collected_task", "get_task", "make_env"]
+#: icu-sepsis's tables (the MDP, its observations, the clinicians' policy) and pendulum-het's
+#: swing-up controller: the references a notes script values a policy or a log against.
+sepsis_tables = icu_sepsis.tables
+swingup_action = pendulum_het.swingup_action
+
+__all__ = ["TASKS", "Episode", "Task", "collect", "collected_task", "get_task", "make_env",
+           "sepsis_tables", "swingup_action"]

@@ -91,7 +91,16 @@ def select_rows(data: CorpusData, mask: np.ndarray) -> CorpusData:
         tags={k: (np.asarray(c)[rows], lab) for k, (c, lab) in data.tags.items()},
         columns={k: np.asarray(v)[rows] for k, v in data.columns.items()},
         episode_ids=ids, source=data.source,
+        imputed=_rows_imputed(data.imputed, rows), preprocessing=data.preprocessing,
     )
+
+
+def _rows_imputed(imputed: np.ndarray | None, rows: np.ndarray) -> np.ndarray | None:
+    """The imputed-cell mask of the selected ``rows`` (None when none of them was imputed)."""
+    if imputed is None:
+        return None
+    part = np.asarray(imputed)[rows]
+    return part if part.any() else None
 
 
 def check_target(path: Path, store: Store, overwrite: bool, *, folder: bool = False) -> None:

@@ -11,12 +11,18 @@ the CSV's column mapping (``NAME.columns.json``, key ``aoc``). A reader that fin
 :func:`restore` on what it read; without it the file reads as any other of its format.
 
 The spec also records the content hash of what was exported: :func:`restore` warns when the
-data read back differ (a file edited after export).
+data read back differ (a file edited after export). And what a clinical corpus was prepared
+with: its ``preprocessing`` (imputation rule and medians, dose-bin edges, the split) and its
+imputed-cell mask (``imputed``: the (N, d_o) bits packed row-major, zlib-compressed, base64;
+:func:`pack_mask`), so that a corpus read back from any of the three formats still marks its
+imputed cells and fills appended or held-out data with its own medians.
 """
 
 from __future__ import annotations
 
+import base64
 import json
+import zlib
 
 import numpy as np
 
@@ -64,7 +70,35 @@ def describe(data: CorpusData, corpus: str, fmt: str, content_hash: str | None =
         "episode_ids": None if data.episode_ids is None else list(data.episode_ids),
         "unflagged_ends": unflagged_ends(data),
         "source": data.source,
+        "preprocessing": data.preprocessing or {},
+        "imputed": None if data.imputed is None else pack_mask(data.imputed),
     }
+
+
+def pack_mask(mask: np.ndarray) -> dict:
+    """An (N, d) bool mask as JSON: ``{"shape", "bits"}``, the bits packed row-major,
+    zlib-compressed, base64 (229k x 44 cells with 15% set: ~0.9 MB of text)."""
+    mask = np.ascontiguousarray(mask, dtype=bool)
+    packed = zlib.compress(np.packbits(mask.reshape(-1)).tobytes(), 6)
+    return {"shape": list(mask.shape), "bits": base64.b64encode(packed).decode("ascii")}
+
+
+def unpack_mask(packed: dict, shape: tuple[int, int], where) -> np.ndarray:
+    """The mask :func:`pack_mask` wrote, checked to be of ``shape`` (the observations read
+    back); anything else is an AocError naming the file."""
+    bad = AocError(f"{where}: the imputed-cell mask of the export metadata does not fit the "
+                   f"observations {tuple(shape)}; re-export the corpus")
+    if not isinstance(packed, dict) or [int(x) for x in packed.get("shape", [])] != \
+            list(shape):
+        raise bad
+    n = int(shape[0]) * int(shape[1])
+    try:
+        raw = zlib.decompressobj().decompress(base64.b64decode(packed["bits"]), (n + 7) // 8)
+    except (ValueError, TypeError, KeyError, zlib.error):
+        raise bad from None
+    if len(raw) != (n + 7) // 8:
+        raise bad
+    return np.unpackbits(np.frombuffer(raw, np.uint8), count=n).astype(bool).reshape(shape)
 
 
 def parse_spec(value, where) -> dict | None:
@@ -178,9 +212,11 @@ def restore(data: CorpusData, spec: dict, where) -> CorpusData:
     last = np.asarray(data.episode_starts[1:]) - 1
     ends = np.asarray(spec.get("unflagged_ends") or [], np.int64)
     truncations[last[ends]] = False
+    observations = _cast(data.observations, spec["observations_dtype"], "observations", where)
+    imputed = None if spec.get("imputed") is None else \
+        unpack_mask(spec["imputed"], np.asarray(observations).shape, where)
     out = CorpusData(
-        observations=_cast(data.observations, spec["observations_dtype"], "observations",
-                           where),
+        observations=observations,
         actions=actions,
         rewards=None if not spec["has_rewards"] or data.rewards is None
         else np.asarray(data.rewards, np.float64),
@@ -192,6 +228,7 @@ def restore(data: CorpusData, spec: dict, where) -> CorpusData:
         source={**data.source, "exported_from": {
             "corpus": spec.get("corpus"), "content_hash": spec.get("content_hash"),
             "source": spec.get("source")}},
+        imputed=imputed, preprocessing=dict(spec.get("preprocessing") or {}),
     )
     untouched = set(tags) == set(spec["tags"]) and \
         (out.rewards is not None) == bool(spec["has_rewards"])

@@ -1,5 +1,5 @@
 """Train one belief row's model of ``aoc bench`` by itself: the bench's corpus and the bench's
-configuration (``aoc_cli.experiments.beliefs.model_config`` at the scale), for one task and size.
+configuration (``aoc_cli.experiments.model_config`` at the scale), for one task and size.
 
 ``aoc bench pendulum-het --sizes N --methods aoc-critic`` trains a critic for each of the two
 tasks' corpora (random and upright start); this trains the one asked for, so a single cell can
@@ -36,12 +36,11 @@ from aoc_cli.threads import wait_passively  # noqa: E402
 wait_passively()  # OpenMP threads wait passively, as under the aoc command (aoc_cli/threads.py)
 
 from aoc_cli.belief import train_model  # noqa: E402
-from aoc_cli.experiments import lunar, pendulum  # noqa: E402
-from aoc_cli.experiments.beliefs import model_config  # noqa: E402
-from aoc_cli.experiments.prepare import Artefacts  # noqa: E402
+from aoc_cli.experiments import EXPERIMENTS, Artefacts, model_config  # noqa: E402
 
-SCALES = {"pendulum-het": pendulum.SCALES, "pendulum-het-upright": pendulum.SCALES,
-          "lunar": lunar.SCALES}
+SCALES = {"pendulum-het": EXPERIMENTS["pendulum-het"].scales,
+          "pendulum-het-upright": EXPERIMENTS["pendulum-het"].scales,
+          "lunar": EXPERIMENTS["lunar"].scales}
 
 
 def main() -> None:

@@ -45,6 +45,7 @@ from aoc_cli.threads import wait_passively  # noqa: E402
 
 wait_passively()  # OpenMP threads wait passively, as under the aoc command (aoc_cli/threads.py)
 
+# internal: this note counts the engine's step-2 solves and step 3's tableaux by wrapping them
 import aoc_cli.decompose.engine as engine  # noqa: E402
 import aoc_cli.decompose.hull as hull  # noqa: E402
 from aoc_cli.control import HistoryBuffer  # noqa: E402

@@ -32,7 +32,7 @@ from aoc_cli.threads import wait_passively  # noqa: E402
 wait_passively()  # OpenMP threads wait passively, as under the aoc command (aoc_cli/threads.py)
 
 import aoc_cli  # noqa: E402
-from aoc_cli.envs.pendulum_het import swingup_action  # noqa: E402
+from aoc_cli.envs import swingup_action  # noqa: E402
 from aoc_cli.store import Store  # noqa: E402
 
 

@@ -32,12 +32,12 @@ def main() -> None:
     args = p.parse_args()
     torch.set_num_threads(1)
 
-    from aoc_cli.belief import BeliefConfig
+    import aoc_cli
+    from aoc_cli.belief import BeliefConfig, prepare
+    # internal: this note fits the critic alone, the part of training it studies
     from aoc_cli.belief.critic import fit_critic
-    from aoc_cli.belief.data import prepare
     from aoc_cli.belief.inputs import encode_corpus
     from aoc_cli.belief.model import Encoder, Normalisation
-    import aoc_cli
 
     corpus = aoc_cli.collect("pendulum-het", "p", store=tempfile.mkdtemp(), steps=args.rows,
                              seed=0).corpus

@@ -25,10 +25,9 @@ wait_passively()  # OpenMP threads wait passively, as under the aoc command (aoc
 
 import numpy as np  # noqa: E402
 
-from aoc_cli.belief.targets import value_targets  # noqa: E402
-from aoc_cli.control.episodes import run_episode  # noqa: E402
+from aoc_cli.belief import value_targets  # noqa: E402
+from aoc_cli.control import open_session, run_episode  # noqa: E402
 from aoc_cli.envs import make_env  # noqa: E402
-from aoc_cli.control import open_session  # noqa: E402
 from aoc_cli.store import DEFAULT_INDEX, DEFAULT_MODEL, Store  # noqa: E402
 
 

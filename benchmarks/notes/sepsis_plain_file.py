@@ -17,9 +17,8 @@ from pathlib import Path
 import numpy as np
 
 import aoc_cli
-from aoc_cli.envs import collect
-from aoc_cli.envs.icu_sepsis import tables
-from aoc_cli.experiments import sepsis_policies as sp
+from aoc_cli.envs import collect, sepsis_tables
+from aoc_cli.experiments import state_policy
 
 
 def plain_npz(data, path: Path) -> Path:
@@ -52,8 +51,8 @@ def main() -> None:
     train_seconds = time.perf_counter() - started
     aoc_cli.build_index(name, store=root)
     session = aoc_cli.open_session(name, store=root)
-    t = tables("terminate" if args.task.endswith("terminate") else "mean")
-    policy = sp.state_policy(session.controller.decide, t)
+    t = sepsis_tables("terminate" if args.task.endswith("terminate") else "mean")
+    policy = state_policy(session.controller.decide, t)
     print(json.dumps({
         "task": args.task, "episodes": args.episodes, "seed": args.seed,
         "aoc": round(float(t.mdp.value(policy)), 4),

@@ -28,10 +28,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from aoc_cli.belief.fqe import FQEConfig, fitted_q_values
+from aoc_cli.belief import FQEConfig, fitted_q_values
 from aoc_cli.control import open_session
-from aoc_cli.envs.icu_sepsis import tables
-from aoc_cli.experiments import sepsis_policies as sp
+from aoc_cli.envs import sepsis_tables
+from aoc_cli.experiments import log_model, state_policy
 from aoc_cli.store import DEFAULT_MODEL, Store, model_dir
 from aoc_cli.threads import one_thread
 
@@ -64,7 +64,7 @@ def main() -> None:
     ap.add_argument("--variant", action="append", default=[])
     ap.add_argument("--references", action="store_true")
     args = ap.parse_args()
-    t = tables("mean")
+    t = sepsis_tables("mean")
     corpus = Store(args.store).corpus(args.corpus)
     data = corpus.load()
     obs, rew, starts = data.observations, data.rewards, data.episode_starts
@@ -96,7 +96,7 @@ def main() -> None:
         ctl.index.values = v
         ctl.value_std = float(np.std(v))
         with one_thread():
-            pol = sp.state_policy(ctl.decide, t, 0)
+            pol = state_policy(ctl.decide, t, 0)
         mse = None if val_q is None else round(float(np.mean(
             (val_q[s[va], act[va]][ok] - rtg[va][ok]) ** 2)), 5)
         print(json.dumps({"values": name, "val_mse": mse,
@@ -112,10 +112,10 @@ def main() -> None:
         v = np.load(stored) if name == "base" else fqe(obs, act, rew, starts, spec)
         report(name, v, val_q, time.perf_counter() - started)
     if args.references:
-        model, behaviour, _counts = sp.log_model(s[tr], act[tr], rew[tr], data.terminals[tr],
+        model, behaviour, _counts = log_model(s[tr], act[tr], rew[tr], data.terminals[tr],
                                                  tr_starts)
         val_q = model.q_values(behaviour)
-        model, behaviour, _counts = sp.log_model(s, act, rew, data.terminals, starts)
+        model, behaviour, _counts = log_model(s, act, rew, data.terminals, starts)
         report("count model (told the state)", model.q_values(behaviour)[s, act], val_q)
         report("exact Q", q_exact[s, act], q_exact)
 

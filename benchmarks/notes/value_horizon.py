@@ -23,8 +23,8 @@ import json
 
 import numpy as np
 
-from aoc_cli.belief.targets import discounted_return_to_go, mean_remaining_reward
-from aoc_cli.envs.pendulum_het import swingup_action
+from aoc_cli.belief import discounted_return_to_go, mean_remaining_reward
+from aoc_cli.envs import swingup_action
 from aoc_cli.store import Store
 
 

@@ -26,10 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from aoc_cli.belief.artefact import load_model
-from aoc_cli.belief.data import split_episodes
-from aoc_cli.belief.fit import train_corpus
-from aoc_cli.belief.select import abc_scores
+from aoc_cli.belief import abc_scores, load_model, split_episodes, train_corpus
 from aoc_cli.decompose import decompose
 from aoc_cli.envs import collect
 from aoc_cli.neighbours import BeliefIndex, PerAction

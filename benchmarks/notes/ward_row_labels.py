@@ -31,9 +31,9 @@ import json
 import numpy as np
 from scipy.spatial import cKDTree
 
-from aoc_cli.belief.row_labels import subset_scores
+from aoc_cli.belief import subset_scores
 from aoc_cli.decompose import decompose, per_action_k
-from aoc_cli.experiments.ward import history_features
+from aoc_cli.experiments import history_features
 from aoc_cli.neighbours import BeliefIndex, PerAction
 from aoc_cli.threads import one_thread
 
