@@ -109,20 +109,52 @@ def with_defaults(config: BeliefConfig, given: dict) -> BeliefConfig:
 
 
 #: Imitation of discrete actions on a small corpus: the training loss's label smoothing
-#: when the user gives none (docs/design.md, "Candidates of every action").
+#: when the user gives none (docs/design.md, "Candidates of every action"), where it gives
+#: no action more than its share of the log (:func:`smoothing_fits`).
 LABEL_SMOOTHING = 0.1
+
+
+def rarest_share(corpus) -> float | None:
+    """The share of the rows of the least logged action among those logged (None: no rows)."""
+    actions = np.asarray(corpus.actions, dtype=np.int64).reshape(-1)
+    counts = np.bincount(actions)
+    counts = counts[counts > 0]
+    return float(counts.min() / len(actions)) if len(actions) else None
+
+
+def smoothing_fits(corpus) -> bool:
+    """Whether :data:`LABEL_SMOOTHING` suits the log: the smoothed target gives every action
+    LABEL_SMOOTHING / n (n the actions), which must not exceed the rarest logged action's
+    share of the rows (ward: 12-14% treated, 0.05 a target; medkit's ward log: 1.1%, where
+    the target would tell every untreated row the rare action is 5x likelier than the log
+    does, and ABC's held-out AUC fell from 0.99 to 0.93 on a split: docs/design.md)."""
+    share = rarest_share(corpus)
+    return share is not None and LABEL_SMOOTHING / int(corpus.n_actions) <= share
 
 
 def with_imitation_defaults(corpus, config: BeliefConfig, given: dict,
                             paper: bool = False) -> BeliefConfig:
     """``config`` with :data:`LABEL_SMOOTHING` when ``given`` has no ``label_smoothing``
     (None), the model imitates discrete actions, the corpus is small (settings chosen by
-    validation: :func:`open_settings`'s rule) and ``paper`` is off; else the paper's 0 for a
+    validation: :func:`open_settings`'s rule), the smoothing gives no action more than its
+    share of the log (:func:`smoothing_fits`) and ``paper`` is off; else the paper's 0 for a
     smoothing left open. The value is saved in the model's config."""
     if given.get("label_smoothing") is not None:
         return replace(config, label_smoothing=float(given["label_smoothing"]))
-    on = searches(corpus, config, paper)
+    on = searches(corpus, config, paper) and smoothing_fits(corpus)
     return replace(config, label_smoothing=LABEL_SMOOTHING if on else 0.0)
+
+
+def why_no_smoothing(corpus, config: BeliefConfig, given: dict, paper: bool) -> str | None:
+    """Why a smoothing left open is 0 where settings are searched: the rarest action's share
+    is below what the smoothing would give it (None otherwise)."""
+    if given.get("label_smoothing") is not None or not searches(corpus, config, paper) \
+            or smoothing_fits(corpus):
+        return None
+    n = int(corpus.n_actions)
+    return (f"no label smoothing: the rarest action is {rarest_share(corpus):.1%} of the rows, "
+            f"under the {LABEL_SMOOTHING / n:.1%} a smoothing of {LABEL_SMOOTHING:g} would give "
+            f"each of the {n} actions")
 
 
 def why_no_search(corpus, config: BeliefConfig, given: dict, paper: bool,

@@ -66,6 +66,8 @@ def notes(trained: Trained) -> list[str]:
         out.append(f"label smoothing {trained.config.label_smoothing:g} (the default for "
                    "imitating discrete actions on a small corpus; --label-smoothing 0 for the "
                    "paper's)")
+    if metrics.get("label_smoothing_rule"):
+        out.append(metrics["label_smoothing_rule"])
     warning = select.baseline_check(metrics)
     if warning:
         out.append(f"[yellow]warning:[/] {warning}")

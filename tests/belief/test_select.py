@@ -244,12 +244,30 @@ def test_label_smoothing_default_only_where_it_was_measured():
 
     from aoc_cli.belief.config import BeliefConfig
 
-    small = SimpleNamespace(n_rows=5000, discrete=True)
+    acts = np.array([0] * 88 + [1] * 12)   # the rarer action at 12% of the rows
+    small = SimpleNamespace(n_rows=5000, discrete=True, actions=acts, n_actions=2)
     imit = BeliefConfig(mode="imitation")
     assert select.with_imitation_defaults(small, imit, {}).label_smoothing == 0.1
     assert select.with_imitation_defaults(small, imit, {"label_smoothing": 0.0}).label_smoothing == 0
     assert select.with_imitation_defaults(small, imit, {"label_smoothing": 0.2}).label_smoothing == 0.2
     assert select.with_imitation_defaults(small, imit, {}, paper=True).label_smoothing == 0
+    # a rare action under the 0.1 / 2 = 5% the smoothing gives each action: no smoothing
+    rare = SimpleNamespace(n_rows=5000, discrete=True, actions=np.array([0] * 96 + [1] * 4),
+                           n_actions=2)
+    assert select.with_imitation_defaults(rare, imit, {}).label_smoothing == 0
+    assert "4.0% of the rows" in select.why_no_smoothing(rare, imit, {}, False)
+    assert select.why_no_smoothing(small, imit, {}, False) is None
+    assert select.with_imitation_defaults(rare, imit, {"label_smoothing": 0.1}).label_smoothing \
+        == 0.1                                 # given: kept
+    at = SimpleNamespace(n_rows=5000, discrete=True, actions=np.array([0] * 95 + [1] * 5),
+                         n_actions=2)           # exactly 5%: it fits
+    assert select.smoothing_fits(at)
+    # three actions, one never logged (not the rarest): 0.1 / 3 against the 3% of action 1
+    assert select.rarest_share(SimpleNamespace(actions=np.array([0] * 97 + [1] * 3))) == 0.03
+    assert not select.smoothing_fits(SimpleNamespace(actions=np.array([0] * 97 + [1] * 3),
+                                                     n_actions=3))
+    assert select.smoothing_fits(SimpleNamespace(actions=np.array([0] * 96 + [1] * 4),
+                                                 n_actions=3))
     big = SimpleNamespace(n_rows=select.SELECT_MAX_ROWS + 1, discrete=True)
     assert select.with_imitation_defaults(big, imit, {}).label_smoothing == 0
     boxes = SimpleNamespace(n_rows=5000, discrete=False)
