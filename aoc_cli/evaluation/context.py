@@ -272,7 +272,7 @@ class EvalContext:
         """(S,) float64 the value target of held-out ``rows`` (value mode; None in imitation
         mode): the model's own values when the data are its corpus, else the target computed
         on the held-out log as the model's values were. For ``fqe`` values, the logged
-        behaviour's Q(o, a) by d3rlpy's fitted Q evaluation of the held-out log
+        behaviour's Q(o, a) by fitted Q evaluation of the held-out log
         (:func:`aoc_cli.ope.policies.behaviour_targets`: the OPE's own when ``ope``, its
         block, fitted it at the model's discount and FQE's default steps and schedule; else
         fitted alone at those: an OPE made quicker does not change the target; kept beside
@@ -301,7 +301,7 @@ class EvalContext:
                         " (the held-out log's)"
                 else:
                     self.target_source = (
-                        "the logged behaviour's Q(o, a) by d3rlpy's fitted Q evaluation of the "
+                        "the logged behaviour's Q(o, a) by fitted Q evaluation of the "
                         f"held-out log (SARSA, gamma {gamma:g}): another estimator of what the "
                         "model's values estimate")
                 self._data_values = v

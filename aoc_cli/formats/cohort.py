@@ -25,6 +25,7 @@ from aoc_cli.errors import AocError, param
 from aoc_cli.formats import bins as dose_bins
 from aoc_cli.formats import impute, outcomes
 from aoc_cli.store import discrete_space
+from aoc_cli.store.columns import ColumnStack
 
 
 @dataclass
@@ -33,7 +34,7 @@ class Cohort:
 
     observations (N, d + m) float64: the d columns ``obs_names``, NaN where empty, then room
     for the m ``COL?measured`` features of ``measured`` (:func:`measured_planned`), filled in
-    place; rewards (N,) or None; terminals,
+    place; or None, the columns given by ``column``; rewards (N,) or None; terminals,
     truncations (N,) bool; doses {column: (N,)} for ``--bin-actions``; outcome (N,) the
     outcome column, NaN where empty; censored (N,) 0/1 the censoring column;
     ``row_label(r)``/``stay_label(e)``: text naming corpus row r / stay e in messages.
@@ -41,7 +42,7 @@ class Cohort:
 
     where: str
     starts: np.ndarray
-    observations: np.ndarray
+    observations: np.ndarray | None
     obs_names: list[str]
     rewards: np.ndarray | None
     terminals: np.ndarray
@@ -52,8 +53,9 @@ class Cohort:
     outcome: np.ndarray | None = None
     censored: np.ndarray | None = None
     measured: list[str] = field(default_factory=list)
-    #: when given, ``observations`` is an empty buffer and ``column(j)`` (N,) the raw values
-    #: of its column j (read once, filled while contiguous: :func:`impute.fill_columns`)
+    #: when given (``observations`` None), ``column(j)`` (N,) the raw values of column j,
+    #: read once and filled while contiguous (:func:`impute.fill_columns`); the observations
+    #: are then a :class:`ColumnStack` of the columns and their ``COL?measured`` features
     column: Callable[[int], np.ndarray] | None = None
 
 
@@ -73,9 +75,9 @@ def measured_planned(options, names: list[str], gaps) -> list[str]:
 class Prepared:
     """What :func:`prepare` made: arrays of the corpus and its ``preprocessing``."""
 
-    observations: np.ndarray
+    observations: np.ndarray | None
     obs_names: list[str]
-    imputed: np.ndarray | None
+    imputed: np.ndarray | ColumnStack | None
     imputed_cells: dict[str, int]
     rewards: np.ndarray | None
     terminals: np.ndarray
@@ -125,7 +127,7 @@ def prepare(c: Cohort, options) -> Prepared:
                            "outcome")
         per_stay = outcomes.stay_outcomes(c.outcome, c.starts, options.outcome, c.where,
                                           c.row_label)
-        r = outcomes.outcome_rewards(per_stay, mapping, c.starts, len(c.observations),
+        r = outcomes.outcome_rewards(per_stay, mapping, c.starts, int(c.starts[-1]),
                                      options.outcome, c.where, c.stay_label)
         rewards = r if rewards is None else rewards + r
         censored |= np.isnan(per_stay)
@@ -152,20 +154,20 @@ def prepare(c: Cohort, options) -> Prepared:
     mask = None
     if c.column is not None and (spec is not None or options.impute is not None):
         rule = spec["rule"] if spec is not None else options.impute
-        mask, spec = impute.fill_columns(
-            obs, c.column, names, c.starts, rule,
+        obs, mask, spec = impute.fill_columns(
+            c.column, names, c.starts, rule,
             spec["mask"] if spec is not None else options.impute_mask, list(c.measured),
             c.where, medians=None if spec is None else spec["medians"])
         if _like(options, "impute")[0] is not None:
             spec = _like(options, "impute")[0]  # the reused spec, as it was recorded
     elif c.column is not None:
-        for j in range(d):
-            obs[:, j] = c.column(j)
+        obs = ColumnStack([np.asarray(c.column(j), dtype=np.float64) for j in range(d)])
     if mask is None and spec is None and options.impute is not None:
         spec = impute.fit(obs[:, :d], names, options.impute, options.impute_mask, c.where,
                           measured=c.measured if options.impute_mask else None)
     if spec is None and not options.drop_nonfinite:
-        impute.refuse_gaps(obs[:, :d], names, c.where)
+        impute.refuse_gaps(obs if isinstance(obs, ColumnStack) else obs[:, :d], names,
+                           c.where)
     if spec is not None:
         if impute.planned_measured(spec) != list(c.measured):
             raise AssertionError("the observations were made for other measured features")

@@ -48,36 +48,21 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
-from aoc_cli.errors import AocError, param, warn
+from aoc_cli.errors import AocError, param
 from aoc_cli.formats.bins import parse as parse_bins
 from aoc_cli.formats.cohort import Cohort, measured_planned, prepare
 from aoc_cli.formats.common import ReadOptions, action_space_of, encode_labels
 from aoc_cli.formats.csv_exported import exported_mapping, restore_exported
+from aoc_cli.formats.episodes import Episodes, order_episodes
 from aoc_cli.formats.spec import parse_spec
 from aoc_cli.formats.static import read_static
-from aoc_cli.formats.table import (Table, from_frame, has_gaps, is_numeric, numeric, read_table,
-                                   text)
+from aoc_cli.formats.table import (Table, from_frame, has_gaps, is_numeric, numeric,
+                                   read_table, text)
 from aoc_cli.formats.text_actions import text_actions
 from aoc_cli.store import CorpusData
 
 MAPPING_KEYS = {"id", "time", "observations", "actions", "reward", "terminal", "tags",
                 "discrete_actions", "static_id", "static", "aoc"}
-
-
-def _sort_key(col: pa.ChunkedArray, name: str, where, dates: bool) -> np.ndarray:
-    """Numbers if every value is a number, else (time only) dates, else (ids) the text."""
-    if pa.types.is_timestamp(col.type) or pa.types.is_date(col.type):
-        return col.cast(pa.timestamp("ns")).cast(pa.int64()).to_numpy(zero_copy_only=False)
-    if is_numeric(col):
-        return numeric(col, name, where)
-    values = text(col)
-    if dates:
-        try:
-            return np.array(values, dtype="datetime64[ns]").astype(np.int64)
-        except ValueError:
-            raise AocError(f"{where}: time column {name!r} holds neither numbers nor ISO dates "
-                           f"(e.g. {str(values[0])!r})") from None
-    return values
 
 
 def _mapping(options: ReadOptions) -> dict:
@@ -175,60 +160,6 @@ def _roles(where, header: list[str], options: ReadOptions, bins: list[str] | Non
                  m.get("static_id") or id_col)
 
 
-@dataclass
-class Episodes:
-    """Rows ordered by (id, time): ``order`` (N,) file row of each corpus row, ``starts``
-    (E + 1,), the id of each episode as text and as its sort key, and ``row_ids`` (N,) the
-    id text of each file row (messages name a row's stay by it)."""
-
-    order: np.ndarray
-    starts: np.ndarray
-    ids: list[str]
-    keys: np.ndarray
-    row_ids: np.ndarray
-    id_name: str | None
-
-    def row_label(self, i: int) -> str:
-        """Text naming file row ``i``'s episode: ``icustayid 1007``."""
-        return f"{self.id_name} {self.row_ids[i]}" if self.id_name else "the only episode"
-
-    def corpus_row_label(self, r: int) -> str:
-        """``data row 12 (icustayid 1007)`` for corpus row ``r``."""
-        i = int(self.order[r])
-        return f"data row {i + 1} ({self.row_label(i)})"
-
-
-def _episodes(table: Table, roles: Roles) -> Episodes:
-    """Order the rows by episode id and time (stable); warn about empty ids; two rows of one
-    episode at one time are an AocError naming them."""
-    n, cols, where = table.n, table.cols, table.where
-    ids_text = text(cols[roles.id]) if roles.id else np.full(n, "0")
-    if roles.id and (ids_text == "").any():
-        rows = np.flatnonzero(ids_text == "")
-        warn(f"{where}: {len(rows)} rows have an empty {roles.id!r} cell (first: data row "
-             f"{int(rows[0]) + 1}); they form one episode with the id ''")
-    id_key = _sort_key(cols[roles.id], roles.id, where, dates=False) if roles.id \
-        else np.zeros(n)
-    uniq_keys, id_codes = np.unique(id_key, return_inverse=True)
-    time_key = _sort_key(cols[roles.time], roles.time, where, dates=True) if roles.time \
-        else np.arange(n)
-    order = np.lexsort((time_key, id_codes))
-    id_codes = id_codes[order]
-    if roles.time:
-        same = (np.diff(id_codes) == 0) & (np.diff(np.asarray(time_key)[order]) == 0)
-        if same.any():
-            k = int(np.flatnonzero(same)[0])
-            a, b = sorted((int(order[k]), int(order[k + 1])))
-            stay = f"{roles.id} {ids_text[a]}, " if roles.id else ""
-            raise AocError(f"{where}: data rows {a + 1} and {b + 1} are both at ({stay}"
-                           f"{roles.time} {text(cols[roles.time])[a]}) ({int(same.sum())} "
-                           "such repeats): one row per stay and time; remove the duplicates")
-    bounds = np.flatnonzero(np.diff(id_codes)) + 1
-    starts = np.concatenate([[0], bounds, [n]]).astype(np.int64)
-    return Episodes(order, starts, [str(ids_text[r]) for r in order[starts[:-1]]],
-                    uniq_keys[id_codes[starts[:-1]]], ids_text, roles.id)
-
-
 def _flags(table: Table, roles: Roles, eps: Episodes):
     """(terminals, truncations) (N,): each episode's last row ends it, a terminal unless the
     terminal column says otherwise (then a truncation)."""
@@ -239,8 +170,8 @@ def _flags(table: Table, roles: Roles, eps: Episodes):
     if roles.terminal is None:
         terminals[last] = True
     else:
-        terminals = numeric(table.cols[roles.terminal], roles.terminal, table.where,
-                            eps.row_label)[eps.order] != 0
+        terminals = eps.take(numeric(table.cols[roles.terminal], roles.terminal, table.where,
+                                     eps.row_label)) != 0
         truncations[last] = ~terminals[last]
     return terminals, truncations
 
@@ -251,7 +182,7 @@ def _tags(table: Table, roles: Roles, eps: Episodes, static_tags: dict,
     tags = {}
     for c in roles.tags:
         if c in table.cols:
-            tags[c] = encode_labels(text(table.cols[c])[eps.order])
+            tags[c] = encode_labels(eps.take(text(table.cols[c])))
         elif c in static_tags:
             tags[c] = encode_labels(np.repeat(static_tags[c], lengths))
         else:
@@ -286,7 +217,7 @@ def read_columns(table: Table, options: ReadOptions, source: dict) -> CorpusData
     roles = _roles(where, table.header, options, bin_cols)
     if table.n == 0:
         raise AocError(f"{where} has zero rows: nothing to store")
-    eps = _episodes(table, roles)
+    eps = order_episodes(table, roles.id, roles.time)
     static_names: list[str] = []
     static_feats = None
     static_tags: dict[str, np.ndarray] = {}
@@ -306,8 +237,7 @@ def read_columns(table: Table, options: ReadOptions, source: dict) -> CorpusData
         if static_feats is not None else {}
     measured = measured_planned(options, obs_names, lambda c: static_gaps[c]
                                 if c in static_gaps else has_gaps(cols[c]))
-    # made once at full width; each table column dropped once read (memory: about one copy)
-    observations = np.empty((table.n, len(obs_names) + len(measured)))
+    # each table column dropped once read: its values kept as one column (memory: one copy)
     other_roles = set(roles.tags) | set(roles.actions) | {
         roles.id, roles.time, roles.reward, roles.terminal, options.outcome,
         options.censored_column}
@@ -317,27 +247,27 @@ def read_columns(table: Table, options: ReadOptions, source: dict) -> CorpusData
         if j >= len(roles.observations):  # a static feature, per stay
             return np.repeat(static_feats[:, j - len(roles.observations)], np.diff(eps.starts))
         c = roles.observations[j]
-        x = numeric(cols[c], c, where, eps.row_label)[eps.order]
+        x = eps.take(numeric(cols[c], c, where, eps.row_label))
         if c not in other_roles:
             del cols[c]
         return x
 
     terminals, truncations = _flags(table, roles, eps)
     cohort = Cohort(
-        where=where, starts=eps.starts, observations=observations, obs_names=obs_names,
-        rewards=numeric(cols[roles.reward], roles.reward, where, eps.row_label)[eps.order]
+        where=where, starts=eps.starts, observations=None, obs_names=obs_names,
+        rewards=eps.take(numeric(cols[roles.reward], roles.reward, where, eps.row_label))
         if roles.reward else None,
         terminals=terminals, truncations=truncations, row_label=eps.corpus_row_label,
         stay_label=lambda e: f"{roles.id or 'episode'} {eps.ids[e]}", measured=measured,
         column=column)
     if bin_cols:
-        cohort.doses = {c: numeric(cols[c], c, where, eps.row_label)[eps.order]
+        cohort.doses = {c: eps.take(numeric(cols[c], c, where, eps.row_label))
                         for c in roles.actions}
         actions, act_space = None, None
     else:
         labelled = text_actions(where, cols, roles.actions, eps.order, eps.row_label)
         if labelled is None:
-            act_raw = np.stack([numeric(cols[c], c, where, eps.row_label)[eps.order]
+            act_raw = np.stack([eps.take(numeric(cols[c], c, where, eps.row_label))
                                 for c in roles.actions], 1)
             labelled = action_space_of(act_raw, roles.discrete, names=roles.actions)
         actions, act_space = labelled
@@ -345,12 +275,12 @@ def read_columns(table: Table, options: ReadOptions, source: dict) -> CorpusData
         if c is not None:
             setattr(cohort, role, _truthy(cols[c]) if role == "censored" else
                     numeric(cols[c], c, where, eps.row_label))
-            setattr(cohort, role, getattr(cohort, role)[eps.order])
+            setattr(cohort, role, eps.take(getattr(cohort, role)))
     prepared = prepare(cohort, options)
     tags = _tags(table, roles, eps, static_tags, options.static is not None)
     used = set(roles.observations) | set(roles.actions) | set(roles.tags) | {
         roles.id, roles.time, roles.reward, roles.terminal, options.censored_column}
-    columns = {c: numeric(cols[c], c, where)[eps.order] for c in table.header
+    columns = {c: eps.take(numeric(cols[c], c, where)) for c in table.header
                if c not in used and c in cols and is_numeric(cols[c])}
     columns.update(prepared.columns)
     if actions is None:

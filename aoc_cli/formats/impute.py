@@ -19,19 +19,25 @@ Actions and rewards are never imputed.
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 
 from aoc_cli.errors import AocError, param
+from aoc_cli.store.columns import ColumnStack
 
 RULES = ("hold", "median")
 #: Suffix of the 0/1 feature that says whether a column was measured.
 MEASURED = "?measured"
 
 
-def refuse_gaps(obs: np.ndarray, names: list[str], where) -> None:
+def refuse_gaps(obs: np.ndarray | ColumnStack, names: list[str], where) -> None:
     """An AocError naming the share of empty cells in the worst columns and the flags, when
-    (N, d) ``obs`` holds NaN; nothing otherwise."""
-    empty = np.isnan(obs).mean(axis=0) if len(obs) else np.zeros(len(names))
+    (N, d) ``obs`` (or the first d columns of a ColumnStack) holds NaN; nothing otherwise."""
+    cols = obs.columns[:len(names)] if isinstance(obs, ColumnStack) else obs.T
+    empty = np.array([np.isnan(c).mean() for c in cols]) if len(obs) else \
+        np.zeros(len(names))
     if not empty.any():
         return
     worst = np.argsort(-empty, kind="stable")[:3]
@@ -113,6 +119,28 @@ def fill(obs: np.ndarray, starts: np.ndarray, spec: dict) -> np.ndarray:
     return imputed
 
 
+def _filled(x: np.ndarray, name: str, rows: np.ndarray, stay_start: np.ndarray | None,
+            rule: str, where, median: float | None) -> tuple:
+    """(one column ``x`` filled, its empty cells or None when it has none, the median used:
+    ``median``, else that of its measured cells) as :func:`fill_columns` keeps them."""
+    empty = np.isnan(x)
+    any_empty = bool(empty.any())
+    if median is None:
+        present = x[~empty] if any_empty else x
+        if present.size == 0:
+            raise AocError(f"{where}: column {name!r} is empty for every stay: "
+                           f"{param('impute', rule)} has no measured value to fill it from; "
+                           "drop the column")
+        # partitioned in place when ``present`` is a copy already
+        median = float(np.median(present, overwrite_input=any_empty))
+    if not any_empty:
+        return x, None, median
+    if not x.flags.writeable:
+        x = x.copy()
+    _fill_column(x, empty, rows, stay_start, median)
+    return x, empty, median
+
+
 def _fill_column(x: np.ndarray, empty: np.ndarray, rows: np.ndarray,
                  stay_start: np.ndarray | None, median: float) -> None:
     """Fill the empty cells of one column ``x`` (N,) in place: with ``stay_start`` (N,) (the
@@ -128,43 +156,49 @@ def _fill_column(x: np.ndarray, empty: np.ndarray, rows: np.ndarray,
     x[still] = median
 
 
-def fill_columns(obs: np.ndarray, column, names: list[str], starts: np.ndarray, rule: str,
-                 mask: bool, measured: list[str], where,
-                 medians: list[float] | None = None) -> tuple[np.ndarray, dict]:
+def fill_columns(column, names: list[str], starts: np.ndarray, rule: str, mask: bool,
+                 measured: list[str], where, medians: list[float] | None = None
+                 ) -> tuple[ColumnStack, np.ndarray, dict]:
     """:func:`fit` (unless ``medians`` are given) and :func:`fill` in one pass, column by
-    column: ``column(j)`` (N,) float64, NaN where empty, is filled while contiguous and written
-    once into ``obs`` (N, d + m) with its ``COL?measured`` feature. Returns (imputed (N, d + m)
-    bool, the spec) as the two would; a column empty for every row is an AocError."""
+    column: ``column(j)`` (N,) float64, NaN where empty, is filled while contiguous (the
+    columns on the machine's cores: each is its own) and kept as a column, with its
+    ``COL?measured`` feature (bool). Returns (the observations: a
+    :class:`ColumnStack` of the d filled columns then the m features of ``measured``, the
+    imputed cells (N, d + m) as a bool ColumnStack, the spec) as :func:`fit` and :func:`fill`
+    would make them; a column empty for every row is an AocError."""
     if rule not in RULES:
         raise AocError(f"unknown {param('impute', rule)}: use one of {', '.join(RULES)}")
-    d = len(names)
-    features = {name: d + k for k, name in enumerate(measured if mask else [])}
-    imputed = np.zeros(obs.shape, bool)
-    rows = np.arange(len(obs))
+    d, n = len(names), int(starts[-1])
+    features = {name: k for k, name in enumerate(measured if mask else [])}
+    rows = np.arange(n)
     stay_start = np.repeat(starts[:-1], np.diff(starts)) if rule == "hold" else None
-    fitted, gaps = [], []
-    for j, name in enumerate(names):
-        x = np.array(column(j), dtype=np.float64)
-        empty = np.isnan(x)
-        if medians is None:
-            present = x[~empty]
-            if present.size == 0:
-                raise AocError(f"{where}: column {name!r} is empty for every stay: "
-                               f"{param('impute', rule)} has no measured value to fill it "
-                               "from; drop the column")
-            fitted.append(float(np.median(present)))
-        median = fitted[j] if medians is None else medians[j]
-        if name in features:
-            obs[:, features[name]] = ~empty
-        if empty.any():
-            gaps.append(name)
-            imputed[:, j] = empty
-            _fill_column(x, empty, rows, stay_start, median)
-        obs[:, j] = x
+
+    def one(j: int, x: np.ndarray):
+        return _filled(x, names[j], rows, stay_start, rule, where,
+                       None if medians is None else medians[j])
+
+    raw = [np.asarray(column(j), dtype=np.float64) for j in range(d)]  # read here, in order
+    # columns are independent and numpy lets go of the GIL: filled on the cores (<= 4)
+    with ThreadPoolExecutor(max_workers=max(1, min(4, os.cpu_count() or 1))) as pool:
+        done = list(pool.map(one, range(d), raw))  # the first failing column's error
+    del raw
+    values = [x for x, _e, _m in done]
+    empties = [e for _x, e, _m in done]  # each column's empty cells (None: none)
+    fitted = [m for _x, _e, m in done]
+    gaps = [name for name, e in zip(names, empties) if e is not None]
+    unknown = [m for m in features if m not in names]
+    if unknown:
+        raise AssertionError(f"measured features of columns that are not read: {unknown}")
+    none = np.zeros(n, bool)  # one array for every column without gaps
+    cells = [none if e is None else e for e in empties]
+    measured_of = [cells[names.index(m)] for m in features]
+    # the features are ~empty and never imputed: the same arrays, negated / not at all
+    observations = ColumnStack(values + measured_of, negate=[False] * d + [True] * len(features))
+    imputed = ColumnStack(cells + [none] * len(features), dtype=bool)
     spec = {"rule": rule, "mask": bool(mask), "names": list(names),
             "medians": list(fitted if medians is None else medians),
             "measured": list(measured if mask else gaps)}
-    return imputed, spec
+    return observations, imputed, spec
 
 
 def names_with_mask(spec: dict | None, names: list[str]) -> list[str]:
@@ -174,9 +208,9 @@ def names_with_mask(spec: dict | None, names: list[str]) -> list[str]:
     return list(names) + [n + MEASURED for n in spec["measured"]]
 
 
-def counts(imputed: np.ndarray, names: list[str]) -> dict[str, int]:
+def counts(imputed: np.ndarray | ColumnStack, names: list[str]) -> dict[str, int]:
     """Imputed cells per column (the columns with any)."""
-    per = imputed.sum(axis=0)
+    per = imputed.column_sums() if isinstance(imputed, ColumnStack) else imputed.sum(axis=0)
     return {n: int(c) for n, c in zip(names, per) if c}
 
 

@@ -24,7 +24,8 @@ from aoc_cli.formats.impute import counts
 from aoc_cli.formats.minari import read_minari
 from aoc_cli.formats.npz import read_npz
 from aoc_cli.store import CorpusData, Store, check_name, writing_corpus
-from aoc_cli.store.corpus import all_finite
+from aoc_cli.store.columns import ColumnStack
+from aoc_cli.store.corpus import all_finite, finite_rows
 
 
 def read_dataset(path: str | os.PathLike, fmt: str | None = None,
@@ -35,6 +36,18 @@ def read_dataset(path: str | os.PathLike, fmt: str | None = None,
     non-finite check (an AocError naming the first bad row) or, with ``drop_nonfinite``, the
     removal of every episode holding a NaN/inf observation, action or reward.
     """
+    data = _read_dataset(path, fmt, options)
+    if isinstance(data.observations, ColumnStack):
+        data.observations = np.asarray(data.observations)
+    if isinstance(data.imputed, ColumnStack):
+        data.imputed = np.asarray(data.imputed)
+    return data
+
+
+def _read_dataset(path, fmt, options) -> CorpusData:
+    """:func:`read_dataset`, a table's observations and imputed mask left as
+    :class:`ColumnStack` (what :func:`ingest` hands the store, which makes their rows block by
+    block)."""
     options = options or ReadOptions()
     if is_frame(path):
         fmt = "frame"
@@ -88,10 +101,10 @@ def _check_finite(data: CorpusData) -> None:
                       ("rewards", data.rewards)):
         if arr is None:
             continue
-        arr = np.asarray(arr)
+        arr = arr if isinstance(arr, ColumnStack) else np.asarray(arr)
         if all_finite(arr):
             continue
-        finite = np.isfinite(arr) if arr.ndim == 1 else np.isfinite(arr).all(axis=1)
+        finite = finite_rows(arr)
         if not finite.all():
             row = int(np.argmin(finite))
             if first is None or row < first[1]:
@@ -182,7 +195,7 @@ def ingest(path: str | os.PathLike, name: str, *, store: Store | None = None,
         fmt = detect_format(path)  # a missing or unknown input fails before the store is touched
     with writing_corpus(store.root, name):  # one writer per corpus: a second fails at once
         store.check_writable(name, overwrite=overwrite, append=append)
-        data = read_dataset(path, fmt, with_fitted(store, name, options, append))
+        data = _read_dataset(path, fmt, with_fitted(store, name, options, append))
         corpus = store.write(name, data, overwrite=overwrite, append=append)
     return IngestResult(
         name=name, format=data.source.get("format", fmt or "?"), rows=data.n_rows,

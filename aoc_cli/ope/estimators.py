@@ -372,23 +372,3 @@ def bootstrap(log: Log, estimators: dict, n_boot: int = N_BOOTSTRAP, level: floa
         point = float(_evaluate(p, log.discount, np.ones((1, e)))[0])
         out[name] = Estimate.of(point, np.concatenate(reps[name]), level)
     return out
-
-
-def censoring_weights(starts: np.ndarray, truncated: np.ndarray) -> np.ndarray:
-    """(N,) how often FQE draws each transition of a log whose ``truncated`` (E,) episodes
-    were cut short (inverse probability of censoring weighting). A cut episode's last step is
-    censored: it went on, to a state the log does not hold, so it has no target (weight 0).
-    Dropping it alone would leave too few transitions that go on: an ending one is always in
-    the log, a continuing one only if the cut spared it, with probability 1 - h, h the share
-    of the continuing transitions that were cut. So each continuing transition weighs
-    1 / (1 - h), each ending one 1: the mini-batches are then drawn as from the uncut log
-    where the cut is independent of the state and the step (one h for the log: FQE pools
-    every step's transitions of a state)."""
-    starts = np.asarray(starts, np.int64)
-    last = np.zeros(int(starts[-1]), bool)
-    last[starts[1:] - 1] = True
-    cut = np.zeros_like(last)
-    cut[starts[1:][np.asarray(truncated, bool)] - 1] = True
-    going = ~last
-    h = cut.sum() / max(1, cut.sum() + going.sum())
-    return np.where(cut, 0.0, np.where(going, 1.0 / (1.0 - h), 1.0))

@@ -1,21 +1,19 @@
-"""The direct method of offline policy evaluation: fitted Q evaluation by d3rlpy's
-``DiscreteFQE`` (the optional ``bench`` extra), for a policy known only at the logged steps.
+"""The direct method of offline policy evaluation: fitted Q evaluation (FQE) in plain torch, for
+a policy known only at the logged steps.
 
-d3rlpy's FQE regresses Q(s_t, a_t) on r_t + gamma Q'(s_{t+1}, pi(s_{t+1})) and asks the
-evaluated algorithm for pi(s_{t+1}) (``algo.impl.predict_best_action``). aoc's policies are
-decisions at logged steps (they may depend on the history, and a stochastic one is a
-distribution per step), so the mini-batches are drawn here (numpy, one draw of B transitions
-instead of d3rlpy's per-transition sampler) and the next action of each drawn transition is
-the evaluated policy's at the next logged step, handed to FQE through :class:`_NextActions`;
-a stochastic policy's next action is drawn from its distribution there (an unbiased target).
-The update itself is d3rlpy's (``DiscreteFQE.update``, :meth:`FQEFit.train`). The last step
-of an ended episode is terminal; that of a truncated one is censored (never drawn: its next
-state is not in the log; :func:`fqe_policies`).
+FQE regresses Q(s_t, a_t) on r_t + gamma Q'(s_{t+1}, pi(s_{t+1})), Q' a target network synced
+every :data:`TARGET_UPDATE` updates (Le et al. 2019; the update of d3rlpy's DiscreteFQE, the
+reference of tests/ope/test_ope_ensemble.py). aoc's policies are decisions at logged steps
+(they may depend on the history, and a stochastic one is a distribution per step), so the next
+action of each drawn transition is the evaluated policy's at the next logged step; a
+stochastic policy's next action is drawn from its distribution there (an unbiased target).
+The last step of an ended episode is terminal; that of a truncated one is censored: its
+target bootstraps from the value its next state is predicted to have
+(:mod:`aoc_cli.ope.ensemble`).
 
 ``aoc evaluate`` runs :func:`fqe_policies`: every policy's fit, then every refit, trained at
-once as a batched ensemble of d3rlpy's networks (:mod:`aoc_cli.ope.ensemble`; each
-member equal to its own ``DiscreteFQE.update`` training to float rounding, checked by
-tests/ope/test_ope_ensemble.py), ~2x less CPU than one fit after another.
+once as a batched ensemble (:mod:`aoc_cli.ope.ensemble`), ~2x less CPU than one fit after
+another.
 
 Shapes: observations (N, d_o) float, ``policy`` (N, n) probabilities of the evaluated policy
 at each logged step (one-hot for a deterministic one), actions (N,) int, rewards (N,),
@@ -24,13 +22,11 @@ at each logged step (one-hot for a deterministic one), actions (N,) int, rewards
 
 from __future__ import annotations
 
-import copy
+import itertools
 
 import numpy as np
 
-from aoc_cli.errors import AocError
 from aoc_cli.ope.ensemble import FQEEnsemble, joined, sampler
-from aoc_cli.ope.estimators import censoring_weights
 from aoc_cli.ope.parts import train_parts
 
 #: FQE settings: mini-batch, learning rate, target network sync, hidden layers.
@@ -52,36 +48,6 @@ REFIT_SHARE = 5
 #: (chosen on the behaviour policy, whose FQE should equal the log's mean return:
 #: docs/results.md, "icu-sepsis: offline policy evaluation").
 SCHEDULE = "cosine"
-
-
-def available() -> str | None:
-    """None when d3rlpy is importable, else the one-line reason the FQE row is absent."""
-    import contextlib
-    import io
-
-    try:
-        # d3rlpy imports the old gym package, which prints a deprecation banner on import
-        with contextlib.redirect_stderr(io.StringIO()), contextlib.redirect_stdout(io.StringIO()):
-            import d3rlpy  # noqa: F401
-    except ImportError:
-        return "fqe: d3rlpy is not installed (pip install -e '.[bench]'), no direct method"
-    return None
-
-
-class _NextActions:
-    """The 'algorithm' d3rlpy's FQE evaluates: it returns the next actions of the batch being
-    updated (set by :func:`fit_fqe` before each update)."""
-
-    def __init__(self):
-        self.actions = None
-        self.impl = self
-
-    def predict_best_action(self, x):
-        import torch
-
-        if self.actions is None or len(self.actions) != x.shape[0]:
-            raise AocError("FQE asked for next actions of a batch it was not given")
-        return torch.as_tensor(self.actions, dtype=torch.long, device=x.device)
 
 
 def horizon(starts: np.ndarray, gamma: float = 1.0) -> int:
@@ -110,26 +76,16 @@ def default_steps(n_rows: int, starts: np.ndarray | None = None, gamma: float = 
 
 
 class FQEFit:
-    """One DiscreteFQE model of ``policy`` on the log, trained by :meth:`train` (module
-    docstring); :meth:`snapshot` / :meth:`restore` keep and put back its weights and optimiser
-    state (a bootstrap refit starts from the full fit: :func:`bootstrap_fqe`). With
-    ``cosine_steps``, d3rlpy's Adam anneals its learning rate to 0 over that many updates
-    (d3rlpy's CosineAnnealingLRFactory: the ensemble's "cosine" schedule)."""
+    """The log as FQE trains on it, and FQE's settings: observations standardised (by the log's
+    mean and spread), actions, rewards, each row's next row (itself at an episode's last),
+    terminal ``last`` and censored ``cut`` steps (N,), the policy's cumulative probabilities
+    ``cum``, mini-batch, gamma, target interval, learning rate, hidden layers, and a generator
+    seeded by ``seed``. ``truncated`` (E,): episodes cut short (their last step censored)."""
 
     def __init__(self, observations, actions, rewards, starts, policy, gamma: float = 1.0,
                  seed: int = 0, batch: int = BATCH, learning_rate: float = LEARNING_RATE,
-                 target_update: int = TARGET_UPDATE, cosine_steps: int | None = None):
-        reason = available()
-        if reason is not None:
-            raise AocError(reason)
-        # d3rlpy is the optional bench extra, torch a heavy import: both only when FQE runs
-        import d3rlpy
-        import torch
-        from d3rlpy.models.encoders import VectorEncoderFactory
-        from d3rlpy.ope import DiscreteFQE, FQEConfig
-        from d3rlpy.optimizers import AdamFactory
-        from d3rlpy.optimizers.lr_schedulers import CosineAnnealingLRFactory
-
+                 target_update: int = TARGET_UPDATE, hidden: tuple | None = None,
+                 truncated: np.ndarray | None = None):
         obs = np.asarray(observations, np.float64)
         mu, sd = obs.mean(0), obs.std(0)
         self.x = ((obs - mu) / np.where(sd > 0, sd, 1.0)).astype(np.float32)   # (N, d_o)
@@ -139,65 +95,30 @@ class FQEFit:
         self.starts = np.asarray(starts, np.int64)
         self.last = np.zeros(self.n_rows, bool)
         self.last[self.starts[1:] - 1] = True
+        self.cut = np.zeros(self.n_rows, bool)
+        if truncated is not None:
+            self.cut[self.starts[1:][np.asarray(truncated, bool)] - 1] = True
         self.nxt = np.where(self.last, np.arange(self.n_rows), np.arange(self.n_rows) + 1)
         self.cum = cumulative(policy)
-        self.batch = batch
-        d3rlpy.seed(seed)
-        torch.manual_seed(seed)
-        self.algo = _NextActions()
-        self.fqe = DiscreteFQE(algo=self.algo, config=FQEConfig(
-            batch_size=batch, gamma=float(gamma), learning_rate=learning_rate,
-            target_update_interval=target_update,
-            optim_factory=AdamFactory() if cosine_steps is None else AdamFactory(
-                lr_scheduler_factory=CosineAnnealingLRFactory(T_max=int(cosine_steps))),
-            encoder_factory=VectorEncoderFactory(hidden_units=list(HIDDEN))), device=False)
-        self.fqe.create_impl((self.x.shape[1],), self.n_actions)
+        self.batch, self.gamma = int(batch), float(gamma)
+        self.learning_rate, self.interval = float(learning_rate), int(target_update)
+        self.hidden = tuple(HIDDEN if hidden is None else hidden)
+        self.seed = int(seed)
         self.rng = np.random.default_rng(seed)
 
-    def train(self, steps: int, rows: np.ndarray | None = None, progress=None) -> None:
-        """``steps`` updates on mini-batches drawn from ``rows`` (a multiset of row indices:
-        a resampled log; None: every row once)."""
-        from d3rlpy.dataset import TransitionMiniBatch
+    def initial(self) -> list:
+        """The network's initial weights in torch's layout, [W_1 (out, in), b_1 (out,), ...]:
+        ``torch.nn.Linear``'s default initialisation under ``torch.manual_seed(seed)``, layer
+        by layer, the global generator left as it was. The last layer gives Q of every action,
+        and with censored steps C of every action too (:mod:`aoc_cli.ope.ensemble`)."""
+        import torch
 
-        batch, one = self.batch, np.ones((self.batch, 1), np.float32)
-        pool = None if rows is None else np.asarray(rows, np.int64)
-        for step in range(int(steps)):
-            if pool is None:
-                idx = self.rng.integers(0, self.n_rows, batch)
-            else:
-                idx = pool[self.rng.integers(0, len(pool), batch)]
-            j = self.nxt[idx]
-            # the evaluated policy's action at the next logged step (drawn if it is stochastic)
-            self.algo.actions = (self.cum[j] < self.rng.random((batch, 1))).sum(1).clip(
-                0, self.n_actions - 1)
-            self.fqe.update(TransitionMiniBatch(
-                observations=self.x[idx], actions=self.act[idx, None].astype(np.float32),
-                rewards=self.rew[idx, None], next_observations=self.x[j],
-                next_actions=np.zeros((batch, 1), np.float32),
-                terminals=self.last[idx, None].astype(np.float32), intervals=one,
-                transitions=[]))
-            if progress is not None and (step + 1) % 500 == 0:
-                progress(step + 1, steps)
-
-    def snapshot(self) -> dict:
-        """A copy of the model's weights, target weights and optimiser state."""
-        m = self.fqe.impl.modules
-        return copy.deepcopy({"q": m.q_funcs.state_dict(), "target": m.targ_q_funcs.state_dict(),
-                              "optim": m.optim.state_dict()})
-
-    def restore(self, state: dict) -> None:
-        """Put back a :meth:`snapshot` (or an ensemble member's state, with its step count)."""
-        m = self.fqe.impl.modules
-        if "count" in state:
-            self.fqe._grad_step = int(state["count"])
-        m.q_funcs.load_state_dict(state["q"])
-        m.targ_q_funcs.load_state_dict(state["target"])
-        m.optim.load_state_dict(copy.deepcopy(state["optim"]))
-
-    def q(self, rows: np.ndarray | None = None) -> np.ndarray:
-        """(len(rows), n) Q_hat of the given rows (None: every row) and every action."""
-        x = self.x if rows is None else self.x[np.asarray(rows, np.int64)]
-        return q_table(self.fqe, x, self.n_actions)
+        outputs = self.n_actions * (2 if self.cut.any() else 1)
+        sizes = (self.x.shape[1], *self.hidden, outputs)
+        with torch.random.fork_rng(devices=[]):
+            torch.manual_seed(self.seed)
+            layers = [torch.nn.Linear(i, o) for i, o in itertools.pairwise(sizes)]
+        return [t.detach() for layer in layers for t in (layer.weight, layer.bias)]
 
     def distinct(self) -> tuple:
         """(the distinct standardised observations (U, d_o), each row's index among them
@@ -212,17 +133,19 @@ class FQEFit:
 
 def fit_fqe(observations, actions, rewards, starts, policy, gamma: float = 1.0,
             steps: int | None = None, seed: int = 0, progress=None, batch: int = BATCH,
-            learning_rate: float = LEARNING_RATE, target_update: int = TARGET_UPDATE
-            ) -> np.ndarray:
-    """Q_hat (N, n) of ``policy`` by d3rlpy's DiscreteFQE on the log (module docstring).
-    Observations are standardised here (by the log's mean and spread) before d3rlpy sees
-    them. ``progress(done, total)`` after each block of steps."""
+            learning_rate: float = LEARNING_RATE, target_update: int = TARGET_UPDATE,
+            truncated: np.ndarray | None = None, schedule: str = SCHEDULE) -> np.ndarray:
+    """Q_hat (N, n) of ``policy`` by one FQE fit on the log (module docstring), the learning
+    rate's ``schedule`` as :func:`fqe_policies`'s. Observations are standardised here (by the
+    log's mean and spread). ``progress(done)`` every 100 steps."""
     fit = FQEFit(observations, actions, rewards, starts, policy, gamma, seed, batch,
-                 learning_rate, target_update)
+                 learning_rate, target_update, truncated=truncated)
     total = default_steps(fit.n_rows, starts, gamma, target_update) if steps is None \
         else int(steps)
-    fit.train(total, progress=progress)
-    return fit.q()
+    ens = FQEEnsemble(fit, 1)
+    ens.train(total, fit.cum[None], np.zeros(1, np.int64), [None], fit.rng, progress=progress,
+              schedule=schedule)
+    return ens.q()[0]
 
 
 def refit_steps(steps: int) -> int:
@@ -243,7 +166,7 @@ def fqe_policies(observations, actions, rewards, starts, policies: list, gamma: 
                  refit_step_count: int | None = None, seed: int = 0, progress=None,
                  schedule: str = SCHEDULE, behaviour: bool = False,
                  n_actions: int | None = None, parts: int | None = None,
-                 truncated: np.ndarray | None = None) -> list:
+                 truncated: np.ndarray | None = None, cross=False) -> list:
     """The direct method for each of P policies on one log, with an interval that holds the
     fitted model's own error. Per policy: Q_hat (N, n) of the full fit, its estimate (the mean
     start value of the policy), and ``refits`` refits, each on the log's episodes resampled
@@ -258,8 +181,8 @@ def fqe_policies(observations, actions, rewards, starts, policies: list, gamma: 
     spread it estimates: 2.26 for 10 refits; their percentiles would be their extremes);
     without, the full fit's mean start value (``fit_estimate`` either way). The P fits train
     as one ensemble, then the P x ``refits`` refits as another
-    (:class:`aoc_cli.ope.ensemble.FQEEnsemble`: each member d3rlpy's DiscreteFQE
-    update, batched); every policy's fit starts from the same d3rlpy initialisation and
+    (:class:`aoc_cli.ope.ensemble.FQEEnsemble`: each member one FQE, batched); every
+    policy's fit starts from the same initialisation (``seed``) and
     the policies' refits see the same resamples. ``progress(done, total)`` in member-steps;
     ``schedule`` the learning rate's over the fit and over each refit
     (:meth:`aoc_cli.ope.ensemble.FQEEnsemble.train`); ``parts`` the processes each
@@ -277,9 +200,16 @@ def fqe_policies(observations, actions, rewards, starts, policies: list, gamma: 
     "logged" (N,) Q_hat of each logged step, "estimate" (the mean Q_hat of the episodes' first
     logged steps: the behaviour's value, which the log's mean return also estimates), "steps".
 
-    ``truncated`` (E,): episodes cut short (:func:`aoc_cli.ope.estimators.censoring_weights`): the last step of one is
-    never drawn, and the transitions that continue are drawn in proportion to the inverse of
-    their chance to have escaped the cut."""
+    ``truncated`` (E,): episodes cut short: the last step of one is censored, its target the
+    value its next state is predicted to have (:mod:`aoc_cli.ope.ensemble`).
+
+    ``cross``: each policy's record also holds "q_cross" (N, n), its Q_hat cross-fitted over
+    two folds of the episodes (split at random, seeded by ``seed``): two more fits of each
+    policy, one on each fold's episodes (every fit's steps, from the same initialisation, on
+    mini-batches of their own generator: the other members' values do not change), each
+    fold's rows given the Q_hat fitted on the other fold (WDR's control variate then never
+    fits the episodes it corrects: :func:`aoc_cli.ope.value.policy_value`), and "folds" (E,)
+    each episode's fold. True for every policy, or P bools: those policies only."""
     import time
 
     started = time.perf_counter()
@@ -290,39 +220,52 @@ def fqe_policies(observations, actions, rewards, starts, policies: list, gamma: 
     if behaviour:                   # the logged actions as a policy (N, n): one-hot
         logged = np.zeros((len(act), policies[0].shape[1] if P else int(n_actions)))
         logged[np.arange(len(act)), act] = 1.0
-    fit = FQEFit(observations, act, rewards, starts, policies[0] if P else logged, gamma, seed)
+    fit = FQEFit(observations, act, rewards, starts, policies[0] if P else logged, gamma, seed,
+                 truncated=truncated)
     cums = np.stack([fit.cum] + [cumulative(p) for p in policies[1:]]) if P else None
-    M = P + (logged is not None)
-    total = default_steps(fit.n_rows, starts, gamma, fit.fqe.config.target_update_interval) \
+    crossed = np.flatnonzero(np.broadcast_to(np.asarray(cross, bool), (P,))) \
+        if len(fit.starts) > 2 else np.empty(0, np.int64)    # two folds need two episodes
+    K = len(crossed)
+    B0 = P + (logged is not None)                   # the fold members: 2K from here
+    M = B0 + 2 * K
+    total = default_steps(fit.n_rows, starts, gamma, fit.interval) \
         if steps is None else int(steps)
     k = refit_steps(total) if refit_step_count is None else int(refit_step_count)
     grand = M * total + (P * refits * k if refits > 1 else 0)
+    n_episodes = len(fit.starts) - 1
+    lengths = np.diff(fit.starts)
+    folds = np.random.default_rng([seed, 2]).permutation(np.arange(n_episodes) % 2)
+    row_fold = np.repeat(folds, lengths)                                    # (N,)
+    fold_pools = [np.flatnonzero(row_fold == f) for f in (0, 1)]
     tick = (lambda base, m: None) if progress is None else \
         (lambda base, m: lambda done: progress(base + m * done, grand))
     behaviour_seed = [seed, 1]
-    weights = None if truncated is None or not np.any(truncated) else \
-        censoring_weights(fit.starts, truncated)
 
     def fit_draw(keep, rng):        # members keep of [policies..., behaviour]: their draws
         draws = [] if not P else [sampler(fit, cums, np.arange(P), [None] * P, rng, P,
-                                          keep=keep[keep < P], weights=weights)]
+                                          keep=keep[keep < P])]
         if logged is not None and np.any(keep == P):
             draws.append(sampler(fit, cumulative(logged)[None], np.zeros(1, np.int64),
-                                 [None], np.random.default_rng(behaviour_seed), 1,
-                                 weights=weights))
+                                 [None], np.random.default_rng(behaviour_seed), 1))
+        if np.any(keep >= B0):          # policy crossed[j] on fold f: member B0 + f * K + j
+            draws.append(sampler(fit, cums, np.tile(crossed, 2),
+                                 [fold_pools[0]] * K + [fold_pools[1]] * K,
+                                 np.random.default_rng([seed, 3]), 2 * K,
+                                 keep=keep[keep >= B0] - B0))
         return joined(*draws)
 
-    ens = FQEEnsemble(fit, [fit.snapshot()] * M, [fit.fqe._grad_step] * M)
+    ens = FQEEnsemble(fit, M)
     train_parts(ens, total, fit_draw, fit.rng, parts, progress=tick(0, M), schedule=schedule)
     first = fit.starts[:-1]
-    n_episodes = len(first)
     q = ens.q()                                                             # (M, N, n)
     fitted = [float(np.mean((policies[i][first] * q[i][first]).sum(1))) for i in range(P)]
     out = [{"q": q[i], "estimate": fitted[i], "fit_estimate": fitted[i], "low": float("nan"),
             "high": float("nan"), "replicates": np.empty(0), "bagged": float("nan"),
             "steps": total, "refit_steps": 0} for i in range(P)]
+    for j, i in enumerate(crossed):     # fold 0's rows from the fit on fold 1, and back
+        out[i]["q_cross"] = np.where((row_fold == 0)[:, None], q[B0 + K + j], q[B0 + j])
+        out[i]["folds"] = folds
     if refits > 1:
-        lengths = np.diff(fit.starts)
         rng = np.random.default_rng(seed + 1)
         counts = rng.multinomial(n_episodes, np.full(n_episodes, 1.0 / n_episodes),
                                  size=refits)                               # (refits, E)
@@ -333,8 +276,7 @@ def fqe_policies(observations, actions, rewards, starts, policies: list, gamma: 
         boot = ens.repeat(refits, range(P))             # member i * refits + b: policy i, refit b
         policy_of, boot_pools = np.repeat(np.arange(P), refits), pools * P
         train_parts(boot, k, lambda keep, rng: sampler(fit, cums, policy_of, boot_pools, rng,
-                                                       P * refits, keep=keep,
-                                                       weights=weights),
+                                                       P * refits, keep=keep),
                     fit.rng, parts, progress=tick(M * total, P * refits), schedule=schedule)
         q0 = boot.q(first).reshape(P, refits, n_episodes, -1)               # (P, refits, E, n)
         quantile = student_quantile(refits - 1)
@@ -385,15 +327,3 @@ def _offsets(lengths: np.ndarray) -> np.ndarray:
     """(sum lengths,) 0..l-1 within each run of the given lengths."""
     ends = np.cumsum(lengths)
     return np.arange(int(ends[-1]) if len(ends) else 0) - np.repeat(ends - lengths, lengths)
-
-
-def q_table(fqe, x: np.ndarray, n_actions: int, block: int = 65536) -> np.ndarray:
-    """(N, n) Q_hat of every row of standardised observations ``x`` (N, d_o) and action."""
-    out = np.empty((len(x), n_actions))
-    rows_per = max(1, block // n_actions)
-    for lo in range(0, len(x), rows_per):
-        xs = x[lo:lo + rows_per]
-        rep = np.repeat(xs, n_actions, axis=0)
-        a = np.tile(np.arange(n_actions), len(xs))
-        out[lo:lo + len(xs)] = fqe.predict_value(rep, a).reshape(len(xs), n_actions)
-    return out

@@ -35,7 +35,6 @@ from aoc_cli.ope.fqe import (
     REFITS,
     SCHEDULE,
     TARGET_UPDATE,
-    available,
     behaviour_fqe,
     default_steps,
 )
@@ -62,7 +61,7 @@ class OPESettings(Settings):
     FQE's interval (:func:`aoc_cli.ope.fqe.bootstrap_fqe`; 0: one fit, its interval
     resamples the start values only and leaves the model's own error out); bootstrap
     replicates; seed; ``fqe_schedule`` FQE's learning rate, "cosine" (annealed to 0 over the
-    fit and over each refit) or "constant" (d3rlpy's default)
+    fit and over each refit) or "constant"
     (:meth:`aoc_cli.ope.ensemble.FQEEnsemble.train`)."""
 
     label = "offline policy evaluation"
@@ -90,7 +89,7 @@ class OPESettings(Settings):
     seed: int = setting(0, help="Seed of the bootstrap and FQE.")
     fqe_schedule: str = setting(SCHEDULE, choices=("cosine", "constant"),
                                 help="FQE's learning rate: cosine (annealed to 0 over the fit "
-                                     "and over each refit) or constant (d3rlpy's default).")
+                                     "and over each refit) or constant.")
     fqe_processes: int | None = setting(None, bounds=">= 1",
                                         none=f"the cores, at most {MAX_PARTS}",
                                         help="Processes FQE's fits train in (the same values "
@@ -147,30 +146,29 @@ def behaviour_propensities(data, logged: np.ndarray, settings: OPESettings,
 def fqe_record(settings: OPESettings, n_rows: int, starts: np.ndarray, gamma: float) -> dict:
     """What the behaviour's fitted Q evaluation (:func:`behaviour_targets`) is computed from:
     its estimator, settings and the libraries' versions (JSON)."""
-    import d3rlpy
     import torch
 
     return {"value": "fqe", "gamma": float(gamma),
-            "estimator": "d3rlpy DiscreteFQE of the logged behaviour (SARSA)",
+            "estimator": "fitted Q evaluation of the logged behaviour (SARSA), plain torch",
             "steps": int(settings.fqe_steps or default_steps(n_rows, starts, gamma)),
             "batch": BATCH, "learning_rate": LEARNING_RATE, "target_update": TARGET_UPDATE,
             "hidden": list(HIDDEN), "schedule": settings.fqe_schedule,
-            "seed": int(settings.seed), "truncated": "censored", "torch": torch.__version__,
-            "d3rlpy": d3rlpy.__version__}
+            "seed": int(settings.seed), "truncated": "censored, bootstrapped",
+            "torch": torch.__version__}
 
 
 def behaviour_targets(data, gamma: float, seed: int = 0,
                       block: dict | None = None) -> np.ndarray | None:
     """(N,) the logged behaviour's Q_hat(o_t, a_t) of every step of held-out log ``data`` by
-    d3rlpy's fitted Q evaluation at FQE's default settings (discount ``gamma``, ``seed``):
+    fitted Q evaluation at FQE's default settings (discount ``gamma``, ``seed``):
     ``aoc evaluate``'s held-out value target of a model whose values are ``fqe`` (an estimate
     of the same Q(o, a), by another estimator, from the held-out log alone). The OPE's own
     (``block``, an :func:`ope_block`) when it fitted the behaviour at those settings; else
     fitted alone (:func:`aoc_cli.ope.fqe.behaviour_fqe`, the same values): a quicker
     OPE does not change the target. Kept beside the log
-    (:func:`aoc_cli.belief.targets.kept_values`). None where it cannot run (no d3rlpy,
-    continuous actions, no rewards): the caller then uses aoc's own fitted Q evaluation."""
-    if available() is not None or not data.discrete or not data.has_rewards:
+    (:func:`aoc_cli.belief.targets.kept_values`). None where it cannot run (continuous
+    actions, no rewards): the caller then uses aoc's own fitted Q evaluation."""
+    if not data.discrete or not data.has_rewards:
         return None
     settings = OPESettings(seed=seed)
     record = fqe_record(settings, data.n_rows, data.episode_starts, gamma)
@@ -195,10 +193,14 @@ def behaviour_targets(data, gamma: float, seed: int = 0,
 
 
 def warnings_for(name: str, rec: dict, n_episodes: int) -> list[str]:
-    """A small ESS; a pair of estimators whose intervals do not overlap."""
+    """A small ESS beside an importance-sampling estimate that is still shown (where the rule
+    withholds them, their cells already say "not estimable: ESS ..."); a pair of estimators
+    whose intervals do not overlap."""
     out = []
     small = max(30.0, ESS_WARN_SHARE * n_episodes)
-    if rec["ess"] < small:
+    shown = [k for k in ("pdwis", "wdr")
+             if (rec["policy_value"].get(k) or {}).get("estimate") is not None]
+    if rec["ess"] < small and shown:
         out.append(f"policy {name!r}: effective sample size {rec['ess']:.1f} of {n_episodes} episodes "
                    "(few logged episodes follow this policy; its estimates are unreliable)")
     items = [(k, e) for k, e in rec["policy_value"].items() if e.get("estimate") is not None]
@@ -259,7 +261,7 @@ def off_policy_values(data, logged: np.ndarray, policies: dict, settings: OPESet
     out["ope"]["fqe_inputs"] = "the observation" + (
         f" and the last {history_length} steps" if history_length else "")
     fqes = fqe_values(log, inputs, logged, list(probs.values()), settings, progress,
-                      behaviour=True)
+                      behaviour=True, propensity=propensity)
     if len(fqes) > len(probs):          # the logged behaviour's, last
         own = fqes.pop()
         out["behaviour_fqe"] = own

@@ -10,6 +10,9 @@ Shapes (N rows, E episodes, d_o observation dims, d_a action dims):
 * ``columns[name]`` (N,) float64: any other numeric per-row column (usable as a value target);
 * ``imputed`` (N, d_o) bool, or None: true where an observation cell was empty in the source
   and filled by the corpus's imputation rule (``preprocessing["impute"]``);
+* a table's reader hands over ``observations`` and ``imputed`` as
+  :class:`~aoc_cli.store.columns.ColumnStack` (their columns; the writer makes the rows block by
+  block); ``np.asarray`` gives the arrays;
 * ``preprocessing``: what was fitted while reading (imputation medians and rule, dose-bin
   edges, the split), applied again to data appended or ingested ``--impute-like`` it.
 """
@@ -22,6 +25,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from aoc_cli.errors import AocError, param
+from aoc_cli.store.columns import ColumnStack
 
 
 def box_space(dim: int, low=None, high=None, names: list[str] | None = None) -> dict:
@@ -62,6 +66,8 @@ def all_finite(arr: np.ndarray) -> bool:
     """True when a float array holds no NaN or inf. Fast path: NaN and inf propagate through a
     sum (one pass, no temporary); only when the sum is not finite (a bad value, or an overflow
     of large finite values) is every element checked."""
+    if isinstance(arr, ColumnStack):
+        return arr.all_finite()
     arr = np.asarray(arr)
     if not np.issubdtype(arr.dtype, np.floating):
         return True
@@ -71,11 +77,20 @@ def all_finite(arr: np.ndarray) -> bool:
     return bool(np.isfinite(arr).all())
 
 
+def finite_rows(arr) -> np.ndarray:
+    """(N,) bool: the rows of an (N,) or (N, d) array (or a ColumnStack) holding no NaN or
+    inf."""
+    if isinstance(arr, ColumnStack):
+        return arr.finite_rows()
+    arr = np.asarray(arr)
+    return np.isfinite(arr) if arr.ndim == 1 else np.isfinite(arr).all(axis=1)
+
+
 @dataclass
 class CorpusData:
     """A corpus in memory, as readers produce it and the store writes it."""
 
-    observations: np.ndarray
+    observations: np.ndarray | ColumnStack
     actions: np.ndarray
     rewards: np.ndarray | None
     terminals: np.ndarray
@@ -87,7 +102,7 @@ class CorpusData:
     columns: dict[str, np.ndarray] = field(default_factory=dict)
     episode_ids: list[str] | None = None
     source: dict = field(default_factory=dict)
-    imputed: np.ndarray | None = None
+    imputed: np.ndarray | ColumnStack | None = None
     preprocessing: dict = field(default_factory=dict)
 
     @property
@@ -112,7 +127,8 @@ class CorpusData:
         n = self.n_rows
         if n == 0:
             raise AocError("the data has zero rows: nothing to store")
-        self.observations = _observation_array(self.observations)
+        if not isinstance(self.observations, ColumnStack):  # a table's columns stay columns
+            self.observations = _observation_array(self.observations)
         self.actions = _action_array(self.actions, self.discrete)
         if self.rewards is not None:
             self.rewards = np.asarray(self.rewards, dtype=np.float64).reshape(-1)
@@ -129,7 +145,8 @@ class CorpusData:
                      for k, (c, lab) in self.tags.items()}
         self.columns = {k: np.asarray(v, dtype=np.float64) for k, v in self.columns.items()}
         if self.imputed is not None:
-            self.imputed = np.asarray(self.imputed, dtype=bool)
+            if not (isinstance(self.imputed, ColumnStack) and self.imputed.dtype == bool):
+                self.imputed = np.asarray(self.imputed, dtype=bool)
             if self.imputed.shape != self.observations.shape:
                 raise AocError(f"the imputed mask has shape {self.imputed.shape}, the "
                                f"observations {self.observations.shape}")
@@ -157,7 +174,7 @@ class CorpusData:
                           ("rewards", self.rewards)):
             if arr is None or not np.issubdtype(arr.dtype, np.floating) or all_finite(arr):
                 continue
-            finite = np.isfinite(arr) if arr.ndim == 1 else np.isfinite(arr).all(axis=1)
+            finite = finite_rows(arr)
             if not finite.all():
                 bad = int(np.flatnonzero(~finite)[0])
                 raise AocError(
@@ -178,12 +195,12 @@ class CorpusData:
         """(E,) bool: episodes holding a NaN/inf observation, action or reward."""
         bad = np.zeros(self.n_rows, dtype=bool)
         for arr in (self.observations, self.actions, self.rewards):
-            if arr is None or not np.issubdtype(np.asarray(arr).dtype, np.floating):
+            if arr is None:
                 continue
-            a = np.asarray(arr)
-            if all_finite(a):
+            arr = arr if isinstance(arr, ColumnStack) else np.asarray(arr)
+            if not np.issubdtype(arr.dtype, np.floating) or all_finite(arr):
                 continue
-            bad |= ~(np.isfinite(a) if a.ndim == 1 else np.isfinite(a).all(axis=1))
+            bad |= ~finite_rows(arr)
         ep = np.searchsorted(self.episode_starts, np.arange(self.n_rows), side="right") - 1
         out = np.zeros(self.n_episodes, dtype=bool)
         out[ep[bad]] = True

@@ -4,8 +4,9 @@ artefact is opened and in full by ``aoc verify``.
 What is recorded when written:
 
 * ``manifest.json``: the content hash of the arrays, a CRC-32 per array (``arrays``: the
-  content row names the changed ones), ``files`` (size + SHA-256 of ``corpus.h5``) and its
-  own seal (``sha256`` of its other keys);
+  content row names the changed ones), ``files`` (size + CRC-32 of ``corpus.h5``; SHA-256
+  when written before the content hash made the file's own record a damage check only) and
+  its own seal (``sha256`` of its other keys);
 * ``models/<id>/config.json``: ``files`` (weights.pt, values.npy, metrics.csv), sealed;
 * ``models/<id>/beliefs.json``: ``files`` (beliefs.npy), sealed;
 * ``models/<id>/index/<index_id>/index.json``: ``files`` (index.faiss, its .json and row
@@ -22,7 +23,7 @@ import json
 from pathlib import Path
 
 from aoc_cli.errors import AocError, call
-from aoc_cli.store.atomic import seal_status, sha256_file
+from aoc_cli.store.atomic import crc32_file, seal_status, sha256_file
 from aoc_cli.store.layout import INDEXES, models_dir
 from aoc_cli.store.reader import Corpus
 from aoc_cli.store.sweep import clear_dead
@@ -33,7 +34,8 @@ FAST_HASH_BYTES = 16 << 20
 
 
 def file_status(path: Path, record: dict | None, full: bool = True) -> tuple[str, str]:
-    """(status, detail) of a file against its record ``{"bytes", "sha256"}``."""
+    """(status, detail) of a file against its record ``{"bytes", "sha256"}`` (or
+    ``"crc32"``: a corpus.h5)."""
     if not path.is_file():
         return "missing", "recorded but not on disk" if record else "not on disk"
     if not record:
@@ -42,6 +44,10 @@ def file_status(path: Path, record: dict | None, full: bool = True) -> tuple[str
     if size != record.get("bytes"):
         return "damaged", f"{size} bytes, {record.get('bytes')} recorded"
     if full or size <= FAST_HASH_BYTES:
+        if "crc32" in record:
+            if crc32_file(path) != record.get("crc32"):
+                return "damaged", "CRC-32 differs from the one recorded"
+            return "ok", "CRC-32 matches"
         if sha256_file(path) != record.get("sha256"):
             return "damaged", "SHA-256 differs from the one recorded"
         return "ok", "SHA-256 matches"
@@ -68,7 +74,7 @@ def read_json(path: Path, what: str, todo: str) -> dict:
 
 def check_files(folder: Path, meta: dict, names, what: str, todo: str) -> None:
     """The fast check when an artefact is opened: each of ``names`` recorded in
-    ``meta["files"]`` exists, has its size, and (when small) its SHA-256."""
+    ``meta["files"]`` exists, has its size, and (when small) its SHA-256 or CRC-32."""
     records = meta.get("files") or {}
     for name in names:
         if name not in records:
@@ -112,7 +118,7 @@ def _recorded_rows(corpus: str, folder: Path, base: str, meta: dict | None) -> l
 
 
 def verify_corpus(store, name: str) -> list[dict]:
-    """Rows for every file of corpus ``name``: manifest, corpus.h5 (file SHA-256 and the
+    """Rows for every file of corpus ``name``: manifest, corpus.h5 (file CRC-32 and the
     content hash of the arrays), and every model's, beliefs' and index's files."""
     folder = store.path(name)
     rows = []

@@ -118,7 +118,7 @@ from pathlib import Path
 case, src, store = sys.argv[1], sys.argv[2], sys.argv[3]
 import numpy, pyarrow, pyarrow.csv
 if case == "aoc":
-    import aoc_cli, aoc_cli.store
+    import aoc_cli, aoc_cli.store, aoc_cli.formats.ingest
     ingest = aoc_cli.ingest  # the API's lazy import, before the clock starts
 def hwm():
     for line in Path("/proc/self/status").read_text().splitlines():
@@ -145,7 +145,7 @@ else:
     rows = result.rows
 print(json.dumps({"seconds": time.perf_counter() - t0, "cpu": cpu() - c0, "rows": rows,
                   "hwm_imports_mb": before,
-                  "hwm_mb": hwm()}))
+                  "hwm_mb": hwm(), "pandas_imported": "pandas" in sys.modules}))
 """
 
 
@@ -180,6 +180,7 @@ def cohort_rows(tmp: Path, stays: int, repeats: int) -> list[dict]:
             t.add(x["seconds"], x["cpu"])
         peak = sorted(x["hwm_mb"] - x["hwm_imports_mb"] for x in r)[len(r) // 2]
         rows.append(h.row(label, r[0]["rows"], t, file_mb=round(size_mb, 1),
+                          pandas_imported=any(x["pandas_imported"] for x in r),
                           peak_above_imports_mb=round(peak, 1),
                           peak_over_file=round(peak / size_mb, 2),
                           peak_total_mb=round(sorted(x["hwm_mb"] for x in r)[len(r) // 2], 1)))

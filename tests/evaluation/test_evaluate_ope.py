@@ -68,7 +68,6 @@ def test_policy_value_is_the_estimators_on_the_decisions(sepsis):
 
 
 def test_fqe_interval_is_from_refits_and_says_so(sepsis):
-    pytest.importorskip("d3rlpy", reason="the bench extra (d3rlpy) is not installed")
     _root, store, _ = sepsis
     held = store.corpus("held")
     settings = OPESettings(estimators=("fqe",), fqe_steps=300, fqe_refits=3)
@@ -106,7 +105,6 @@ def test_fqe_interval_is_from_refits_and_says_so(sepsis):
 
 
 def test_cli_fqe_refits_reach_the_estimator(sepsis, capsys):
-    pytest.importorskip("d3rlpy", reason="the bench extra (d3rlpy) is not installed")
     root, _store, _ = sepsis
     code, out, _err = run_in_process(capsys, "--store", str(root), "evaluate", "icu", "--data",
                                      "held", "--baselines", "none", "--ope", "fqe",
@@ -263,11 +261,10 @@ def test_continuous_actions_asked_for_ope_are_refused_before_any_step_is_decided
 
 def test_an_fqe_models_held_out_target_is_the_behaviours_fqe_kept_beside_the_log(
         sepsis, monkeypatch):
-    """For fqe values, value_r2's held-out target is the logged behaviour's Q by d3rlpy's FQE
+    """For fqe values, value_r2's held-out target is the logged behaviour's Q by the OPE's FQE
     at its default settings: the OPE's own fit when it ran at the model's discount and those
     settings, kept beside the log and read back by a later evaluate; fitted alone at another
     discount or when the OPE's FQE took other steps."""
-    pytest.importorskip("d3rlpy", reason="the bench extra (d3rlpy) is not installed")
     from aoc_cli.ope import policies as ope_eval
     from aoc_cli.store import targets_dir
 
@@ -289,7 +286,7 @@ def test_an_fqe_models_held_out_target_is_the_behaviours_fqe_kept_beside_the_log
     got = ctx.targets(rows, {"settings": settings,
                              "behaviour_fqe": {"logged": fresh, "steps": steps}})
     np.testing.assert_array_equal(got, fresh)
-    assert "d3rlpy's fitted Q evaluation" in ctx.target_source
+    assert "behaviour's Q(o, a) by fitted Q evaluation" in ctx.target_source
     assert len(list(targets_dir(held.path).glob("fqe-behaviour-*.npy"))) == 1
 
     def never(*_a, **_k):
@@ -328,7 +325,8 @@ def test_fqe_off_on_the_logged_behaviour_is_a_warning_and_withheld(sepsis, monke
     e = held.n_episodes
     counts = np.random.default_rng(0).multinomial(e, np.full(e, 1 / e), size=3)
 
-    def fake(_log, _obs, _logged, policies, _settings, _progress=None, behaviour=False):
+    def fake(_log, _obs, _logged, policies, _settings, _progress=None, behaviour=False,
+             propensity=None):
         recs = [{"q": np.zeros((n, held.n_actions)), "replicates": np.array([0.1, 0.2, 0.3]),
                  "counts": counts, "estimate": 0.2, "low": 0.0, "high": 0.4,
                  "fit_estimate": 0.2, "steps": 10, "refit_steps": 2} for _ in policies]
@@ -358,7 +356,8 @@ def test_fqe_is_given_the_history_the_policies_decide_from(sepsis, monkeypatch):
     held = store.corpus("held")
     seen = {}
 
-    def fake(_log, obs, _logged, policies, _settings, _progress=None, behaviour=False):
+    def fake(_log, obs, _logged, policies, _settings, _progress=None, behaviour=False,
+             propensity=None):
         seen["width"] = np.asarray(obs).shape[1]
         return [None] * len(policies)
 

@@ -142,6 +142,59 @@ def test_reading_reports_progress_in_bytes_up_to_the_whole_file(tmp_path):
     path.write_text("a,b\n" + "".join(f"{i},{i}\n" for i in range(7)))
     seen = []
     table = read_table(path, lambda *a: seen.append(a))
-    assert table.header == ["a", "b"] and table.cols["a"].to_pylist() == list(range(7))
+    assert table.header == ["a", "b"] and list(table.cols["a"]) == list(range(7))
     size = path.stat().st_size
     assert seen == [(0, size, "reading p.csv"), (size, size, "reading p.csv")]
+
+
+def test_a_file_with_more_rows_than_its_first_mb_suggests_reads_every_row(tmp_path):
+    """The streamed reader sizes its arrays from the first MB's lines (long notes there, short
+    rows after): the arrays grow, and every row's numbers come back in order."""
+    from aoc_cli.formats.table import read_table
+
+    path = tmp_path / "grow.csv"
+    n_long, n = 2_000, 60_000
+    with path.open("w") as fh:
+        fh.write("id,t,obs_a,act_u,note\n")
+        for i in range(n):
+            note = "x" * 600 if i < n_long else ""
+            fh.write(f"p{i // 10},{i % 10},{i * 0.5},{i % 3},{note}\n")
+    table = read_table(path, text_columns=["id"])
+    assert table.n == n
+    np.testing.assert_array_equal(table.cols["obs_a"], np.arange(n) * 0.5)
+    np.testing.assert_array_equal(table.cols["act_u"], np.arange(n) % 3)
+
+
+@pytest.mark.parametrize("trailing_newline", [True, False])
+def test_a_csv_read_as_two_halves_is_the_csv_read_as_one_stream(tmp_path, monkeypatch,
+                                                               trailing_newline):
+    """A large plain CSV without quotes is read in two threads, its second half with the
+    first's names and types: the same columns as one stream (blank lines, text and number
+    columns, the last line with or without its line break); a file holding a quote is one
+    stream."""
+    from aoc_cli.formats import table as t
+
+    path = tmp_path / "halves.csv"
+    lines = ["id,t,obs_a,act_u,note"]
+    for i in range(5_000):
+        lines.append(f"p{i // 7},{i % 7},{'' if i % 11 == 0 else i * 0.25},{i % 3},n{i % 5}")
+        if i % 997 == 0:
+            lines.append("")  # blank lines are skipped
+    path.write_text("\n".join(lines) + ("\n" if trailing_newline else ""))
+    monkeypatch.setattr(t, "BLOCK_BYTES", 4096)
+    monkeypatch.setattr(t, "SPLIT_BYTES", 1 << 40)
+    one = t.read_table(path, text_columns=["id"])
+    monkeypatch.setattr(t, "SPLIT_BYTES", 1024)
+    halves = t._halves(path)
+    assert halves is not None and 0 < halves.middle < path.stat().st_size
+    two = t.read_table(path, text_columns=["id"])
+    assert two.n == one.n == 5_000 and two.header == one.header
+    for name in one.header:
+        a, b = one.cols[name], two.cols[name]
+        if isinstance(a, np.ndarray):  # streamed (not the whole-file fallback) both times
+            assert isinstance(b, np.ndarray)
+            np.testing.assert_array_equal(b, a)
+        else:
+            assert b.to_pylist() == a.to_pylist()
+    path.write_text(path.read_text().replace("n3", '"n3"'))
+    assert t._halves(path) is None

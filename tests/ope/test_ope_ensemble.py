@@ -1,7 +1,10 @@
-"""Fitted Q evaluations trained as one batched ensemble (aoc_cli.ope.ensemble): each
-member is d3rlpy's DiscreteFQE trained by its own update (``FQEFit.train`` calls
-``DiscreteFQE.update``), to float rounding, fresh or warm-started, on its own policy and
-resampled rows, without touching the other members."""
+"""Fitted Q evaluations trained as one batched ensemble in plain torch (aoc_cli.ope.ensemble):
+a member started from d3rlpy's DiscreteFQE network and fed the same mini-batches trains as
+d3rlpy's own update does (d3rlpy 2.8, the reference, only here), fresh or warm-started, on its
+own policy and resampled rows, without touching the other members."""
+
+import contextlib
+import io
 
 import numpy as np
 import pytest
@@ -11,11 +14,15 @@ from aoc_cli.ope.fqe import FQEFit, cumulative
 from aoc_cli.threads import one_thread
 from tests.ope.mdps import noisy_log
 
-pytest.importorskip("d3rlpy", reason="the bench extra (d3rlpy) is not installed")
-
-#: float32 training replayed by another sequence of kernels: a few hundred steps agree to
-#: about 1e-6 of Q values of order 1 (measured 3e-6 at worst after 400 steps).
+#: float32 training replayed by the same kernels in another arrangement (other members
+#: beside it, a table of the target's values): a few hundred steps agree to about 1e-6 of Q
+#: values of order 1.
 TOL = 2e-5
+#: against d3rlpy's modules (its loss and torch's per-tensor Adam: other roundings): they agree
+#: to ~2e-7 until a ReLU whose input lies within rounding of 0 falls on the other side in one,
+#: which changes that row's gradient at that unit; measured 8e-4 of Q values of order 0.5
+#: 100 steps after such a flip (its first in 320 steps of a member on these logs).
+D3RLPY_TOL = 2e-3
 
 
 @pytest.fixture(scope="module")
@@ -26,85 +33,146 @@ def log():
     return obs, data, [p[data["state"]] for p in policies]
 
 
-def make(log, policy=0, seed=0, cosine_steps=None):
+def make(log, policy=0, seed=0):
     obs, data, policies = log
     return FQEFit(obs, data["action"], data["reward"], data["starts"], policies[policy],
-                  seed=seed, cosine_steps=cosine_steps)
+                  seed=seed)
 
 
-def replay(fits, pools):
-    """draw() giving each member the rows and next actions ``FQEFit.train`` draws for it."""
-    def draw():
-        rows, acts = [], []
-        for fit, pool in zip(fits, pools):
-            B = fit.batch
-            idx = fit.rng.integers(0, fit.n_rows, B) if pool is None else \
-                pool[fit.rng.integers(0, len(pool), B)]
-            acts.append((fit.cum[fit.nxt[idx]] < fit.rng.random((B, 1))).sum(1).clip(
-                0, fit.n_actions - 1))
-            rows.append(idx)
-        return np.stack(rows), np.stack(acts)
-    return draw
+class D3rlpyFQE:
+    """d3rlpy's DiscreteFQE on ``fit``'s log at FQE's settings, updated by its own
+    ``update`` on the mini-batches and next actions it is given."""
+
+    def __init__(self, fit, cosine_steps=None):
+        with contextlib.redirect_stderr(io.StringIO()), contextlib.redirect_stdout(
+                io.StringIO()):
+            d3rlpy = pytest.importorskip("d3rlpy", reason="the bench extra (d3rlpy)")
+        from d3rlpy.models.encoders import VectorEncoderFactory
+        from d3rlpy.ope import DiscreteFQE, FQEConfig
+        from d3rlpy.optimizers import AdamFactory
+        from d3rlpy.optimizers.lr_schedulers import CosineAnnealingLRFactory
+
+        d3rlpy.seed(fit.seed)
+        self.fit, self.actions, self.impl = fit, None, self
+        optim = AdamFactory() if cosine_steps is None else AdamFactory(
+            lr_scheduler_factory=CosineAnnealingLRFactory(T_max=int(cosine_steps)))
+        self.fqe = DiscreteFQE(algo=self, config=FQEConfig(
+            batch_size=fit.batch, gamma=fit.gamma, learning_rate=fit.learning_rate,
+            target_update_interval=fit.interval, optim_factory=optim,
+            encoder_factory=VectorEncoderFactory(hidden_units=list(fit.hidden))), device=False)
+        self.fqe.create_impl((fit.x.shape[1],), fit.n_actions)
+
+    def predict_best_action(self, x):           # the 'algorithm' FQE evaluates
+        import torch
+
+        return torch.as_tensor(self.actions, dtype=torch.long)
+
+    def weights(self) -> list:
+        """Its network's weights in torch's layout, [W_1, b_1, ...]."""
+        return [t.detach().clone() for t in self.fqe.impl.modules.q_funcs.state_dict().values()]
+
+    def update(self, rows, next_actions) -> None:
+        from d3rlpy.dataset import TransitionMiniBatch
+
+        fit, B = self.fit, len(rows)
+        self.actions = next_actions
+        self.fqe.update(TransitionMiniBatch(
+            observations=fit.x[rows], actions=fit.act[rows, None].astype(np.float32),
+            rewards=fit.rew[rows, None], next_observations=fit.x[fit.nxt[rows]],
+            next_actions=np.zeros((B, 1), np.float32),
+            terminals=fit.last[rows, None].astype(np.float32),
+            intervals=np.ones((B, 1), np.float32), transitions=[]))
+
+    def q(self) -> np.ndarray:
+        n, x = self.fit.n_actions, self.fit.x
+        return self.fqe.predict_value(np.repeat(x, n, 0), np.tile(np.arange(n), len(x))
+                                      ).reshape(len(x), n)
+
+
+def recorded(draw, refs, of=None):
+    """draw() that also updates each d3rlpy reference on its member's rows and next actions
+    (reference j: member ``of[j]``; None: member j)."""
+    def both():
+        rows, acts = draw()
+        for j, ref in enumerate(refs):
+            m = j if of is None else of[j]
+            ref.update(rows[m], acts[m])
+        return rows, acts
+    return both
 
 
 def test_a_fresh_member_trains_as_d3rlpys_own_update(log):
+    from aoc_cli.ope.ensemble import sampler
+
     with one_thread():
-        ref, twin = make(log), make(log)          # same seed: same initial weights, same draws
-        ref.train(230)                            # d3rlpy's DiscreteFQE.update, 230 times
-        ens = FQEEnsemble(twin, [twin.snapshot()], [twin.fqe._grad_step])
-        ens.train(230, None, None, None, None, draw=replay([twin], [None]))
+        fit = make(log)
+        ref = D3rlpyFQE(fit)
+        ens = FQEEnsemble(fit, 1, ref.weights())
+        draw = sampler(fit, fit.cum[None], np.zeros(1, np.int64), [None], fit.rng, 1)
+        ens.train(230, None, None, None, None, draw=recorded(draw, [ref]))
     q_ref = ref.q()
     assert np.abs(q_ref).max() > 0.1              # it learned something
-    assert np.abs(ens.q()[0] - q_ref).max() < TOL
+    assert np.abs(ens.q()[0] - q_ref).max() < D3RLPY_TOL
 
 
 def test_the_cosine_schedule_is_d3rlpys_cosine_annealing(log):
     """schedule="cosine" over n steps: d3rlpy's FQE with Adam under CosineAnnealingLR(T_max n)."""
+    from aoc_cli.ope.ensemble import sampler
+
     with one_thread():
-        ref, twin = make(log, cosine_steps=230), make(log)
-        ref.train(230)
-        ens = FQEEnsemble(twin, [twin.snapshot()], [twin.fqe._grad_step])
-        ens.train(230, None, None, None, None, draw=replay([twin], [None]), schedule="cosine")
-        plain = make(log)
-        plain.train(230)
-    assert np.abs(ens.q()[0] - ref.q()).max() < TOL
-    assert np.abs(plain.q() - ref.q()).max() > 100 * TOL       # the schedule mattered
+        fit = make(log)
+        ref, plain = D3rlpyFQE(fit, cosine_steps=230), D3rlpyFQE(fit)
+        ens = FQEEnsemble(fit, 1, ref.weights())
+        draw = sampler(fit, fit.cum[None], np.zeros(1, np.int64), [None], fit.rng, 1)
+        ens.train(230, None, None, None, None, draw=recorded(draw, [ref, plain], [0, 0]),
+                  schedule="cosine")
+    assert np.abs(ens.q()[0] - ref.q()).max() < D3RLPY_TOL
+    assert np.abs(plain.q() - ref.q()).max() > 5 * D3RLPY_TOL   # the schedule mattered
 
 
 def test_warm_started_members_each_match_their_own_d3rlpy_fit(log):
-    """Three members from one trained fit (weights, target, Adam's moments, step count), each
-    on another policy and another multiset of rows, against three d3rlpy fits doing the same
-    one at a time: no member leaks into another."""
+    """Three members warm-started from one trained member (weights, target, Adam's moments,
+    step count), each on another policy and another multiset of rows, against three d3rlpy
+    fits doing the same one at a time: no member leaks into another."""
+    from aoc_cli.ope.ensemble import sampler
+
     with one_thread():
-        base = make(log)
-        base.train(150)
-        state = base.snapshot()
-        count = base.fqe._grad_step
-        pools = [None, np.arange(0, base.n_rows, 3), np.repeat(np.arange(40), 2)]
-        refs = []
-        for m in range(3):
-            fit = make(log, policy=m)
-            fit.restore(state)
-            fit.fqe._grad_step = count
-            fit.rng = np.random.default_rng(10 + m)
-            refs.append(fit)
-        twins = [make(log, policy=m) for m in range(3)]
-        for m, t in enumerate(twins):
-            t.rng = np.random.default_rng(10 + m)
-        ens = FQEEnsemble(base, [state] * 3, [count] * 3)
-        ens.train(170, None, None, None, None, draw=replay(twins, pools))
-        for fit, pool in zip(refs, pools):
-            fit.train(170, pool)
-    got = ens.q()
-    for m, fit in enumerate(refs):
-        assert np.abs(got[m] - fit.q()).max() < TOL
-    assert np.abs(got[0] - got[1]).max() > 10 * TOL       # the members did differ
+        fit = make(log)
+        refs = [D3rlpyFQE(fit) for _ in range(3)]
+        ens = FQEEnsemble(fit, 1, refs[0].weights())
+        first = sampler(fit, fit.cum[None], np.zeros(1, np.int64), [None], fit.rng, 1)
+        # the same first 150 mini-batches for each reference
+        ens.train(150, None, None, None, None, draw=recorded(first, refs, [0, 0, 0]))
+        cums = np.stack([cumulative(p) for p in log[2]])
+        pools = [None, np.arange(0, fit.n_rows, 3), np.repeat(np.arange(40), 2)]
+        three = ens.repeat(3)
+        assert list(three.counts) == [150] * 3
+        draw = sampler(fit, cums, np.arange(3), pools, np.random.default_rng(10), 3)
+        three.train(170, None, None, None, None, draw=recorded(draw, refs))
+    got = three.q()
+    for m, ref in enumerate(refs):
+        assert np.abs(got[m] - ref.q()).max() < D3RLPY_TOL
+    assert np.abs(got[0] - got[1]).max() > 10 * D3RLPY_TOL     # the members did differ
+
+
+def test_fqe_starts_from_torchs_linear_initialisation_and_leaves_the_generator(log):
+    import torch
+
+    fit = make(log, seed=4)
+    state = torch.get_rng_state()
+    w = fit.initial()
+    assert torch.equal(torch.get_rng_state(), state)
+    torch.manual_seed(4)
+    first = torch.nn.Linear(fit.x.shape[1], fit.hidden[0])
+    assert torch.equal(w[0], first.weight.detach()) and torch.equal(w[1], first.bias.detach())
+    assert [tuple(t.shape) for t in w[-2:]] == [(fit.n_actions, fit.hidden[-1]),
+                                               (fit.n_actions,)]
 
 
 def test_repeat_warm_starts_copies_that_train_on_as_the_original(log):
     with one_thread():
         fit = make(log)
-        ens = FQEEnsemble(fit, [fit.snapshot()], [0])
+        ens = FQEEnsemble(fit, 1)
         ens.train(120, cumulative(log[2][0])[None], np.zeros(1, int), [None],
                   np.random.default_rng(0))
         copies = ens.repeat(3)
@@ -128,21 +196,6 @@ def _first_member_thrice(cum, fit, rng):
         rows, acts = one()
         return np.repeat(rows, 3, 0), np.repeat(acts, 3, 0)
     return draw
-
-
-def test_a_member_state_restored_into_d3rlpy_predicts_the_same_q(log):
-    with one_thread():
-        fit = make(log)
-        ens = FQEEnsemble(fit, [fit.snapshot()] * 2, [0, 0])
-        ens.train(80, np.stack([fit.cum, cumulative(log[2][1])]), np.array([0, 1]),
-                  [None, np.arange(30)], np.random.default_rng(3))
-        other = make(log, seed=5)                 # other initial weights, overwritten
-        other.restore(ens.state(1))
-        assert other.fqe._grad_step == 80
-        # the round trip through d3rlpy's predict_value
-        assert np.abs(other.q() - ens.q()[1]).max() < 1e-5
-        other.train(20)                           # and d3rlpy trains on from it
-        assert np.isfinite(other.q()).all()
 
 
 def test_thesampler_draws_each_member_from_its_pool_and_policy(log):
@@ -194,7 +247,7 @@ def test_the_target_table_of_repeated_observations_gives_the_per_batch_q(log, mo
             fit = FQEFit(rep, data["action"], data["reward"], data["starts"], policies[0])
             if not table:                         # as a log with too many to tabulate
                 monkeypatch.setattr(fit, "distinct", lambda: (np.zeros((10 ** 6, 1)), None))
-            ens = FQEEnsemble(fit, [fit.snapshot()] * 2, [0, 0])
+            ens = FQEEnsemble(fit, 2)
             assert (ens._next_table() is not None) == table
             ens.train(250, cums, np.array([0, 1]), [None, None], np.random.default_rng(4))
             return ens.q()
@@ -219,42 +272,15 @@ def test_a_group_drawn_by_its_own_generator_trains_the_same_beside_others(log):
                               np.random.default_rng(9), 1)
         shared = lambda: sampler(fit, cums[:1], np.zeros(1, np.int64), [None],
                                  np.random.default_rng(8), 1)
-        alone = FQEEnsemble(fit, [fit.snapshot()], [0])
+        alone = FQEEnsemble(fit, 1)
         alone.train(150, None, None, None, None, draw=own())
-        first = FQEEnsemble(fit, [fit.snapshot()], [0])
+        first = FQEEnsemble(fit, 1)
         first.train(150, None, None, None, None, draw=shared())
-        both = FQEEnsemble(fit, [fit.snapshot()] * 2, [0, 0])
+        both = FQEEnsemble(fit, 2)
         both.train(150, None, None, None, None, draw=joined(shared(), own()))
     assert np.abs(both.q()[1] - alone.q()[0]).max() < TOL
     assert np.abs(both.q()[0] - first.q()[0]).max() < TOL
     assert np.abs(both.q()[0] - both.q()[1]).max() > 10 * TOL
-
-
-def test_the_written_out_backpropagation_is_autograds(log):
-    """FQEEnsemble._grads: the gradient of the members' Huber losses as autograd computes it
-    through the same forward pass (errors inside and outside Huber's quadratic part)."""
-    import torch
-
-    with one_thread():
-        fit = make(log)
-        ens = FQEEnsemble(fit, [fit.snapshot()] * 3, [0] * 3)
-        ens.train(60, np.stack([fit.cum] * 3), np.arange(3), [None] * 3,
-                  np.random.default_rng(2))          # members that differ
-        rng = np.random.default_rng(4)
-        rows = rng.integers(0, fit.n_rows, (3, fit.batch))
-        x, act = torch.from_numpy(fit.x[rows]), torch.from_numpy(fit.act[rows])
-        y = torch.from_numpy(rng.normal(0.5, 1.5, (3, fit.batch)).astype(np.float32))
-        with torch.no_grad():                            # as FQEEnsemble.train calls it
-            got = ens._grads(x, act, y)
-        q = ens._forward(ens.params, x).gather(2, act[..., None])[..., 0]
-        diff = y - q
-        assert (diff.abs() > 1).any() and (diff.abs() < 1).any()
-        huber = torch.where(diff.detach().abs() < 1.0, 0.5 * diff ** 2, diff.abs() - 0.5)
-        want = torch.autograd.grad(huber.mean(1).sum(), ens.params)
-    for g, w in zip(got, want):
-        assert g.shape == w.shape
-        assert float(w.abs().max()) > 0
-        np.testing.assert_allclose(g.numpy(), w.numpy(), rtol=1e-5, atol=1e-7)
 
 
 def test_a_kept_members_draw_is_its_part_of_the_whole_draw(log):

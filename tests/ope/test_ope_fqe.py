@@ -1,4 +1,4 @@
-"""Fitted Q evaluation through d3rlpy's DiscreteFQE (aoc_cli.ope.fqe): the direct
+"""Fitted Q evaluation (aoc_cli.ope.fqe): the direct
 method's value of a deterministic and a stochastic policy against the exact values of a small
 MDP, with the next action taken from the policy at the next logged step."""
 
@@ -8,8 +8,6 @@ import pytest
 from aoc_cli.ope.fqe import fit_fqe
 from aoc_cli.threads import one_thread
 from tests.ope.mdps import SmallMDP
-
-pytest.importorskip("d3rlpy", reason="the bench extra (d3rlpy) is not installed")
 
 
 @pytest.mark.parametrize("which", ["greedy", "soft"])

@@ -11,8 +11,6 @@ from aoc_cli.ope.fqe import bootstrap_fqe, refit_steps
 from aoc_cli.threads import one_thread
 from tests.ope.mdps import SmallMDP
 
-pytest.importorskip("d3rlpy", reason="the bench extra (d3rlpy) is not installed")
-
 
 def tabular_estimate(mdp: SmallMDP, data: dict, pi: np.ndarray, weights: np.ndarray) -> float:
     """The fitted-Q fixed point with one-hot states (a count model of the log, each episode

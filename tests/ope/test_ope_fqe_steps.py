@@ -4,7 +4,6 @@ a value one step back per target sync, so on a log of long episodes 30 passes ov
 target syncs per step of the episodes' 99th-percentile length, reaches it."""
 
 import numpy as np
-import pytest
 
 from aoc_cli.ope.fqe import (
     MAX_STEPS,
@@ -17,8 +16,6 @@ from aoc_cli.ope.fqe import (
 from aoc_cli.threads import one_thread
 from tests.ope.mdps import SmallMDP
 from tests.ope.test_ope_fqe_bootstrap import tabular_estimate
-
-pytest.importorskip("d3rlpy", reason="the bench extra (d3rlpy) is not installed")
 
 
 def test_default_steps_add_target_syncs_per_step_of_the_horizon():

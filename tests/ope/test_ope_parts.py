@@ -12,8 +12,6 @@ from aoc_cli.ope.fqe import FQEFit, cumulative, fqe_policies
 from aoc_cli.threads import one_thread
 from tests.ope.mdps import noisy_log
 
-pytest.importorskip("d3rlpy", reason="the bench extra (d3rlpy) is not installed")
-
 #: the same member trained in another process: the same kernels on the same inputs; a few
 #: float32 ulp of Q values of order 1 allowed for a library that picks kernels by shape
 ULP = 1e-6
@@ -33,7 +31,7 @@ def ensemble(log, M):
     cums = np.stack([cumulative(p) for p in policies])
     pools = [None if m % 2 else np.arange(0, fit.n_rows, 3) for m in range(M)]
     make_draw = lambda keep, rng: sampler(fit, cums, np.arange(M) % 3, pools, rng, M, keep=keep)
-    return FQEEnsemble(fit, [fit.snapshot()] * M, [0] * M), make_draw
+    return FQEEnsemble(fit, M), make_draw
 
 
 def trained(log, M, parts, steps=140):

@@ -12,8 +12,8 @@ import pytest
 from aoc_cli.ope import estimators as ope
 from aoc_cli.ope.fqe import student_quantile
 from aoc_cli.ope.policies import OPESettings
-from aoc_cli.ope.value import policy_value
 from aoc_cli.ope.support import cell, min_ess, refusal, verdict
+from aoc_cli.ope.value import policy_value
 from tests.ope.mdps import SmallMDP
 
 
@@ -179,3 +179,19 @@ def test_the_improvement_of_a_better_policy_covers_the_true_difference():
     assert rec["improvement"]["fqe"]["high"] - rec["improvement"]["fqe"]["low"] == \
         pytest.approx(2 * half, rel=1e-9)
     assert truth > 0.02 and rec["verdict"].endswith("(FQE): shown")
+
+
+def test_a_small_ess_is_warned_of_only_beside_a_shown_importance_sampling_estimate():
+    """The withheld cells already say "not estimable: ESS ..."; the warning on stderr is left
+    for a shown PDWIS or WDR whose ESS is small (a rule given other settings)."""
+    from aoc_cli.ope.policies import warnings_for
+
+    fqe = {"estimate": 0.8, "low": 0.78, "high": 0.82}
+    withheld_is = {"ess": 4.6, "policy_value": {"pdwis": {"estimate": None, "reason": "ESS"},
+                                                "wdr": {"estimate": None, "reason": "ESS"},
+                                                "fqe": fqe}}
+    assert warnings_for("aoc", withheld_is, 3000) == []
+    shown_is = {"ess": 4.6, "policy_value": {"pdwis": {"estimate": 0.79, "low": 0.7,
+                                                       "high": 0.9}, "fqe": fqe}}
+    out = warnings_for("aoc", shown_is, 3000)
+    assert len(out) == 1 and "effective sample size 4.6 of 3000" in out[0]

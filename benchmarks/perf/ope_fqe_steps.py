@@ -3,7 +3,7 @@ offline policy evaluation"): ``aoc evaluate``'s direct method (``ope_fqe.fqe_pol
 fit, 10 warm-started refits, cosine learning rate, bagged estimate) of AOC, BC and the
 clinicians at each ``--steps`` count, per log, for a choice by convergence.
 
-    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/notes/ope_fqe_steps.py --store DIR \
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/perf/ope_fqe_steps.py --store DIR \
         --logs 0,1,2,3,4 --steps 5300,10600,21200 [--target-update 100] [--lr 1e-3] [--hidden 64,64] --out runs.json
 
 ``--store`` is one ``benchmarks/perf/ope_sepsis.py`` has built (its ``train`` corpus, model
@@ -16,30 +16,26 @@ estimate against the log's mean return (the behaviour's value, estimated without
 
 from __future__ import annotations
 
-import argparse
 import functools
 import json
-import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "perf"))
-
-import _harness as h  # noqa: E402
+import _harness as h
 
 h.omp_threads(1)
 
 import numpy as np  # noqa: E402
-
 import ope_sepsis as O  # noqa: E402
-from aoc_cli.ope import fqe as ope_fqe  # noqa: E402
+
 from aoc_cli.envs.icu_sepsis import tables  # noqa: E402
+from aoc_cli.ope import fqe as ope_fqe  # noqa: E402
 from aoc_cli.store import Store  # noqa: E402
 from aoc_cli.threads import one_thread  # noqa: E402
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
+    ap = h.parser(__doc__, rows=False)
     ap.add_argument("--store", required=True)
     ap.add_argument("--logs", default="0,1,2,3,4")
     ap.add_argument("--steps", default="5300,10600,21200")

@@ -2,7 +2,7 @@
 user's log needs them and with the true ones (issue 36)? One table: icu-sepsis, held-out logs
 of clinician episodes, AOC, BC and the clinicians.
 
-    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/notes/ope_coverage.py --processes 10 \\
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/perf/ope_coverage.py --processes 10 \\
         [--logs 10] [--episodes 5000] [--policies policies.npz] [--store DIR] [--out runs.json]
 
 The policies: AOC's decision in every state and BC's (the training log's modal action per
@@ -29,16 +29,15 @@ intervals, and the verdicts.
 
 from __future__ import annotations
 
-import argparse
 import json
-import os
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+import _harness as h
+
+h.omp_threads(1)
 
 import numpy as np  # noqa: E402
 
@@ -48,8 +47,7 @@ ESTIMATORS = ("pdwis", "wdr", "fqe")
 
 def compute_policies(store_dir: str, train_episodes: int) -> dict:
     """AOC's and BC's (716,) state policies as benchmarks/perf/ope_sepsis.py computes them."""
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "perf"))
-    import ope_sepsis  # noqa: E402  (the bench's own preparation: the same corpus and model)
+    import ope_sepsis  # lazy: needs faiss and the training corpus (the bench's preparation)
 
     from aoc_cli.envs.icu_sepsis import tables
     from aoc_cli.store import Store
@@ -86,8 +84,11 @@ def run_log(i: int, episodes: int, policies: dict, settings: dict, n_boot: int) 
     opts = OPESettings(n_boot=n_boot, **settings)
     out = []
     with one_thread():
+        fit = fit_propensities(data.observations, logged, data.episode_starts, n, seed=0)
+        props = {"true": data.columns["propensity"], "estimated": fit["probs"][rows, logged]}
+        # WDR's Q cross-fitted where either propensities' ESS lets the rule show it
         fqes = fqe_values(log, data.observations, logged, list(probs.values()), opts,
-                          behaviour=True)
+                          behaviour=True, propensity=list(props.values()))
         own = fqes.pop() if len(fqes) > len(probs) else None   # aoc evaluate's FQE check
         mean = ope.bootstrap(log, {"m": ("mean", log.returns())}, n_boot=n_boot,
                              seed=opts.seed)["m"]
@@ -95,15 +96,13 @@ def run_log(i: int, episodes: int, policies: dict, settings: dict, n_boot: int) 
         for rec in fqes:
             if off is not None and rec is not None:
                 rec["withheld"] = off
-        fit = fit_propensities(data.observations, logged, data.episode_starts, n, seed=0)
-        props = {"true": data.columns["propensity"], "estimated": fit["probs"][rows, logged]}
         for kind, prop in props.items():
             for (name, pol), fqe in zip(probs.items(), fqes):
                 rec = policy_value(log, data.observations, logged, prop, pol, n, opts, fqe=fqe)
                 rho = ope.ratios(pol[rows, logged], prop)
                 specs = {"pdwis": ("pdwis", rho)}
                 if fqe is not None and fqe.get("q") is not None:
-                    q = fqe["q"]
+                    q = fqe.get("q_cross", fqe["q"])
                     specs["wdr"] = ("wdr", rho, q[rows, logged], (pol * q).sum(1))
                 raw = ope.bootstrap(log, specs, n_boot=n_boot, seed=opts.seed)  # before the rule
                 out.append({"log": i, "propensities": kind, "policy": name,
@@ -173,7 +172,7 @@ def markdown(rows: list) -> str:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = h.parser(__doc__, rows=False)
     ap.add_argument("--logs", type=int, default=10)
     ap.add_argument("--first", type=int, default=0)
     ap.add_argument("--episodes", type=int, default=5000)
