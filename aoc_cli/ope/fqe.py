@@ -166,7 +166,7 @@ def fqe_policies(observations, actions, rewards, starts, policies: list, gamma: 
                  refit_step_count: int | None = None, seed: int = 0, progress=None,
                  schedule: str = SCHEDULE, behaviour: bool = False,
                  n_actions: int | None = None, parts: int | None = None,
-                 truncated: np.ndarray | None = None, cross: bool = False) -> list:
+                 truncated: np.ndarray | None = None, cross=False) -> list:
     """The direct method for each of P policies on one log, with an interval that holds the
     fitted model's own error. Per policy: Q_hat (N, n) of the full fit, its estimate (the mean
     start value of the policy), and ``refits`` refits, each on the log's episodes resampled
@@ -209,7 +209,7 @@ def fqe_policies(observations, actions, rewards, starts, policies: list, gamma: 
     mini-batches of their own generator: the other members' values do not change), each
     fold's rows given the Q_hat fitted on the other fold (WDR's control variate then never
     fits the episodes it corrects: :func:`aoc_cli.ope.value.policy_value`), and "folds" (E,)
-    each episode's fold."""
+    each episode's fold. True for every policy, or P bools: those policies only."""
     import time
 
     started = time.perf_counter()
@@ -223,9 +223,11 @@ def fqe_policies(observations, actions, rewards, starts, policies: list, gamma: 
     fit = FQEFit(observations, act, rewards, starts, policies[0] if P else logged, gamma, seed,
                  truncated=truncated)
     cums = np.stack([fit.cum] + [cumulative(p) for p in policies[1:]]) if P else None
-    cross = bool(cross) and len(fit.starts) > 2     # two folds need two episodes
-    B0 = P + (logged is not None)                   # the fold members: 2P from here
-    M = B0 + (2 * P if cross else 0)
+    crossed = np.flatnonzero(np.broadcast_to(np.asarray(cross, bool), (P,))) \
+        if len(fit.starts) > 2 else np.empty(0, np.int64)    # two folds need two episodes
+    K = len(crossed)
+    B0 = P + (logged is not None)                   # the fold members: 2K from here
+    M = B0 + 2 * K
     total = default_steps(fit.n_rows, starts, gamma, fit.interval) \
         if steps is None else int(steps)
     k = refit_steps(total) if refit_step_count is None else int(refit_step_count)
@@ -245,10 +247,10 @@ def fqe_policies(observations, actions, rewards, starts, policies: list, gamma: 
         if logged is not None and np.any(keep == P):
             draws.append(sampler(fit, cumulative(logged)[None], np.zeros(1, np.int64),
                                  [None], np.random.default_rng(behaviour_seed), 1))
-        if np.any(keep >= B0):          # policy i on fold f: member B0 + f * P + i
-            draws.append(sampler(fit, cums, np.tile(np.arange(P), 2),
-                                 [fold_pools[0]] * P + [fold_pools[1]] * P,
-                                 np.random.default_rng([seed, 3]), 2 * P,
+        if np.any(keep >= B0):          # policy crossed[j] on fold f: member B0 + f * K + j
+            draws.append(sampler(fit, cums, np.tile(crossed, 2),
+                                 [fold_pools[0]] * K + [fold_pools[1]] * K,
+                                 np.random.default_rng([seed, 3]), 2 * K,
                                  keep=keep[keep >= B0] - B0))
         return joined(*draws)
 
@@ -260,10 +262,9 @@ def fqe_policies(observations, actions, rewards, starts, policies: list, gamma: 
     out = [{"q": q[i], "estimate": fitted[i], "fit_estimate": fitted[i], "low": float("nan"),
             "high": float("nan"), "replicates": np.empty(0), "bagged": float("nan"),
             "steps": total, "refit_steps": 0} for i in range(P)]
-    if cross:                           # fold 0's rows from the fit on fold 1, and back
-        for i, rec in enumerate(out):
-            rec["q_cross"] = np.where((row_fold == 0)[:, None], q[B0 + P + i], q[B0 + i])
-            rec["folds"] = folds
+    for j, i in enumerate(crossed):     # fold 0's rows from the fit on fold 1, and back
+        out[i]["q_cross"] = np.where((row_fold == 0)[:, None], q[B0 + K + j], q[B0 + j])
+        out[i]["folds"] = folds
     if refits > 1:
         rng = np.random.default_rng(seed + 1)
         counts = rng.multinomial(n_episodes, np.full(n_episodes, 1.0 / n_episodes),

@@ -261,7 +261,7 @@ def off_policy_values(data, logged: np.ndarray, policies: dict, settings: OPESet
     out["ope"]["fqe_inputs"] = "the observation" + (
         f" and the last {history_length} steps" if history_length else "")
     fqes = fqe_values(log, inputs, logged, list(probs.values()), settings, progress,
-                      behaviour=True)
+                      behaviour=True, propensity=propensity)
     if len(fqes) > len(probs):          # the logged behaviour's, last
         own = fqes.pop()
         out["behaviour_fqe"] = own

@@ -11,7 +11,7 @@ import numpy as np
 
 from aoc_cli.ope import estimators as ope
 from aoc_cli.ope.fqe import fqe_policies, student_quantile
-from aoc_cli.ope.support import refusal, verdict, withheld
+from aoc_cli.ope.support import min_ess, refusal, verdict, withheld
 
 
 def _as_probs(policy: np.ndarray, n_actions: int) -> np.ndarray:
@@ -38,7 +38,8 @@ def policy_value(log: ope.Log, observations, logged, propensity, policy, n_actio
     if "pdwis" in settings.estimators:
         specs["pdwis"] = ("pdwis", rho)
     if isinstance(fqe, str):
-        fqe = fqe_values(log, observations, logged, [probs], settings, progress)[0]
+        fqe = fqe_values(log, observations, logged, [probs], settings, progress,
+                         propensity=propensity)[0]
     q = None if fqe is None else fqe["q"]                                     # (N, n)
     if fqe is not None and fqe.get("note"):
         out["notes"].append(fqe["note"])
@@ -102,11 +103,14 @@ def _fqe_gain(fqe: dict, returns: np.ndarray) -> dict:
 
 
 def fqe_values(log: ope.Log, observations, logged, policies: list, settings,
-               progress=None, behaviour: bool = False) -> list:
+               progress=None, behaviour: bool = False, propensity=None) -> list:
     """The direct method for each policy (N, n) at once
     (:func:`aoc_cli.ope.fqe.fqe_policies`: one batched ensemble), when an estimator needs it: with refits when FQE is asked for and
     ``settings.fqe_refits`` > 1, and cross-fitted over two folds of episodes when WDR is
-    asked for (its ``q_cross``). Each entry None (no estimator needs a Q model) or a record.
+    asked for (its ``q_cross``): with ``propensity`` (N,), only for the policies whose ESS
+    meets :data:`aoc_cli.ope.support.MIN_ESS` (below it the rule withholds WDR whatever its Q,
+    and its fold fits would cost ~1.5x the FQE); a list of propensities: where any does. Each entry None (no estimator needs a Q
+    model) or a record.
     ``behaviour``:
     the logged behaviour's record last (``fqe_policies``'s), when FQE runs."""
     if "fqe" not in settings.estimators and "wdr" not in settings.estimators:
@@ -116,6 +120,17 @@ def fqe_values(log: ope.Log, observations, logged, policies: list, settings,
                         settings.gamma, settings.fqe_steps, refits if refits > 1 else 0,
                         seed=settings.seed, progress=progress, schedule=settings.fqe_schedule,
                         behaviour=behaviour, parts=settings.fqe_processes,
-                        truncated=log.truncated, cross="wdr" in settings.estimators)
+                        truncated=log.truncated, cross=_crossed(log, logged, policies,
+                                                                propensity, settings))
 
 
+def _crossed(log: ope.Log, logged, policies: list, propensity, settings) -> list:
+    """Which policies' Q :func:`fqe_values` cross-fits for WDR (its docstring)."""
+    if "wdr" not in settings.estimators:
+        return [False] * len(policies)
+    if propensity is None:
+        return [True] * len(policies)
+    rows = np.arange(len(logged))       # the policies' (N, n) probabilities
+    props = propensity if isinstance(propensity, (list, tuple)) else [propensity]
+    return [any(ope.ess(log, ope.ratios(np.asarray(p)[rows, logged], prop))
+                >= min_ess(log.n_episodes) for prop in props) for p in policies]

@@ -47,11 +47,11 @@ evaluation of the log), the OPE, and the rest (the decisions and the baselines):
 * ``ope fitted aoc targets``: a log's first evaluate with value_r2's held-out target for fqe
   values fitted by aoc's own fitted Q evaluation, as the model's values were (60 backups of 300
   steps; what ``aoc evaluate`` did before the OPE's FQE fitted the logged behaviour beside the
-  policies, and what it does without d3rlpy).
+  policies).
 
 The "before" cases put back earlier code paths by patching this process (Adam's per-tensor
 loop, the ensemble's general next-action draw); the targets' stage times both of
-``aoc evaluate``'s held-out targets (aoc's FQE and the logged behaviour's by d3rlpy's).
+``aoc evaluate``'s held-out targets (aoc's FQE and the logged behaviour's by the OPE's).
 """
 
 from __future__ import annotations
@@ -184,7 +184,8 @@ def main() -> None:
                 ev._value_distinct = lambda ctx, *a: _per_step(ctx, *a)
                 ev.chunk_size = lambda ctx, chunk_steps=ev.CHUNK_STEPS: chunk_steps
             if name.endswith("before"):
-                torch.optim.Adam = lambda *a, **kw: adam(*a, **{**kw, "foreach": False})
+                torch.optim.Adam = lambda *a, **kw: adam(*a, **{**kw, "foreach": False,
+                                                                 "fused": False})
                 ens._deterministic = lambda _cums: None
             try:
                 summary = ev.evaluate(session, data, ["knn", "bc"], ope=ope)[0]

@@ -84,8 +84,11 @@ def run_log(i: int, episodes: int, policies: dict, settings: dict, n_boot: int) 
     opts = OPESettings(n_boot=n_boot, **settings)
     out = []
     with one_thread():
+        fit = fit_propensities(data.observations, logged, data.episode_starts, n, seed=0)
+        props = {"true": data.columns["propensity"], "estimated": fit["probs"][rows, logged]}
+        # WDR's Q cross-fitted where either propensities' ESS lets the rule show it
         fqes = fqe_values(log, data.observations, logged, list(probs.values()), opts,
-                          behaviour=True)
+                          behaviour=True, propensity=list(props.values()))
         own = fqes.pop() if len(fqes) > len(probs) else None   # aoc evaluate's FQE check
         mean = ope.bootstrap(log, {"m": ("mean", log.returns())}, n_boot=n_boot,
                              seed=opts.seed)["m"]
@@ -93,8 +96,6 @@ def run_log(i: int, episodes: int, policies: dict, settings: dict, n_boot: int) 
         for rec in fqes:
             if off is not None and rec is not None:
                 rec["withheld"] = off
-        fit = fit_propensities(data.observations, logged, data.episode_starts, n, seed=0)
-        props = {"true": data.columns["propensity"], "estimated": fit["probs"][rows, logged]}
         for kind, prop in props.items():
             for (name, pol), fqe in zip(probs.items(), fqes):
                 rec = policy_value(log, data.observations, logged, prop, pol, n, opts, fqe=fqe)

@@ -184,7 +184,8 @@ def main() -> None:
         probs = {k: (np.eye(held.n_actions)[p] if p.ndim == 1 else p)
                  for k, p in at_steps.items()}
         with one_thread():       # every policy's FQE in one ensemble, as aoc evaluate does
-            fqes = fqe_values(log, held.observations, logged, list(probs.values()), settings)
+            fqes = fqe_values(log, held.observations, logged, list(probs.values()), settings,
+                              propensity=prop)
         mean_return = float(log.returns().mean())
         for (pname, pol), fqe in zip(probs.items(), fqes):
             with one_thread():

@@ -325,7 +325,8 @@ def test_fqe_off_on_the_logged_behaviour_is_a_warning_and_withheld(sepsis, monke
     e = held.n_episodes
     counts = np.random.default_rng(0).multinomial(e, np.full(e, 1 / e), size=3)
 
-    def fake(_log, _obs, _logged, policies, _settings, _progress=None, behaviour=False):
+    def fake(_log, _obs, _logged, policies, _settings, _progress=None, behaviour=False,
+             propensity=None):
         recs = [{"q": np.zeros((n, held.n_actions)), "replicates": np.array([0.1, 0.2, 0.3]),
                  "counts": counts, "estimate": 0.2, "low": 0.0, "high": 0.4,
                  "fit_estimate": 0.2, "steps": 10, "refit_steps": 2} for _ in policies]
@@ -355,7 +356,8 @@ def test_fqe_is_given_the_history_the_policies_decide_from(sepsis, monkeypatch):
     held = store.corpus("held")
     seen = {}
 
-    def fake(_log, obs, _logged, policies, _settings, _progress=None, behaviour=False):
+    def fake(_log, obs, _logged, policies, _settings, _progress=None, behaviour=False,
+             propensity=None):
         seen["width"] = np.asarray(obs).shape[1]
         return [None] * len(policies)
 

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from aoc_cli.ope.estimators import Log, ratios, wdr
+from aoc_cli.ope.estimators import ess as estimated_ess
 from aoc_cli.ope.fqe import fqe_policies
 from aoc_cli.threads import one_thread
 from tests.ope.mdps import SmallMDP
@@ -65,3 +66,31 @@ def test_wdr_with_a_cross_fitted_q_recovers_the_exact_value():
     # sampling error about the exact 0.488)
     assert got == pytest.approx(oracle, abs=0.006)
     assert got == pytest.approx(truth, abs=0.06)
+
+
+def test_only_a_policy_whose_wdr_the_rule_can_show_gets_fold_fits():
+    """fqe_values with the propensities: fold fits for a policy whose ESS meets the rule's 500
+    (the behaviour itself here), none for one it withholds at any Q (a far greedy policy)."""
+    from aoc_cli.ope.policies import OPESettings
+    from aoc_cli.ope.support import MIN_ESS
+    from aoc_cli.ope.value import fqe_values
+
+    mdp = SmallMDP.random(seed=2, end=0.35)
+    rng = np.random.default_rng(2)
+    s, a = mdp.P.shape[:2]
+    pi_b = rng.dirichlet(np.full(a, 2.0), size=s)
+    greedy = np.eye(a)[rng.integers(0, a, size=s)]
+    data = mdp.sample(pi_b, 600, seed=3)
+    st, ac = data["state"], data["action"]
+    log = Log(data["starts"], data["reward"])
+    policies = [pi_b[st], greedy[st]]
+    ess = [float(estimated_ess(log, ratios(p[np.arange(len(ac)), ac], data["propensity"])))
+           for p in policies]
+    assert ess[0] >= MIN_ESS > ess[1]
+    settings = OPESettings(estimators=("wdr",), fqe_steps=300)
+    with one_thread():
+        recs = fqe_values(log, np.eye(s)[st], ac, policies, settings,
+                          propensity=data["propensity"])
+        every = fqe_values(log, np.eye(s)[st], ac, policies, settings)
+    assert "q_cross" in recs[0] and "q_cross" not in recs[1]
+    assert all("q_cross" in r for r in every)          # without propensities: every policy
