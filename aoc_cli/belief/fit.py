@@ -90,6 +90,10 @@ def train_corpus(corpus: Corpus, model: str = DEFAULT_MODEL, *, paper: bool = Fa
     no_search = paper or not select_settings
     config = select.with_imitation_defaults(
         corpus, config, {"label_smoothing": smoothing}, paper)
+    unsmoothed = select.why_no_smoothing(corpus, config, {"label_smoothing": smoothing},
+                                         paper)
+    if unsmoothed:
+        extra = {**extra, "label_smoothing_rule": unsmoothed}
     measure = ev is not None and not no_search and evidence.held_out(ev, config)
     with writing_model(corpus.path, check_name(model, "model")):  # one writer per model id
         metrics = _train(corpus, config, model, overwrite,
