@@ -49,8 +49,8 @@ def bench(experiment: str, *, store: StoreLike = None, scale: str = "full",
     ``methods``: a subset of the methods; ``controller``: AOC's controller settings (a
     ControllerConfig or a mapping of its fields; None: not given) over each experiment's own
     (the paper's; maze-adapt at epsilon 0.1) in the rollout experiments, each but the one an
-    experiment varies; ``sizes``: rows per corpus (pendulum-het, lunar) or
-    episodes per log (icu-sepsis). Writes results.csv, summary.md, summary.json and plots to
+    experiment varies; ``sizes``: rows per corpus (pendulum-het, lunar),
+    episodes per log (icu-sepsis) or the patients of ward's log (one count). Writes results.csv, summary.md, summary.json and plots to
     ``out`` (default bench/EXPERIMENT; ``all``: out/EXPERIMENT); corpora and models go to
     ``bench_store`` and are reused. ``source``: ward's log, ``ward`` (the simulated ward) or
     ``medkit`` (medkit-learn's ward simulator; the ``medkit`` extra). ``log``: the expected
@@ -73,8 +73,12 @@ def bench(experiment: str, *, store: StoreLike = None, scale: str = "full",
         if seeds is not None and seeds < 1:
             raise BadSetting("seeds", seeds, f"{param('seeds')} (random patient splits) must be "
                              f">= 1, got {seeds}")
+        if sizes is not None and (len(sizes) != 1 or sizes[0] < 22):
+            raise BadSetting("sizes", sizes, f"{param('sizes')} for ward is one count of "
+                             f"patients, at least 22 (two held out a split), got {sizes}")
         report = run_ward(Path(out) if out is not None else Path("bench/ward"), bench_store,
-                          scale, seeds, log=note, progress=progress, source=source)
+                          scale, seeds, log=note, progress=progress, source=source,
+                          patients=sizes[0] if sizes is not None else None)
         note(f"ward ({source}): wrote {report['out']}/results.csv, summary.md, summary.json and ward.png "
              f"in {duration(report['seconds'])}")
         return Benched(experiment, scale, report["summary"], None)

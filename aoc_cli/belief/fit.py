@@ -99,6 +99,10 @@ def train_corpus(corpus: Corpus, model: str = DEFAULT_MODEL, *, paper: bool = Fa
     no_search = paper or not select_settings
     config = select.with_imitation_defaults(
         corpus, config, {"label_smoothing": smoothing}, paper)
+    unsmoothed = select.why_no_smoothing(corpus, config, {"label_smoothing": smoothing},
+                                         paper)
+    if unsmoothed:
+        extra = {**extra, "label_smoothing_rule": unsmoothed}
     if "k" not in chosen and corpus.n_rows > 0:  # the k rule's, recorded with the model
         imitation = config.mode == "imitation" and bool(corpus.discrete)
         extra["controller"]["k"] = index_k(config.belief_dim, corpus, imitation)[0]

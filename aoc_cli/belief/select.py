@@ -3,25 +3,37 @@
 On a small corpus (at most :data:`SELECT_MAX_ROWS` rows) whose model imitates discrete actions
 (ABC on a reward-free log, e.g. ward), the paper's settings (a 4-step GRU history, 128 units,
 no weight decay) can overfit or underfit what the data supports, and nothing tells the user.
-So, for the settings the user leaves open, ``aoc train`` trains candidates and keeps the one
-with the lowest validation loss (cross-entropy of the logged action) averaged over
+So, for the settings the user leaves open, ``aoc train`` trains candidates on
 :data:`FOLDS` validation folds of whole episodes (cross-validation by episode, e.g. by
 patient: disjoint blocks of the usual validation size from one random order of the episodes,
-the first being the usual split, :func:`aoc_cli.belief.data.episode_folds`):
+the first being the usual split, :func:`aoc_cli.belief.data.episode_folds`) and scores each on
+the held-out episodes by two figures, each the mean over the folds:
+
+* the **log-loss**, the cross-entropy of the logged action under the model's head;
+* the **AUC** of ABC's own scores (each held-out row decomposed over the fold's training rows,
+  every score the sum over the decision's named rows, as ``aoc evaluate`` scores it:
+  :func:`abc_validation`), over the folds whose held-out steps hold more than one action.
+
+The rule (:func:`choose_rule`), stated before any result was read: among the candidates whose
+mean AUC is within :data:`AUC_MARGIN` of the best mean AUC, the one with the lowest mean
+log-loss, a later candidate replacing an earlier (simpler) one only when its log-loss is lower
+by more than :data:`MARGIN` (relative). The settings are searched one at a time, in order:
 
 1. history length L in (0, 1, 4);
 2. then the width (GRU and hidden units) in (128, 64, 256) at the chosen L;
 3. then Adam's weight decay in (0, 1e-4, 1e-3).
 
-A candidate replaces the current choice only when its mean validation loss is lower by more
-than :data:`MARGIN` (relative): ties keep the simpler, earlier setting (:func:`choose`). One
-validation split is not enough on a ward-sized log: on one of 30 patient splits the search
-kept L = 4 by 2.7% on its one split, and the other seeds' splits (which draw other
-validation patients) chose L = 1 (docs/design.md, "Settings chosen on small logs").
+The log-loss ranks candidates with less noise than the AUC (every held-out step counts, not
+only the few treated ones), and the AUC guards what the user gets: a candidate whose
+decisions, scored from their named rows, rank the held-out steps worse by more than the margin
+is not chosen for a lower loss. One validation split is not enough on a ward-sized log: on one
+of 30 patient splits a search on one split kept L = 4 by 2.7%, and the other seeds' splits
+(which draw other validation patients) chose L = 1 (docs/design.md, "Settings chosen on small
+logs").
 Candidates stop early with patience :data:`SEARCH_PATIENCE` (at most the user's); the chosen
 settings are then trained on the usual split with the user's patience and saved. What was
-tried (each candidate's loss on every fold and their mean), what was chosen and why go to the
-output and to the model's config (``metrics.selection``).
+tried (each candidate's log-loss and AUC on every fold and their means), what was chosen and
+why go to the output and to the model's config (``metrics.selection``).
 
 **Where it runs** (:func:`searches`): only for imitation of discrete actions, where it was
 measured (docs/results.md, "ward"). For a decision's accountability the action's validation
@@ -61,7 +73,12 @@ SEARCH: tuple[tuple[str, tuple], ...] = (
 )
 #: The paper's value of each searched setting (used when a setting is open and no search runs).
 PAPER = {name: BeliefConfig.__dataclass_fields__[name].default for name, _values in SEARCH}
+#: A later candidate must have a mean log-loss lower than the current choice's by more than
+#: this (relative).
 MARGIN = 0.01
+#: Candidates whose mean held-out ABC AUC is below the best mean AUC by more than this are
+#: not chosen.
+AUC_MARGIN = 0.01
 SEARCH_PATIENCE = 5
 #: Validation folds of whole episodes each candidate is trained and scored on (fewer when the
 #: corpus has fewer whole blocks of the validation size); the first is the usual split.
@@ -92,20 +109,52 @@ def with_defaults(config: BeliefConfig, given: dict) -> BeliefConfig:
 
 
 #: Imitation of discrete actions on a small corpus: the training loss's label smoothing
-#: when the user gives none (docs/design.md, "Candidates of every action").
+#: when the user gives none (docs/design.md, "Candidates of every action"), where it gives
+#: no action more than its share of the log (:func:`smoothing_fits`).
 LABEL_SMOOTHING = 0.1
+
+
+def rarest_share(corpus) -> float | None:
+    """The share of the rows of the least logged action among those logged (None: no rows)."""
+    actions = np.asarray(corpus.actions, dtype=np.int64).reshape(-1)
+    counts = np.bincount(actions)
+    counts = counts[counts > 0]
+    return float(counts.min() / len(actions)) if len(actions) else None
+
+
+def smoothing_fits(corpus) -> bool:
+    """Whether :data:`LABEL_SMOOTHING` suits the log: the smoothed target gives every action
+    LABEL_SMOOTHING / n (n the actions), which must not exceed the rarest logged action's
+    share of the rows (ward: 12-14% treated, 0.05 a target; medkit's ward log: 1.1%, where
+    the target would tell every untreated row the rare action is 5x likelier than the log
+    does, and ABC's held-out AUC fell from 0.99 to 0.93 on a split: docs/design.md)."""
+    share = rarest_share(corpus)
+    return share is not None and LABEL_SMOOTHING / int(corpus.n_actions) <= share
 
 
 def with_imitation_defaults(corpus, config: BeliefConfig, given: dict,
                             paper: bool = False) -> BeliefConfig:
     """``config`` with :data:`LABEL_SMOOTHING` when ``given`` has no ``label_smoothing``
     (None), the model imitates discrete actions, the corpus is small (settings chosen by
-    validation: :func:`open_settings`'s rule) and ``paper`` is off; else the paper's 0 for a
+    validation: :func:`open_settings`'s rule), the smoothing gives no action more than its
+    share of the log (:func:`smoothing_fits`) and ``paper`` is off; else the paper's 0 for a
     smoothing left open. The value is saved in the model's config."""
     if given.get("label_smoothing") is not None:
         return replace(config, label_smoothing=float(given["label_smoothing"]))
-    on = searches(corpus, config, paper)
+    on = searches(corpus, config, paper) and smoothing_fits(corpus)
     return replace(config, label_smoothing=LABEL_SMOOTHING if on else 0.0)
+
+
+def why_no_smoothing(corpus, config: BeliefConfig, given: dict, paper: bool) -> str | None:
+    """Why a smoothing left open is 0 where settings are searched: the rarest action's share
+    is below what the smoothing would give it (None otherwise)."""
+    if given.get("label_smoothing") is not None or not searches(corpus, config, paper) \
+            or smoothing_fits(corpus):
+        return None
+    n = int(corpus.n_actions)
+    return (f"no label smoothing: the rarest action is {rarest_share(corpus):.1%} of the rows, "
+            f"under the {LABEL_SMOOTHING / n:.1%} a smoothing of {LABEL_SMOOTHING:g} would give "
+            f"each of the {n} actions")
 
 
 def why_no_search(corpus, config: BeliefConfig, given: dict, paper: bool,
@@ -199,6 +248,33 @@ def choose(values: tuple, loss) -> tuple:
     return best, best_loss
 
 
+def eligible(values: tuple, auc) -> tuple:
+    """The ``values`` (in order) whose ``auc(value)`` (a candidate's mean held-out AUC, None
+    where no fold's held-out steps hold two actions) is within :data:`AUC_MARGIN` of the best;
+    all of them when none has an AUC."""
+    aucs = {v: auc(v) for v in values}
+    known = [a for a in aucs.values() if a is not None]
+    if not known:
+        return tuple(values)
+    top = max(known)
+    return tuple(v for v in values if aucs[v] is not None and aucs[v] >= top - AUC_MARGIN)
+
+
+def choose_rule(values: tuple, loss, auc) -> tuple:
+    """The rule of the search (module docstring): (the value chosen, its mean log-loss) by
+    :func:`choose` among the values :func:`eligible` keeps by their mean AUC."""
+    return choose(eligible(values, auc), loss)
+
+
+def _mean(xs: list) -> float | None:
+    known = [x for x in xs if x is not None]
+    return float(np.mean(known)) if known else None
+
+
+def _fmt(x: float | None) -> str:
+    return "n/a" if x is None else f"{x:.4g}"
+
+
 def select_and_train(corpus, config: BeliefConfig, open_names: list[str], model_id: str,
                      overwrite: bool, prepared, progress=None, extra: dict | None = None) -> dict:
     """Search ``open_names`` (see the module docstring), then train and save the chosen
@@ -214,24 +290,29 @@ def select_and_train(corpus, config: BeliefConfig, open_names: list[str], model_
     data = fold_data(corpus, prepared, config, FOLDS)
     tried: dict[tuple, dict] = {}
 
+    hook = abc_validation(corpus.actions, int(corpus.n_actions))
+
     def run(cfg: BeliefConfig) -> dict:
-        """The candidate's record: its settings, loss and accuracy on every fold, the mean."""
+        """The candidate's record: its settings, log-loss, ABC AUC and accuracy on every
+        fold, the means."""
         key = tuple(getattr(cfg, n) for n in names)
         if key not in tried:
             rec: dict = dict(zip(names, key))
             per_fold = []
             for j, fold in enumerate(data):
                 m = train_model(corpus, replace(search_cfg, **rec), model_id, overwrite=True,
-                                prepared=fold, save=False)
+                                prepared=fold, save=False, inspect=hook)
                 per_fold.append(m)
                 if progress is not None:
                     progress(0, None, "choosing settings: " + ", ".join(
                         f"{k} {rec[k]}" for k in names)
-                        + f" fold {j + 1}/{len(data)} val loss {m['val_loss']:.4f}")
+                        + f" fold {j + 1}/{len(data)} log-loss {m['val_loss']:.4f} AUC "
+                        + _fmt(m["val_abc_auc"]))
             rec["val_losses"] = [float(m["val_loss"]) for m in per_fold]
             rec["val_loss"] = float(np.mean(rec["val_losses"]))
-            if "val_accuracy" in per_fold[0]:
-                rec["val_accuracy"] = float(np.mean([m["val_accuracy"] for m in per_fold]))
+            rec["val_aucs"] = [m["val_abc_auc"] for m in per_fold]
+            rec["val_auc"] = _mean(rec["val_aucs"])
+            rec["val_accuracy"] = float(np.mean([m["val_accuracy"] for m in per_fold]))
             rec["epochs"] = [int(m["epochs"]) for m in per_fold]
             tried[key] = rec
         return tried[key]
@@ -240,22 +321,32 @@ def select_and_train(corpus, config: BeliefConfig, open_names: list[str], model_
     for name, values in SEARCH:
         if name not in open_names:
             continue
-        value, loss = choose(values, lambda v: run(replace(best, **{name: v}))["val_loss"])
+
+        def record(v, name=name):
+            return run(replace(best, **{name: v}))
+
+        value, loss = choose_rule(values, lambda v: record(v)["val_loss"],
+                                  lambda v: record(v)["val_auc"])
+        kept = eligible(values, lambda v: record(v)["val_auc"])
+        reasons.append(f"{name} {value}: log-loss {loss:.4g} (" + ", ".join(
+            f"{v}: log-loss {record(v)['val_loss']:.4g} AUC {_fmt(record(v)['val_auc'])}"
+            + ("" if v in kept else " out by AUC") for v in values) + ")")
         best = replace(best, **{name: value})
-        reasons.append(f"{name} {value}: mean validation loss {loss:.4g} (" + ", ".join(
-            f"{v}: {run(replace(best, **{name: v}))['val_loss']:.4g}" for v in values) + ")")
     selection = {
         "searched": list(open_names),
         "chosen": {n: getattr(best, n) for n in names},
-        "why": f"lowest mean validation loss over {len(data)} folds of held-out episodes (a "
-               f"candidate must beat the simpler one by more than {MARGIN:.0%}): "
-               + "; ".join(reasons),
+        "why": f"the lowest mean held-out log-loss over {len(data)} folds of episodes among "
+               f"the candidates whose mean held-out ABC AUC is within {AUC_MARGIN:g} of the "
+               f"best (a candidate must beat the simpler one's log-loss by more than "
+               f"{MARGIN:.0%}): " + "; ".join(reasons),
         "folds": len(data),
         "fold_val_episodes": [len(f.val_episodes) for f in data],
         "candidates": list(tried.values()),
         "search_seconds": time.perf_counter() - started,
         "rule": f"settings left open are chosen by cross-validation over episodes on corpora "
-                f"of at most {SELECT_MAX_ROWS} rows",
+                f"of at most {SELECT_MAX_ROWS} rows: log-loss among the candidates within "
+                f"{AUC_MARGIN:g} of the best ABC AUC",
+        "margins": {"log_loss_relative": MARGIN, "auc": AUC_MARGIN},
     }
     inspect = None
     if config.mode == "imitation" and corpus.discrete:  # ABC's own decisions, validated

@@ -37,7 +37,8 @@ def register(app: typer.Typer) -> None:
         sizes: Optional[str] = typer.Option(
             None, "--sizes", help="pendulum-het, lunar: comma-separated rows per corpus "
                                   "instead of the scale's (e.g. 100000, the paper's Low-Data); "
-                                  "icu-sepsis: episodes per log (e.g. 1000,10000)."),
+                                  "icu-sepsis: episodes per log (e.g. 1000,10000); ward: "
+                                  "patients in its log (one count)."),
         behaviour: str = typer.Option(
             "mix", "--behaviour", help="pendulum-het, lunar: mix (the task's behaviour "
                                        "policies) or replay (an agent that starts random and "

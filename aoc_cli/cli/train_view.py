@@ -18,6 +18,23 @@ def _chosen(metrics: dict) -> dict | None:
         else None
 
 
+def candidate_lines(selection: dict) -> list[str]:
+    """One line per candidate of the selection: its settings, mean held-out log-loss and ABC
+    AUC over the folds, and each fold's."""
+    def fmt(x):
+        return "n/a" if x is None else f"{x:.4f}"
+
+    out = []
+    for c in selection.get("candidates", []):
+        settings = ", ".join(f"{k} {c[k]}" for k in selection["chosen"])
+        out.append(f"{settings}: held-out log-loss {fmt(c['val_loss'])}, ABC AUC "
+                   f"{fmt(c.get('val_auc'))} (folds: "
+                   + "; ".join(f"{fmt(l)} / {fmt(a)}" for l, a in
+                               zip(c["val_losses"], c.get("val_aucs") or [None] * len(
+                                   c["val_losses"]))) + ")")
+    return out
+
+
 def notes(trained: Trained) -> list[str]:
     """The lines printed after training, in order (rich markup)."""
     metrics, out = trained.metrics, []
@@ -44,6 +61,7 @@ def notes(trained: Trained) -> list[str]:
     if chosen:
         out.append("chose " + ", ".join(f"{k} {v}" for k, v in chosen["chosen"].items()
                                         if k in chosen["searched"]) + " by " + chosen["why"])
+        out += [f"  {line}" for line in candidate_lines(chosen)]
     if metrics.get("val_abc_accuracy") is not None:
         auc = metrics.get("val_abc_auc")
         out.append(f"ABC's own decisions on the validation episodes (k "
@@ -53,6 +71,8 @@ def notes(trained: Trained) -> list[str]:
         out.append(f"label smoothing {trained.config.label_smoothing:g} (the default for "
                    "imitating discrete actions on a small corpus; --label-smoothing 0 for the "
                    "paper's)")
+    if metrics.get("label_smoothing_rule"):
+        out.append(metrics["label_smoothing_rule"])
     warning = select.baseline_check(metrics)
     if warning:
         out.append(f"[yellow]warning:[/] {warning}")

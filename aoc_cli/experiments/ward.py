@@ -165,22 +165,24 @@ def plot(summary: list[dict], out_png: Path) -> None:
 
 
 def run_ward(out: Path, bench_store: Path, scale: str = "full", splits: int | None = None,
-             log=None, progress=None, source: str = "ward") -> dict:
-    """Collect the log (``source``), run every split, write the outputs; the report."""
+             log=None, progress=None, source: str = "ward", patients: int | None = None) -> dict:
+    """Collect the log (``source``) of ``patients`` stays (default: the scale's), run every
+    split, write the outputs; the report."""
     if source not in SOURCES:
         source_log(source, 1)  # the one-line error
     cfg = (MEDKIT_SCALES if source == "medkit" else SCALES)[scale]
     n_splits = splits or cfg["splits"]
+    patients = patients or cfg["patients"]
     started = time.perf_counter()
     store = Store(Path(bench_store))
-    data = source_log(source, cfg["patients"])
+    data = source_log(source, patients)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     rows: list[dict] = []
     if progress is not None:
         progress(0, n_splits, "bench ward")
     for s in range(n_splits):
-        rows += run_split(store, data, s, cfg["patients"], name=source)
+        rows += run_split(store, data, s, patients, name=source)
         if progress is not None:
             progress(s + 1, n_splits, "bench ward")
         if log is not None:
@@ -191,7 +193,7 @@ def run_ward(out: Path, bench_store: Path, scale: str = "full", splits: int | No
     write_rows_csv(out / "results.csv", rows)
     with atomic_path(out / "summary.json", suffix=".json") as tmp:
         Path(tmp).write_text(json.dumps({"scale": scale, "source": source,
-                                         "log": data.source, "patients": cfg["patients"],
+                                         "log": data.source, "patients": patients,
                                          "splits": n_splits, "summary": summary,
                                          "rows": rows}, indent=2))
     md = ["| method | splits | accuracy | AUC |", "| --- | --- | --- | --- |"]

@@ -2,15 +2,18 @@
 (docs/benchmarks.md, "Settings chosen by cross-validation").
 
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/perf/select_cost.py [--split 0]
-        [--folds 1,3] [--repeats 3] [--log-seed 0] [-f json]
+        [--folds 1,3] [--rules auc] [--repeats 3] [--log-seed 0] [-f json]
 
 ``aoc bench ward``'s patient split ``--split`` of the ward log (550 patients; its training
 side, 500 patients, ~5,000 rows), the model trained as the bench trains it (``train_corpus``:
 the settings left open chosen by validation, one thread), with the selection's folds set to
 each of ``--folds`` (1: one validation split, the rule before; 3: the default now), the fold
-counts interleaved round by round. One row per fold count: the median wall and CPU seconds of
-the whole training, the search's own median seconds, what each run chose, and the ratio to
-the first fold count (median of the rounds' ratios).
+counts interleaved round by round, and with each of ``--rules``: ``auc`` (the rule now:
+the lowest log-loss among the candidates within 0.01 of the best held-out ABC AUC, each
+candidate's fold decomposed and scored) or ``loss`` (the rule before: the log-loss alone, no
+fold decomposed; the final model's own validation of ABC still runs). One row per case: the
+median wall and CPU seconds of the whole training, the search's own median seconds, what each
+run chose, and the ratio to the first case (median of the rounds' ratios).
 """
 
 from __future__ import annotations
@@ -34,6 +37,7 @@ def main() -> None:
     ap.add_argument("--split", type=int, default=0)
     ap.add_argument("--folds", default="1,3")
     ap.add_argument("--log-seed", type=int, default=0)
+    ap.add_argument("--rules", default="auc", help="auc, loss or both (comma-separated)")
     args = ap.parse_args()
     data, _ = collect("ward", episodes=PATIENTS, seed=args.log_seed)
     rng = np.random.default_rng([0, args.split])
@@ -45,19 +49,31 @@ def main() -> None:
         store.write("ward", data.select_episodes(~test))
         corpus = store.corpus("ward")
 
-        def train(folds: int):
+        def train(folds: int, rule: str):
             def run(_i: int) -> dict:
                 old, select.FOLDS = select.FOLDS, folds
+                hook = select.abc_validation
+                if rule == "loss":  # the search's folds unscored (no AUC: the log-loss
+                    calls = []      # alone); the final model's validation as before
+
+                    def first_unscored(actions, n_actions, k=None):
+                        calls.append(1)
+                        if len(calls) == 1:
+                            return lambda *_a: {"val_abc_auc": None}
+                        return hook(actions, n_actions, k)
+                    select.abc_validation = first_unscored
                 try:
                     metrics = train_corpus(corpus, "default", overwrite=True, mode="imitation",
                                            threads=1, seed=args.split).metrics
                 finally:
-                    select.FOLDS = old
+                    select.FOLDS, select.abc_validation = old, hook
                 return metrics["selection"]
             return run
 
-        runs = h.interleave({f"folds {f}": train(f) for f in counts}, args.repeats)
-    base = runs[f"folds {counts[0]}"]
+        cases = {f"folds {f}, {rule}": train(f, rule) for f in counts
+                 for rule in args.rules.split(",")}
+        runs = h.interleave(cases, args.repeats)
+    base = runs[next(iter(cases))]
     rows = [h.row(case, corpus.n_rows, r,
                   search_s=float(np.median([s["search_seconds"] for s in r.outs])),
                   chosen=[s["chosen"] for s in r.outs], ratio=h.paired(base, r))

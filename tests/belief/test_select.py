@@ -37,7 +37,9 @@ def test_open_settings_are_chosen_by_validation_and_recorded(aoc, ward):
     by_l = {c["history_length"]: c["val_loss"] for c in sel["candidates"]
             if c["weight_decay"] == 0.0}
     assert by_l[chosen["history_length"]] <= min(by_l.values()) / (1 - select.MARGIN) + 1e-12
-    assert "lowest mean validation loss" in sel["why"] and "chose history_length" in err
+    assert "lowest mean held-out log-loss" in sel["why"] and "chose history_length" in err
+    # every candidate printed with both figures
+    assert err.count("held-out log-loss") >= len(sel["candidates"]) and "ABC AUC" in err
     config = json.loads((ward.corpus("ward").models_dir / "default" / "config.json").read_text())
     assert config["config"]["history_length"] == chosen["history_length"]
     assert config["config"]["hidden"] == 32
@@ -65,13 +67,20 @@ def test_settings_are_chosen_by_their_mean_validation_loss_over_folds(ward):
         assert len(c["val_losses"]) == select.FOLDS and len(c["epochs"]) == select.FOLDS
         assert c["val_loss"] == pytest.approx(np.mean(c["val_losses"]), rel=1e-12)
         assert len(set(c["val_losses"])) == select.FOLDS  # three validation sets, three losses
+        assert len(c["val_aucs"]) == select.FOLDS and all(0.5 < a <= 1 for a in c["val_aucs"])
+        assert c["val_auc"] == pytest.approx(np.mean(c["val_aucs"]), rel=1e-12)
     mean = {(c["history_length"], c["weight_decay"]): c["val_loss"] for c in sel["candidates"]}
-    chosen_l = 0
-    for h in (1, 4):  # the margin rule by hand over the means
+    aucs = {(c["history_length"], c["weight_decay"]): c["val_auc"] for c in sel["candidates"]}
+    # the rule by hand over the means: within AUC_MARGIN of the best AUC, then the log-loss
+    top = max(aucs[(h, 0.0)] for h in (0, 1, 4))
+    kept = [h for h in (0, 1, 4) if aucs[(h, 0.0)] >= top - select.AUC_MARGIN]
+    chosen_l = kept[0]
+    for h in kept[1:]:
         if mean[(h, 0.0)] < mean[(chosen_l, 0.0)] * (1 - select.MARGIN):
             chosen_l = h
     assert sel["chosen"]["history_length"] == chosen_l
-    assert "mean validation loss over 3 folds" in sel["why"]
+    assert "log-loss over 3 folds" in sel["why"] and "ABC AUC" in sel["why"]
+    assert sel["margins"] == {"log_loss_relative": select.MARGIN, "auc": select.AUC_MARGIN}
     # a recorded fold loss is that candidate trained on that fold: the first fold is the
     # usual split, the second the next block of the same random order of the episodes
     config = BeliefConfig(mode="imitation", hidden=16, threads=1, max_epochs=3,
@@ -82,10 +91,31 @@ def test_settings_are_chosen_by_their_mean_validation_loss_over_folds(ward):
     assert np.array_equal(folds[0].val_rows, usual.val_rows)
     record = next(c for c in sel["candidates"] if c["history_length"] == chosen_l
                   and c["weight_decay"] == 0.0)
+    hook = select.abc_validation(corpus.actions, 2)
     for j in (0, 1):
         m = train_model(corpus, replace(config), "x", overwrite=True, prepared=folds[j],
-                        save=False)
+                        save=False, inspect=hook)
         assert m["val_loss"] == pytest.approx(record["val_losses"][j], rel=1e-5)
+        # the fold's AUC: ABC's own scores of that fold's held-out rows, from their named rows
+        assert m["val_abc_auc"] == pytest.approx(record["val_aucs"][j], abs=1e-6)
+
+
+def test_the_rule_takes_the_lowest_log_loss_among_candidates_near_the_best_auc():
+    # 4 has the lowest log-loss but its AUC is 0.02 below the best: out; of 0 and 1 (within
+    # 0.01 of 1's 0.96), 1's log-loss is lower by more than the 1% margin
+    loss = {0: 1.0, 1: 0.9, 4: 0.8}.get
+    auc = {0: 0.955, 1: 0.96, 4: 0.94}.get
+    assert select.eligible((0, 1, 4), auc) == (0, 1)
+    assert select.choose_rule((0, 1, 4), loss, auc) == (1, 0.9)
+    assert select.choose((0, 1, 4), loss) == (4, 0.8)   # the log-loss alone would take 4
+    # all within the AUC margin: the log-loss decides, ties keeping the simpler
+    assert select.choose_rule((0, 1, 4), loss, {0: 0.95, 1: 0.955, 4: 0.9501}.get) == (4, 0.8)
+    assert select.choose_rule((0, 1, 4), {0: 1.0, 1: 0.995, 4: 0.9901}.get,
+                              {0: 0.95, 1: 0.96, 4: 0.955}.get) == (0, 1.0)
+    # the best AUC with the worst log-loss is chosen when it alone is near the top
+    assert select.choose_rule((0, 1, 4), loss, {0: 0.99, 1: 0.97, 4: 0.96}.get) == (0, 1.0)
+    # no fold held two actions out: no AUC, the log-loss alone
+    assert select.choose_rule((0, 1, 4), loss, {0: None, 1: None, 4: None}.get) == (4, 0.8)
 
 
 def test_the_margin_rule_keeps_the_simpler_setting_on_a_tie():
@@ -214,12 +244,30 @@ def test_label_smoothing_default_only_where_it_was_measured():
 
     from aoc_cli.belief.config import BeliefConfig
 
-    small = SimpleNamespace(n_rows=5000, discrete=True)
+    acts = np.array([0] * 88 + [1] * 12)   # the rarer action at 12% of the rows
+    small = SimpleNamespace(n_rows=5000, discrete=True, actions=acts, n_actions=2)
     imit = BeliefConfig(mode="imitation")
     assert select.with_imitation_defaults(small, imit, {}).label_smoothing == 0.1
     assert select.with_imitation_defaults(small, imit, {"label_smoothing": 0.0}).label_smoothing == 0
     assert select.with_imitation_defaults(small, imit, {"label_smoothing": 0.2}).label_smoothing == 0.2
     assert select.with_imitation_defaults(small, imit, {}, paper=True).label_smoothing == 0
+    # a rare action under the 0.1 / 2 = 5% the smoothing gives each action: no smoothing
+    rare = SimpleNamespace(n_rows=5000, discrete=True, actions=np.array([0] * 96 + [1] * 4),
+                           n_actions=2)
+    assert select.with_imitation_defaults(rare, imit, {}).label_smoothing == 0
+    assert "4.0% of the rows" in select.why_no_smoothing(rare, imit, {}, False)
+    assert select.why_no_smoothing(small, imit, {}, False) is None
+    assert select.with_imitation_defaults(rare, imit, {"label_smoothing": 0.1}).label_smoothing \
+        == 0.1                                 # given: kept
+    at = SimpleNamespace(n_rows=5000, discrete=True, actions=np.array([0] * 95 + [1] * 5),
+                         n_actions=2)           # exactly 5%: it fits
+    assert select.smoothing_fits(at)
+    # three actions, one never logged (not the rarest): 0.1 / 3 against the 3% of action 1
+    assert select.rarest_share(SimpleNamespace(actions=np.array([0] * 97 + [1] * 3))) == 0.03
+    assert not select.smoothing_fits(SimpleNamespace(actions=np.array([0] * 97 + [1] * 3),
+                                                     n_actions=3))
+    assert select.smoothing_fits(SimpleNamespace(actions=np.array([0] * 96 + [1] * 4),
+                                                 n_actions=3))
     big = SimpleNamespace(n_rows=select.SELECT_MAX_ROWS + 1, discrete=True)
     assert select.with_imitation_defaults(big, imit, {}).label_smoothing == 0
     boxes = SimpleNamespace(n_rows=5000, discrete=False)

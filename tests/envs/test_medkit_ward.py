@@ -101,3 +101,11 @@ def test_unknown_source_and_source_elsewhere_are_one_line(aoc, tmp_path):
     code, _out, err = aoc("bench", "pendulum-het", "--tiny", "--source", "medkit",
                           "--out", str(tmp_path / "o2"))
     assert code == 2 and "--source" in err and len(err.strip().splitlines()) == 1
+
+
+def test_ward_sizes_are_one_count_of_patients(aoc, tmp_path):
+    for sizes in ("100,200", "10"):
+        code, out, err = aoc("bench", "ward", "--tiny", "--sizes", sizes, "--out",
+                             str(tmp_path / "o"), "--bench-store", str(tmp_path / "s"))
+        assert code == 2 and out == "" and "--sizes" in err and "patients" in err, err
+        assert len(err.strip().splitlines()) == 1
