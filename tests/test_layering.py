@@ -226,3 +226,13 @@ def test_the_inner_import_count_sees_a_lazy_import_and_its_reason(tmp_path):
                       "    from aoc_cli.neighbours import BeliefIndex\n\n"
                       "def g():\n    from aoc_cli.store import Store\n    return Store\n")
     assert _inner_imports(module) == [(4, True), (5, True), (8, False)]
+
+
+#: The house's rule: a few clear modules, none over about this many lines.
+MODULE_LINES = 400
+
+
+def test_no_module_is_over_the_house_size():
+    long = {str(p.relative_to(ROOT)): n for p in ROOT.rglob("*.py")
+            if (n := len(p.read_text().splitlines())) > MODULE_LINES}
+    assert long == {}, f"modules over {MODULE_LINES} lines: split them"

@@ -13,7 +13,8 @@ import pyarrow as pa
 import pyarrow.compute as pc
 
 from aoc_cli.errors import AocError, warn
-from aoc_cli.formats.table import Table, arrow_values, is_numeric, is_text_type, numeric, text
+from aoc_cli.formats.csv_stream import arrow_values
+from aoc_cli.formats.table import Table, is_numeric, is_text_type, numeric, text
 
 
 def sort_key(col: pa.ChunkedArray, name: str, where, dates: bool) -> np.ndarray:

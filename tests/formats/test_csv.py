@@ -172,6 +172,7 @@ def test_a_csv_read_as_two_halves_is_the_csv_read_as_one_stream(tmp_path, monkey
     first's names and types: the same columns as one stream (blank lines, text and number
     columns, the last line with or without its line break); a file holding a quote is one
     stream."""
+    from aoc_cli.formats import csv_stream as cs
     from aoc_cli.formats import table as t
 
     path = tmp_path / "halves.csv"
@@ -181,11 +182,11 @@ def test_a_csv_read_as_two_halves_is_the_csv_read_as_one_stream(tmp_path, monkey
         if i % 997 == 0:
             lines.append("")  # blank lines are skipped
     path.write_text("\n".join(lines) + ("\n" if trailing_newline else ""))
-    monkeypatch.setattr(t, "BLOCK_BYTES", 4096)
-    monkeypatch.setattr(t, "SPLIT_BYTES", 1 << 40)
+    monkeypatch.setattr(cs, "BLOCK_BYTES", 4096)
+    monkeypatch.setattr(cs, "SPLIT_BYTES", 1 << 40)
     one = t.read_table(path, text_columns=["id"])
-    monkeypatch.setattr(t, "SPLIT_BYTES", 1024)
-    halves = t._halves(path)
+    monkeypatch.setattr(cs, "SPLIT_BYTES", 1024)
+    halves = cs.halves(path)
     assert halves is not None and 0 < halves.middle < path.stat().st_size
     two = t.read_table(path, text_columns=["id"])
     assert two.n == one.n == 5_000 and two.header == one.header
@@ -197,4 +198,4 @@ def test_a_csv_read_as_two_halves_is_the_csv_read_as_one_stream(tmp_path, monkey
         else:
             assert b.to_pylist() == a.to_pylist()
     path.write_text(path.read_text().replace("n3", '"n3"'))
-    assert t._halves(path) is None
+    assert cs.halves(path) is None
