@@ -6,10 +6,13 @@ from dataclasses import dataclass
 
 from aoc_cli.api.common import Log, StoreLike, open_store
 from aoc_cli.belief.config import BeliefConfig
+from aoc_cli.belief.evidence import CONTROLLER
 from aoc_cli.belief.fit import Trained, check_settings, train_corpus
+from aoc_cli.control.config import ControllerConfig, ControllerLike, given_settings
 from aoc_cli.corpus_index import CorpusIndex
 from aoc_cli.corpus_index import build_index as _build_index
 from aoc_cli.errors import BadSetting, param
+from aoc_cli.evaluation import selection
 from aoc_cli.progress import Progress
 from aoc_cli.store import DEFAULT_INDEX, DEFAULT_MODEL
 
@@ -29,7 +32,7 @@ def train(name: str, *, store: StoreLike = None, model: str = DEFAULT_MODEL,
           critic_bc_weight: float = _D.critic_bc_weight, device: str = _D.device,
           paper: bool = False, no_select: bool = False,
           overwrite: bool = False, progress: Progress | None = None,
-          log: Log | None = None) -> Trained:
+          log: Log | None = None, controller: ControllerLike = None) -> Trained:
     """Train the belief model ``model`` of corpus ``name`` (``aoc train``): ``mode`` value
     (AOC: b(o, a, h) predicts ``value``) or imitation (ABC: b(o, h) predicts the action).
     Settings left None are decided from the log's evidence (:mod:`aoc_cli.belief.evidence`:
@@ -38,8 +41,11 @@ def train(name: str, *, store: StoreLike = None, model: str = DEFAULT_MODEL,
     paper's; ``paper``: the paper's for all; ``no_select``: no choice by validation. The
     controller settings the evidence decides are saved with the model. The other arguments are :class:`~aoc_cli.belief.BeliefConfig`'s
     (``belief_dim`` d_b, ``max_epochs``, ``device`` auto|cpu|cuda, ...). One writer per
-    model id; ``overwrite`` replaces one. Returns :class:`~aoc_cli.belief.fit.Trained`
-    (``.metrics`` as saved)."""
+    model id; ``overwrite`` replaces one. ``controller``: controller settings to save with the
+    model (a mapping or ControllerConfig of epsilon, residual_cap, support_penalty, k; None
+    values: decided), instead of those the evidence decides or the validation episodes
+    choose (:mod:`aoc_cli.evaluation.selection`). Returns
+    :class:`~aoc_cli.belief.fit.Trained` (``.metrics`` as saved)."""
     settings = dict(mode=mode, belief=belief, value=value, gamma=gamma,
                     history_length=history_length, dynamics_weight=dynamics_weight,
                     hidden=hidden, weight_decay=weight_decay, label_smoothing=label_smoothing,
@@ -48,9 +54,26 @@ def train(name: str, *, store: StoreLike = None, model: str = DEFAULT_MODEL,
                     dropout=dropout, class_weight=class_weight, critic_steps=critic_steps,
                     critic_bc_weight=critic_bc_weight, device=device)
     check_settings(settings)  # bad settings fail before the store is read
+    given = controller_given(controller)
     corpus = open_store(store).corpus(name)
     return train_corpus(corpus, model, paper=paper, select_settings=not no_select,
-                        overwrite=overwrite, progress=progress, log=log, **settings)
+                        overwrite=overwrite, progress=progress, log=log, controller=given,
+                        choose_controller=selection.recording_hook, **settings)
+
+
+def controller_given(controller: ControllerLike) -> dict:
+    """The controller settings ``train`` saves as given: checked as ControllerConfig's, and
+    only those training records (:data:`aoc_cli.belief.evidence.CONTROLLER`)."""
+    given = given_settings(controller)
+    if isinstance(controller, ControllerConfig):  # a whole config: its recorded fields only
+        given = {k: v for k, v in given.items() if k in CONTROLLER}
+    other = sorted(set(given) - set(CONTROLLER))
+    if other:
+        raise BadSetting(other[0], given[other[0]],
+                         f"train saves only the controller settings {', '.join(CONTROLLER)} "
+                         f"with the model, not {param(other[0])}: give it when deciding")
+    ControllerConfig(**given)  # bounds checked
+    return given
 
 
 @dataclass

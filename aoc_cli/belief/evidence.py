@@ -170,6 +170,20 @@ def held_out(ev: Evidence, config) -> bool:
     return config.mode == "value" and not ev.discrete and config.belief == "value"
 
 
+#: The controller settings rule 2's selection chooses on held-out episodes
+#: (:mod:`aoc_cli.evaluation.selection`); given any of them, it does not run.
+SELECTED = ("residual_cap", "support_penalty")
+
+
+def selects_controller(ev: Evidence, config, given: dict) -> bool:
+    """Whether ``aoc train`` chooses rule 2's controller on the validation episodes for a
+    model of ``config`` (a BeliefConfig): value mode with the value belief trained in memory,
+    a finite state the log revisits (discrete actions), rewards, and none of
+    :data:`SELECTED` ``given``."""
+    return (config.mode == "value" and config.belief == "value" and ev.finite_states
+            and ev.rewards and not any(given.get(k) is not None for k in SELECTED))
+
+
 def controller_settings(corpus, mode: str) -> dict:
     """The controller's settings the rules decide for a ``mode`` model of ``corpus`` (what
     ``aoc train`` records; also used for a model trained without them, by the library's
@@ -191,3 +205,21 @@ def describe(reasons: list[dict]) -> list[str]:
     """One line per setting decided, for ``aoc train``'s output."""
     return [f"{r['setting']} {r['value']:g}: {r['why']}" if isinstance(r["value"], float)
             else f"{r['setting']} {r['value']}: {r['why']}" for r in reasons]
+
+
+def selection_lines(out: dict) -> list[str]:
+    """What ``aoc train`` prints of the controller chosen on held-out episodes (the record of
+    :func:`aoc_cli.evaluation.selection.select_controller`): one line per candidate, its FQE
+    estimate and interval, the chosen one marked."""
+    width = max(len(label(e["settings"])) for e in out["candidates"])
+    return [f"{label(e['settings']):<{width}}  FQE {e['estimate']:.4f} [{e['low']:.4f}, "
+            f"{e['high']:.4f}], the logged action at {e['agrees']:.0%} of the steps"
+            + ("  <- chosen" if e["settings"] == out["chosen"] else "")
+            for e in out["candidates"]]
+
+
+def label(settings: dict) -> str:
+    """``cap 0.01, penalty 5``; ``no cap, no penalty``."""
+    cap, pen = settings.get("residual_cap"), settings.get("support_penalty")
+    return (("no cap" if cap is None else f"cap {cap:g}") + ", "
+            + ("no penalty" if pen is None else f"penalty {pen:g}"))

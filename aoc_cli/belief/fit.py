@@ -21,6 +21,7 @@ from typing import Callable
 from aoc_cli.belief import evidence, select
 from aoc_cli.belief.config import CRITIC_STEP_SECONDS, BeliefConfig
 from aoc_cli.belief.data import prepare
+from aoc_cli.decompose.k_rule import index_k
 from aoc_cli.progress import Progress
 from aoc_cli.store import DEFAULT_MODEL, Corpus, check_name, writing_model
 
@@ -65,26 +66,34 @@ def check_settings(settings: dict) -> BeliefConfig:
 def train_corpus(corpus: Corpus, model: str = DEFAULT_MODEL, *, paper: bool = False,
                  select_settings: bool = True, overwrite: bool = False,
                  progress: Progress | None = None,
-                 log: Callable[[str], None] | None = None, **settings) -> Trained:
+                 log: Callable[[str], None] | None = None, controller: dict | None = None,
+                 choose_controller: Callable | None = None, **settings) -> Trained:
     """Train model ``model`` of ``corpus`` with ``settings`` (BeliefConfig fields; see the
     module docstring); ``paper``: the paper's settings for everything not given (no rules of
     the evidence, no selection); ``select_settings`` False: no choice by validation (the
     evidence's rules still hold). ``log``: the notes ``aoc train`` prints before training (the
     settings the evidence decided and why, the critic's step budget). ``progress``: fitted Q
-    evaluation, the candidates tried, then the epochs (or critic steps)."""
+    evaluation, the candidates tried, then the epochs (or critic steps).
+
+    ``controller``: the controller settings given (:data:`aoc_cli.belief.evidence.CONTROLLER`;
+    None values: not given), saved with the model as given. ``choose_controller(corpus,
+    config, k, extra, progress)``: the ``inspect`` hook that chooses the controller on the
+    validation episodes (:mod:`aoc_cli.evaluation.selection`, a later stage: the API passes
+    it), run where :func:`aoc_cli.belief.evidence.selects_controller` says."""
     note = log or (lambda _text: None)
     given, fixed, smoothing = _split(settings)
     _config(given, fixed)  # the settings checked before the corpus is read
-    extra, ev = {}, None
+    chosen = {k: v for k, v in (controller or {}).items() if v is not None}
+    extra, ev = {"controller": dict(chosen)}, None
     if not paper:
         started = time.perf_counter()
         ev = evidence.Evidence.of(corpus)
-        decided, reasons = evidence.decide(ev, given)
+        decided, reasons = evidence.decide(ev, {**given, **chosen})
         given = {**given, **{k: v for k, v in decided.items() if k in OPEN}}
         extra = {"settings": {"evidence": ev.to_dict(), "decided": reasons,
                               "seconds": time.perf_counter() - started},
-                 "controller": {k: v for k, v in decided.items()
-                                if k in evidence.CONTROLLER}}
+                 "controller": {**chosen, **{k: v for k, v in decided.items()
+                                             if k in evidence.CONTROLLER}}}
     searched = {k: given[k] for k in select.PAPER}
     config = _config(given, fixed)
     no_search = paper or not select_settings
@@ -94,26 +103,35 @@ def train_corpus(corpus: Corpus, model: str = DEFAULT_MODEL, *, paper: bool = Fa
                                          paper)
     if unsmoothed:
         extra = {**extra, "label_smoothing_rule": unsmoothed}
-    measure = ev is not None and not no_search and evidence.held_out(ev, config)
+    if "k" not in chosen and corpus.n_rows > 0:  # the k rule's, recorded with the model
+        imitation = config.mode == "imitation" and bool(corpus.discrete)
+        extra["controller"]["k"] = index_k(config.belief_dim, corpus, imitation)[0]
+    measure = ev is not None and not no_search and "epsilon" not in chosen \
+        and evidence.held_out(ev, config)
+    hook = None
+    if ev is not None and not no_search and choose_controller is not None \
+            and evidence.selects_controller(ev, config, chosen):
+        hook = choose_controller(corpus, config, extra["controller"]["k"], extra, progress)
     with writing_model(corpus.path, check_name(model, "model")):  # one writer per model id
         metrics = _train(corpus, config, model, overwrite,
                          select.open_settings(corpus, config, searched, no_search),
                          select.why_no_search(corpus, config, searched, paper,
                                               select_settings), extra, progress, note,
-                         measure)
+                         measure, hook)
     return Trained(corpus.name, model, metrics, config,
                    smoothing is None and config.label_smoothing > 0)
 
 
 def _train(corpus, config: BeliefConfig, model: str, overwrite: bool, open_names: list[str],
            defaults_note: str | None, extra: dict, progress: Progress | None,
-           note: Callable[[str], None], measure: bool = False) -> dict:
+           note: Callable[[str], None], measure: bool = False, hook=None) -> dict:
     """Check the inputs (and the corpus's content hash), then train; with ``open_names``,
     choose those settings by validation first (aoc_cli.belief.select). ``extra``: more
     entries of the saved metrics (the settings the evidence decided); ``measure``: decide the
     controller's epsilon on the validation episodes after training
     (aoc_cli.belief.epsilon_rule), into ``extra``'s ``controller`` before the model is
-    saved."""
+    saved; ``hook``: another such ``inspect`` (the controller chosen on the validation
+    episodes, :func:`train_corpus`)."""
     name = corpus.name
     fqe = config.mode == "value" and config.value == "fqe"
     if fqe and progress is not None:
@@ -140,6 +158,8 @@ def _train(corpus, config: BeliefConfig, model: str, overwrite: bool, open_names
         extra = {**extra, "selection": {"searched": [], "why": defaults_note}}
     inspect = epsilon_rule.recording_hook(corpus, config.seed, extra, progress) \
         if measure and not stream.streams(corpus, config) else None
+    if hook is not None and not stream.streams(corpus, config):
+        inspect = hook
     return trainer.train_model(corpus, config, model, overwrite=overwrite, progress=progress,
                                prepared=prepared, extra=extra or None, inspect=inspect)
 

@@ -1,6 +1,8 @@
 """`aoc train NAME`: learn the belief model of a corpus (value mode: AOC; imitation: ABC).
 Parses and prints only; the work is in :func:`aoc_cli.api.train`. Every option but
-``--model``, ``--paper``, ``--no-select`` and ``--overwrite`` is a :class:`~aoc_cli.belief.config.BeliefConfig`
+``--model``, ``--paper``, ``--no-select``, ``--overwrite`` and the four controller settings
+saved with the model (``--epsilon``, ``--residual-cap``, ``--support-penalty``, ``--k``:
+:class:`~aoc_cli.control.config.ControllerConfig`'s) is a :class:`~aoc_cli.belief.config.BeliefConfig`
 setting: its help, range, choices and default come from the field (:mod:`aoc_cli.cli.fields`).
 """
 
@@ -13,6 +15,7 @@ import typer
 import aoc_cli
 from aoc_cli.belief import select
 from aoc_cli.belief.config import BeliefConfig
+from aoc_cli.control.config import ControllerConfig
 from aoc_cli.cli.common import (BeliefKind, BeliefMode, ClassWeight, CorpusArgument, Device,
                                 FormatOption, choice, state)
 from aoc_cli.cli.fields import EVIDENCE, from_field
@@ -33,6 +36,16 @@ def _searched(name: str) -> str:
 
 def _option(name: str, *flags: str, given: str | None = None):
     return from_field(BeliefConfig, name, *flags, given=given)
+
+
+#: The controller settings saved with the model: decided, chosen on held-out episodes, or given.
+_SAVED = ("saved with the model; given, it is not decided (residual cap or support penalty "
+          "given: no controller chosen on held-out episodes)")
+
+
+def _controller(name: str):
+    return from_field(ControllerConfig, name, given=_SAVED + ", else {default}" if name != "k"
+                      else "the k rule's, " + _SAVED)
 
 
 _PAPER = ", ".join(f"{k} {v:g}" for k, v in {**select.PAPER, "label_smoothing": 0,
@@ -59,6 +72,10 @@ def train(
     class_weight: ClassWeight = _option("class_weight"),
     label_smoothing: Optional[float] = _option(
         "label_smoothing", given=f"{select.LABEL_SMOOTHING:g} {_SMALL}, else {{default}}"),
+    epsilon: Optional[float] = _controller("epsilon"),
+    residual_cap: Optional[float] = _controller("residual_cap"),
+    support_penalty: Optional[float] = _controller("support_penalty"),
+    k: Optional[int] = _controller("k"),
     paper: bool = typer.Option(False, "--paper", help=f"The paper's settings for everything "
                                                       f"not given ({_PAPER}): no selection, "
                                                       "no rules of the log's evidence."),
@@ -88,7 +105,9 @@ def train(
             batch_size=batch_size, lr=lr, patience=patience, val_fraction=val_fraction,
             seed=seed, threads=threads, device=choice(device), dropout=dropout,
             class_weight=choice(class_weight),
-            paper=paper, no_select=no_select, overwrite=overwrite, progress=bar, log=message)
+            paper=paper, no_select=no_select, overwrite=overwrite, progress=bar, log=message,
+            controller={"epsilon": epsilon, "residual_cap": residual_cap,
+                        "support_penalty": support_penalty, "k": k})
     for line in train_view.notes(trained):
         message(line)
     write_object(train_view.shown(trained, fmt), fmt, title=f"aoc train {name} --model {model}")

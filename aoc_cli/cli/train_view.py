@@ -52,6 +52,11 @@ def notes(trained: Trained) -> list[str]:
         for r in settings["decided"]:
             cost = f" ({r['seconds']:.1f} s)" if "seconds" in r else ""
             out.append(f"  {evidence.describe([r])[0]}{cost}")
+        chosen = settings.get("controller_selection")
+        if chosen:
+            out.append(f"  the controllers on {chosen['episodes']:,} held-out episodes (FQE, "
+                       f"{chosen['interval']}; {chosen['seconds']:.1f} s):")
+            out.extend(f"    {line}" for line in evidence.selection_lines(chosen))
     chosen = _chosen(metrics)
     if chosen:
         out.append("chose " + ", ".join(f"{k} {v}" for k, v in chosen["chosen"].items()

@@ -105,7 +105,10 @@ class ControllerConfig(Settings):
         by ``aoc train`` from the log's evidence, aoc_cli.belief.evidence) over the paper's
         defaults. A model trained without them (by the library's ``train_model``, or before
         they were recorded) has none: the paper's."""
-        settings = {k: v for k, v in (saved or {}).items() if k in cls.__dataclass_fields__}
+        # the model's k reaches the controller through its index, built with it (an index
+        # built with another --neighbours rule keeps the k that fits it)
+        settings = {k: v for k, v in (saved or {}).items()
+                    if k in cls.__dataclass_fields__ and k != "k"}
         settings.update({k: v for k, v in given.items() if v is not None})
         return cls(**settings)
 

@@ -39,9 +39,12 @@ TYPICAL_SAMPLE = 500
 
 def neighbours(corpus: Corpus, model, candidates: str = "auto") -> tuple[int, str]:
     """The default neighbours per query of ``model`` on ``corpus`` and where they come from:
-    the k rule, :func:`aoc_cli.decompose.k_rule.index_k` (docs/design.md, "Candidates of every
-    action"), once ``candidates`` is checked: "auto" (that rule), "nearest" (the paper's k) or
-    "per_action" (discrete actions only)."""
+    the k saved with the model (``metrics.controller.k``: the k rule's when ``aoc train``
+    ran it, or the ``--k`` it was given), else the k rule,
+    :func:`aoc_cli.decompose.k_rule.index_k` (docs/design.md, "Candidates of every action"),
+    once ``candidates`` is checked: "auto" (the model's, else that rule), "nearest" (the
+    paper's k) or "per_action" (discrete actions only): a ``candidates`` given takes its
+    rule's k."""
     if candidates not in ("auto", NEAREST, PER_ACTION):
         raise BadSetting("neighbours", candidates,
                          f"unknown {param('neighbours')} {candidates!r}: use auto, {NEAREST} or "
@@ -51,7 +54,11 @@ def neighbours(corpus: Corpus, model, candidates: str = "auto") -> tuple[int, st
                          f"{param('neighbours', PER_ACTION)} needs discrete actions; corpus "
                          f"{corpus.name!r} has continuous ones")
     imitation = model.mode == "imitation" and bool(corpus.discrete) and corpus.n_rows > 0
-    return index_k(model.d_b, corpus, imitation, candidates)
+    k, how = index_k(model.d_b, corpus, imitation, candidates)
+    saved = ((model.meta.get("metrics") or {}).get("controller") or {}).get("k")
+    if candidates == "auto" and saved is not None:  # the k saved with the model
+        k = int(saved)
+    return k, how
 
 
 def build_index(corpus: Corpus, model_id: str | None = None, kind: str = "auto",

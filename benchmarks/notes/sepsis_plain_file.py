@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from pathlib import Path
 
@@ -47,7 +48,15 @@ def main() -> None:
     name = "mine"
     aoc_cli.ingest(str(path), name=name, store=root, overwrite=True)
     started = time.perf_counter()
-    trained = aoc_cli.train(name, store=root, overwrite=True)
+    seen = {}
+
+    def progress(done, total=None, label=None):  # each stage once on stderr, with its time
+        if label and label.split(":")[0].split(" batch")[0] not in seen:
+            seen[label.split(":")[0].split(" batch")[0]] = True
+            print(f"{time.perf_counter() - started:8.1f} s  {label}", file=sys.stderr,
+                  flush=True)
+
+    trained = aoc_cli.train(name, store=root, overwrite=True, progress=progress)
     train_seconds = time.perf_counter() - started
     aoc_cli.build_index(name, store=root)
     session = aoc_cli.open_session(name, store=root)

@@ -110,7 +110,9 @@ def test_aoc_train_decides_records_and_shows_the_settings_of_a_plain_file(aoc, u
     decided = {r["setting"]: r["value"] for r in metrics["settings"]["decided"]}
     assert decided["gamma"] == 0.9 and decided["mode"] == "value"
     assert 0.1 <= decided["epsilon"] <= 0.5  # decided on held-out episodes after training
-    assert metrics["controller"] == {"epsilon": decided["epsilon"]}
+    assert metrics["controller"] == {"epsilon": decided["epsilon"],
+                                     "k": 2 * (_saved(upright, "file")["config"]
+                                               ["belief_dim"] + 1)}
     assert metrics["settings"]["evidence"]["at_limit"] > evidence.AT_LIMIT
     said = " ".join(err.split())
     assert "gamma 0.9: 100% of the episodes stop at 200 steps (a time limit)" in said
@@ -165,9 +167,13 @@ def test_the_controller_settings_travel_with_the_model(aoc, store, tmp_path):
     from tests.conftest import run_aoc
 
     assert run_aoc("ingest", str(path), "--name", "icu")[0] == 0
-    code, out, err = aoc("train", "icu", *QUICK)
+    # rule 2's controller (--no-select: not chosen on held-out episodes, tests/evaluation/
+    # test_selection.py) and the k rule's k
+    code, out, err = aoc("train", "icu", "--no-select", *QUICK)
     assert code == 0, err
-    assert json.loads(out)["controller"] == {"residual_cap": 0.01, "support_penalty": 5.0}
+    assert json.loads(out)["controller"] == {"residual_cap": 0.01, "support_penalty": 5.0,
+                                             "k": 2 * (_saved(s, "icu")["config"]
+                                                       ["belief_dim"] + 1)}
     assert _saved(s, "icu")["config"]["history_length"] == 0
     assert aoc("index", "icu", "--format", "json")[0] == 0
     own = aoc_cli.open_session("icu", store=store).controller.config

@@ -1,0 +1,202 @@
+"""The controller chosen on held-out episodes of the user's own log (value mode, discrete
+actions, a finite state the log revisits: rule 2 of :mod:`aoc_cli.belief.evidence`), by a rule
+stated in advance (docs/design.md, "Settings from the log's evidence").
+
+``aoc train`` holds out the validation episodes (``val_fraction``, 20% by default) from the
+belief's fit; they only stop its training early. After training, at every step of those
+episodes, every action is decomposed over the *training* rows' beliefs and values (as the
+controller will decompose over the index's rows), with the k the model records; each candidate
+controller of :data:`CANDIDATES` decides at every held-out step from those decompositions
+(:func:`aoc_cli.control.rule.choose`: the same rule as the controller, its residual cap scaled
+by the training rows' own typical p90 residual); each candidate's decisions are valued by fitted
+Q evaluation on the held-out episodes (:func:`aoc_cli.ope.fqe.fqe_policies`: one batched
+ensemble, :data:`aoc_cli.ope.fqe.REFITS` bootstrap refits over the episodes, the 95% interval
+by Student's t). The rule:
+
+    the candidate with the highest lower bound of its 95% interval; of equal bounds the
+    more conservative (earlier in :data:`CANDIDATES`).
+
+The final model is the one trained: the selection changes no weight and no value, only the
+controller's settings saved with it (``metrics.controller``), so the model keeps its quality
+and the index holds every row. The value targets were computed on the whole log (the
+behaviour's Q by FQE, :mod:`aoc_cli.belief.fqe`), so a held-out episode's transitions are in
+the training rows' values too; what the held-out episodes give the selection is states and
+outcomes that neither the belief's weights nor the decompositions' rows hold.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import torch
+
+from aoc_cli.belief.model import Encoder
+from aoc_cli.control.config import ControllerConfig
+from aoc_cli.control.rule import choose, residual_cap
+from aoc_cli.control.support import row_episodes, support_episodes
+from aoc_cli.decompose import decompose
+from aoc_cli.neighbours import BeliefIndex
+from aoc_cli.ope.fqe import REFITS, fqe_policies, student_quantile
+from aoc_cli.ope.policies import truncated
+from aoc_cli.threads import one_thread
+
+#: The candidate controllers, the most conservative first (the ties' order): rule 2's (an
+#: action trusted only where the log took it in that state, its value shrunk by the episodes
+#: behind it), each of its two parts alone, and the paper's.
+CANDIDATES = (
+    {"residual_cap": 0.01, "support_penalty": 5.0},
+    {"residual_cap": None, "support_penalty": 5.0},
+    {"residual_cap": 0.01, "support_penalty": None},
+    {"residual_cap": None, "support_penalty": None},
+)
+#: The settings the selection chooses (given any of them, ``aoc train`` selects nothing).
+CHOSEN = ("residual_cap", "support_penalty")
+#: Training rows sampled for their typical residual (leave-those-rows-out), as the index does.
+TYPICAL_SAMPLE = 500
+#: FQE's gradient steps (None: :func:`aoc_cli.ope.fqe.default_steps`, from the held-out
+#: episodes' horizon) and bootstrap refits.
+FQE_STEPS, FQE_REFITS = None, REFITS
+#: Held-out steps x actions whose beliefs are computed at once.
+BLOCK = 65536
+RULE = ("the highest lower bound of the 95% interval of FQE on the held-out episodes; of "
+        "equal bounds the more conservative")
+
+
+def held_out_steps(corpus, data) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(rows (R,), starts (E_v + 1,), truncated (E_v,)) of the validation episodes, in the
+    order of ``data.val_rows``."""
+    starts = np.asarray(corpus.episode_starts, np.int64)
+    eps = np.asarray(data.val_episodes, np.int64)
+    lengths = starts[eps + 1] - starts[eps]
+    rows = np.asarray(data.val_rows, np.int64)
+    return rows, np.concatenate([[0], np.cumsum(lengths)]), truncated(corpus)[eps]
+
+
+def decompositions(net, inputs, data, norm, corpus, k: int, seed: int = 0) -> dict:
+    """Every action at every held-out step decomposed over the training rows: residual,
+    value, support (R, n), sigma_v, the training rows' typical p90 residual, and how many
+    distinct beliefs were decomposed."""
+    device = inputs.obs.device
+    n = int(corpus.n_actions)
+    encoder = Encoder(norm, True, n, device)
+    tr = torch.as_tensor(data.train_rows, device=device)
+    rows, _, _ = held_out_steps(corpus, data)
+    with torch.no_grad():
+        b_tr = torch.cat([net(*inputs.batch(tr[i:i + BLOCK]))[0]
+                          for i in range(0, len(tr), BLOCK)]).cpu().numpy()
+        per = max(1, BLOCK // n)
+        out = []
+        for i in range(0, len(rows), per):
+            obs, _act, steps = inputs.batch(torch.as_tensor(rows[i:i + per], device=device))
+            memory = net.memory(steps)
+            m = len(obs)
+            acts = encoder.actions(np.tile(np.arange(n), m))
+            out.append(net.belief_from_memory(
+                None if memory is None else memory.repeat_interleave(n, 0),
+                obs.repeat_interleave(n, 0), acts).cpu().numpy())
+    beliefs = np.ascontiguousarray(np.concatenate(out), dtype=np.float32)     # (R n, d_b)
+    # the same belief decomposes the same: each distinct one once (a state policy's held-out
+    # steps revisit a few hundred states)
+    keys = beliefs.view(np.dtype((np.void, beliefs.itemsize * beliefs.shape[1]))).ravel()
+    _, first, of = np.unique(keys, return_index=True, return_inverse=True)
+    values = np.asarray(data.values, np.float64)[data.train_rows]
+    index = BeliefIndex.build(b_tr, kind="flat")
+    dec = decompose(b_tr, beliefs[first], k=k, values=values, index=index)
+    episode = row_episodes(corpus.episode_starts)[data.train_rows]
+    support, _ = support_episodes(b_tr, dec.rows, dec.weights, dec.neighbours, episode)
+    rng = np.random.default_rng(seed)
+    sample = np.sort(rng.choice(len(b_tr), size=min(TYPICAL_SAMPLE, len(b_tr) // 2),
+                                replace=False))
+    keep = np.ones(len(b_tr), bool)
+    keep[sample] = False
+    typical = decompose(b_tr, b_tr[sample], k=k, values=values, index=index, selection=keep)
+    of = np.asarray(of).reshape(-1)
+    return {"residual": np.asarray(dec.residual, np.float64)[of].reshape(len(rows), n),
+            "value": np.asarray(dec.value, np.float64)[of].reshape(len(rows), n),
+            "support": np.asarray(support, np.float64)[of].reshape(len(rows), n),
+            "value_std": float(np.std(values)) if len(values) else 1.0,
+            "p90": float(np.quantile(typical.residual, 0.9)), "distinct": int(len(first))}
+
+
+def decisions(parts: dict, candidates=CANDIDATES) -> list[np.ndarray]:
+    """(R,) each candidate's action at every held-out step (:func:`choose`, epsilon the
+    model's controller's)."""
+    out = []
+    for settings in candidates:
+        config = ControllerConfig(**settings)
+        _, _, chosen = choose(parts["residual"], parts["value"], config,
+                              cap=residual_cap(config.residual_cap, parts["p90"]),
+                              support=parts["support"], value_std=parts["value_std"])
+        out.append(np.asarray(chosen, np.int64))
+    return out
+
+
+def pick(estimates: list[dict]) -> int:
+    """The rule (module docstring): the index of the highest lower bound, the first of
+    equals."""
+    lows = [e["low"] for e in estimates]
+    return int(np.argmax(lows))   # argmax takes the first of equals: the more conservative
+
+
+def select_controller(net, inputs, data, norm, corpus, config, k: int,
+                      progress=None, candidates=CANDIDATES) -> dict:
+    """The selection of the module docstring on a trained model: {"chosen" (settings),
+    "candidates" [{settings, estimate, low, high, agrees}], "episodes", "steps", "rule",
+    "seconds"}. ``config`` the model's BeliefConfig (its gamma, seed); ``progress``: FQE's
+    member-steps, labelled. Runs with one thread in torch, FAISS and BLAS, as a control step
+    and ``aoc evaluate``'s FQE do (FQE's parts fork: :mod:`aoc_cli.ope.parts`)."""
+    with one_thread():
+        return _select(net, inputs, data, norm, corpus, config, k, progress, candidates)
+
+
+def _select(net, inputs, data, norm, corpus, config, k, progress, candidates) -> dict:
+    started = time.perf_counter()
+    rows, starts, cut = held_out_steps(corpus, data)
+    n_eps = len(starts) - 1
+    if progress is not None:
+        progress(0, None, f"choosing the controller: {len(candidates)} candidates decide "
+                          f"{len(rows):,} held-out steps")
+    parts = decompositions(net, inputs, data, norm, corpus, k, config.seed)
+    chosen = decisions(parts, candidates)
+    n = int(corpus.n_actions)
+    logged = np.asarray(corpus.actions, np.int64)[rows]
+    policies = [np.eye(n)[c] for c in chosen]
+    text = (f"choosing the controller: FQE of {len(candidates)} candidates on {n_eps:,} "
+            "held-out episodes")
+    tick = None if progress is None else (lambda done, total: progress(done, total, text))
+    fits = fqe_policies(np.asarray(corpus.observations)[rows], logged,
+                        np.asarray(corpus.rewards, np.float64)[rows], starts, policies,
+                        float(config.gamma), FQE_STEPS, FQE_REFITS, seed=config.seed,
+                        progress=tick, truncated=cut)
+    estimates = [{"settings": dict(s), "estimate": float(f["estimate"]),
+                  "low": float(f["low"]), "high": float(f["high"]),
+                  "agrees": float(np.mean(c == logged))}
+                 for s, f, c in zip(candidates, fits, chosen)]
+    best = pick(estimates)
+    return {"chosen": dict(candidates[best]), "candidates": estimates, "episodes": n_eps,
+            "steps": int(len(rows)), "distinct": parts["distinct"], "rule": RULE,
+            "interval": f"+- {student_quantile(FQE_REFITS - 1):.3g} sd of {FQE_REFITS} refits",
+            "fqe_steps": int(fits[0]["steps"]), "seconds": time.perf_counter() - started}
+
+
+def recording_hook(corpus, config, k: int, extra: dict, progress=None):
+    """An ``inspect`` hook for :func:`aoc_cli.belief.train.train_model`: runs
+    :func:`select_controller` and records its choice in ``extra`` (the ``controller``
+    settings saved with the model, the ``settings`` reasons ``aoc train`` prints)."""
+
+    def inspect(net, inputs, data, norm) -> dict:
+        out = select_controller(net, inputs, data, norm, corpus, config, k, progress)
+        extra["controller"].update(out["chosen"])
+        decided = [r for r in extra["settings"]["decided"] if r["setting"] not in CHOSEN]
+        for name in CHOSEN:
+            decided.append({
+                "setting": name, "value": out["chosen"][name],
+                "why": f"chosen among {len(out['candidates'])} controllers by {RULE} "
+                       f"({out['episodes']:,} episodes, {out['steps']:,} steps; each "
+                       "candidate's value below)", "seconds": out["seconds"]})
+        extra["settings"]["decided"] = decided
+        extra["settings"]["controller_selection"] = out
+        return {}
+
+    return inspect

@@ -1,0 +1,118 @@
+"""The controller chosen on held-out episodes (aoc_cli.evaluation.selection, rule 6 of
+docs/design.md "Settings from the log's evidence"): each candidate decides by the controller's
+own rule, the rule takes the highest lower bound (ties: the more conservative), ``aoc train``
+records what it chose and why, a setting given or --no-select skips it; the k saved with the
+model reaches the index and every decision unless --k is given."""
+
+import json
+
+import numpy as np
+import pytest
+
+import aoc_cli
+from aoc_cli.envs import collect
+from aoc_cli.evaluation import selection
+from aoc_cli.store import Store
+from tests.plain_log import write_plain_npz
+
+
+def test_the_rule_takes_the_highest_lower_bound_and_the_first_of_equals():
+    assert selection.pick([{"low": 0.5}, {"low": 0.6}, {"low": 0.6}, {"low": 0.1}]) == 1
+    assert selection.pick([{"low": 0.3}] * 4) == 0
+    assert selection.CANDIDATES[0] == {"residual_cap": 0.01, "support_penalty": 5.0}
+    assert selection.CANDIDATES[-1] == {"residual_cap": None, "support_penalty": None}
+
+
+def test_each_candidate_decides_by_the_controllers_rule():
+    # four actions at one step: the median residual 0.02 passes all, the cap (0.01 x p90 1)
+    # only action 0; action 2 has the best value but one episode behind it
+    parts = {"residual": np.array([[0.0, 0.02, 0.02, 0.02]]),
+             "value": np.array([[0.0, 0.5, 1.0, 0.2]]),
+             "support": np.array([[50.0, 50.0, 1.0, 50.0]]), "value_std": 1.0, "p90": 1.0}
+    chosen = [int(c[0]) for c in selection.decisions(parts)]
+    # cap and penalty: 0; penalty: 1 (0.5 - 5/sqrt(50) beats 1 - 5); cap: 0; neither: 2
+    assert chosen == [0, 1, 0, 2]
+
+
+@pytest.fixture(scope="module")
+def icu(tmp_path_factory):
+    """A plain-file icu-sepsis log (150 episodes, 30 held out) and its model trained once as
+    ``aoc train`` trains it, the selection's FQE cut short (200 steps, 3 refits), and indexed;
+    the progress labels it showed."""
+    from tests.conftest import run_aoc
+
+    root = tmp_path_factory.mktemp("select")
+    data, _ = collect("icu-sepsis", episodes=150, seed=0)
+    path = write_plain_npz(data, root / "icu.npz")
+    code, _out, err = run_aoc("--store", str(root / "store"), "ingest", str(path), "--name",
+                              "icu")
+    assert code == 0, err
+    steps, refits = selection.FQE_STEPS, selection.FQE_REFITS
+    selection.FQE_STEPS, selection.FQE_REFITS = 200, 3
+    labels = []
+    try:
+        trained = aoc_cli.train("icu", store=root / "store", threads=1, max_epochs=1, hidden=8,
+                                progress=lambda done, total=None, label=None:
+                                labels.append(label))
+    finally:
+        selection.FQE_STEPS, selection.FQE_REFITS = steps, refits
+    aoc_cli.build_index("icu", store=root / "store")
+    return root / "store", trained.metrics, labels
+
+
+def test_train_chooses_the_controller_on_held_out_episodes(icu):
+    store, metrics, labels = icu
+    chosen = metrics["settings"]["controller_selection"]
+    lows = [c["low"] for c in chosen["candidates"]]
+    assert len(lows) == 4 and all(np.isfinite(lows))
+    best = selection.CANDIDATES[int(np.argmax(lows))]
+    assert chosen["chosen"] == best
+    assert {k: metrics["controller"][k] for k in best} == best
+    assert chosen["episodes"] == 30 and chosen["steps"] == metrics["val_rows"]
+    why = {r["setting"]: r["why"] for r in metrics["settings"]["decided"]}
+    assert why["support_penalty"].startswith("chosen among 4 controllers by the highest lower")
+    assert any(label and label.startswith("choosing the controller: FQE") for label in labels)
+    # the choice is saved with the model and every decision takes it, each flag over it
+    own = aoc_cli.open_session("icu", store=store).controller.config
+    assert (own.residual_cap, own.support_penalty) == (best["residual_cap"],
+                                                        best["support_penalty"])
+    flag = aoc_cli.open_session("icu", store=store, controller={"support_penalty": 1.0})
+    assert flag.controller.config.support_penalty == 1.0
+
+
+def test_the_k_rule_is_saved_with_the_model_and_the_index_takes_it(icu):
+    store, metrics, _ = icu
+    config = json.loads((Store(store).corpus("icu").models_dir / "default" / "config.json")
+                        .read_text())
+    rule = 2 * (config["config"]["belief_dim"] + 1)  # the paper's, for a value model
+    assert metrics["controller"]["k"] == config["metrics"]["controller"]["k"] == rule
+    assert aoc_cli.open_session("icu", store=store).controller.k == rule
+
+
+def test_a_setting_given_skips_the_choice_and_k_travels_with_the_model(icu, aoc):
+    store = str(icu[0])
+    code, out, err = aoc("--store", store, "train", "icu", "--model", "given",
+                         "--support-penalty", "2", "--k", "7", "--threads", "1", "--epochs",
+                         "1", "--hidden", "8", "--format", "json")
+    assert code == 0, err
+    metrics = json.loads(out)
+    assert "controller_selection" not in metrics["settings"]
+    # what was given, and rule 2's cap for the setting not given
+    assert metrics["controller"] == {"support_penalty": 2.0, "residual_cap": 0.01, "k": 7}
+    code, out, err = aoc("--store", store, "index", "icu", "--model", "given", "--format",
+                         "json")
+    assert code == 0, err
+    assert json.loads(out)["k"] == 7
+    session = aoc_cli.open_session("icu", model="given", store=store)
+    assert session.controller.k == 7 and session.controller.config.support_penalty == 2.0
+    over = aoc_cli.open_session("icu", model="given", store=store, controller={"k": 9})
+    assert over.controller.k == 9
+
+
+def test_train_refuses_a_controller_setting_it_does_not_save(icu, aoc):
+    store = str(icu[0])
+    code, _out, err = aoc("--store", store, "train", "icu", "--residual-cap", "0")
+    assert code == 2 and err.strip().startswith("aoc: error:") and "--residual-cap" in err
+    with pytest.raises(Exception, match="sampler"):
+        aoc_cli.train("icu", store=store, controller={"sampler": "bc"})
+
