@@ -55,7 +55,8 @@ def neighbours(corpus: Corpus, model, candidates: str = "auto") -> tuple[int, st
                          f"{corpus.name!r} has continuous ones")
     imitation = model.mode == "imitation" and bool(corpus.discrete) and corpus.n_rows > 0
     k, how = index_k(model.d_b, corpus, imitation, candidates)
-    saved = ((model.meta.get("metrics") or {}).get("controller") or {}).get("k")
+    meta = getattr(model, "meta", None) or {}  # a model-free session has none
+    saved = ((meta.get("metrics") or {}).get("controller") or {}).get("k")
     if candidates == "auto" and saved is not None:  # the k saved with the model
         k = int(saved)
     return k, how
