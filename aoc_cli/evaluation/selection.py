@@ -14,7 +14,10 @@ ensemble, :data:`aoc_cli.ope.fqe.REFITS` bootstrap refits over the episodes, the
 by Student's t). The rule:
 
     the candidate with the highest lower bound of its 95% interval; of equal bounds the
-    more conservative (earlier in :data:`CANDIDATES`).
+    more conservative (earlier in :data:`CANDIDATES`). An estimate outside the held-out
+    episodes' returns (FQE diverged: seen on icu-sepsis-terminate's 1k log) is no estimate:
+    that candidate is not chosen, and when rule 2's own candidate has none the log cannot
+    weigh the others against it, so it is kept.
 
 The final model is the one trained: the selection changes no weight and no value, only the
 controller's settings saved with it (``metrics.controller``), so the model keeps its quality
@@ -60,7 +63,8 @@ FQE_STEPS, FQE_REFITS = None, REFITS
 #: Held-out steps x actions whose beliefs are computed at once.
 BLOCK = 65536
 RULE = ("the highest lower bound of the 95% interval of FQE on the held-out episodes; of "
-        "equal bounds the more conservative")
+        "equal bounds the more conservative; an estimate outside the episodes' returns is "
+        "none (rule 2's kept when it has none)")
 
 
 def held_out_steps(corpus, data) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -132,10 +136,20 @@ def decisions(parts: dict, candidates=CANDIDATES) -> list[np.ndarray]:
     return out
 
 
-def pick(estimates: list[dict]) -> int:
+def pick(estimates: list[dict], span: tuple[float, float] | None = None) -> int:
     """The rule (module docstring): the index of the highest lower bound, the first of
-    equals."""
-    lows = [e["low"] for e in estimates]
+    equals. ``span`` (lowest, highest): the held-out episodes' returns; an estimate outside
+    it (by more than a tenth of its width: FQE diverged) is no estimate, and that candidate is
+    not chosen; when the first (rule 2's) has none, the log cannot weigh anything against
+    it, and it is kept."""
+    lows = np.array([e["low"] for e in estimates], np.float64)
+    if span is not None:
+        slack = 0.1 * max(span[1] - span[0], 1e-12)
+        valued = np.array([span[0] - slack <= e["estimate"] <= span[1] + slack
+                           and np.isfinite(e["low"]) for e in estimates])
+        if not valued[0]:
+            return 0
+        lows = np.where(valued, lows, -np.inf)
     return int(np.argmax(lows))   # argmax takes the first of equals: the more conservative
 
 
@@ -173,7 +187,9 @@ def _select(net, inputs, data, norm, corpus, config, k, progress, candidates) ->
                   "low": float(f["low"]), "high": float(f["high"]),
                   "agrees": float(np.mean(c == logged))}
                  for s, f, c in zip(candidates, fits, chosen)]
-    best = pick(estimates)
+    returns = np.add.reduceat(np.asarray(corpus.rewards, np.float64)[rows]
+                              * float(config.gamma) ** _steps_in(starts), starts[:-1])
+    best = pick(estimates, (float(returns.min()), float(returns.max())))
     return {"chosen": dict(candidates[best]), "candidates": estimates, "episodes": n_eps,
             "steps": int(len(rows)), "distinct": parts["distinct"], "rule": RULE,
             "interval": f"+- {student_quantile(FQE_REFITS - 1):.3g} sd of {FQE_REFITS} refits",
@@ -200,3 +216,10 @@ def recording_hook(corpus, config, k: int, extra: dict, progress=None):
         return {}
 
     return inspect
+
+
+def _steps_in(starts: np.ndarray) -> np.ndarray:
+    """(N,) each held-out step's index within its episode (``starts``: the (E + 1,) row
+    offsets of the episodes)."""
+    lengths = np.diff(starts)
+    return np.arange(int(starts[-1])) - np.repeat(starts[:-1], lengths)

@@ -23,6 +23,19 @@ def test_the_rule_takes_the_highest_lower_bound_and_the_first_of_equals():
     assert selection.CANDIDATES[-1] == {"residual_cap": None, "support_penalty": None}
 
 
+def test_an_estimate_outside_the_returns_is_none_and_keeps_rule_2s_candidate():
+    """FQE diverged on icu-sepsis-terminate's 1k log (26.7 [-60.8, 114.2] for survival in
+    [0, 1]): such a candidate is never chosen; when it is the first, it is kept."""
+    def e(estimate, low):
+        return {"estimate": estimate, "low": low}
+
+    span = (0.0, 1.0)
+    assert selection.pick([e(0.8, 0.7), e(26.7, 0.9), e(0.85, 0.75)], span) == 2
+    assert selection.pick([e(26.7, -60.8), e(0.32, 0.2), e(0.53, 0.47)], span) == 0
+    assert selection.pick([e(26.7, -60.8), e(0.32, 0.2), e(0.53, 0.47)]) == 2  # no span
+    assert selection.pick([e(0.5, 0.4), e(1.05, 0.95)], span) == 1  # within a tenth
+
+
 def test_each_candidate_decides_by_the_controllers_rule():
     # four actions at one step: the median residual 0.02 passes all, the cap (0.01 x p90 1)
     # only action 0; action 2 has the best value but one episode behind it
