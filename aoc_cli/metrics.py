@@ -1,4 +1,5 @@
-"""Metrics of decisions scored against a log (``aoc evaluate``), with scikit-learn and scipy.
+"""Metrics of decisions scored against a log (``aoc evaluate``), with scikit-learn and scipy
+(R^2 and MAE in numpy: :func:`_r2`).
 
 Shapes: S scored steps; n actions (discrete); d_a action dims (continuous).
 
@@ -80,25 +81,36 @@ def classification(y: np.ndarray, decided: np.ndarray, scores: np.ndarray,
     return out
 
 
+def _r2(y: np.ndarray, pred: np.ndarray) -> float:
+    """R^2 of pred against y, both (S, d), averaged uniformly over the d columns, as
+    scikit-learn's ``r2_score`` (a constant column scores 1 if predicted exactly, else 0).
+    Written here because importing sklearn.metrics costs ~1.4 s, more than the rest of
+    ``aoc evaluate``'s summary (docs/benchmarks.md, "The whole OPE, paired")."""
+    ss_res = ((y - pred) ** 2).sum(0)
+    ss_tot = ((y - y.mean(0)) ** 2).sum(0)
+    ok = ss_tot != 0
+    col = np.where(ss_res == 0, 1.0, 0.0)
+    col[ok] = 1.0 - ss_res[ok] / ss_tot[ok]
+    return float(col.mean())
+
+
 def regression(y: np.ndarray, pred: np.ndarray) -> dict:
     """Continuous imitation: MAE and R^2 of decided actions (S, d_a) against logged (S, d_a)."""
-    from sklearn.metrics import mean_absolute_error, r2_score
-
     y, pred = np.asarray(y, float).reshape(len(y), -1), np.asarray(pred, float).reshape(len(y), -1)
-    r2 = r2_score(y, pred) if len(y) > 1 else None
-    return {"mae": float(mean_absolute_error(y, pred)), "r2": _f(r2),
+    r2 = _r2(y, pred) if len(y) > 1 else None
+    return {"mae": float(np.mean(np.abs(y - pred))), "r2": _f(r2),
             "mean_baseline_mae": float(np.mean(np.abs(y - y.mean(0))))}
 
 
 def value_fit(target: np.ndarray, v_hat: np.ndarray) -> dict:
     """v_hat (S,) against the logged value target (S,): R^2, MAE, Spearman's rho."""
     from scipy.stats import spearmanr
-    from sklearn.metrics import mean_absolute_error, r2_score
 
+    target, v_hat = np.asarray(target, float), np.asarray(v_hat, float)
     rho = spearmanr(target, v_hat).statistic if len(target) > 2 and np.ptp(target) > 0 \
         and np.ptp(v_hat) > 0 else None
-    return {"value_r2": _f(r2_score(target, v_hat)) if len(target) > 1 else None,
-            "value_mae": float(mean_absolute_error(target, v_hat)),
+    return {"value_r2": _f(_r2(target[:, None], v_hat[:, None])) if len(target) > 1 else None,
+            "value_mae": float(np.mean(np.abs(target - v_hat))),
             "value_spearman": _f(rho),
             "mean_baseline_mae": float(np.mean(np.abs(target - target.mean())))}
 
