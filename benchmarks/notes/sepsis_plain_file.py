@@ -4,7 +4,8 @@ every live state decided once by the controller with the settings saved with the
 exact survival of that state policy (one linear solve over the package's tables), beside the
 clinicians'. docs/results.md, "icu-sepsis", "From a plain file".
 
-    python benchmarks/notes/sepsis_plain_file.py --episodes 10000 --seed 0 --store /tmp/x
+    python benchmarks/notes/sepsis_plain_file.py --episodes 10000 --seed 0 --store /tmp/x \
+        [--threads 1]
 """
 
 from __future__ import annotations
@@ -40,6 +41,8 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--task", default="icu-sepsis")
     ap.add_argument("--store", required=True)
+    ap.add_argument("--threads", type=int, default=None,
+                    help="aoc train's --threads (default: the cores)")
     args = ap.parse_args()
     root = Path(args.store)
     root.mkdir(parents=True, exist_ok=True)
@@ -56,7 +59,8 @@ def main() -> None:
             print(f"{time.perf_counter() - started:8.1f} s  {label}", file=sys.stderr,
                   flush=True)
 
-    trained = aoc_cli.train(name, store=root, overwrite=True, progress=progress)
+    trained = aoc_cli.train(name, store=root, overwrite=True, progress=progress,
+                            threads=args.threads)
     train_seconds = time.perf_counter() - started
     aoc_cli.build_index(name, store=root)
     session = aoc_cli.open_session(name, store=root)
