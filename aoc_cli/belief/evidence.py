@@ -212,9 +212,15 @@ def selection_lines(out: dict) -> list[str]:
     :func:`aoc_cli.evaluation.selection.select_controller`): one line per candidate, its FQE
     estimate and interval, the chosen one marked."""
     width = max(len(label(e["settings"])) for e in out["candidates"])
+    def pairs(e: dict) -> str:
+        if "pairs" not in e:
+            return ""
+        return (f"; its median decision held out {e['pairs']:g} times"
+                + ("" if e.get("valued", True) else f" ({e.get('not_valued', 'no estimate')})"))
+
     return [f"{label(e['settings']):<{width}}  FQE {e['estimate']:.4f} [{e['low']:.4f}, "
             f"{e['high']:.4f}], the logged action at {e['agrees']:.0%} of the steps"
-            + ("  <- chosen" if e["settings"] == out["chosen"] else "")
+            + pairs(e) + ("  <- chosen" if e["settings"] == out["chosen"] else "")
             for e in out["candidates"]]
 
 

@@ -14,10 +14,15 @@ ensemble, :data:`aoc_cli.ope.fqe.REFITS` bootstrap refits over the episodes, the
 by Student's t). The rule:
 
     the candidate with the highest lower bound of its 95% interval; of equal bounds the
-    more conservative (earlier in :data:`CANDIDATES`). An estimate outside the held-out
-    episodes' returns (FQE diverged: seen on icu-sepsis-terminate's 1k log) is no estimate:
-    that candidate is not chosen, and when rule 2's own candidate has none the log cannot
-    weigh the others against it, so it is kept.
+    more conservative (earlier in :data:`CANDIDATES`). Two kinds of estimate are no
+    estimate: one outside the held-out episodes' returns (FQE diverged: seen on
+    icu-sepsis-terminate's 1k log), and one the held-out log does not support: a candidate
+    whose decision, at half of the held-out steps or more, is an action the held-out
+    episodes took fewer than :data:`MIN_PAIRS` times in that state (its median pair count;
+    FQE's Q of such a pair is the network's extrapolation, and it came out high: seen on
+    icu-sepsis's 50k log, the cap alone 0.888 [0.852, 0.923] by FQE, 0.788 exact). A
+    candidate without an estimate is not chosen, and when rule 2's own candidate has none
+    the log cannot weigh the others against it, so it is kept.
 
 The final model is the one trained: the selection changes no weight and no value, only the
 controller's settings saved with it (``metrics.controller``), so the model keeps its quality
@@ -62,9 +67,13 @@ TYPICAL_SAMPLE = 500
 FQE_STEPS, FQE_REFITS = None, REFITS
 #: Held-out steps x actions whose beliefs are computed at once.
 BLOCK = 65536
+#: The held-out transitions of a (state, action) pair below which FQE's Q of it is the
+#: network's extrapolation: a candidate whose median decision has fewer is not valued.
+MIN_PAIRS = 3
 RULE = ("the highest lower bound of the 95% interval of FQE on the held-out episodes; of "
-        "equal bounds the more conservative; an estimate outside the episodes' returns is "
-        "none (rule 2's kept when it has none)")
+        "equal bounds the more conservative; an estimate outside the episodes' returns, or "
+        f"of a candidate whose median decision the held-out episodes took fewer than "
+        f"{MIN_PAIRS} times in that state, is none (rule 2's kept when it has none)")
 
 
 def held_out_steps(corpus, data) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -136,27 +145,55 @@ def decisions(parts: dict, candidates=CANDIDATES) -> list[np.ndarray]:
     return out
 
 
+def valued(estimates: list[dict], span: tuple[float, float] | None = None) -> list[str]:
+    """Per candidate, why its estimate is none ("" where it is an estimate): its lower bound
+    not finite; outside ``span`` (lowest, highest: the held-out episodes' returns) by more
+    than a tenth of its width (FQE diverged); its ``pairs`` (the held-out count of the pair
+    its median decision takes, where given) below :data:`MIN_PAIRS` (FQE extrapolated)."""
+    out = []
+    slack = None if span is None else 0.1 * max(span[1] - span[0], 1e-12)
+    for e in estimates:
+        if not np.isfinite(e["low"]):
+            out.append("no interval")
+        elif span is not None and not span[0] - slack <= e["estimate"] <= span[1] + slack:
+            out.append("outside the held-out returns: FQE diverged")
+        elif e.get("pairs", MIN_PAIRS) < MIN_PAIRS:
+            out.append(f"fewer than {MIN_PAIRS}: FQE's Q there extrapolates")
+        else:
+            out.append("")
+    return out
+
+
 def pick(estimates: list[dict], span: tuple[float, float] | None = None) -> int:
     """The rule (module docstring): the index of the highest lower bound, the first of
-    equals. ``span`` (lowest, highest): the held-out episodes' returns; an estimate outside
-    it (by more than a tenth of its width: FQE diverged) is no estimate, and that candidate is
-    not chosen; when the first (rule 2's) has none, the log cannot weigh anything against
-    it, and it is kept."""
-    lows = np.array([e["low"] for e in estimates], np.float64)
-    if span is not None:
-        slack = 0.1 * max(span[1] - span[0], 1e-12)
-        valued = np.array([span[0] - slack <= e["estimate"] <= span[1] + slack
-                           and np.isfinite(e["low"]) for e in estimates])
-        if not valued[0]:
-            return 0
-        lows = np.where(valued, lows, -np.inf)
+    equals, among the candidates with an estimate (:func:`valued`); when the first (rule
+    2's) has none, the log cannot weigh anything against it, and it is kept."""
+    why = valued(estimates, span)
+    if why[0]:
+        return 0
+    lows = np.array([-np.inf if w else e["low"] for e, w in zip(estimates, why)], np.float64)
     return int(np.argmax(lows))   # argmax takes the first of equals: the more conservative
+
+
+def pair_counts(observations: np.ndarray, logged: np.ndarray, n: int,
+                chosen: list[np.ndarray]) -> list[np.ndarray]:
+    """(R,) per candidate: how many held-out steps took, in the state of each held-out step
+    (its observation (R, d_o), exactly: rule 2's finite state), the action the candidate
+    decides there (its ``chosen`` (R,)); ``logged`` (R,) the actions the steps took."""
+    obs = np.ascontiguousarray(observations)
+    keys = obs.view(np.dtype((np.void, obs.itemsize * obs.shape[1]))).ravel()
+    _, state = np.unique(keys, return_inverse=True)
+    state = np.asarray(state, np.int64).reshape(-1)
+    table = np.bincount(state * n + logged, minlength=(int(state.max()) + 1) * n)
+    return [table[state * n + np.asarray(c, np.int64)] for c in chosen]
 
 
 def select_controller(net, inputs, data, norm, corpus, config, k: int,
                       progress=None, candidates=CANDIDATES) -> dict:
     """The selection of the module docstring on a trained model: {"chosen" (settings),
-    "candidates" [{settings, estimate, low, high, agrees}], "episodes", "steps", "rule",
+    "candidates" [{settings, estimate, low, high, agrees (the share of held-out steps where
+    it decides the logged action), pairs (the held-out count of its median decision's
+    pair), rare (the share of its decisions below MIN_PAIRS)}], "episodes", "steps", "rule",
     "seconds"}. ``config`` the model's BeliefConfig (its gamma, seed); ``progress``: FQE's
     member-steps, labelled. Runs with one thread in torch, FAISS and BLAS, as a control step
     and ``aoc evaluate``'s FQE do (FQE's parts fork: :mod:`aoc_cli.ope.parts`)."""
@@ -183,13 +220,20 @@ def _select(net, inputs, data, norm, corpus, config, k, progress, candidates) ->
                         np.asarray(corpus.rewards, np.float64)[rows], starts, policies,
                         float(config.gamma), FQE_STEPS, FQE_REFITS, seed=config.seed,
                         progress=tick, truncated=cut)
+    held = pair_counts(np.asarray(corpus.observations)[rows], logged, n, chosen)
     estimates = [{"settings": dict(s), "estimate": float(f["estimate"]),
                   "low": float(f["low"]), "high": float(f["high"]),
-                  "agrees": float(np.mean(c == logged))}
-                 for s, f, c in zip(candidates, fits, chosen)]
+                  "agrees": float(np.mean(c == logged)), "pairs": float(np.median(h)),
+                  "rare": float(np.mean(h < MIN_PAIRS))}
+                 for s, f, c, h in zip(candidates, fits, chosen, held)]
     returns = np.add.reduceat(np.asarray(corpus.rewards, np.float64)[rows]
                               * float(config.gamma) ** _steps_in(starts), starts[:-1])
-    best = pick(estimates, (float(returns.min()), float(returns.max())))
+    span = (float(returns.min()), float(returns.max()))
+    for e, why in zip(estimates, valued(estimates, span)):
+        e["valued"] = not why
+        if why:
+            e["not_valued"] = why
+    best = pick(estimates, span)
     return {"chosen": dict(candidates[best]), "candidates": estimates, "episodes": n_eps,
             "steps": int(len(rows)), "distinct": parts["distinct"], "rule": RULE,
             "interval": f"+- {student_quantile(FQE_REFITS - 1):.3g} sd of {FQE_REFITS} refits",
