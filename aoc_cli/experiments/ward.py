@@ -167,7 +167,8 @@ def plot(summary: list[dict], out_png: Path) -> None:
 def run_ward(out: Path, bench_store: Path, scale: str = "full", splits: int | None = None,
              log=None, progress=None, source: str = "ward", patients: int | None = None) -> dict:
     """Collect the log (``source``) of ``patients`` stays (default: the scale's), run every
-    split, write the outputs; the report."""
+    split, write the outputs; the report. ``results.csv`` is rewritten (atomically) as each
+    split ends, so a run stopped part way keeps the splits it finished."""
     if source not in SOURCES:
         source_log(source, 1)  # the one-line error
     cfg = (MEDKIT_SCALES if source == "medkit" else SCALES)[scale]
@@ -183,6 +184,7 @@ def run_ward(out: Path, bench_store: Path, scale: str = "full", splits: int | No
         progress(0, n_splits, "bench ward")
     for s in range(n_splits):
         rows += run_split(store, data, s, patients, name=source)
+        write_rows_csv(out / "results.csv", rows)  # each split's rows kept as it ends
         if progress is not None:
             progress(s + 1, n_splits, "bench ward")
         if log is not None:
@@ -190,7 +192,6 @@ def run_ward(out: Path, bench_store: Path, scale: str = "full", splits: int | No
             auc = "n/a (one action held out)" if abc["auc"] is None else f"{abc['auc']:.3f}"
             log(f"{source} split {s}: abc accuracy {abc['accuracy']:.3f} auc {auc}")
     summary = summarise(rows)
-    write_rows_csv(out / "results.csv", rows)
     with atomic_path(out / "summary.json", suffix=".json") as tmp:
         Path(tmp).write_text(json.dumps({"scale": scale, "source": source,
                                          "log": data.source, "patients": patients,

@@ -32,3 +32,26 @@ def test_rows_csv_takes_every_key_in_first_seen_order(tmp_path):
     write_rows_csv(tmp_path / "r.csv", rows)
     assert (tmp_path / "r.csv").read_text() == "method,auc,split\nabc,0.5,\nknn,0.25,1\n"
     assert not list(tmp_path.glob("*.tmp"))
+
+
+def test_a_run_stopped_part_way_keeps_the_splits_it_finished(tmp_path, monkeypatch):
+    import csv
+
+    import pytest
+
+    from aoc_cli.experiments import ward
+
+    monkeypatch.setattr(ward, "source_log", lambda source, patients, seed=0: object())
+
+    def split(store, data, s, patients, seed=0, name="ward"):
+        if s == 2:
+            raise KeyboardInterrupt           # the user stops the run during split 2
+        return [{"method": "abc", "accuracy": 0.9 + s / 100, "auc": 0.95, "split": s}]
+
+    monkeypatch.setattr(ward, "run_split", split)
+    with pytest.raises(KeyboardInterrupt):
+        ward.run_ward(tmp_path / "out", tmp_path / "store", scale="quick")
+    with open(tmp_path / "out" / "results.csv") as f:
+        kept = list(csv.DictReader(f))
+    assert [(r["split"], r["accuracy"]) for r in kept] == [("0", "0.9"), ("1", "0.91")]
+    assert not (tmp_path / "out" / "summary.json").exists()
