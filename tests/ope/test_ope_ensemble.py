@@ -68,8 +68,17 @@ class D3rlpyFQE:
         return torch.as_tensor(self.actions, dtype=torch.long)
 
     def weights(self) -> list:
-        """Its network's weights in torch's layout, [W_1, b_1, ...]."""
-        return [t.detach().clone() for t in self.fqe.impl.modules.q_funcs.state_dict().values()]
+        """Its network's weights in torch's layout, [W_1, b_1, ...], read from the file of
+        d3rlpy's public ``save_model`` (its modules' state dicts, ``q_funcs`` the Q network)."""
+        import tempfile
+
+        import torch
+
+        with tempfile.TemporaryDirectory() as tmp:
+            path = f"{tmp}/fqe.pt"
+            self.fqe.save_model(path)
+            states = torch.load(path, weights_only=True)
+        return [t.detach().clone() for t in states["q_funcs"].values()]
 
     def update(self, rows, next_actions) -> None:
         from d3rlpy.dataset import TransitionMiniBatch
