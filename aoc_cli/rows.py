@@ -1,4 +1,5 @@
-"""Row masks and multiplicities from a corpus's tags, episodes and row ranges.
+"""Row masks and multiplicities from a corpus's tags, episodes and row ranges, and the
+distinct rows of an array (:func:`distinct_rows`).
 
 A selection (:func:`row_selection`) is an (N,) bool mask over corpus rows that the controller
 applies at query time, with no rebuild; a multiplicity (:func:`episode_multiplicity`) is the
@@ -78,3 +79,15 @@ def row_selection(corpus, select: dict[str, list[str]] | None = None,
     if not mask.any():
         raise AocError("the row selection leaves no rows of the corpus")
     return mask
+
+
+def distinct_rows(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(first (U,), inverse (N,)) of the N rows of ``a`` (N, ...) compared as bytes (one
+    sort): the first row of each distinct one, in the rows' byte order, and each row's
+    index among them (``a[first][inverse]`` is ``a``)."""
+    if len(a) == 0:
+        return np.empty(0, np.int64), np.empty(0, np.int64)
+    a = np.ascontiguousarray(a).reshape(len(a), -1)
+    keys = a.view(np.dtype((np.void, a.dtype.itemsize * a.shape[1]))).ravel()
+    _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
+    return np.asarray(first, np.int64), np.asarray(inverse, np.int64).reshape(-1)

@@ -45,6 +45,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from aoc_cli.rows import distinct_rows
+
 #: Rule 2: the share of rows whose observation occurs at another row above which the log's
 #: states are taken as finite and revisited (icu-sepsis: 0.93; the continuous tasks <= 0.21).
 REPEATS = 0.5
@@ -88,10 +90,8 @@ class Evidence:
         lengths = np.diff(starts)
         rewards = corpus.rewards
         varies = rewards is not None and len(rewards) > 0 and bool(np.ptp(rewards) > 0)
-        obs = np.ascontiguousarray(np.asarray(corpus.observations))
-        obs = obs.reshape(len(obs), -1)
-        distinct = len(np.unique(obs.view(np.dtype((np.void, obs.dtype.itemsize
-                                                    * obs.shape[1]))))) if len(obs) else 0
+        obs = np.asarray(corpus.observations)
+        distinct = len(distinct_rows(obs)[0])
         longest = int(lengths.max()) if len(lengths) else 0
         return cls(rows=int(corpus.n_rows), episodes=int(len(lengths)),
                    discrete=bool(corpus.discrete),
@@ -100,7 +100,7 @@ class Evidence:
                    length_median=float(np.median(lengths)) if len(lengths) else 0.0,
                    length_max=longest,
                    at_limit=float(np.mean(lengths == longest)) if len(lengths) else 0.0,
-                   repeats=1.0 - distinct / len(obs) if len(obs) else 0.0)
+                   repeats=(len(obs) - distinct) / len(obs) if len(obs) else 0.0)
 
     def to_dict(self) -> dict:
         return asdict(self)

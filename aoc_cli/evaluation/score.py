@@ -47,6 +47,7 @@ from aoc_cli.evaluation.context import (
 from aoc_cli.evaluation.records import step_records  # noqa: F401 (re-exported)
 from aoc_cli.neighbours.strata import PerAction
 from aoc_cli.ope.policies import ope_block, put_ope, wanted
+from aoc_cli.rows import distinct_rows
 from aoc_cli.threads import one_thread
 
 #: Held-out steps per chunk (whole episodes; a chunk has at least one episode).
@@ -243,10 +244,7 @@ def distinct_inputs(obs: np.ndarray, hist) -> tuple[np.ndarray, np.ndarray]:
     and each step's one among them (``obs[first][inverse]`` is ``obs``)."""
     parts = [np.ascontiguousarray(obs, np.float64).reshape(len(obs), -1)]
     parts += [np.asarray(x, np.float64).reshape(len(obs), -1) for x in hist]
-    key = np.ascontiguousarray(np.concatenate(parts, axis=1))
-    view = key.view(np.dtype((np.void, key.dtype.itemsize * key.shape[1]))).ravel()
-    _, first, inverse = np.unique(view, return_index=True, return_inverse=True)
-    return first, inverse.reshape(-1)
+    return distinct_rows(np.concatenate(parts, axis=1))
 
 
 def _value_distinct(ctx, rows, ep, obs, hist, logged) -> StepScores:

@@ -39,6 +39,7 @@ import time
 import numpy as np
 import torch
 
+from aoc_cli.belief.evidence import SELECTED
 from aoc_cli.belief.model import Encoder
 from aoc_cli.control.config import ControllerConfig
 from aoc_cli.control.rule import choose, residual_cap
@@ -47,6 +48,7 @@ from aoc_cli.decompose import decompose
 from aoc_cli.neighbours import BeliefIndex
 from aoc_cli.ope.fqe import REFITS, fqe_policies, student_quantile
 from aoc_cli.ope.policies import truncated
+from aoc_cli.rows import distinct_rows
 from aoc_cli.threads import one_thread
 
 #: The candidate controllers, the most conservative first (the ties' order): rule 2's (an
@@ -58,8 +60,6 @@ CANDIDATES = (
     {"residual_cap": 0.01, "support_penalty": None},
     {"residual_cap": None, "support_penalty": None},
 )
-#: The settings the selection chooses (given any of them, ``aoc train`` selects nothing).
-CHOSEN = ("residual_cap", "support_penalty")
 #: Training rows sampled for their typical residual (leave-those-rows-out), as the index does.
 TYPICAL_SAMPLE = 500
 #: FQE's gradient steps (None: :func:`aoc_cli.ope.fqe.default_steps`, from the held-out
@@ -111,8 +111,7 @@ def decompositions(net, inputs, data, norm, corpus, k: int, seed: int = 0) -> di
     beliefs = np.ascontiguousarray(np.concatenate(out), dtype=np.float32)     # (R n, d_b)
     # the same belief decomposes the same: each distinct one once (a state policy's held-out
     # steps revisit a few hundred states)
-    keys = beliefs.view(np.dtype((np.void, beliefs.itemsize * beliefs.shape[1]))).ravel()
-    _, first, of = np.unique(keys, return_index=True, return_inverse=True)
+    first, of = distinct_rows(beliefs)
     values = np.asarray(data.values, np.float64)[data.train_rows]
     index = BeliefIndex.build(b_tr, kind="flat")
     dec = decompose(b_tr, beliefs[first], k=k, values=values, index=index)
@@ -124,7 +123,6 @@ def decompositions(net, inputs, data, norm, corpus, k: int, seed: int = 0) -> di
     keep = np.ones(len(b_tr), bool)
     keep[sample] = False
     typical = decompose(b_tr, b_tr[sample], k=k, values=values, index=index, selection=keep)
-    of = np.asarray(of).reshape(-1)
     return {"residual": np.asarray(dec.residual, np.float64)[of].reshape(len(rows), n),
             "value": np.asarray(dec.value, np.float64)[of].reshape(len(rows), n),
             "support": np.asarray(support, np.float64)[of].reshape(len(rows), n),
@@ -180,10 +178,7 @@ def pair_counts(observations: np.ndarray, logged: np.ndarray, n: int,
     """(R,) per candidate: how many held-out steps took, in the state of each held-out step
     (its observation (R, d_o), exactly: rule 2's finite state), the action the candidate
     decides there (its ``chosen`` (R,)); ``logged`` (R,) the actions the steps took."""
-    obs = np.ascontiguousarray(observations)
-    keys = obs.view(np.dtype((np.void, obs.itemsize * obs.shape[1]))).ravel()
-    _, state = np.unique(keys, return_inverse=True)
-    state = np.asarray(state, np.int64).reshape(-1)
+    _, state = distinct_rows(observations)
     table = np.bincount(state * n + logged, minlength=(int(state.max()) + 1) * n)
     return [table[state * n + np.asarray(c, np.int64)] for c in chosen]
 
@@ -216,11 +211,12 @@ def _select(net, inputs, data, norm, corpus, config, k, progress, candidates) ->
     text = (f"choosing the controller: FQE of {len(candidates)} candidates on {n_eps:,} "
             "held-out episodes")
     tick = None if progress is None else (lambda done, total: progress(done, total, text))
-    fits = fqe_policies(np.asarray(corpus.observations)[rows], logged,
+    obs = np.asarray(corpus.observations)[rows]
+    fits = fqe_policies(obs, logged,
                         np.asarray(corpus.rewards, np.float64)[rows], starts, policies,
                         float(config.gamma), FQE_STEPS, FQE_REFITS, seed=config.seed,
                         progress=tick, truncated=cut)
-    held = pair_counts(np.asarray(corpus.observations)[rows], logged, n, chosen)
+    held = pair_counts(obs, logged, n, chosen)
     estimates = [{"settings": dict(s), "estimate": float(f["estimate"]),
                   "low": float(f["low"]), "high": float(f["high"]),
                   "agrees": float(np.mean(c == logged)), "pairs": float(np.median(h)),
@@ -248,8 +244,8 @@ def recording_hook(corpus, config, k: int, extra: dict, progress=None):
     def inspect(net, inputs, data, norm) -> dict:
         out = select_controller(net, inputs, data, norm, corpus, config, k, progress)
         extra["controller"].update(out["chosen"])
-        decided = [r for r in extra["settings"]["decided"] if r["setting"] not in CHOSEN]
-        for name in CHOSEN:
+        decided = [r for r in extra["settings"]["decided"] if r["setting"] not in SELECTED]
+        for name in SELECTED:
             decided.append({
                 "setting": name, "value": out["chosen"][name],
                 "why": f"chosen among {len(out['candidates'])} controllers by {RULE} "

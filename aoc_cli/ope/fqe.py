@@ -28,6 +28,7 @@ import numpy as np
 
 from aoc_cli.ope.ensemble import FQEEnsemble, joined, sampler
 from aoc_cli.ope.parts import train_parts
+from aoc_cli.rows import distinct_rows
 
 #: FQE settings: mini-batch, learning rate, target network sync, hidden layers.
 BATCH = 256
@@ -124,10 +125,8 @@ class FQEFit:
         """(the distinct standardised observations (U, d_o), each row's index among them
         (N,)), found once (rows compared as bytes: one sort)."""
         if getattr(self, "_distinct", None) is None:
-            rows = np.ascontiguousarray(self.x).view(
-                np.dtype((np.void, self.x.dtype.itemsize * self.x.shape[1]))).ravel()
-            _, first, of = np.unique(rows, return_index=True, return_inverse=True)
-            self._distinct = (self.x[first], np.asarray(of, np.int64).reshape(-1))
+            first, of = distinct_rows(self.x)
+            self._distinct = (self.x[first], of)
         return self._distinct
 
 
