@@ -76,3 +76,15 @@ def noisy_log(seed: int, end: float, episodes: int, sample_seed: int):
     data = mdp.sample(pi_b, episodes, seed=sample_seed)
     obs = np.eye(s)[data["state"]] + 0.1 * rng.random((len(data["state"]), s))
     return obs, data, pi_b, rng
+
+
+def mixed_policies(mdp: SmallMDP, seed: int = 1):
+    """(pi_b, greedy, soft, rng) on ``mdp``: a random deterministic policy ``greedy``, the
+    behaviour pi_b half it and half a random one (so it takes greedy's actions often), the
+    stochastic ``soft`` 0.6 greedy + 0.4 uniform, each (S, A); ``rng`` the generator they
+    were drawn from (``seed``), for what follows."""
+    rng = np.random.default_rng(seed)
+    s, a = mdp.P.shape[:2]
+    greedy = np.eye(a)[rng.integers(0, a, size=s)]
+    pi_b = 0.5 * greedy + 0.5 * rng.dirichlet(np.full(a, 2.0), size=s)
+    return pi_b, greedy, 0.6 * greedy + 0.4 / a, rng

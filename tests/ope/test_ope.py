@@ -7,7 +7,7 @@ import pytest
 
 from aoc_cli.errors import AocError
 from aoc_cli.ope.estimators import Log, bootstrap, ess, padded, pdwis, ratios, wdr
-from tests.ope.mdps import SmallMDP
+from tests.ope.mdps import SmallMDP, mixed_policies
 
 # Two episodes by hand: lengths 2 and 3, the reward only at each end.
 STARTS = np.array([0, 2, 5])
@@ -85,12 +85,7 @@ def test_the_behaviour_policy_itself_gives_the_mean_return():
 
 
 def _policies(mdp, seed):
-    rng = np.random.default_rng(seed)
-    s, a = mdp.P.shape[:2]
-    greedy = np.eye(a)[rng.integers(0, a, size=s)]        # a deterministic policy
-    pi_b = 0.5 * greedy + 0.5 * rng.dirichlet(np.full(a, 2.0), size=s)
-    soft = 0.6 * greedy + 0.4 / a                          # a stochastic one
-    return pi_b, greedy, soft
+    return mixed_policies(mdp, seed)[:3]   # pi_b, greedy (deterministic), soft (stochastic)
 
 
 def _estimates(mdp, log_dict, pi_e, gamma=1.0):

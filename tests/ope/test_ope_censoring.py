@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from aoc_cli.ope.estimators import Log, bootstrap, pdwis, ratios, wdr
-from tests.ope.mdps import SmallMDP
+from tests.ope.mdps import SmallMDP, mixed_policies
 
 
 def _cut(data, rng, hazard=0.15):
@@ -23,9 +23,7 @@ def _cut(data, rng, hazard=0.15):
 def test_pdwis_and_wdr_censor_truncated_episodes_and_recover_the_exact_value():
     mdp = SmallMDP.random(seed=1, end=0.35)
     s, a = mdp.P.shape[:2]
-    rng = np.random.default_rng(1)
-    greedy = np.eye(a)[rng.integers(0, a, size=s)]
-    pi_b = 0.5 * greedy + 0.5 * rng.dirichlet(np.full(a, 2.0), size=s)
+    pi_b, greedy, _soft, rng = mixed_policies(mdp, 1)
     truth, q = mdp.exact(greedy)
     behaviour, _ = mdp.exact(pi_b)
     data = mdp.sample(pi_b, 20000, seed=2)
@@ -70,9 +68,7 @@ def test_fqe_bootstraps_a_censored_step_and_recovers_the_exact_value(seed):
 
     mdp = SmallMDP.random(seed=1, end=0.35)
     s, a = mdp.P.shape[:2]
-    rng = np.random.default_rng(1)
-    greedy = np.eye(a)[rng.integers(0, a, size=s)]
-    pi_b = 0.5 * greedy + 0.5 * rng.dirichlet(np.full(a, 2.0), size=s)
+    pi_b, greedy, _soft, rng = mixed_policies(mdp, 1)
     _, q = mdp.exact(greedy)
     data = mdp.sample(pi_b, 3000, seed=2 + seed)
     rows, starts, truncated = _cut(data, np.random.default_rng(seed))

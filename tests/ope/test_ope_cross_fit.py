@@ -11,7 +11,7 @@ from aoc_cli.ope.estimators import Log, ratios, wdr
 from aoc_cli.ope.estimators import ess as estimated_ess
 from aoc_cli.ope.fqe import fqe_policies
 from aoc_cli.threads import one_thread
-from tests.ope.mdps import SmallMDP
+from tests.ope.mdps import SmallMDP, mixed_policies
 
 
 def tabular_q(data: dict, pi: np.ndarray, episodes: np.ndarray, shape) -> np.ndarray:
@@ -37,10 +37,8 @@ def tabular_q(data: dict, pi: np.ndarray, episodes: np.ndarray, shape) -> np.nda
 
 def test_wdr_with_a_cross_fitted_q_recovers_the_exact_value():
     mdp = SmallMDP.random(seed=1, end=0.35)
-    rng = np.random.default_rng(1)
     s, a = mdp.P.shape[:2]
-    greedy = np.eye(a)[rng.integers(0, a, size=s)]
-    pi_b = 0.5 * greedy + 0.5 * rng.dirichlet(np.full(a, 2.0), size=s)
+    pi_b, greedy, _soft, _rng = mixed_policies(mdp, 1)
     truth, q_exact = mdp.exact(greedy)
     data = mdp.sample(pi_b, 2000, seed=2)
     st, ac = data["state"], data["action"]

@@ -7,17 +7,15 @@ import pytest
 
 from aoc_cli.ope.fqe import fit_fqe
 from aoc_cli.threads import one_thread
-from tests.ope.mdps import SmallMDP
+from tests.ope.mdps import SmallMDP, mixed_policies
 
 
 @pytest.mark.parametrize("which", ["greedy", "soft"])
 def test_fqe_start_values_match_the_exact_value(which):
     mdp = SmallMDP.random(seed=1, end=0.35)
-    rng = np.random.default_rng(1)
     s, a = mdp.P.shape[:2]
-    greedy = np.eye(a)[rng.integers(0, a, size=s)]
-    pi_b = 0.5 * greedy + 0.5 * rng.dirichlet(np.full(a, 2.0), size=s)
-    pi_e = greedy if which == "greedy" else 0.6 * greedy + 0.4 / a
+    pi_b, greedy, soft, _rng = mixed_policies(mdp, 1)
+    pi_e = greedy if which == "greedy" else soft
     truth, q_exact = mdp.exact(pi_e)
     data = mdp.sample(pi_b, 3000, seed=2)
     obs = np.eye(s)[data["state"]]                       # one-hot states

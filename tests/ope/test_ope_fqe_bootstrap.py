@@ -9,7 +9,7 @@ import pytest
 
 from aoc_cli.ope.fqe import bootstrap_fqe, refit_steps
 from aoc_cli.threads import one_thread
-from tests.ope.mdps import SmallMDP
+from tests.ope.mdps import SmallMDP, mixed_policies
 
 
 def tabular_estimate(mdp: SmallMDP, data: dict, pi: np.ndarray, weights: np.ndarray) -> float:
@@ -42,11 +42,9 @@ def tabular_estimate(mdp: SmallMDP, data: dict, pi: np.ndarray, weights: np.ndar
 
 def test_refits_spread_like_the_fitted_estimate_over_resampled_logs_and_cover_the_truth():
     mdp = SmallMDP.random(seed=1, end=0.35)
-    rng = np.random.default_rng(1)
     s, a = mdp.P.shape[:2]
-    greedy = np.eye(a)[rng.integers(0, a, size=s)]
-    pi_b = 0.5 * greedy + 0.5 * rng.dirichlet(np.full(a, 2.0), size=s)
-    pi_e = 0.6 * greedy + 0.4 / a
+    pi_b, greedy, soft, _rng = mixed_policies(mdp, 1)
+    pi_e = soft
     truth, _q = mdp.exact(pi_e)
     data = mdp.sample(pi_b, 600, seed=2)
     e = len(data["starts"]) - 1
