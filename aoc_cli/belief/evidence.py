@@ -8,7 +8,7 @@ every training and controller setting the user left open. A flag the user gives 
 ``--paper`` takes the paper's value for all. Each rule's setting, its value and why go to the
 output and to the model's config (``metrics.settings``); the controller's settings chosen are
 saved with the model (``metrics.controller``) and every command that decides with it uses them
-unless its own flag is given (:func:`controller_settings`).
+unless its own flag is given.
 
 1. **mode**: value (AOC) when the log has rewards that vary; imitation (ABC) when it has none
    or every reward is the same (nothing to rank actions by).
@@ -17,9 +17,12 @@ unless its own flag is given (:func:`controller_settings`).
    ``history_length`` 0); each row's value is the behaviour's Q by fitted Q evaluation
    (``value`` fqe), bootstrapped through the revisits; undiscounted (``gamma`` 1) when the
    episodes end by themselves (rule 3 does not hold). The controller trusts an action only
-   where the log took it in (nearly) that state: ``residual_cap`` :data:`STATE_CAP` times the
-   typical residual, and the value shrunk by the episodes behind it (``support_penalty``
-   :data:`STATE_PENALTY`).
+   where the log took it in (nearly) that state (``residual_cap`` :data:`STATE_CAP` times the
+   typical residual) and ranks each action by a lower bound of its value: the simultaneous
+   :data:`STATE_LEVEL` one-sided bound over the step's K actions (Bonferroni: z_K =
+   Phi^-1(1 - (1 - level) / K)), with the log's own noise of a value backed by one episode,
+   measured once the row values exist (:func:`state_penalty`: ``support_penalty`` = z_K
+   sigma_1 / sigma_v, in the controller's units).
 3. **a horizon cut by a time limit** (value mode: at least :data:`AT_LIMIT` of the episodes
    have the longest length T: a limit ends them, not the task): ``gamma`` = 1 - 20 / T (an
    effective horizon 1 / (1 - gamma) of T / 20, so a row's return-to-go is not cut by the
@@ -42,6 +45,7 @@ unless its own flag is given (:func:`controller_settings`).
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from statistics import NormalDist
 
 import numpy as np
 
@@ -57,8 +61,9 @@ AT_LIMIT = 0.5
 GAMMA_MIN, GAMMA_MAX = 0.5, 0.99
 #: Rule 3: the effective horizon is the time limit over this.
 HORIZON_DIVISOR = 20
-#: Rule 2's controller: the residual cap (times the typical p90) and the support penalty z.
-STATE_CAP, STATE_PENALTY = 0.01, 5.0
+#: Rule 2's controller: the residual cap (times the typical p90), and the confidence of the
+#: lower bound that ranks the actions (simultaneous over a step's K actions).
+STATE_CAP, STATE_LEVEL = 0.01, 0.95
 
 #: The training settings a rule may decide (BeliefConfig fields; None when not given).
 TRAINING = ("mode", "belief", "gamma", "value", "dynamics_weight", "history_length")
@@ -154,8 +159,6 @@ def decide(ev: Evidence, given: dict) -> tuple[dict, list[dict]]:
         take("residual_cap", STATE_CAP, "a finite state the log revisits: an action is "
                                         "trusted only where the log took it in (nearly) that "
                                         "state")
-        take("support_penalty", STATE_PENALTY, "a finite state the log revisits: each "
-                                               "action's value shrunk by the episodes behind it")
     if ev.time_limit and value_belief:
         take("gamma", horizon_gamma(ev.length_max),
              f"{ev.at_limit:.0%} of the episodes stop at {ev.length_max} steps (a time limit): "
@@ -184,12 +187,76 @@ def selects_controller(ev: Evidence, config, given: dict) -> bool:
             and ev.rewards and not any(given.get(k) is not None for k in SELECTED))
 
 
-def controller_settings(corpus, mode: str) -> dict:
-    """The controller's settings the rules decide for a ``mode`` model of ``corpus`` (what
-    ``aoc train`` records; also used for a model trained without them, by the library's
-    ``train_model`` or before they were recorded)."""
-    settings, _ = decide(Evidence.of(corpus), {"mode": mode})
-    return {k: v for k, v in settings.items() if k in CONTROLLER}
+def penalises(ev: Evidence, config, given: dict) -> bool:
+    """Whether rule 2 decides ``support_penalty`` (:func:`state_penalty`, once the row values
+    of a model of ``config``, a BeliefConfig, exist): value mode, a finite state the log
+    revisits, the penalty not ``given``."""
+    return config.mode == "value" and ev.finite_states and given.get("support_penalty") is None
+
+
+def one_step_noise(observations: np.ndarray, actions: np.ndarray, rewards: np.ndarray,
+                   episode_starts: np.ndarray, values: np.ndarray, gamma: float,
+                   censored: np.ndarray | None = None) -> tuple[float, int]:
+    """(sigma_1, degrees of freedom): the sd of the value of a (state, action) backed by one
+    episode, measured on the log. Each row's one-step target is y = r + gamma V(o'), V(o) the
+    mean of the row ``values`` (N,) at observation o (fitted Q evaluation's own backup,
+    :mod:`aoc_cli.belief.fqe`), y = r at an episode's last row; sigma_1 is the pooled sd of y
+    within each (observation, action) the log repeats (the cut of a ``censored`` (E,) stay
+    left out). A value backed by n episodes then has a standard error of about sigma_1 /
+    sqrt(n). observations (N, d_o); actions (N,) int; episode_starts (E + 1,). (0, 0) when no
+    pair repeats."""
+    n = len(rewards)
+    starts = np.asarray(episode_starts, np.int64)
+    _, state = distinct_rows(np.asarray(observations).reshape(n, -1))
+    values = np.asarray(values, np.float64)
+    at_state = np.bincount(state, weights=values) / np.bincount(state)
+    last = np.zeros(n, bool)
+    last[starts[1:] - 1] = True
+    nxt = np.where(last, 0, np.arange(1, n + 1) % max(n, 1))
+    y = np.asarray(rewards, np.float64) + np.where(last, 0.0, gamma * at_state[state[nxt]])
+    keep = np.ones(n, bool)
+    if censored is not None:
+        keep[(starts[1:] - 1)[np.asarray(censored, bool)]] = False
+    _, pair = np.unique(state[keep] * (int(np.max(actions)) + 1)
+                        + np.asarray(actions, np.int64).reshape(-1)[keep], return_inverse=True)
+    count = np.bincount(pair)
+    mean = np.bincount(pair, weights=y[keep]) / count
+    dof = int((count - 1).sum())
+    if dof == 0:
+        return 0.0, 0
+    return float(np.sqrt(np.sum((y[keep] - mean[pair]) ** 2) / dof)), dof
+
+
+def lower_bound_z(n_actions: int, level: float = STATE_LEVEL) -> float:
+    """z_K = Phi^-1(1 - (1 - level) / K): the one-sided normal quantile of a bound that holds
+    for all K actions of a step at once (Bonferroni)."""
+    return float(NormalDist().inv_cdf(1.0 - (1.0 - level) / max(int(n_actions), 1)))
+
+
+def state_penalty(corpus, values: np.ndarray, gamma: float, censored=None
+                  ) -> tuple[float | None, dict]:
+    """Rule 2's ``support_penalty`` for a model of ``corpus`` whose row values are ``values``
+    (N,): z_K sigma_1 / sigma_v (:func:`lower_bound_z`, :func:`one_step_noise`, sigma_v the
+    std of the values, the unit of :func:`aoc_cli.control.support.penalised`), so the
+    controller ranks each action by v_hat - z_K sigma_1 / sqrt(support); and its reason.
+    None when the values do not vary or no (state, action) repeats."""
+    noise, dof = one_step_noise(corpus.observations, corpus.actions, corpus.rewards,
+                                corpus.episode_starts, values, gamma, censored)
+    spread = float(np.std(values)) if len(values) else 0.0
+    k = int(corpus.action_space["n"])
+    z_k = lower_bound_z(k)
+    if spread <= 0 or dof == 0:
+        return None, {"setting": "support_penalty", "value": None,
+                      "why": "a finite state the log revisits, but no (state, action) repeats "
+                             "or the values do not vary: no noise to bound"}
+    z = round(z_k * noise / spread, 3)
+    return z, {"setting": "support_penalty", "value": z,
+               "why": f"a finite state the log revisits: each action ranked by the "
+                      f"simultaneous {STATE_LEVEL:.0%} lower bound of its value over the {k} "
+                      f"actions (z {z_k:.3g}), with the log's noise of a value backed by one "
+                      f"episode, sd {noise:.3g} ({dof:,} repeats of a state and action), "
+                      f"{noise / spread:.3g} sd of the row values",
+               "level": STATE_LEVEL, "z": z_k, "noise": noise, "dof": dof, "value_std": spread}
 
 
 def summary(ev: Evidence) -> str:

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 from aoc_cli.belief import evidence, select
+from aoc_cli.belief.censoring import censoring_of
 from aoc_cli.belief.config import CRITIC_STEP_SECONDS, BeliefConfig
 from aoc_cli.belief.data import prepare
 from aoc_cli.decompose.k_rule import index_k
@@ -108,6 +109,7 @@ def train_corpus(corpus: Corpus, model: str = DEFAULT_MODEL, *, paper: bool = Fa
         extra["controller"]["k"] = index_k(config.belief_dim, corpus, imitation)[0]
     measure = ev is not None and not no_search and "epsilon" not in chosen \
         and evidence.held_out(ev, config)
+    penalty = ev is not None and evidence.penalises(ev, config, chosen)
     hook = None
     if ev is not None and not no_search and choose_controller is not None \
             and evidence.selects_controller(ev, config, chosen):
@@ -117,21 +119,23 @@ def train_corpus(corpus: Corpus, model: str = DEFAULT_MODEL, *, paper: bool = Fa
                          select.open_settings(corpus, config, searched, no_search),
                          select.why_no_search(corpus, config, searched, paper,
                                               select_settings), extra, progress, note,
-                         measure, hook)
+                         measure, hook, penalty)
     return Trained(corpus.name, model, metrics, config,
                    smoothing is None and config.label_smoothing > 0)
 
 
 def _train(corpus, config: BeliefConfig, model: str, overwrite: bool, open_names: list[str],
            defaults_note: str | None, extra: dict, progress: Progress | None,
-           note: Callable[[str], None], measure: bool = False, hook=None) -> dict:
+           note: Callable[[str], None], measure: bool = False, hook=None,
+           penalty: bool = False) -> dict:
     """Check the inputs (and the corpus's content hash), then train; with ``open_names``,
     choose those settings by validation first (aoc_cli.belief.select). ``extra``: more
     entries of the saved metrics (the settings the evidence decided); ``measure``: decide the
     controller's epsilon on the validation episodes after training
     (aoc_cli.belief.epsilon_rule), into ``extra``'s ``controller`` before the model is
     saved; ``hook``: another such ``inspect`` (the controller chosen on the validation
-    episodes, :func:`train_corpus`)."""
+    episodes, :func:`train_corpus`); ``penalty``: rule 2's support penalty measured on the row
+    values once they exist (:func:`aoc_cli.belief.evidence.state_penalty`), into ``extra``."""
     name = corpus.name
     fqe = config.mode == "value" and config.value == "fqe"
     if fqe and progress is not None:
@@ -141,6 +145,14 @@ def _train(corpus, config: BeliefConfig, model: str, overwrite: bool, open_names
     trainer.pick_device(config.device)  # a GPU asked for where torch sees none: before the targets
     prepared = prepare(corpus, config, model, overwrite, progress=progress if fqe else None)
     corpus.verify_content()  # the columns prepare read are cached: hashing reads nothing again
+    if penalty and prepared.values is not None:
+        z, reason = evidence.state_penalty(corpus, prepared.values, config.gamma,
+                                           censoring_of(corpus))
+        if z is not None:
+            extra["controller"]["support_penalty"] = z
+        extra["settings"]["decided"].append(reason)
+        extra["settings"]["support_penalty"] = {k: v for k, v in reason.items()
+                                                if k not in ("setting", "why")}
 
     total = config.max_epochs
     if config.belief == "critic":  # counted in gradient steps, not epochs

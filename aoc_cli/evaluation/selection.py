@@ -6,7 +6,7 @@ stated in advance (docs/design.md, "Settings from the log's evidence").
 belief's fit; they only stop its training early. After training, at every step of those
 episodes, every action is decomposed over the *training* rows' beliefs and values (as the
 controller will decompose over the index's rows), with the k the model records; each candidate
-controller of :data:`CANDIDATES` decides at every held-out step from those decompositions
+controller of :func:`candidates` decides at every held-out step from those decompositions
 (:func:`aoc_cli.control.rule.choose`: the same rule as the controller, its residual cap scaled
 by the training rows' own typical p90 residual); each candidate's decisions are valued by fitted
 Q evaluation on the held-out episodes (:func:`aoc_cli.ope.fqe.fqe_policies`: one batched
@@ -14,7 +14,7 @@ ensemble, :data:`aoc_cli.ope.fqe.REFITS` bootstrap refits over the episodes, the
 by Student's t). The rule:
 
     the candidate with the highest lower bound of its 95% interval; of equal bounds the
-    more conservative (earlier in :data:`CANDIDATES`). Two kinds of estimate are no
+    more conservative (earlier in :func:`candidates`). Two kinds of estimate are no
     estimate: one outside the held-out episodes' returns (FQE diverged: seen on
     icu-sepsis-terminate's 1k log), and one the held-out log does not support: a candidate
     whose decision, at half of the held-out steps or more, is an action the held-out
@@ -39,7 +39,7 @@ import time
 import numpy as np
 import torch
 
-from aoc_cli.belief.evidence import SELECTED
+from aoc_cli.belief.evidence import SELECTED, STATE_CAP
 from aoc_cli.belief.model import Encoder
 from aoc_cli.control.config import ControllerConfig
 from aoc_cli.control.rule import choose, residual_cap
@@ -51,15 +51,20 @@ from aoc_cli.ope.policies import truncated
 from aoc_cli.rows import distinct_rows
 from aoc_cli.threads import one_thread
 
-#: The candidate controllers, the most conservative first (the ties' order): rule 2's (an
-#: action trusted only where the log took it in that state, its value shrunk by the episodes
-#: behind it), each of its two parts alone, and the paper's.
-CANDIDATES = (
-    {"residual_cap": 0.01, "support_penalty": 5.0},
-    {"residual_cap": None, "support_penalty": 5.0},
-    {"residual_cap": 0.01, "support_penalty": None},
-    {"residual_cap": None, "support_penalty": None},
-)
+
+
+def candidates(penalty: float | None, cap: float = STATE_CAP) -> tuple[dict, ...]:
+    """The candidate controllers, the most conservative first (the ties' order): rule 2's (an
+    action trusted only where the log took it in that state, ranked by the lower bound of its
+    value: ``penalty`` the support penalty rule 2 measured, :func:`aoc_cli.belief.evidence.
+    state_penalty`), each of its two parts alone, and the paper's. ``penalty`` None (the log
+    gave no noise to bound): the cap and the paper's."""
+    bounded = () if penalty is None else (
+        {"residual_cap": cap, "support_penalty": float(penalty)},
+        {"residual_cap": None, "support_penalty": float(penalty)})
+    return bounded + ({"residual_cap": cap, "support_penalty": None},
+                      {"residual_cap": None, "support_penalty": None})
+
 #: Training rows sampled for their typical residual (leave-those-rows-out), as the index does.
 TYPICAL_SAMPLE = 500
 #: FQE's gradient steps (None: :func:`aoc_cli.ope.fqe.default_steps`, from the held-out
@@ -130,11 +135,11 @@ def decompositions(net, inputs, data, norm, corpus, k: int, seed: int = 0) -> di
             "p90": float(np.quantile(typical.residual, 0.9)), "distinct": int(len(first))}
 
 
-def decisions(parts: dict, candidates=CANDIDATES) -> list[np.ndarray]:
-    """(R,) each candidate's action at every held-out step (:func:`choose`, epsilon the
-    model's controller's)."""
+def decisions(parts: dict, controllers: tuple[dict, ...]) -> list[np.ndarray]:
+    """(R,) each of the ``controllers``' (their settings) action at every held-out step
+    (:func:`choose`, epsilon the model's controller's)."""
     out = []
-    for settings in candidates:
+    for settings in controllers:
         config = ControllerConfig(**settings)
         _, _, chosen = choose(parts["residual"], parts["value"], config,
                               cap=residual_cap(config.residual_cap, parts["p90"]),
@@ -183,9 +188,10 @@ def pair_counts(observations: np.ndarray, logged: np.ndarray, n: int,
     return [table[state * n + np.asarray(c, np.int64)] for c in chosen]
 
 
-def select_controller(net, inputs, data, norm, corpus, config, k: int,
-                      progress=None, candidates=CANDIDATES) -> dict:
-    """The selection of the module docstring on a trained model: {"chosen" (settings),
+def select_controller(net, inputs, data, norm, corpus, config, k: int, controllers,
+                      progress=None) -> dict:
+    """The selection of the module docstring among ``controllers`` (:func:`candidates`) on a
+    trained model: {"chosen" (settings),
     "candidates" [{settings, estimate, low, high, agrees (the share of held-out steps where
     it decides the logged action), pairs (the held-out count of its median decision's
     pair), rare (the share of its decisions below MIN_PAIRS)}], "episodes", "steps", "rule",
@@ -193,7 +199,7 @@ def select_controller(net, inputs, data, norm, corpus, config, k: int,
     member-steps, labelled. Runs with one thread in torch, FAISS and BLAS, as a control step
     and ``aoc evaluate``'s FQE do (FQE's parts fork: :mod:`aoc_cli.ope.parts`)."""
     with one_thread():
-        return _select(net, inputs, data, norm, corpus, config, k, progress, candidates)
+        return _select(net, inputs, data, norm, corpus, config, k, progress, controllers)
 
 
 def _select(net, inputs, data, norm, corpus, config, k, progress, candidates) -> dict:
@@ -242,15 +248,27 @@ def recording_hook(corpus, config, k: int, extra: dict, progress=None):
     settings saved with the model, the ``settings`` reasons ``aoc train`` prints)."""
 
     def inspect(net, inputs, data, norm) -> dict:
-        out = select_controller(net, inputs, data, norm, corpus, config, k, progress)
+        # rule 2's penalty, measured on the row values before training (aoc_cli.belief.fit)
+        out = select_controller(net, inputs, data, norm, corpus, config, k,
+                                candidates(extra["controller"].get("support_penalty")),
+                                progress)
         extra["controller"].update(out["chosen"])
+        prior = {r["setting"]: r for r in extra["settings"]["decided"]}
         decided = [r for r in extra["settings"]["decided"] if r["setting"] not in SELECTED]
         for name in SELECTED:
+            value = out["chosen"][name]
+            measured = prior.get(name, {})
+            # the penalty chosen is rule 2's bound: its measure stays in the record
+            kept = {key: v for key, v in measured.items()
+                    if key not in ("setting", "value", "why")} \
+                if value is not None and measured.get("value") == value else {}
             decided.append({
-                "setting": name, "value": out["chosen"][name],
+                "setting": name, "value": value,
                 "why": f"chosen among {len(out['candidates'])} controllers by {RULE} "
                        f"({out['episodes']:,} episodes, {out['steps']:,} steps; each "
-                       "candidate's value below)", "seconds": out["seconds"]})
+                       "candidate's value below)"
+                       + (f"; the penalty: {measured['why']}" if kept else ""),
+                "seconds": out["seconds"], **kept})
         extra["settings"]["decided"] = decided
         extra["settings"]["controller_selection"] = out
         return {}

@@ -48,8 +48,10 @@ def main() -> None:
     starts = np.asarray(corpus.episode_starts, np.int64)
     data = TrainingData(np.asarray(model.values, np.float64), train_eps, val_eps,
                         episode_rows(starts, train_eps), episode_rows(starts, val_eps))
-    k = int((model.meta["metrics"].get("controller") or {}).get("k") or 2 * (model.d_b + 1))
-    out = selection.select_controller(model.net, inputs, data, norm, corpus, config, k)
+    saved = model.meta["metrics"].get("controller") or {}
+    k = int(saved.get("k") or 2 * (model.d_b + 1))
+    out = selection.select_controller(model.net, inputs, data, norm, corpus, config, k,
+                                      selection.candidates(saved.get("support_penalty")))
     t = sepsis_tables("terminate" if args.task.endswith("terminate") else "mean")
     for cand in out["candidates"]:
         session = aoc_cli.open_session(args.name, store=args.store,

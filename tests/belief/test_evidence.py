@@ -75,14 +75,81 @@ def test_rule_2_a_finite_state_revisited():
              at_limit=0.001)
     out, _ = decide(ev, {})
     assert out == {"mode": "value", "history_length": 0, "value": "fqe", "gamma": 1.0,
-                   "residual_cap": evidence.STATE_CAP,
-                   "support_penalty": evidence.STATE_PENALTY}
+                   "residual_cap": evidence.STATE_CAP}
+    # the penalty is measured once the row values exist (state_penalty, below)
+    from aoc_cli.belief.config import BeliefConfig
+
+    assert evidence.penalises(ev, BeliefConfig(mode="value"), {})
+    assert not evidence.penalises(ev, BeliefConfig(mode="value"), {"support_penalty": 1.0})
+    assert not evidence.penalises(_ev(discrete=True, n_actions=25), BeliefConfig(), {})
     # the flags given win, and a critic keeps its own targets
     out, _ = decide(ev, {"gamma": 0.9, "support_penalty": 1.0})
     assert "gamma" not in out and "support_penalty" not in out and out["value"] == "fqe"
     assert "value" not in decide(ev, {"belief": "critic"})[0]
     # observations that do not recur: none of it
     assert decide(_ev(discrete=True, n_actions=25), {})[0] == {"mode": "value"}
+
+
+def _noise_by_hand(obs, actions, rewards, starts, values, gamma, censored=None):
+    """The pooled within-pair sd of the one-step targets, row by row."""
+    keyed = [tuple(o) for o in np.asarray(obs).reshape(len(rewards), -1).tolist()]
+    at = {}
+    for key, v in zip(keyed, values):
+        at.setdefault(key, []).append(v)
+    last = set((np.asarray(starts[1:]) - 1).tolist())
+    cut = set() if censored is None else \
+        {int(starts[e + 1] - 1) for e in np.flatnonzero(censored)}
+    groups = {}
+    for i in range(len(rewards)):
+        if i in cut:
+            continue
+        y = rewards[i] + (0.0 if i in last else gamma * float(np.mean(at[keyed[i + 1]])))
+        groups.setdefault((keyed[i], int(actions[i])), []).append(y)
+    ss = sum(float(np.sum((np.array(g) - np.mean(g)) ** 2)) for g in groups.values())
+    dof = sum(len(g) - 1 for g in groups.values())
+    return (np.sqrt(ss / dof) if dof else 0.0), dof
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_one_step_noise_is_the_pooled_sd_of_the_targets_within_each_pair(seed):
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(2, 200))
+    obs = rng.integers(0, 4, size=(n, 2)).astype(np.float32)      # few states: pairs repeat
+    actions = rng.integers(0, 3, size=n)
+    rewards = rng.normal(size=n) * (seed % 2)                       # zero rewards too
+    cuts = np.sort(rng.choice(np.arange(1, n), size=min(n - 1, 5), replace=False))
+    starts = np.concatenate([[0], cuts, [n]])
+    values = rng.normal(size=n)
+    gamma = float(rng.choice([1.0, 0.9]))
+    censored = rng.random(len(starts) - 1) < 0.3 if seed >= 3 else None
+    got = evidence.one_step_noise(obs, actions, rewards, starts, values, gamma, censored)
+    want = _noise_by_hand(obs, actions, rewards, starts, values, gamma, censored)
+    assert got[1] == want[1]
+    assert got[0] == pytest.approx(want[0], rel=1e-12, abs=1e-15)
+
+
+def test_the_one_step_noise_is_zero_where_nothing_repeats_and_the_bound_is_bonferronis():
+    obs = np.arange(6, dtype=np.float32)[:, None]
+    assert evidence.one_step_noise(obs, np.zeros(6), np.ones(6), np.array([0, 3, 6]),
+                                   np.ones(6), 1.0) == (0.0, 0)
+    from scipy.stats import norm
+
+    for k in (1, 2, 25):
+        assert evidence.lower_bound_z(k) == pytest.approx(norm.ppf(1 - 0.05 / k), rel=1e-9)
+    assert evidence.lower_bound_z(25, 0.9) < evidence.lower_bound_z(25)
+
+
+def test_rule_2s_penalty_is_the_bound_in_the_controllers_units():
+    data = _data("icu-sepsis", episodes=300)
+    values = np.random.default_rng(0).random(data.n_rows)
+    z, why = evidence.state_penalty(data, values, 1.0)
+    noise, dof = evidence.one_step_noise(data.observations, data.actions, data.rewards,
+                                         data.episode_starts, values, 1.0)
+    assert dof > 0 and why["value"] == z
+    assert z == pytest.approx(evidence.lower_bound_z(25) * noise / np.std(values), abs=5e-4)
+    assert "simultaneous 95% lower bound" in why["why"] and "25 actions" in why["why"]
+    flat, why = evidence.state_penalty(data, np.ones(data.n_rows), 1.0)
+    assert flat is None and "no noise to bound" in why["why"]
 
 
 def test_rule_3_gamma_from_a_time_limit():
@@ -171,13 +238,15 @@ def test_the_controller_settings_travel_with_the_model(aoc, store, tmp_path):
     # test_selection.py) and the k rule's k
     code, out, err = aoc("train", "icu", "--no-select", *QUICK)
     assert code == 0, err
-    assert json.loads(out)["controller"] == {"residual_cap": 0.01, "support_penalty": 5.0,
-                                             "k": 2 * (_saved(s, "icu")["config"]
-                                                       ["belief_dim"] + 1)}
+    metrics = json.loads(out)
+    z = metrics["settings"]["support_penalty"]["value"]
+    assert metrics["controller"] == {"residual_cap": 0.01, "support_penalty": z,
+                                     "k": 2 * (_saved(s, "icu")["config"]["belief_dim"] + 1)}
+    assert 1.0 < z < 20.0  # the log's noise over the values' spread, times z_25 = 2.88
     assert _saved(s, "icu")["config"]["history_length"] == 0
     assert aoc("index", "icu", "--format", "json")[0] == 0
     own = aoc_cli.open_session("icu", store=store).controller.config
-    assert (own.residual_cap, own.support_penalty, own.epsilon) == (0.01, 5.0, 0.5)
+    assert (own.residual_cap, own.support_penalty, own.epsilon) == (0.01, z, 0.5)
     flag = aoc_cli.open_session("icu", store=store,
                                 controller={"support_penalty": 0.0}).controller.config
     assert (flag.residual_cap, flag.support_penalty) == (0.01, 0.0)

@@ -19,8 +19,12 @@ from tests.plain_log import write_plain_npz
 def test_the_rule_takes_the_highest_lower_bound_and_the_first_of_equals():
     assert selection.pick([{"low": 0.5}, {"low": 0.6}, {"low": 0.6}, {"low": 0.1}]) == 1
     assert selection.pick([{"low": 0.3}] * 4) == 0
-    assert selection.CANDIDATES[0] == {"residual_cap": 0.01, "support_penalty": 5.0}
-    assert selection.CANDIDATES[-1] == {"residual_cap": None, "support_penalty": None}
+    both = selection.candidates(5.75)
+    assert both[0] == {"residual_cap": 0.01, "support_penalty": 5.75}
+    assert both[1] == {"residual_cap": None, "support_penalty": 5.75}
+    assert both[-1] == {"residual_cap": None, "support_penalty": None} and len(both) == 4
+    # no noise measured: the cap and the paper's, no penalty candidate
+    assert selection.candidates(None) == both[2:]
 
 
 def test_an_estimate_outside_the_returns_is_none_and_keeps_rule_2s_candidate():
@@ -70,7 +74,7 @@ def test_each_candidate_decides_by_the_controllers_rule():
     parts = {"residual": np.array([[0.0, 0.02, 0.02, 0.02]]),
              "value": np.array([[0.0, 0.5, 1.0, 0.2]]),
              "support": np.array([[50.0, 50.0, 1.0, 50.0]]), "value_std": 1.0, "p90": 1.0}
-    chosen = [int(c[0]) for c in selection.decisions(parts)]
+    chosen = [int(c[0]) for c in selection.decisions(parts, selection.candidates(5.0))]
     # cap and penalty: 0; penalty: 1 (0.5 - 5/sqrt(50) beats 1 - 5); cap: 0; neither: 2
     assert chosen == [0, 1, 0, 2]
 
@@ -110,8 +114,12 @@ def test_train_chooses_the_controller_on_held_out_episodes(icu):
     assert all(c["valued"] == (c["pairs"] >= selection.MIN_PAIRS) for c in
                chosen["candidates"])
     ok = [c["valued"] for c in chosen["candidates"]]
-    best = selection.CANDIDATES[0] if not ok[0] else \
-        selection.CANDIDATES[int(np.argmax(np.where(ok, lows, -np.inf)))]
+    # the penalty candidates carry rule 2's measured bound (aoc_cli.belief.evidence)
+    measured = metrics["settings"]["support_penalty"]
+    assert measured["value"] > 0 and measured["noise"] > 0
+    tried = selection.candidates(measured["value"])
+    assert [c["settings"] for c in chosen["candidates"]] == list(tried)
+    best = tried[0] if not ok[0] else tried[int(np.argmax(np.where(ok, lows, -np.inf)))]
     assert chosen["chosen"] == best
     assert {k: metrics["controller"][k] for k in best} == best
     assert chosen["episodes"] == 30 and chosen["steps"] == metrics["val_rows"]
