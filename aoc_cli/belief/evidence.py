@@ -282,8 +282,11 @@ def selection_lines(out: dict) -> list[str]:
     def pairs(e: dict) -> str:
         if "pairs" not in e:
             return ""
-        return (f"; its median decision held out {e['pairs']:g} times"
-                + ("" if e.get("valued", True) else f" ({e.get('not_valued', 'no estimate')})"))
+        return (f"; its median decision held out {e['pairs']:g} times, "
+                f"{e.get('rare', 0.0):.0%} of its decisions fewer than "
+                f"{out.get('min_pairs', 3)}"
+                + (f": bound {e['bound']:.4f}" if e.get("valued", True) and "bound" in e
+                   else f" ({e.get('not_valued', 'no estimate')})"))
 
     return [f"{label(e['settings']):<{width}}  FQE {e['estimate']:.4f} [{e['low']:.4f}, "
             f"{e['high']:.4f}], the logged action at {e['agrees']:.0%} of the steps"

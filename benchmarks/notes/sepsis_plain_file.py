@@ -5,7 +5,7 @@ exact survival of that state policy (one linear solve over the package's tables)
 clinicians'. docs/results.md, "icu-sepsis", "From a plain file".
 
     python benchmarks/notes/sepsis_plain_file.py --episodes 10000 --seed 0 --store /tmp/x \
-        [--threads 1]
+        [--threads 1] [--train-seed 0]
 """
 
 from __future__ import annotations
@@ -41,6 +41,8 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--task", default="icu-sepsis")
     ap.add_argument("--store", required=True)
+    ap.add_argument("--train-seed", type=int, default=0,
+                    help="aoc train's --seed (the split, the weights' initialisation)")
     ap.add_argument("--threads", type=int, default=None,
                     help="aoc train's --threads (default: the cores)")
     args = ap.parse_args()
@@ -60,7 +62,7 @@ def main() -> None:
                   flush=True)
 
     trained = aoc_cli.train(name, store=root, overwrite=True, progress=progress,
-                            threads=args.threads)
+                            threads=args.threads, seed=args.train_seed)
     train_seconds = time.perf_counter() - started
     aoc_cli.build_index(name, store=root)
     session = aoc_cli.open_session(name, store=root)
@@ -68,6 +70,7 @@ def main() -> None:
     policy = state_policy(session.controller.decide, t)
     print(json.dumps({
         "task": args.task, "episodes": args.episodes, "seed": args.seed,
+        "train_seed": args.train_seed,
         "aoc": round(float(t.mdp.value(policy)), 4),
         "clinicians": round(float(t.mdp.value(t.clinicians)), 4),
         "decided": [(r["setting"], r["value"]) for r in trained.metrics["settings"]["decided"]],

@@ -59,6 +59,26 @@ def test_a_candidate_the_held_out_log_does_not_take_is_not_valued():
     assert selection.pick([e(0.80, 0.70, 3), e(0.85, 0.80, 40)], span) == 1
 
 
+def test_decisions_the_held_out_log_hardly_holds_come_off_the_bound():
+    """A 10k plain file (FQE's seed 1): the penalty without the cap, a third of its decisions
+    on pairs held out fewer than 3 times, 0.940 [0.895, 0.986] by FQE, exact 0.810; rule 2's
+    candidate, 7% rare, 0.851 [0.823, 0.879], exact 0.814."""
+    def e(low, pairs, rare):
+        return {"estimate": low + 0.03, "low": low, "pairs": pairs, "rare": rare}
+
+    seen = [e(0.8233, 11, 0.074), e(0.8949, 7, 0.329), e(0.7496, 0, 0.763)]
+    span = (0.0, 1.0)
+    assert selection.bounds(seen, span) == pytest.approx([0.7493, 0.5659, -0.0134], abs=1e-12)
+    assert selection.pick(seen, span) == 0
+    assert selection.pick([{k: v for k, v in c.items() if k != "rare"} for c in seen],
+                          span) == 1   # the interval alone takes the extrapolated one
+    # the widening scales with the returns' range; no span, no widening
+    assert selection.bounds(seen, (0.0, 2.0))[1] == pytest.approx(0.8949 - 0.658, abs=1e-12)
+    assert selection.bounds(seen).tolist() == [c["low"] for c in seen]
+    # a candidate far better where the log holds its decisions still wins
+    assert selection.pick([e(0.70, 20, 0.05), e(0.80, 20, 0.05)], span) == 1
+
+
 def test_pair_counts_count_the_held_out_steps_of_each_decisions_state_and_action():
     obs = np.array([[0.0, 1.0], [0.0, 1.0], [2.0, 0.0], [0.0, 1.0], [2.0, 0.0]])
     logged = np.array([1, 1, 0, 2, 1])
@@ -119,7 +139,11 @@ def test_train_chooses_the_controller_on_held_out_episodes(icu):
     assert measured["value"] > 0 and measured["noise"] > 0
     tried = selection.candidates(measured["value"])
     assert [c["settings"] for c in chosen["candidates"]] == list(tried)
-    best = tried[0] if not ok[0] else tried[int(np.argmax(np.where(ok, lows, -np.inf)))]
+    bounds = [c["bound"] for c in chosen["candidates"]]
+    lo, hi = chosen["returns"]
+    assert bounds == pytest.approx([c["low"] - c["rare"] * (hi - lo)
+                                    for c in chosen["candidates"]], abs=1e-12)
+    best = tried[0] if not ok[0] else tried[int(np.argmax(np.where(ok, bounds, -np.inf)))]
     assert chosen["chosen"] == best
     assert {k: metrics["controller"][k] for k in best} == best
     assert chosen["episodes"] == 30 and chosen["steps"] == metrics["val_rows"]
