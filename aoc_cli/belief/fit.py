@@ -146,8 +146,10 @@ def _train(corpus, config: BeliefConfig, model: str, overwrite: bool, open_names
     prepared = prepare(corpus, config, model, overwrite, progress=progress if fqe else None)
     corpus.verify_content()  # the columns prepare read are cached: hashing reads nothing again
     if penalty and prepared.values is not None:
+        started = time.perf_counter()
         z, reason = evidence.state_penalty(corpus, prepared.values, config.gamma,
                                            censoring_of(corpus))
+        reason["seconds"] = time.perf_counter() - started
         if z is not None:
             extra["controller"]["support_penalty"] = z
         extra["settings"]["decided"].append(reason)

@@ -276,7 +276,7 @@ def recording_hook(corpus, config, k: int, extra: dict, progress=None):
             measured = prior.get(name, {})
             # the penalty chosen is rule 2's bound: its measure stays in the record
             kept = {key: v for key, v in measured.items()
-                    if key not in ("setting", "value", "why")} \
+                    if key not in ("setting", "value", "why", "seconds")} \
                 if value is not None and measured.get("value") == value else {}
             decided.append({
                 "setting": name, "value": value,
