@@ -282,7 +282,8 @@ def selection_lines(out: dict) -> list[str]:
     def pairs(e: dict) -> str:
         if "pairs" not in e:
             return ""
-        return (f"; its median decision held out {e['pairs']:g} times, "
+        times = "time" if e["pairs"] == 1 else "times"
+        return (f"; its median decision held out {e['pairs']:g} {times}, "
                 f"{e.get('rare', 0.0):.0%} of its decisions fewer than "
                 f"{out.get('min_pairs', 3)}"
                 + (f": bound {e['bound']:.4f}" if e.get("valued", True) and "bound" in e

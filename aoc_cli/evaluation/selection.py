@@ -271,7 +271,7 @@ def recording_hook(corpus, config, k: int, extra: dict, progress=None):
         extra["controller"].update(out["chosen"])
         prior = {r["setting"]: r for r in extra["settings"]["decided"]}
         decided = [r for r in extra["settings"]["decided"] if r["setting"] not in SELECTED]
-        for name in SELECTED:
+        for i, name in enumerate(SELECTED):
             value = out["chosen"][name]
             measured = prior.get(name, {})
             # the penalty chosen is rule 2's bound: its measure stays in the record
@@ -280,9 +280,10 @@ def recording_hook(corpus, config, k: int, extra: dict, progress=None):
                 if value is not None and measured.get("value") == value else {}
             decided.append({
                 "setting": name, "value": value,
-                "why": f"chosen among {len(out['candidates'])} controllers by {RULE} "
-                       f"({out['episodes']:,} episodes, {out['steps']:,} steps; each "
-                       "candidate's value below)"
+                "why": (f"chosen among {len(out['candidates'])} controllers by {RULE} "
+                        f"({out['episodes']:,} episodes, {out['steps']:,} steps; each "
+                        "candidate's value below)" if i == 0 else
+                        f"chosen with {SELECTED[0]}, by the same rule")
                        + (f"; the penalty: {measured['why']}" if kept else ""),
                 "seconds": out["seconds"], **kept})
         extra["settings"]["decided"] = decided

@@ -148,7 +148,12 @@ def test_train_chooses_the_controller_on_held_out_episodes(icu):
     assert {k: metrics["controller"][k] for k in best} == best
     assert chosen["episodes"] == 30 and chosen["steps"] == metrics["val_rows"]
     why = {r["setting"]: r["why"] for r in metrics["settings"]["decided"]}
-    assert why["support_penalty"].startswith("chosen among 4 controllers by the highest lower")
+    assert why["residual_cap"].startswith("chosen among 4 controllers by the highest lower")
+    assert why["support_penalty"].startswith("chosen with residual_cap, by the same rule")
+    if best["support_penalty"] is not None:  # rule 2's measure stays with the penalty chosen
+        assert "the penalty: a finite state the log revisits" in why["support_penalty"]
+        decided = {r["setting"]: r for r in metrics["settings"]["decided"]}
+        assert decided["support_penalty"]["noise"] == measured["noise"]
     assert any(label and label.startswith("choosing the controller: FQE") for label in labels)
     # the choice is saved with the model and every decision takes it, each flag over it
     own = aoc_cli.open_session("icu", store=store).controller.config
