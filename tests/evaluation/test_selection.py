@@ -174,9 +174,12 @@ def test_the_k_rule_is_saved_with_the_model_and_the_index_takes_it(icu):
 
 def test_a_setting_given_skips_the_choice_and_k_travels_with_the_model(icu, aoc):
     store = str(icu[0])
+    # (--value return: the fitted Q evaluation of the values is not what this tests, and
+    # costs a minute)
     code, out, err = aoc("--store", store, "train", "icu", "--model", "given",
-                         "--support-penalty", "2", "--k", "7", "--threads", "1", "--epochs",
-                         "1", "--hidden", "8", "--format", "json")
+                         "--support-penalty", "2", "--k", "7", "--value", "return",
+                         "--threads", "1", "--epochs", "1", "--hidden", "8", "--format",
+                         "json")
     assert code == 0, err
     metrics = json.loads(out)
     assert "controller_selection" not in metrics["settings"]
