@@ -54,20 +54,6 @@ from aoc_cli.ope.policies import truncated
 from aoc_cli.rows import distinct_rows
 from aoc_cli.threads import one_thread
 
-
-
-def candidates(penalty: float | None, cap: float = STATE_CAP) -> tuple[dict, ...]:
-    """The candidate controllers, the most conservative first (the ties' order): rule 2's (an
-    action trusted only where the log took it in that state, ranked by the lower bound of its
-    value: ``penalty`` the support penalty rule 2 measured, :func:`aoc_cli.belief.evidence.
-    state_penalty`), each of its two parts alone, and the paper's. ``penalty`` None (the log
-    gave no noise to bound): the cap and the paper's."""
-    bounded = () if penalty is None else (
-        {"residual_cap": cap, "support_penalty": float(penalty)},
-        {"residual_cap": None, "support_penalty": float(penalty)})
-    return bounded + ({"residual_cap": cap, "support_penalty": None},
-                      {"residual_cap": None, "support_penalty": None})
-
 #: Training rows sampled for their typical residual (leave-those-rows-out), as the index does.
 TYPICAL_SAMPLE = 500
 #: FQE's gradient steps (None: :func:`aoc_cli.ope.fqe.default_steps`, from the held-out
@@ -84,6 +70,19 @@ RULE = ("the highest lower bound of the 95% interval of FQE on the held-out epis
         "equal bounds the more conservative; an estimate outside the episodes' returns, or "
         f"of a candidate whose median decision the held-out episodes took fewer than "
         f"{MIN_PAIRS} times in that state, is none (rule 2's kept when it has none)")
+
+
+def candidates(penalty: float | None, cap: float = STATE_CAP) -> tuple[dict, ...]:
+    """The candidate controllers, the most conservative first (the ties' order): rule 2's (an
+    action trusted only where the log took it in that state, ranked by the lower bound of its
+    value: ``penalty`` the support penalty rule 2 measured, :func:`aoc_cli.belief.evidence.
+    state_penalty`), each of its two parts alone, and the paper's. ``penalty`` None (the log
+    gave no noise to bound): the cap and the paper's."""
+    bounded = () if penalty is None else (
+        {"residual_cap": cap, "support_penalty": float(penalty)},
+        {"residual_cap": None, "support_penalty": float(penalty)})
+    return bounded + ({"residual_cap": cap, "support_penalty": None},
+                      {"residual_cap": None, "support_penalty": None})
 
 
 def held_out_steps(corpus, data) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -208,27 +207,28 @@ def select_controller(net, inputs, data, norm, corpus, config, k: int, controlle
     "candidates" [{settings, estimate, low, high, agrees (the share of held-out steps where
     it decides the logged action), pairs (the held-out count of its median decision's
     pair), rare (the share of its decisions below MIN_PAIRS), bound (the rule's,
-    :func:`bounds`), valued}], "episodes", "steps", "returns" (the held-out returns' lowest and
-    highest), "rule", "seconds"}. ``config`` the model's BeliefConfig (its gamma, seed); ``progress``: FQE's
-    member-steps, labelled. Runs with one thread in torch, FAISS and BLAS, as a control step
-    and ``aoc evaluate``'s FQE do (FQE's parts fork: :mod:`aoc_cli.ope.parts`)."""
+    :func:`bounds`), valued}], "episodes", "steps", "returns" (the held-out returns' lowest
+    and highest), "rule", "seconds"}. ``config`` the model's BeliefConfig (its gamma, seed);
+    ``progress``: FQE's member-steps, labelled. Runs with one thread in torch, FAISS and
+    BLAS, as a control step and ``aoc evaluate``'s FQE do (FQE's parts fork:
+    :mod:`aoc_cli.ope.parts`)."""
     with one_thread():
         return _select(net, inputs, data, norm, corpus, config, k, progress, controllers)
 
 
-def _select(net, inputs, data, norm, corpus, config, k, progress, candidates) -> dict:
+def _select(net, inputs, data, norm, corpus, config, k, progress, controllers) -> dict:
     started = time.perf_counter()
     rows, starts, cut = held_out_steps(corpus, data)
     n_eps = len(starts) - 1
     if progress is not None:
-        progress(0, None, f"choosing the controller: {len(candidates)} candidates decide "
+        progress(0, None, f"choosing the controller: {len(controllers)} candidates decide "
                           f"{len(rows):,} held-out steps")
     parts = decompositions(net, inputs, data, norm, corpus, k, config.seed)
-    chosen = decisions(parts, candidates)
+    chosen = decisions(parts, controllers)
     n = int(corpus.n_actions)
     logged = np.asarray(corpus.actions, np.int64)[rows]
     policies = [np.eye(n)[c] for c in chosen]
-    text = (f"choosing the controller: FQE of {len(candidates)} candidates on {n_eps:,} "
+    text = (f"choosing the controller: FQE of {len(controllers)} candidates on {n_eps:,} "
             "held-out episodes")
     tick = None if progress is None else (lambda done, total: progress(done, total, text))
     obs = np.asarray(corpus.observations)[rows]
@@ -241,7 +241,7 @@ def _select(net, inputs, data, norm, corpus, config, k, progress, candidates) ->
                   "low": float(f["low"]), "high": float(f["high"]),
                   "agrees": float(np.mean(c == logged)), "pairs": float(np.median(h)),
                   "rare": float(np.mean(h < MIN_PAIRS))}
-                 for s, f, c, h in zip(candidates, fits, chosen, held)]
+                 for s, f, c, h in zip(controllers, fits, chosen, held)]
     returns = np.add.reduceat(np.asarray(corpus.rewards, np.float64)[rows]
                               * float(config.gamma) ** _steps_in(starts), starts[:-1])
     span = (float(returns.min()), float(returns.max()))
@@ -251,7 +251,7 @@ def _select(net, inputs, data, norm, corpus, config, k, progress, candidates) ->
         if why:
             e["not_valued"] = why
     best = pick(estimates, span)
-    return {"chosen": dict(candidates[best]), "candidates": estimates, "episodes": n_eps,
+    return {"chosen": dict(controllers[best]), "candidates": estimates, "episodes": n_eps,
             "steps": int(len(rows)), "distinct": parts["distinct"], "rule": RULE,
             "min_pairs": MIN_PAIRS, "returns": list(span),
             "interval": f"+- {student_quantile(FQE_REFITS - 1):.3g} sd of {FQE_REFITS} refits",
