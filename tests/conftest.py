@@ -81,16 +81,24 @@ def pytest_configure(config):
         "markers", "quality: an end-to-end quality test of a built-in task (collect, train, "
                    "index, rollout; tens of seconds): spread over the collection order so that "
                    "pytest-xdist's workers share them")
+    config.addinivalue_line(
+        "markers", "long_setup: a module whose shared fixture takes minutes: collected first, "
+                   "so that one pytest-xdist worker starts it at once while the other takes "
+                   "the rest (longest first)")
 
 
 def pytest_collection_modifyitems(session, config, items):
-    """Place the ``quality`` tests evenly among the others: pytest-xdist hands each worker
-    runs of consecutive tests, and the slow ones side by side would all go to one worker.
-    Deterministic, so every worker collects the same order."""
-    heavy = [item for item in items if item.get_closest_marker("quality")]
-    if not heavy or len(heavy) == len(items):
+    """The ``long_setup`` modules first, then the ``quality`` tests placed evenly among the
+    others: pytest-xdist hands each worker runs of consecutive tests, and the slow ones side
+    by side would all go to one worker. Deterministic, so every worker collects the same
+    order."""
+    first = [item for item in items if item.get_closest_marker("long_setup")]
+    if first:  # their module's items stay together (one fixture), ahead of everything
+        items[:] = first + [item for item in items if not item.get_closest_marker("long_setup")]
+    heavy = [item for item in items[len(first):] if item.get_closest_marker("quality")]
+    if not heavy or len(heavy) == len(items) - len(first):
         return
-    rest = [item for item in items if not item.get_closest_marker("quality")]
+    rest = [item for item in items[len(first):] if not item.get_closest_marker("quality")]
     gap = len(rest) / len(heavy)
     spread, j = [], 0
     for i, item in enumerate(rest):
@@ -98,4 +106,4 @@ def pytest_collection_modifyitems(session, config, items):
             spread.append(heavy[j])
             j += 1
         spread.append(item)
-    items[:] = spread + heavy[j:]
+    items[:] = first + spread + heavy[j:]

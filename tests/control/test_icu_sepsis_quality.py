@@ -20,6 +20,8 @@ from aoc_cli.store import Store
 
 #: The log's size per task.
 EPISODES = {"icu-sepsis": 10_000, "icu-sepsis-terminate": 1000}
+#: Its fixture takes ~3 minutes at 10k episodes: first in the suite (tests/conftest.py).
+pytestmark = pytest.mark.long_setup
 #: The exact survival AOC's decisions must reach, per task.
 #: icu-sepsis at 10k episodes (clinicians 0.7818, random 0.7801, their modal dose 0.7868;
 #: Pi_b-SPIBB told the state 0.8032): measured 0.8150 with the settings the log's evidence
