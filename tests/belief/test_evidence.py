@@ -230,7 +230,7 @@ def test_the_controller_settings_travel_with_the_model(aoc, store, tmp_path):
     from aoc_cli.control import ControllerConfig
 
     s = Store(store)
-    path = write_plain_npz(_data("icu-sepsis", episodes=300), tmp_path / "icu.npz")
+    path = write_plain_npz(_data("icu-sepsis", episodes=120), tmp_path / "icu.npz")
     from tests.conftest import run_aoc
 
     assert run_aoc("ingest", str(path), "--name", "icu")[0] == 0
