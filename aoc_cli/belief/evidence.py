@@ -212,7 +212,7 @@ def one_step_noise(observations: np.ndarray, actions: np.ndarray, rewards: np.nd
     at_state = np.bincount(state, weights=values) / np.bincount(state)
     last = np.zeros(n, bool)
     last[starts[1:] - 1] = True
-    nxt = np.where(last, 0, np.arange(1, n + 1) % max(n, 1))
+    nxt = np.minimum(np.arange(1, n + 1), n - 1)    # an episode's last row: masked below
     y = np.asarray(rewards, np.float64) + np.where(last, 0.0, gamma * at_state[state[nxt]])
     keep = np.ones(n, bool)
     if censored is not None:
