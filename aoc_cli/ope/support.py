@@ -22,6 +22,11 @@ covered the truth on 0 to 2 of 10 icu-sepsis logs (docs/results.md); and only wh
 of the logged behaviour (fitted beside the policies) lies within the 95% interval of the
 log's mean return (:func:`fqe_refusal`): its interval does not hold its bias, and this is the
 one policy whose value the log gives directly.
+
+Whatever the estimator, an estimate or an interval end outside the range of the log's
+(discounted) episode returns is never shown (:func:`outside_returns`): a policy's value is a
+mean of returns, so a survival above 1 or a value below the worst episode is the estimator's
+extrapolation, not anything the log vouches for. V(policy) - V(behaviour) is withheld with it.
 """
 
 from __future__ import annotations
@@ -83,6 +88,21 @@ def fqe_refusal(behaviour_fqe: float, low: float, high: float) -> str | None:
             "hold)")
 
 
+def outside_returns(entry: dict, low: float, high: float) -> str | None:
+    """Why a shown estimate ``entry`` {estimate, low, high} is withheld for leaving
+    [``low``, ``high``], the range of the log's episode returns (None: inside it; a
+    float's rounding, a millionth of the range, is inside)."""
+    if entry.get("estimate") is None:
+        return None
+    slack = 1e-6 * max(high - low, abs(high), abs(low), 1e-12)
+    ends = [entry[k] for k in ("estimate", "low", "high") if entry.get(k) is not None]
+    if all(math.isfinite(x) and low - slack <= x <= high + slack for x in ends):
+        return None
+    return (f"outside the range of the log's returns ({entry['estimate']:.4g} "
+            f"[{entry['low']:.4g}, {entry['high']:.4g}] for returns in [{low:.4g}, "
+            f"{high:.4g}]: the estimator's extrapolation)")
+
+
 def withheld(reason: str) -> dict:
     """The JSON of an estimate the log does not support."""
     return {"estimate": None, "low": None, "high": None, "reason": reason}
@@ -101,18 +121,19 @@ def verdict(improvement: dict) -> str:
     """One line: is the policy better than the logged behaviour? ``improvement`` estimator ->
     {estimate, low, high} of V(policy) - V(behaviour) (or withheld). Read from the first
     shown estimator of :data:`VERDICT_ORDER`: "shown" when its interval lies above 0 (or,
-    worse, below it), else "not shown by this log"."""
+    worse, below it), else "not shown by this log". A negative estimate reads "worse than
+    ... by" its magnitude, the interval turned round with it."""
     for name in VERDICT_ORDER:
         d = improvement.get(name)
         if d is None or d.get("estimate") is None:
             continue
-        if d["high"] < 0:       # worse: said as such, the difference turned round
-            return (f"worse than the logged behaviour by {-d['estimate']:.3f} "
-                    f"[{-d['high']:.3f}, {-d['low']:.3f}] ({name.upper()}): shown")
-        span = f"{d['estimate']:.3f} [{d['low']:.3f}, {d['high']:.3f}] ({name.upper()})"
-        if d["low"] > 0:
-            return f"better than the logged behaviour by {span}: shown"
-        return f"better than the logged behaviour by {span}: not shown by this log"
+        if d["estimate"] < 0:   # worse: said as such, the difference turned round
+            word, e, lo, hi = "worse", -d["estimate"], -d["high"], -d["low"]
+        else:
+            word, e, lo, hi = "better", d["estimate"], d["low"], d["high"]
+        shown = "shown" if lo > 0 else "not shown by this log"
+        return (f"{word} than the logged behaviour by {e:.3f} [{lo:.3f}, {hi:.3f}] "
+                f"({name.upper()}): {shown}")
     reasons = sorted({str(d.get("reason")).split(" (")[0] for d in improvement.values()
                       if d is not None and d.get("reason")})
     return ("better than the logged behaviour: not estimable from this log"

@@ -11,7 +11,7 @@ import numpy as np
 
 from aoc_cli.ope import estimators as ope
 from aoc_cli.ope.fqe import fqe_policies, student_quantile
-from aoc_cli.ope.support import min_ess, refusal, verdict, withheld
+from aoc_cli.ope.support import min_ess, outside_returns, refusal, verdict, withheld
 
 
 def _as_probs(policy: np.ndarray, n_actions: int) -> np.ndarray:
@@ -81,6 +81,13 @@ def policy_value(log: ope.Log, observations, logged, propensity, policy, n_actio
     if value.get("fqe", {}).get("estimate") is not None and fqe.get("withheld"):
         # FQE off on the logged behaviour (support.fqe_refusal)
         value["fqe"] = gain["fqe"] = withheld(fqe["withheld"])
+    lo, hi = float(returns.min()), float(returns.max())
+    for name, entry in value.items():       # never a value the returns cannot take
+        why = outside_returns(entry, lo, hi)
+        if why is None and gain.get(name, {}).get("estimate") is not None:
+            why = outside_returns(gain[name], lo - hi, hi - lo)
+        if why is not None:
+            value[name] = gain[name] = withheld(why)
     out["policy_value"] = value
     out["improvement"] = gain
     out["verdict"] = verdict(gain)

@@ -12,7 +12,7 @@ import pytest
 from aoc_cli.ope import estimators as ope
 from aoc_cli.ope.fqe import student_quantile
 from aoc_cli.ope.policies import OPESettings
-from aoc_cli.ope.support import cell, min_ess, refusal, verdict
+from aoc_cli.ope.support import cell, min_ess, outside_returns, refusal, verdict
 from aoc_cli.ope.value import policy_value
 from tests.ope.mdps import SmallMDP
 
@@ -123,8 +123,49 @@ def test_the_verdict_line():
         "better than the logged behaviour by 0.030 [0.010, 0.050] (WDR): shown")
     assert verdict({"fqe": d(-0.03, -0.05, -0.01)}) == (
         "worse than the logged behaviour by 0.030 [0.010, 0.050] (FQE): shown")
+    # a negative difference reads "worse ... by" its magnitude, shown or not
+    assert verdict({"fqe": d(-0.280, -0.568, 0.008)}) == (
+        "worse than the logged behaviour by 0.280 [-0.008, 0.568] (FQE): not shown by this "
+        "log")
     assert verdict({"pdwis": no, "wdr": no}) == (
         "better than the logged behaviour: not estimable from this log (ESS 4.6 of 3,000)")
+
+
+def test_an_estimate_outside_the_returns_range_is_withheld_with_its_reason():
+    """A survival probability above 1 (FQE gave 1.696 on a noisy cohort) or an interval end
+    below the worst return is never shown; a float's rounding at the edge is."""
+    assert outside_returns({"estimate": 0.9, "low": 0.8, "high": 1.0}, 0.0, 1.0) is None
+    assert outside_returns({"estimate": 1.0, "low": 1.0, "high": 1.0 + 1e-12}, 0.0, 1.0) is None
+    why = outside_returns({"estimate": 1.696, "low": 1.4, "high": 1.99}, 0.0, 1.0)
+    assert why.startswith("outside the range of the log's returns (1.696 [1.4, 1.99] for "
+                          "returns in [0, 1]")
+    assert outside_returns({"estimate": 0.05, "low": -0.01, "high": 0.1}, 0.0, 1.0)
+    assert outside_returns({"estimate": float("nan"), "low": 0, "high": 1}, 0.0, 1.0)
+    assert outside_returns({"estimate": None, "reason": "x"}, 0.0, 1.0) is None
+
+
+def test_an_fqe_value_above_every_return_is_withheld_and_the_verdict_reads_the_next():
+    """FQE's Q extrapolated off the log: its value 1.7 of a survival in [0, 1] is withheld
+    (value and difference, with the reason) and the verdict reads WDR or says why not."""
+    mdp = SmallMDP.random(seed=1, end=0.35)
+    s, a = mdp.P.shape[:2]
+    pi_b = np.random.default_rng(1).dirichlet(np.full(a, 2.0), size=s)
+    data = mdp.sample(pi_b, 600, seed=3)
+    log = ope.Log(data["starts"], data["reward"])
+    returns = log.returns()
+    assert returns.min() >= 0 and returns.max() <= 1
+    fqe = _exact_fqe(mdp, pi_b, data)
+    shift = 1.7 - fqe["estimate"]
+    fqe = {**fqe, "q": fqe["q"] + shift, "estimate": 1.7, "low": fqe["low"] + shift,
+           "high": fqe["high"] + shift, "replicates": fqe["replicates"] + shift}
+    rec = policy_value(log, None, data["action"], data["propensity"], pi_b[data["state"]], a,
+                       OPESettings(estimators=("fqe",), n_boot=200), fqe=fqe)
+    assert rec["policy_value"]["fqe"]["estimate"] is None
+    assert rec["policy_value"]["fqe"]["reason"].startswith("outside the range of the log's")
+    assert rec["improvement"]["fqe"]["estimate"] is None
+    assert rec["verdict"].startswith("better than the logged behaviour: not estimable from "
+                                     "this log (outside the range of the log's returns")
+    json.dumps(rec, default=lambda x: None, allow_nan=False)
 
 
 def test_the_behaviour_itself_improves_on_itself_by_exactly_zero():
