@@ -65,6 +65,7 @@ class PolicyName(str, Enum):
 
 #: The choices of a setting, from its field (``--help`` lists them).
 SamplerName = choices_of(ControllerConfig, "sampler")
+DoNoHarm = choices_of(ControllerConfig, "do_no_harm")
 IndexKind = choices_of(IndexConfig, "kind")
 BeliefMode = choices_of(BeliefConfig, "mode")
 BeliefKind = choices_of(BeliefConfig, "belief")
@@ -89,7 +90,8 @@ def choice(value: Enum | str | None) -> str | None:
 # -- the controller's settings, every one, on every command that decides ------------------
 #: The option of each ControllerConfig field: None unless given (then: the model's, else the
 #: field's default), flag, help, range and choices from the field (``-K`` for candidates).
-_TYPES = {**get_type_hints(ControllerConfig), "sampler": SamplerName}
+_TYPES = {**get_type_hints(ControllerConfig), "sampler": SamplerName,
+          "do_no_harm": DoNoHarm}
 CONTROLLER_OPTIONS = {
     item.name: Annotated[
         Optional[_TYPES[item.name]],

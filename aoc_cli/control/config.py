@@ -60,6 +60,14 @@ class ControllerConfig(Settings):
         None, bounds=">= 0", none="rank by v_hat",
         help="Value mode: z, rank the candidates that pass by v_hat - z sigma_v / "
              "sqrt(support), a value shrunk by how many episodes back it.")
+    #: Rule 7 (docs/design.md, "Settings from the log's evidence"): None is on for a
+    #: value-mode model of discrete actions (aoc_cli.neighbours.neighbourhood).
+    do_no_harm: str | None = setting(
+        None, choices=("on", "off"),
+        none="on (value mode, discrete actions), unless rule 2's exact-repeat bound ranks "
+             "the actions (a support penalty)",
+        help="Value mode, discrete actions: keep the clinicians' likely action unless another "
+             "action's lower bound beats its value (on), or rank by v_hat alone (off).")
     #: The index's ``k``: ``index.json``, set by the k rule when it was built
     #: (aoc_cli.decompose.k_rule).
     k: int | None = setting(

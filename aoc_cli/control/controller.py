@@ -26,6 +26,7 @@ import numpy as np
 
 from aoc_cli.belief.row_labels import default_row_smoothing, row_labels
 from aoc_cli.control.config import ControllerConfig
+from aoc_cli.neighbours.neighbourhood import Neighbourhood
 from aoc_cli.control.rule import choose as _choose
 from aoc_cli.control.rule import reads_support, residual_cap
 from aoc_cli.control.support import row_episodes, support_episodes
@@ -68,6 +69,9 @@ class Decision:
     support_counts: np.ndarray = field(default_factory=lambda: np.empty(0, np.int64))
     support_labels: np.ndarray = field(default_factory=lambda: np.empty((0, 0)))
     scores: np.ndarray = field(default_factory=lambda: np.empty(0))
+    #: Rule 7 (do no harm): the clinicians' likely action was kept, no alternative's lower
+    #: bound beating its value (aoc_cli.neighbours.neighbourhood); None where the rule is off.
+    kept: bool | None = None
 
 
 def action_bounds(action_space: dict, actions: np.ndarray | None = None):
@@ -121,6 +125,7 @@ class Controller:
         values = index.values
         self.value_std = float(np.std(values)) if values is not None and len(values) else 1.0
         self.row_episode = row_episodes(corpus.episode_starts)
+        self._neighbourhood = None
 
     @property
     def k(self) -> int:
@@ -150,6 +155,42 @@ class Controller:
         noise = self.rng.standard_normal((k, len(self.low))) * self.config.bc_noise * self.span
         noise[0] = 0.0
         return np.clip(mean[None, :] + noise, self.low, self.high)
+
+    # -- rule 7: do no harm ---------------------------------------------------------------
+    @property
+    def do_no_harm(self) -> bool:
+        """Whether rule 7 decides: value mode, discrete actions, and ``do_no_harm`` on, or
+        None where rule 2's exact-repeat bound does not rank the actions (no
+        ``support_penalty``: on a log whose states repeat, rule 2 ranks and rule 6 chooses
+        on held-out episodes)."""
+        if not (self.discrete and self.model.mode == "value" and self.index.values is not None):
+            return False
+        if self.config.do_no_harm is None:
+            return not reads_support(self.config)
+        return self.config.do_no_harm == "on"
+
+    @property
+    def neighbourhood(self) -> Neighbourhood:
+        """The log's rows near an observation (built on first use)."""
+        if self._neighbourhood is None:
+            self._neighbourhood = Neighbourhood(
+                self.corpus.observations, self.corpus_actions, self.row_episode,
+                self.corpus.n_actions, values=self.index.values)
+        return self._neighbourhood
+
+    def harm_inputs(self, observations: np.ndarray, value: np.ndarray,
+                    support: np.ndarray | None) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """Rule 7's (lower (S, K), kept (S,)) at observations (S, d_o) whose candidates are
+        the discrete actions with v_hat ``value`` (S, K); (None, None) where it is off. Where
+        rule 2 ranks by its exact-repeat lower bound (``support_penalty``), that bound stays
+        the key; elsewhere the neighbourhood's."""
+        if not self.do_no_harm:
+            return None, None
+        near = self.neighbourhood.at(observations)
+        lower = None
+        if not reads_support(self.config):
+            lower = self.neighbourhood.lower(value, near.episodes[:, :value.shape[1]])
+        return lower, near.likely
 
     # -- one step --------------------------------------------------------------------------
     def decide(self, observation: np.ndarray, history: History,
@@ -184,11 +225,15 @@ class Controller:
         value = np.asarray(dec.value, dtype=np.float64)
         # every candidate's support only where a rule reads it (a few ms for K = 100)
         support = self.support(dec)[0] if reads_support(self.config) else np.empty(0)
+        kept = None
         if choose:  # steps 4 and 5: the decision rule (aoc_cli.control.rule.choose)
+            lower, likely = self.harm_inputs(observation[None], value[None], support[None])
             threshold, passed, chosen = _choose(
                 residual[None], value[None], self.config, cap=self.residual_cap,
-                support=support[None], value_std=self.value_std)
+                support=support[None], value_std=self.value_std, lower=lower, kept=likely)
             threshold, passed, chosen = float(threshold[0, 0]), passed[0], int(chosen[0])
+            if likely is not None:
+                kept = bool(chosen == int(likely[0]))
         else:
             threshold, passed, chosen = float("nan"), np.ones(n, bool), 0
         own, counts = self.support(dec, chosen)  # the decision's own, for its record
@@ -208,6 +253,7 @@ class Controller:
             support=float(own[0]),
             candidate_support=support,
             support_counts=_trim(counts[0], dec.rows[chosen]),
+            kept=kept,
         )
         decision.warnings = self.heterogeneity(decision)
         return decision

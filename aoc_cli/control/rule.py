@@ -8,7 +8,9 @@ step at once (:mod:`aoc_cli.evaluation.score`). Over the K candidates of each of
    (:func:`epsilon_filter`); with ``min_support`` m, of those the ones backed by at least m
    distinct episodes (:func:`aoc_cli.control.support.support_filter`);
 5. the argmax of v_hat among them, or with ``support_penalty`` z of the penalised v_hat
-   (:func:`aoc_cli.control.support.penalised`); ties: the smaller residual, then the first.
+   (:func:`aoc_cli.control.support.penalised`); ties: the smaller residual, then the first;
+   with rule 7 (do no harm) the argmax of a lower bound, taken only where it beats the
+   clinicians' likely action's v_hat, else that action is kept (:func:`choose`).
 """
 
 from __future__ import annotations
@@ -53,14 +55,20 @@ def reads_support(config: ControllerConfig) -> bool:
 
 def choose(residual: np.ndarray, value: np.ndarray, config: ControllerConfig, *,
            cap: float | None = None, support: np.ndarray | None = None,
-           value_std: float = 1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+           value_std: float = 1.0, lower: np.ndarray | None = None,
+           kept: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The decision among the K candidates of each of S steps (module docstring).
 
     residual, value (S, K) float64: each candidate's corpus residual and v_hat; ``config``:
     epsilon, min_support, support_penalty; ``cap``: the absolute residual cap
     (:func:`residual_cap`: c x the typical p90) or None; ``support`` (S, K): each
     candidate's support (needed when :func:`reads_support`); ``value_std``: sigma_v of the
-    penalty. Returns (threshold (S, 1), passed (S, K) bool, chosen (S,) int64)."""
+    penalty. Rule 7, do no harm (discrete actions, the candidates every action):
+    ``lower`` (S, K) each candidate's lower bound (the rank key in place of v_hat, or of the
+    penalised v_hat) and ``kept`` (S,) the clinicians' likely action
+    (:mod:`aoc_cli.neighbours.neighbourhood`): the best-ranked candidate is taken only where its
+    key beats the kept action's v_hat, else the kept action is. Returns (threshold (S, 1),
+    passed (S, K) bool, chosen (S,) int64)."""
     residual = np.asarray(residual, np.float64)
     value = np.asarray(value, np.float64)
     threshold, passed = epsilon_filter(residual, config.epsilon, cap)
@@ -68,8 +76,14 @@ def choose(residual: np.ndarray, value: np.ndarray, config: ControllerConfig, *,
     if reads_support(config):
         passed = support_filter(passed, support, config.min_support)
         key = penalised(value, support, config.support_penalty, value_std)
+    if lower is not None:
+        key = np.asarray(lower, np.float64)
     key = np.where(passed, key, -np.inf)
     best = key.max(-1, keepdims=True)
     # of the best (penalised) v_hat the smaller residual; argmin takes the first of equals
     chosen = np.where(key == best, residual, np.inf).argmin(-1)
+    if kept is not None:
+        s = np.arange(len(chosen))
+        kept = np.asarray(kept, np.int64)
+        chosen = np.where(key[s, chosen] > value[s, kept], chosen, kept)
     return threshold, passed, chosen

@@ -212,8 +212,10 @@ def _candidates_decided(ctx, rows, ep, obs, hist):
     if reads_support(cfg):  # the episodes behind each value (control/support.py)
         support = support_episodes(ctx.index.beliefs, dec.rows, dec.weights, dec.neighbours,
                                    ctx.corpus_episode)[0].reshape(s, kk)
+    lower, likely = ctx.session.controller.harm_inputs(obs, val, support)
     _thr, _passed, chosen = choose(res, val, cfg, support=support, value_std=ctx.value_std,
-                                   cap=residual_cap(cfg.residual_cap, ctx.index.typical.p90))
+                                   cap=residual_cap(cfg.residual_cap, ctx.index.typical.p90),
+                                   lower=lower, kept=likely)
     pick = np.arange(s) * kk + chosen
     head_c = None
     if "bc" in ctx.baselines:

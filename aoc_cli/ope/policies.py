@@ -38,6 +38,7 @@ from aoc_cli.ope.fqe import (
     behaviour_fqe,
     default_steps,
 )
+from aoc_cli.neighbours.neighbourhood import Neighbourhood
 from aoc_cli.ope.parts import MAX_PARTS
 from aoc_cli.ope.propensity import features, fit_propensities
 from aoc_cli.ope.support import fqe_refusal
@@ -276,10 +277,16 @@ def off_policy_values(data, logged: np.ndarray, policies: dict, settings: OPESet
             for rec in fqes:
                 if rec is not None:
                     rec["withheld"] = off
+    held = None
+    if "fqe" in settings.estimators and any(f is not None for f in fqes):
+        near = Neighbourhood(data.observations, logged,
+                             np.repeat(np.arange(data.n_episodes), np.diff(data.episode_starts)),
+                             data.n_actions)
+        held = near.at(data.observations).episodes                       # (N, n)
     for i, ((name, policy), fqe) in enumerate(zip(probs.items(), fqes)):
         try:
             rec = policy_value(log, inputs, logged, propensity, policy,
-                               data.n_actions, settings, progress, fqe=fqe)
+                               data.n_actions, settings, progress, fqe=fqe, held=held)
         except AocError as err:
             if i == 0:          # the first policy is the one asked about: its error is the run's
                 raise AocError(f"policy {name!r}: {err.marked}") from None

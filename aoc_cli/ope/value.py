@@ -22,12 +22,16 @@ def _as_probs(policy: np.ndarray, n_actions: int) -> np.ndarray:
 
 
 def policy_value(log: ope.Log, observations, logged, propensity, policy, n_actions: int,
-                 settings, progress=None, fqe: dict | None | str = "fit") -> dict:
+                 settings, progress=None, fqe: dict | None | str = "fit",
+                 held: np.ndarray | None = None) -> dict:
     """One policy's ``policy_value`` {estimator: Estimate dict, or withheld}, ``improvement``
     (over the logged behaviour, paired), ``verdict``, ``ess``, ``support`` and notes.
     ``policy`` (N,) decisions or (N, n) probabilities at the logged steps; ``fqe`` its direct
     method (one entry of :func:`fqe_values`, computed with the other policies'; "fit": fitted
-    here for this policy alone)."""
+    here for this policy alone). ``held`` (N, n): the log's episodes near each step that took
+    each action (:class:`aoc_cli.neighbours.neighbourhood.Neighbourhood`): FQE's interval is
+    widened by the share of the policy's decisions the log hardly holds
+    (:func:`hardly_held`)."""
     probs = _as_probs(policy, n_actions)                          # (N, n)
     rows = np.arange(len(logged))
     rho = ope.ratios(probs[rows, logged], propensity)
@@ -82,6 +86,19 @@ def policy_value(log: ope.Log, observations, logged, propensity, policy, n_actio
         # FQE off on the logged behaviour (support.fqe_refusal)
         value["fqe"] = gain["fqe"] = withheld(fqe["withheld"])
     lo, hi = float(returns.min()), float(returns.max())
+    if held is not None:
+        share = hardly_held(probs, held)
+        out["support"] = {"hardly_held": share}
+        if value.get("fqe", {}).get("estimate") is not None and share > 0:
+            why = widen(value["fqe"], gain["fqe"], share, lo, hi)
+            if why is not None:
+                value["fqe"] = gain["fqe"] = withheld(why)
+            else:
+                out["notes"].append(
+                    f"fqe: the log hardly holds {share:.1%} of the policy's decisions (fewer "
+                    f"than {HELD_EPISODES} of its episodes near the step took that action): "
+                    f"the interval is widened by that share of the returns' range, "
+                    f"+- {share * (hi - lo):.3g}")
     for name, entry in value.items():       # never a value the returns cannot take
         why = outside_returns(entry, lo, hi)
         if why is None and gain.get(name, {}).get("estimate") is not None:
@@ -91,11 +108,42 @@ def policy_value(log: ope.Log, observations, logged, propensity, policy, n_actio
     out["policy_value"] = value
     out["improvement"] = gain
     out["verdict"] = verdict(gain)
-    out["support"] = {"ess": diag["ess"],
+    out["support"] = {**out.get("support", {}), "ess": diag["ess"],
                       "ess_per_step": [round(x, 2) for x in diag["ess_per_step"]],
                       "reached": diag["reached"], "first_step_weight": diag["first_step_weight"],
                       "undefined_replicates": {k: e.undefined for k, e in est.items()}}
     return out
+
+
+#: A decision is hardly held when fewer than this many of the log's episodes near its step
+#: took its action (rule 6's "held out fewer than 3 times", in its continuous form).
+HELD_EPISODES = 3
+
+
+def hardly_held(probs: np.ndarray, held: np.ndarray) -> float:
+    """The share of a policy's decisions (probabilities (N, n) at the N logged steps) whose
+    action fewer than :data:`HELD_EPISODES` of the log's episodes near the step took
+    (``held`` (N, n))."""
+    thin = np.asarray(held)[:, :probs.shape[1]] < HELD_EPISODES
+    return float(np.mean((probs * thin).sum(1))) if len(probs) else 0.0
+
+
+def widen(value: dict, gain: dict, share: float, lo: float, hi: float) -> str | None:
+    """FQE's value and difference intervals widened, in place, by ``share`` x the returns'
+    range [``lo``, ``hi``] each way (on the decisions the log hardly holds FQE's Q is
+    extrapolation: worth anything from the worst return to the best); the reason to withhold
+    them when the widened value leaves that range (None: shown, widened)."""
+    pad = share * (hi - lo)
+    low, high = value["low"] - pad, value["high"] + pad
+    if low < lo - 1e-9 * max(hi - lo, 1e-12) or high > hi + 1e-9 * max(hi - lo, 1e-12):
+        return (f"the log hardly holds {share:.0%} of the policy's decisions (fewer than "
+                f"{HELD_EPISODES} of its episodes near the step took that action): FQE's "
+                f"value there is extrapolation, its interval widened by that share of the "
+                f"returns' range ({value['estimate']:.4g} [{low:.4g}, {high:.4g}]) leaves "
+                f"[{lo:.4g}, {hi:.4g}]")
+    value["low"], value["high"] = low, high
+    gain["low"], gain["high"] = gain["low"] - pad, gain["high"] + pad
+    return None
 
 
 def _fqe_gain(fqe: dict, returns: np.ndarray) -> dict:

@@ -1,0 +1,145 @@
+"""The log's evidence near an observation, without exact repeats: rule 2 for continuous
+observations and the clinicians' likely action that rule 7 keeps (docs/design.md, "Settings
+from the log's evidence").
+
+A cohort's rows are noisy measurements: no two rows repeat, so "the (state, action) the log
+took n times" has no meaning. Its continuous form is the **neighbourhood** of an observation
+o: the :data:`NEAREST` logged rows nearest to o, the observations standardised by the log's
+own spread (each column less its mean, over its sd), searched exactly (FAISS, flat L2). From
+them, for every discrete action a:
+
+* ``episodes[a]``: the distinct episodes among those rows that took a, the number of patients
+  behind a's value at o (on a log whose states repeat, the rows at distance 0 are the state's
+  own: the count is the exact-repeat support, up to :data:`NEAREST`);
+* ``likely``: the action most of those rows took, the clinicians' likely action at o (their
+  modal action where states repeat);
+
+and once for the log, ``noise``: the sd of a row's value about the mean value of the rows of
+the same neighbourhood and action (pooled over a sample of :data:`NOISE_QUERIES` rows' own
+neighbourhoods, each (neighbourhood, action) group with two rows or more), the spread of one
+patient's value where the log cannot tell states apart.
+
+The rule (:func:`aoc_cli.control.rule.choose`, ``lower``, ``kept``): each candidate's lower
+bound is v_hat(a) - z_K noise / sqrt(episodes[a]) (z_K the simultaneous one-sided 95% bound
+over the step's K actions, Bonferroni; no episode: no bound, -inf); the action of the highest
+bound is taken only when that bound beats the clinicians' likely action's own v_hat;
+otherwise the clinicians' likely action is kept (Pi_b-SPIBB's principle: leave the behaviour
+where the log cannot show better).
+
+Shapes: observations (N, d_o), actions (N,) int, row_episode (N,) int, values (N,) float64;
+``at(obs (S, d_o))`` -> :class:`Near` with episodes (S, n) int64, likely (S,) int64,
+rows (S, m) int64.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from statistics import NormalDist
+
+import numpy as np
+
+#: Rows in an observation's neighbourhood.
+NEAREST = 100
+#: Rows whose neighbourhoods measure the noise (a seeded sample of the log).
+NOISE_QUERIES = 2000
+#: The bound's confidence, over the K actions of a step at once.
+LEVEL = 0.95
+#: Queries searched at once.
+_BLOCK = 4096
+
+
+def lower_bound_z(n_actions: int, level: float = LEVEL) -> float:
+    """z_K = Phi^-1(1 - (1 - level) / K) (Bonferroni over the K actions of a step)."""
+    return float(NormalDist().inv_cdf(1.0 - (1.0 - level) / max(int(n_actions), 1)))
+
+
+@dataclass(frozen=True)
+class Near:
+    """The neighbourhoods of S observations: ``episodes`` (S, n) distinct episodes per
+    action, ``likely`` (S,) the action most rows took (ties: the lowest), ``rows`` (S, m)
+    the rows, nearest first."""
+
+    episodes: np.ndarray
+    likely: np.ndarray
+    rows: np.ndarray
+
+
+class Neighbourhood:
+    """The logged rows near an observation (module docstring)."""
+
+    def __init__(self, observations: np.ndarray, actions: np.ndarray, row_episode: np.ndarray,
+                 n_actions: int, values: np.ndarray | None = None, nearest: int = NEAREST,
+                 seed: int = 0):
+        import faiss  # lazy: FAISS only where a controller decides with the rule
+
+        obs = np.asarray(observations, np.float64).reshape(len(observations), -1)
+        self.mean = obs.mean(0)
+        sd = obs.std(0)
+        self.scale = np.where(sd > 1e-12, sd, 1.0)
+        self.actions = np.asarray(actions, np.int64)
+        self.row_episode = np.asarray(row_episode, np.int64)
+        self.n_actions = int(n_actions)
+        self.nearest = int(min(nearest, len(obs)))
+        self.index = faiss.IndexFlatL2(obs.shape[1])
+        self.index.add(self._standard(obs))
+        self.z = lower_bound_z(self.n_actions)
+        self.noise = (float("nan") if values is None
+                      else self._noise(obs, np.asarray(values, np.float64), seed))
+
+    def _standard(self, obs: np.ndarray) -> np.ndarray:
+        return np.ascontiguousarray((np.asarray(obs, np.float64) - self.mean) / self.scale,
+                                    dtype=np.float32)
+
+    def rows(self, obs: np.ndarray) -> np.ndarray:
+        """(S, m) the m nearest logged rows of each observation (S, d_o), nearest first."""
+        obs = np.asarray(obs).reshape(len(obs), -1)
+        out = np.empty((len(obs), self.nearest), np.int64)
+        for a in range(0, len(obs), _BLOCK):
+            _d, idx = self.index.search(self._standard(obs[a:a + _BLOCK]), self.nearest)
+            out[a:a + _BLOCK] = idx
+        return out
+
+    def at(self, obs: np.ndarray) -> Near:
+        """The neighbourhoods of observations (S, d_o) (module docstring)."""
+        rows = self.rows(obs)
+        acts = self.actions[rows]                                         # (S, m)
+        s = len(rows)
+        rowcount = np.zeros((s, self.n_actions), np.int64)
+        np.add.at(rowcount, (np.repeat(np.arange(s), rows.shape[1]), acts.ravel()), 1)
+        # distinct (action, episode) pairs per neighbourhood
+        key = np.sort(acts * (int(self.row_episode.max()) + 1) + self.row_episode[rows], axis=1)
+        first = np.ones(key.shape, bool)
+        first[:, 1:] = key[:, 1:] != key[:, :-1]
+        episodes = np.zeros((s, self.n_actions), np.int64)
+        span = int(self.row_episode.max()) + 1
+        q, j = np.nonzero(first)
+        np.add.at(episodes, (q, key[q, j] // span), 1)
+        return Near(episodes, rowcount.argmax(1).astype(np.int64), rows)
+
+    def _noise(self, obs: np.ndarray, values: np.ndarray, seed: int) -> float:
+        """The pooled sd of a row's value about its (neighbourhood, action) mean (module
+        docstring); NaN where no group has two rows."""
+        n = len(obs)
+        pick = np.random.default_rng(seed).choice(n, size=min(NOISE_QUERIES, n), replace=False)
+        rows = self.rows(obs[np.sort(pick)])                              # (Q, m)
+        acts, vals = self.actions[rows], values[rows]
+        q = np.repeat(np.arange(len(rows)), rows.shape[1])
+        group = q * self.n_actions + acts.ravel()
+        count = np.bincount(group, minlength=len(rows) * self.n_actions)
+        total = np.bincount(group, weights=vals.ravel(), minlength=len(count))
+        mean = np.divide(total, count, out=np.zeros(len(count)), where=count > 0)
+        dev = (vals.ravel() - mean[group]) ** 2
+        dof = int(np.sum(np.maximum(count - 1, 0)))
+        return float(np.sqrt(dev.sum() / dof)) if dof > 0 else float("nan")
+
+    def lower(self, value: np.ndarray, episodes: np.ndarray) -> np.ndarray:
+        """(S, K) v_hat - z_K noise / sqrt(episodes), -inf where no episode took the action;
+        value and episodes (S, K) (the candidates are the discrete actions)."""
+        with np.errstate(divide="ignore"):
+            half = self.z * self.noise / np.sqrt(episodes.astype(np.float64))
+        return np.where(episodes > 0, np.asarray(value, np.float64) - half, -np.inf)
+
+    def describe(self) -> dict:
+        """What the rule measured, for the record."""
+        return {"nearest": self.nearest, "noise": self.noise, "z": self.z, "level": LEVEL,
+                "queries": NOISE_QUERIES}
