@@ -18,6 +18,11 @@ discrete        ``discrete_actions`` (bool)     false
 static id       ``static_id``                   the episode id column's name
 ==============  ==============================  =====================================
 
+A column of another role (the outcome, reward, an action, the censoring or terminal flag, the
+episode id, the time) named among the observations is refused, as it would leak into the state
+(:class:`aoc_cli.errors.RoleOverlap`; ``allow_role_overlap`` keeps it); the default ``obs_*``
+columns and a static file's columns leave such a column out.
+
 The table is read by pyarrow (:mod:`aoc_cli.formats.table`) and converted to numpy column by
 column, once. Rows are ordered by episode id and time whatever the file's order (ids
 numerically when they are all numbers; times as numbers or ISO dates); two rows of one episode
@@ -31,7 +36,8 @@ columns are kept as corpus columns (usable as value targets).
 
 A clinical cohort table adds (each recorded in the corpus's ``preprocessing``): empty cells
 filled by ``--impute`` (:mod:`aoc_cli.formats.impute`), continuous doses cut into dose levels
-by ``--bin-actions`` (:mod:`aoc_cli.formats.bins`), the stay's outcome as its last reward and
+at their quantiles or at a study's own levels by ``--bin-actions``
+(:mod:`aoc_cli.formats.bins`), the stay's outcome as its last reward and
 censored stays (:mod:`aoc_cli.formats.outcomes`).
 
 A CSV of ``aoc export`` is read back exactly with the mapping beside it
@@ -128,6 +134,9 @@ def _roles(where, header: list[str], options: ReadOptions, bins: list[str] | Non
                       ("outcome", options.outcome), ("censoring", options.censored_column)):
         if col is not None and col not in header:
             raise AocError(f"{where}: no {role} column {col!r} (columns: {', '.join(header)})")
+    named = options.obs_columns or m.get("observations")
+    obs_cols = _match(header, named, "observation column", where) if named else \
+        [h for h in header if fnmatch.fnmatchcase(h, "obs_*")]
     if bins:
         act_cols = _match(header, bins, "dose column", where)
         asked = options.act_columns or m.get("actions")
@@ -149,7 +158,7 @@ def _roles(where, header: list[str], options: ReadOptions, bins: list[str] | Non
         raise AocError(f"{where}: no terminal column {term_col!r}")
     role_cols = _role_columns(options, id_col, time_col, act_cols, reward_col, term_col,
                               bool(bins))
-    obs_cols = _observations(where, header, options, m, role_cols)
+    obs_cols = _observations(where, obs_cols, bool(named), options, role_cols)
     discrete = options.discrete_actions or bool(m.get("discrete_actions", False))
     if discrete and len(act_cols) != 1:
         raise AocError(f"{param('discrete_actions')} needs exactly one action column, got "
@@ -180,18 +189,17 @@ def _role_columns(options: ReadOptions, id_col, time_col, act_cols, reward_col, 
     return out
 
 
-def _observations(where, header: list[str], options: ReadOptions, m: dict,
+def _observations(where, obs_cols: list[str], named: bool, options: ReadOptions,
                   role_cols: dict) -> list[str]:
-    """The observation columns: those named (flag or mapping; a column of another role among
-    them refused unless ``allow_role_overlap``), else the ``obs_*`` columns that play no
-    other role."""
-    named = options.obs_columns or m.get("observations")
+    """The observation columns ``obs_cols``: when ``named`` (flag or mapping), a column of
+    another role among them is refused unless ``allow_role_overlap``; the default ones
+    (``obs_*``) are those that play no other role."""
+    if options.allow_role_overlap:
+        return obs_cols
     if not named:
-        found = [h for h in header if fnmatch.fnmatchcase(h, "obs_*")]
-        return [h for h in found if options.allow_role_overlap or h not in role_cols]
-    obs_cols = _match(header, named, "observation column", where)
+        return [h for h in obs_cols if h not in role_cols]
     overlap = [c for c in obs_cols if c in role_cols]
-    if overlap and not options.allow_role_overlap:
+    if overlap:
         col = overlap[0]
         role, name, harm = role_cols[col]
         source = param("obs_columns") if options.obs_columns else \
