@@ -95,6 +95,15 @@ def _rebuild(cls, args, state):
     return err
 
 
+class RoleOverlap(AocError):
+    """Column ``column`` of a table is listed among the observations and also plays the role
+    whose parameter is ``role`` (``outcome``, ``reward_column``, ``act_columns``, ...)."""
+
+    def __init__(self, message: str, column: str, role: str):
+        super().__init__(message)
+        self.column, self.role = column, role
+
+
 class CorpusNotFound(AocError):
     """No corpus ``name`` in the store at ``store`` (``known``: the corpora it holds)."""
 

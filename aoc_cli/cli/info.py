@@ -7,6 +7,7 @@ import typer
 import aoc_cli
 from aoc_cli.cli.common import CorpusArgument, FormatOption, state
 from aoc_cli.cli.output import message, resolve_format, write_object, write_records
+from aoc_cli.formats import bins as dose_bins
 from aoc_cli.store.summary import space_text
 
 
@@ -70,8 +71,7 @@ def preprocessing_text(pre: dict) -> str:
                         else ""))
     if "bins" in pre:
         b = pre["bins"]
-        parts.append("dose bins " + ",".join(f"{c}={n}" for c, n in zip(b["columns"],
-                                                                      b["bins"])))
+        parts.append("dose bins " + dose_bins.describe(dose_bins.asked_of(b)))
     if "outcome" in pre:
         o = pre["outcome"]
         parts.append(f"outcome {o['column']} (" + ",".join(f"{k}={v:g}" for k, v in

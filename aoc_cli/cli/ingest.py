@@ -74,12 +74,17 @@ def register(app: typer.Typer) -> None:
             None, "--outcome-reward", help="OUTCOME=REWARD pairs, e.g. 1=-1,0=1."),
         bin_actions: Optional[str] = typer.Option(
             None, "--bin-actions", help="COL=BINS,...: cut continuous doses into dose levels "
-            "(0: zero dose, the rest at quantiles), e.g. input_4hourly=5,max_dose_vaso=5."),
+            "(0: zero dose, the rest at quantiles), e.g. input_4hourly=5,max_dose_vaso=5; "
+            "COL=0:50:180:530: the study's own levels, the lower edge of each non-zero one."),
         bin_like: Optional[str] = typer.Option(
             None, "--bin-like", help="Cut the doses at corpus NAME's bin edges."),
         censored_column: Optional[str] = typer.Option(
             None, "--censored-column", help="Column truthy on the rows of a stay cut short "
             "(transfer, end of extract): censored, not ended."),
+        allow_role_overlap: bool = typer.Option(
+            False, "--allow-role-overlap", help="Keep a column of another role (outcome, "
+            "reward, action, censoring, stay id, time) listed among the observations "
+            "(refused otherwise: it would leak into the state)."),
         fmt: FormatOption = None,
     ) -> None:
         """Read a dataset (Minari, D4RL HDF5, d3rlpy, NPZ, CSV, Parquet) into corpus NAME."""
@@ -94,6 +99,7 @@ def register(app: typer.Typer) -> None:
             impute=impute.value if impute else None, impute_mask=impute_mask,
             impute_like=impute_like, outcome=outcome, outcome_reward=outcome_reward,
             bin_actions=bin_actions, bin_like=bin_like, censored_column=censored_column,
+            allow_role_overlap=allow_role_overlap,
         )
         with ProgressBar(f"ingest {name}") as bar:
             result = aoc_cli.ingest(path, name, store=state.store, fmt=source_format,

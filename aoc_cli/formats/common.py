@@ -54,6 +54,10 @@ class ReadOptions:
     bin_actions: str | dict | None = None
     bin_like: str | None = None
     censored_column: str | None = None
+    #: keep a column of another role (the outcome, reward, an action, the censoring or
+    #: terminal flag, the stay id, the time) listed among the observations: refused
+    #: otherwise (it would leak into the state), and left out of the default ones
+    allow_role_overlap: bool = False
     #: the preprocessing of the corpora named by ``impute_like``/``bin_like`` or appended
     #: to (``{"impute": ..., "bins": ..., "from": {"impute": name, "bins": name}}``), set by
     #: :func:`aoc_cli.formats.ingest`

@@ -18,6 +18,11 @@ discrete        ``discrete_actions`` (bool)     false
 static id       ``static_id``                   the episode id column's name
 ==============  ==============================  =====================================
 
+A column of another role (the outcome, reward, an action, the censoring or terminal flag, the
+episode id, the time) named among the observations is refused, as it would leak into the state
+(:class:`aoc_cli.errors.RoleOverlap`; ``allow_role_overlap`` keeps it); the default ``obs_*``
+columns and a static file's columns leave such a column out.
+
 The table is read by pyarrow (:mod:`aoc_cli.formats.table`) and converted to numpy column by
 column, once. Rows are ordered by episode id and time whatever the file's order (ids
 numerically when they are all numbers; times as numbers or ISO dates); two rows of one episode
@@ -31,7 +36,8 @@ columns are kept as corpus columns (usable as value targets).
 
 A clinical cohort table adds (each recorded in the corpus's ``preprocessing``): empty cells
 filled by ``--impute`` (:mod:`aoc_cli.formats.impute`), continuous doses cut into dose levels
-by ``--bin-actions`` (:mod:`aoc_cli.formats.bins`), the stay's outcome as its last reward and
+at their quantiles or at a study's own levels by ``--bin-actions``
+(:mod:`aoc_cli.formats.bins`), the stay's outcome as its last reward and
 censored stays (:mod:`aoc_cli.formats.outcomes`).
 
 A CSV of ``aoc export`` is read back exactly with the mapping beside it
@@ -48,7 +54,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
-from aoc_cli.errors import AocError, param
+from aoc_cli.errors import AocError, RoleOverlap, param
 from aoc_cli.formats.bins import parse as parse_bins
 from aoc_cli.formats.cohort import Cohort, measured_planned, prepare
 from aoc_cli.formats.common import ReadOptions, action_space_of, encode_labels
@@ -128,10 +134,9 @@ def _roles(where, header: list[str], options: ReadOptions, bins: list[str] | Non
                       ("outcome", options.outcome), ("censoring", options.censored_column)):
         if col is not None and col not in header:
             raise AocError(f"{where}: no {role} column {col!r} (columns: {', '.join(header)})")
-    obs_cols = _match(header, options.obs_columns or m.get("observations") or "obs_*",
-                      "observation column", where) if (
-        options.obs_columns or m.get("observations") or
-        any(fnmatch.fnmatchcase(h, "obs_*") for h in header)) else []
+    named = options.obs_columns or m.get("observations")
+    obs_cols = _match(header, named, "observation column", where) if named else \
+        [h for h in header if fnmatch.fnmatchcase(h, "obs_*")]
     if bins:
         act_cols = _match(header, bins, "dose column", where)
         asked = options.act_columns or m.get("actions")
@@ -151,6 +156,9 @@ def _roles(where, header: list[str], options: ReadOptions, bins: list[str] | Non
     term_col = options.terminal_column or m.get("terminal")
     if term_col is not None and term_col not in header:
         raise AocError(f"{where}: no terminal column {term_col!r}")
+    role_cols = _role_columns(options, id_col, time_col, act_cols, reward_col, term_col,
+                              bool(bins))
+    obs_cols = _observations(where, obs_cols, bool(named), options, role_cols)
     discrete = options.discrete_actions or bool(m.get("discrete_actions", False))
     if discrete and len(act_cols) != 1:
         raise AocError(f"{param('discrete_actions')} needs exactly one action column, got "
@@ -158,6 +166,49 @@ def _roles(where, header: list[str], options: ReadOptions, bins: list[str] | Non
     return Roles(id_col, time_col, obs_cols, act_cols, reward_col, term_col,
                  list(options.tag_columns) or list(m.get("tags", [])), discrete,
                  m.get("static_id") or id_col)
+
+
+def _role_columns(options: ReadOptions, id_col, time_col, act_cols, reward_col, term_col,
+                  binned: bool) -> dict[str, tuple[str, str, str]]:
+    """{column: (its role, the parameter naming it, what listing it as an observation
+    would do)} for the columns of a role that must not be an observation."""
+    out: dict[str, tuple[str, str, str]] = {}
+    for col, role, name, harm in (
+            (options.outcome, "the outcome", "outcome", "the outcome would leak into the state"),
+            (reward_col, "the reward", "reward_column", "the reward would leak into the state"),
+            *((c, "an action", "bin_actions" if binned else "act_columns",
+               "the action would leak into the state it is chosen in") for c in act_cols),
+            (options.censored_column, "the censoring flag", "censored_column",
+             "the censoring would leak into the state"),
+            (term_col, "the terminal flag", "terminal_column",
+             "the stay's end would leak into the state"),
+            (id_col, "the stay id", "id_column", "the stay's id would become a feature"),
+            (time_col, "the time", "time_column", "the time would become a feature")):
+        if col is not None:
+            out.setdefault(col, (role, name, harm))
+    return out
+
+
+def _observations(where, obs_cols: list[str], named: bool, options: ReadOptions,
+                  role_cols: dict) -> list[str]:
+    """The observation columns ``obs_cols``: when ``named`` (flag or mapping), a column of
+    another role among them is refused unless ``allow_role_overlap``; the default ones
+    (``obs_*``) are those that play no other role."""
+    if options.allow_role_overlap:
+        return obs_cols
+    if not named:
+        return [h for h in obs_cols if h not in role_cols]
+    overlap = [c for c in obs_cols if c in role_cols]
+    if overlap:
+        col = overlap[0]
+        role, name, harm = role_cols[col]
+        source = param("obs_columns") if options.obs_columns else \
+            f"the observations of {param('columns_file')}"
+        raise RoleOverlap(
+            f"{where}: column {col!r} is {role} ({param(name)}) and an observation "
+            f"({source}): {harm}; drop it from the observations, or pass "
+            f"{param('allow_role_overlap', True)}", column=col, role=name)
+    return obs_cols
 
 
 def _flags(table: Table, roles: Roles, eps: Episodes):
@@ -227,7 +278,10 @@ def read_columns(table: Table, options: ReadOptions, source: dict) -> CorpusData
                            f"with {param('id_column')}")
         static_names, static_feats, static_tags = read_static(
             Path(options.static), roles.static_id, eps.keys, eps.ids,
-            bool(np.issubdtype(np.asarray(eps.keys).dtype, np.number)), roles.tags)
+            bool(np.issubdtype(np.asarray(eps.keys).dtype, np.number)), roles.tags,
+            skip=set() if options.allow_role_overlap else {
+                roles.id, roles.time, roles.reward, roles.terminal, options.outcome,
+                options.censored_column, *roles.actions} - {None})
     obs_names = list(roles.observations) + static_names
     if not obs_names:
         raise AocError(f"{where}: no observation columns: name them with "

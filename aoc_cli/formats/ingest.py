@@ -59,8 +59,8 @@ def _read_dataset(path, fmt, options) -> CorpusData:
         raise AocError(f"no such file or folder: {path}; check the path")
     tabular = ("impute", "impute_like", "outcome", "outcome_reward", "bin_actions", "bin_like",
                "censored_column")
-    asked = [name for name in tabular if getattr(options, name) is not None] + (
-        ["impute_mask"] if options.impute_mask else [])
+    asked = [name for name in tabular if getattr(options, name) is not None] + [
+        name for name in ("impute_mask", "allow_role_overlap") if getattr(options, name)]
     if asked and fmt not in ("csv", "parquet", "frame"):
         raise AocError(f"{param(asked[0])} applies to tables (CSV, Parquet, a DataFrame), not "
                        f"to {fmt} data")

@@ -5,7 +5,7 @@ hospital, a year: every stay of one value falls in one part).
 What the ingest fitted on the whole table is fitted again on the training part alone and
 applied to both: the imputation medians (the raw values are the stored ones where
 ``imputed_mask`` is false; the imputed cells are refilled) and the dose-bin edges (the raw
-doses are kept as corpus columns). The test part's own statistics never enter, so evaluating
+doses are kept as corpus columns; edges given at ingest, ``COL=0:50:180:530``, are kept). The test part's own statistics never enter, so evaluating
 on it leaks nothing. The split (the source corpus and its content hash, the share, the seed,
 the tag, the parts' names and the test stays) is recorded in both manifests
 (``preprocessing["split"]``).
@@ -99,7 +99,7 @@ def refit(train: CorpusData, parts: list[CorpusData], where: str) -> list[Corpus
         pre["impute"] = spec
     if "bins" in pre:
         old = pre["bins"]
-        asked = dict(zip(old["columns"], old["bins"]))
+        asked = dose_bins.asked_of(old)  # given edges kept as they are
         spec = dose_bins.fit({c: train.columns[c] for c in old["columns"]}, asked, where)
         labels = dose_bins.labels(spec)
         for part in parts:

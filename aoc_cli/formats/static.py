@@ -1,7 +1,9 @@
 """Static per-episode covariates of a CSV log (``--static FILE``, one row per episode id),
 joined onto every step of the series and appended to its observation: numeric columns as they
 are, text columns one-hot (``sex=F``, ``sex=M``, levels from the whole file), tag columns kept
-as text for the series' tags.
+as text for the series' tags. A column named as a column of another role in the series (its
+outcome, reward, an action, the censoring or terminal flag, the time) is left out, unless
+``allow_role_overlap``: it would leak into the state.
 """
 
 from __future__ import annotations
@@ -15,8 +17,10 @@ from aoc_cli.formats.table import is_numeric, numeric, read_table, text
 
 
 def read_static(path: Path, id_col: str, episode_keys: np.ndarray, episode_ids: list[str],
-                 numeric_ids: bool, tag_cols: list[str]):
-    """Static per-episode features, one row per id -> (names, (E, d_s) float, tag values)."""
+                 numeric_ids: bool, tag_cols: list[str], skip=frozenset()):
+    """Static per-episode features, one row per id -> (names, (E, d_s) float, tag values);
+    the columns ``skip`` (those of another role in the series: its outcome, ...) are not
+    features."""
     table = read_table(path, text_columns=[id_col, *tag_cols])
     header, cols = table.header, table.cols
     if id_col not in header:
@@ -47,7 +51,7 @@ def read_static(path: Path, id_col: str, episode_keys: np.ndarray, episode_ids: 
     feats: list[np.ndarray] = []
     tags: dict[str, np.ndarray] = {}
     for c in header:
-        if c == id_col:
+        if c == id_col or (c in skip and c not in tag_cols):
             continue
         if c in tag_cols:
             tags[c] = text(cols[c])[rows]

@@ -201,3 +201,183 @@ def test_invalid_corpus_name(filled_store, aoc, d4rl_file, name):
     assert_refused(aoc, filled_store, ["ingest", str(d4rl_file), "--name", name],
                    "invalid corpus name")
     assert not (filled_store.parent / "escape").exists()
+
+
+# --- a cohort table: a study's own dose levels, no column in two roles (issue 45) -------------
+
+FLUID_EDGES = [0.0, 50.0, 180.0, 530.0]  # the AI Clinician's MIMIC-III fluid levels
+VASO_EDGES = [0.0, 0.08, 0.22, 0.45]
+
+
+def _cohort_csv(tmp_path, name="c.csv", seed=0, **extra_cols):
+    from tests.formats.cohorts import cohort, write
+
+    cols = cohort(stays=30, seed=seed, gap=0.0, censored=0.0)
+    cols.update(extra_cols)
+    return cols, write(cols, tmp_path / name)
+
+
+def _role_flags(*obs_extra):
+    from tests.formats.cohorts import OBS
+
+    return ["--id-column", "icustayid", "--time-column", "bloc",
+            "--obs-columns", ",".join([*OBS, *obs_extra])]
+
+
+def _levels(dose, edges):
+    return np.where(dose > 0, np.searchsorted(edges[1:], dose, side="right") + 1, 0)
+
+
+def test_given_dose_levels_are_stored_and_reused_by_bin_like_and_split(store, aoc, tmp_path):
+    cols, path = _cohort_csv(tmp_path)
+    spec = (f"input_4hourly={':'.join(f'{x:g}' for x in FLUID_EDGES)},"
+            f"max_dose_vaso={':'.join(f'{x:g}' for x in VASO_EDGES)}")
+    code, _, err = aoc("ingest", str(path), "--name", "icu", *_role_flags(),
+                       "--bin-actions", spec)
+    assert code == 0, err
+    from aoc_cli.store import Store
+
+    s = Store(store)
+    bins = s.corpus("icu").preprocessing["bins"]
+    assert bins["edges"] == {"input_4hourly": [*FLUID_EDGES, None],
+                             "max_dose_vaso": [*VASO_EDGES, None]}
+    assert bins["bins"] == [5, 5] and bins["given"] == ["input_4hourly", "max_dose_vaso"]
+
+    def expected(cols):
+        return (_levels(cols["input_4hourly"], FLUID_EDGES) * 5 +
+                _levels(cols["max_dose_vaso"], VASO_EDGES))
+
+    data = s.corpus("icu").load()
+    np.testing.assert_array_equal(data.actions, expected(cols))  # cohort rows in stay order
+    names = data.action_space["names"]
+    assert names[5 * 4 + 1] == "input_4hourly 4/5 (530+), max_dose_vaso 1/5 (0-0.08)"
+    code, out, _ = aoc("info", "icu", "-f", "table")
+    assert "dose bins input_4hourly=0:50:180:530,max_dose_vaso=0:0.08:0.22:0.45" in out
+    # a second file, whose own quantiles differ: cut at the given levels all the same
+    other, path_b = _cohort_csv(tmp_path, "b.csv", seed=1)
+    other["input_4hourly"] *= 3
+    from tests.formats.cohorts import write
+
+    write(other, path_b)
+    code, _, err = aoc("ingest", str(path_b), "--name", "held", *_role_flags(),
+                       "--bin-like", "icu")
+    assert code == 0, err
+    held = s.corpus("held")
+    assert held.preprocessing["bins"] == bins
+    np.testing.assert_array_equal(held.load().actions, expected(other))
+    # the same edges again: accepted; other ones: refused
+    code, _, err = aoc("ingest", str(path_b), "--name", "held2", *_role_flags(),
+                       "--bin-like", "icu", "--bin-actions", spec)
+    assert code == 0, err
+    line = assert_refused(aoc, store, ["ingest", str(path_b), "--name", "held3",
+                                       *_role_flags(), "--bin-like", "icu", "--bin-actions",
+                                       "input_4hourly=5,max_dose_vaso=0:0.08:0.22:0.45"],
+                          "--bin-actions differs from the bins of corpus 'icu'")
+    assert "(input_4hourly=0:50:180:530,max_dose_vaso=0:0.08:0.22:0.45)" in line
+    # aoc split keeps the given edges (nothing to fit) and cuts both parts at them
+    code, _, err = aoc("split", "icu", "--test", "0.3", "--seed", "0")
+    assert code == 0, err
+    for part in ("icu-train", "icu-test"):
+        c = s.corpus(part)
+        assert c.preprocessing["bins"] == bins
+        d = c.load()
+        np.testing.assert_array_equal(d.actions, expected(d.columns))
+
+
+def test_given_dose_levels_mixed_with_a_count_refit_only_the_count_on_split(store, aoc,
+                                                                             tmp_path):
+    cols, path = _cohort_csv(tmp_path)
+    code, _, err = aoc("ingest", str(path), "--name", "icu", *_role_flags(),
+                       "--bin-actions", "input_4hourly=0:50:180:530,max_dose_vaso=3")
+    assert code == 0, err
+    code, _, err = aoc("split", "icu", "--test", "0.3", "--seed", "0")
+    assert code == 0, err
+    from aoc_cli.store import Store
+
+    train = Store(store).corpus("icu-train")
+    bins = train.preprocessing["bins"]
+    assert bins["given"] == ["input_4hourly"] and bins["bins"] == [5, 3]
+    assert bins["edges"]["input_4hourly"] == [*FLUID_EDGES, None]
+    vaso = train.load().columns["max_dose_vaso"]
+    nz = vaso[vaso > 0]
+    assert bins["edges"]["max_dose_vaso"] == pytest.approx([nz.min(), np.median(nz), nz.max()])
+
+
+@pytest.mark.parametrize("value, message", [
+    ("0:180:50", "the dose levels of 'input_4hourly' do not increase (180 then 50)"),
+    ("0:50:50", "the dose levels of 'input_4hourly' do not increase (50 then 50)"),
+    ("-10:50:180", "the dose levels of 'input_4hourly' start at -10, a negative dose"),
+    ("0:fifty:180", "the dose levels of 'input_4hourly' hold 'fifty', not a number"),
+    ("0:50:", "the dose levels of 'input_4hourly' hold '', not a number"),
+    ("0:nan", "the dose levels of 'input_4hourly' hold 'nan', not a number"),
+    ("1", "write COLUMN=BINS (BINS >= 2"),
+])
+def test_bad_dose_levels_are_one_line_naming_the_column(store, aoc, tmp_path, value, message):
+    _, path = _cohort_csv(tmp_path)
+    line = assert_refused(aoc, store, ["ingest", str(path), "--name", "icu", *_role_flags(),
+                                       "--bin-actions", f"input_4hourly={value}"], message)
+    assert f"--bin-actions input_4hourly={value}" in line
+    assert "0:50:180:530" in line or "0:0.08:0.22:0.45" in line  # what to give
+
+
+#: (the role's flags, the column, what the error names it)
+OVERLAPS = {
+    "outcome": (["--outcome", "died_in_hosp", "--outcome-reward", "1=-1,0=1"], "died_in_hosp",
+                "is the outcome (--outcome)", "the outcome would leak into the state"),
+    "reward": (["--reward-column", "mortality_90d"], "mortality_90d",
+               "is the reward (--reward-column)", "the reward would leak into the state"),
+    "action": (["--act-columns", "input_4hourly"], "input_4hourly",
+               "is an action (--act-columns)", "the action would leak"),
+    "binned action": (["--bin-actions", "input_4hourly=3"], "input_4hourly",
+                      "is an action (--bin-actions)", "the action would leak"),
+    "censoring": (["--censored-column", "transferred"], "transferred",
+                  "is the censoring flag (--censored-column)", "the censoring would leak"),
+    "stay id": ([], "icustayid", "is the stay id (--id-column)",
+                "the stay's id would become a feature"),
+    "time": ([], "bloc", "is the time (--time-column)", "the time would become a feature"),
+    "terminal": (["--terminal-column", "ended"], "ended",
+                 "is the terminal flag (--terminal-column)", "the stay's end would leak"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(OVERLAPS))
+def test_a_role_column_among_the_observations_is_refused_unless_allowed(store, aoc, tmp_path,
+                                                                         case):
+    flags, column, role, harm = OVERLAPS[case]
+    cols, path = _cohort_csv(tmp_path)
+    n = len(cols["bloc"])
+    ends = np.zeros(n)
+    ends[np.r_[cols["icustayid"][1:] != cols["icustayid"][:-1], True]] = 1
+    from tests.formats.cohorts import write
+
+    write({**cols, "transferred": np.zeros(n), "ended": ends}, path)
+    act = [] if "--act-columns" in flags or "--bin-actions" in flags else \
+        ["--act-columns", "max_dose_vaso"]
+    args = ["ingest", str(path), "--name", "icu", *_role_flags(column), *act, *flags]
+    line = assert_refused(aoc, store, args, f"column {column!r} {role} and an observation "
+                                            "(--obs-columns)")
+    assert harm in line
+    assert line.endswith("drop it from the observations, or pass --allow-role-overlap")
+    code, out, err = aoc(*args, "--allow-role-overlap", "-f", "json")
+    assert code == 0, err
+    code, out, _ = aoc("info", "icu", "-f", "json")
+    assert column in json.loads(out)["observation_space"]["names"]
+
+
+def test_default_observations_leave_out_role_columns(store, aoc, tmp_path):
+    """No --obs-columns: the obs_* columns are the observations, a role column among them
+    left out (not refused); --allow-role-overlap keeps it."""
+    rng = np.random.default_rng(0)
+    rows = [[e, t, *np.round(rng.normal(size=2), 3), e % 2, int(t == 2)]
+            for e in range(4) for t in range(3)]
+    path = write_csv(tmp_path / "log.csv", ["episode", "t", "obs_hr", "obs_sbp", "act_0",
+                                            "obs_died"], rows)
+    code, _, err = aoc("ingest", str(path), "--name", "a", "--reward-column", "obs_died")
+    assert code == 0, err
+    code, out, _ = aoc("info", "a", "-f", "json")
+    assert json.loads(out)["observation_space"]["names"] == ["obs_hr", "obs_sbp"]
+    code, _, err = aoc("ingest", str(path), "--name", "b", "--reward-column", "obs_died",
+                       "--allow-role-overlap")
+    assert code == 0, err
+    code, out, _ = aoc("info", "b", "-f", "json")
+    assert json.loads(out)["observation_space"]["names"] == ["obs_hr", "obs_sbp", "obs_died"]

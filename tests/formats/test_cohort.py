@@ -213,3 +213,64 @@ def test_the_table_flags_are_refused_on_other_formats(tmp_path):
     np.savez(path, **{k: v for k, v in flat_arrays()[0].items() if v is not None})
     with pytest.raises(AocError, match="applies to tables"):
         read_dataset(path, options=ReadOptions(impute="median"))
+
+
+def test_a_study_s_dose_levels_given_as_a_dict_cut_the_doses_at_them(tmp_path):
+    cols = cohort(stays=20, gap=0.0)
+    data = _read(cols, tmp_path, act_columns=None,
+                 bin_actions={"input_4hourly": [0, 50, 180, 530], "max_dose_vaso": 3})
+    spec = data.preprocessing["bins"]
+    assert spec["edges"]["input_4hourly"] == [0.0, 50.0, 180.0, 530.0, None]
+    assert spec["given"] == ["input_4hourly"] and spec["bins"] == [5, 3]
+    fluid = cols["input_4hourly"]
+    level = np.select([fluid >= 530, fluid >= 180, fluid >= 50, fluid > 0], [4, 3, 2, 1], 0)
+    np.testing.assert_array_equal(data.actions // 3, level)
+    with pytest.raises(AocError, match=r"bin_actions='input_4hourly=\[0, 50, 40\]': the dose "
+                                       r"levels of 'input_4hourly' do not increase \(50 then 40"):
+        _read(cols, tmp_path, act_columns=None, bin_actions={"input_4hourly": [0, 50, 40]})
+
+
+def test_the_outcome_among_the_observations_is_refused_by_the_library_too(tmp_path):
+    from aoc_cli.errors import RoleOverlap
+
+    cols = cohort(stays=6, gap=0.0, censored=0.0)
+    extra = dict(obs_columns=[*OBS, "died_in_hosp"], outcome="died_in_hosp",
+                 outcome_reward="1=-1,0=1")
+    with pytest.raises(RoleOverlap, match=r"column 'died_in_hosp' is the outcome \(outcome\) "
+                                          r"and an observation \(obs_columns\): the outcome "
+                                          r"would leak.*allow_role_overlap=True") as err:
+        _read(cols, tmp_path, **extra)
+    assert (err.value.column, err.value.role) == ("died_in_hosp", "outcome")
+    data = _read(cols, tmp_path, allow_role_overlap=True, **extra)
+    assert data.observation_space["names"][-1] == "died_in_hosp"
+    j = len(OBS)
+    last = data.episode_starts[1:] - 1
+    np.testing.assert_array_equal(data.observations[last, j], cols["died_in_hosp"][last])
+
+
+def test_a_mapping_s_observations_are_checked_and_static_role_columns_left_out(tmp_path):
+    import json
+
+    from aoc_cli.errors import RoleOverlap
+
+    cols = cohort(stays=6, gap=0.0, censored=0.0)
+    path = write(cols, tmp_path / "c.csv")
+    mapping = tmp_path / "roles.json"
+    mapping.write_text(json.dumps({"id": "icustayid", "time": "bloc",
+                                   "observations": ["HR", "bloc"],
+                                   "actions": ["input_4hourly"]}))
+    with pytest.raises(RoleOverlap, match=r"column 'bloc' is the time \(time_column\) and an "
+                                          r"observation \(the observations of columns_file\)"):
+        read_dataset(path, options=ReadOptions(columns_file=mapping))
+    # a static table holding the outcome too: not a feature (it would leak), unless allowed
+    ids = np.unique(cols["icustayid"])
+    static = tmp_path / "static.csv"
+    died = {i: cols["died_in_hosp"][cols["icustayid"] == i][0] for i in ids}
+    static.write_text("icustayid,weight,died_in_hosp\n" + "".join(
+        f"{i},{70 + k},{died[i]:g}\n" for k, i in enumerate(ids)))
+    opts = roles(act_columns=["input_4hourly"], static=static, outcome="died_in_hosp",
+                 outcome_reward="1=-1,0=1")
+    data = read_dataset(path, options=ReadOptions(**opts))
+    assert data.observation_space["static"] == ["weight"]
+    data = read_dataset(path, options=ReadOptions(**opts, allow_role_overlap=True))
+    assert data.observation_space["static"] == ["weight", "died_in_hosp"]
