@@ -151,15 +151,20 @@ def test_the_env_at_noise_zero_observes_the_centre_and_seeds_reproduce():
     C = ic.centres().astype(np.float32)
     obs, info = env.reset(seed=11)
     np.testing.assert_array_equal(obs, C[info["state"]])
-    steps, done = 0, False
+    env.action_space.seed(0)
+    done, held, cells = False, 0, 0
     while not done:
+        prev = obs
         obs, reward, term, trunc, info = env.step(env.action_space.sample())
         done = term or trunc
-        steps += 1
-        # a gap holds the value last observed: at noise 0 each cell is a centre seen so far
-        assert env.observation_space.contains(obs) or term
+        # each cell the current state's centre, or (a gap) the value observed the step before
+        fresh = obs == C[info["state"]]
+        assert (fresh | (obs == prev)).all()
+        held += (~fresh).sum()
+        cells += obs.size
         assert reward == float(info["state"] == sepsis.STATE_SURVIVAL)
     assert term == (info["state"] in (713, 714, 715))
+    assert 0 < held < cells
 
     def episode(seed):
         e = make_env("icu-cohort")
@@ -179,7 +184,7 @@ def test_the_env_at_noise_zero_observes_the_centre_and_seeds_reproduce():
 def test_the_env_noise_and_holds():
     env = make_env("icu-cohort:noise=1.0,gap=0.15")
     assert env.unwrapped.noise == 1.0 and env.unwrapped.gap == 0.15
-    C = ic.centres()
+    C, modal = ic.centres(), sepsis.tables().modal()
     held = fresh = 0
     resid = []
     for seed in range(40):
@@ -187,8 +192,7 @@ def test_the_env_noise_and_holds():
         resid.append(obs - C[info["state"]])  # the first step: every cell fresh
         done = False
         while not done:
-            nxt, _, term, trunc, info = env.step(int(ic.sepsis.tables().modal()[
-                info["state"]]))
+            nxt, _, term, trunc, info = env.step(int(modal[info["state"]]))
             done = term or trunc
             same = nxt == obs
             held += same.sum()
