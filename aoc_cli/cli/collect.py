@@ -23,7 +23,7 @@ def register(app: typer.Typer) -> None:
     def collect_cmd(
         task: Optional[str] = typer.Argument(
             None, help="Built-in task: pendulum-het, pendulum-het-upright, maze, two-gates, "
-                       "lunar, ward, icu-sepsis, icu-sepsis-terminate (see --list)."),
+                       "lunar, ward, icu-sepsis, icu-sepsis-terminate, icu-cohort (see --list)."),
         steps: Annotated[Optional[int], typer.Option(
             "--steps", help="Rows to collect (default: the task's, see --list).")] = None,
         episodes: EpisodesOption = None,

@@ -34,17 +34,19 @@ _IDS = {
     "aoc/ICUSepsis-v0": ("aoc_cli.envs.icu_sepsis:make_sepsis_env", 500, {"strategy": "mean"}),
     "aoc/ICUSepsisTerminate-v0": ("aoc_cli.envs.icu_sepsis:make_sepsis_env", 500,
                                   {"strategy": "terminate"}),
+    "aoc/ICUCohort-v0": ("aoc_cli.envs.icu_cohort:CohortEnv", 500, {"strategy": "mean"}),
 }
 for _id, (_entry, _steps, _kwargs) in _IDS.items():
     if _id not in gymnasium.registry:
         gymnasium.register(id=_id, entry_point=_entry, max_episode_steps=_steps,
                            kwargs=_kwargs)
 
-from aoc_cli.envs import icu_sepsis, lunar, maze, pendulum_het, ward  # noqa: E402  (after reg.)
+from aoc_cli.envs import (icu_cohort, icu_sepsis, lunar, maze, pendulum_het,  # noqa: E402
+                         ward)  # (after registration)
 
 #: name -> Task, in the order ``aoc collect --list`` shows them.
 TASKS: dict[str, Task] = {t.name: t for mod in (pendulum_het, maze, lunar, ward,
-                                                      icu_sepsis)
+                                                      icu_sepsis, icu_cohort)
                          for t in mod.TASKS}
 
 
@@ -56,10 +58,40 @@ def get_task(name: str) -> Task:
     return TASKS[name]
 
 
+def task_settings(name: str) -> tuple[str, dict[str, float]]:
+    """``TASK:key=value,key=value`` -> (TASK, {key: float}) for a built-in task that takes
+    settings (``icu-cohort:noise=1.0,gap=0.15``); a name without ``:`` -> (name, {}). A key
+    the task does not know, or a value that is not a number, is an AocError naming it and the
+    known keys."""
+    base, sep, rest = name.partition(":")
+    if not sep or base not in TASKS:
+        return name, {}
+    known = TASKS[base].extra.get("settings") or {}
+    if not known:
+        raise BadSetting("env", name, f"task {base!r} takes no settings (got {rest!r}): use "
+                         f"{base!r} alone")
+    out: dict[str, float] = {}
+    for item in rest.split(","):
+        key, eq, value = (part.strip() for part in item.partition("="))
+        if key not in known or not eq:
+            raise BadSetting("env", name, f"{name!r}: {item.strip()!r} is not a setting of "
+                             f"{base!r}: use {base}:KEY=VALUE,... with KEY among "
+                             f"{', '.join(known)} (defaults "
+                             f"{', '.join(f'{k}={v}' for k, v in known.items())})")
+        try:
+            out[key] = float(value)
+        except ValueError:
+            raise BadSetting("env", name, f"{name!r}: {key}={value!r} is not a number "
+                             f"(settings of {base!r}: {', '.join(known)})") from None
+    return base, out
+
+
 def make_env(name_or_gym_id: str, **kw) -> gymnasium.Env:
-    """A built-in task's evaluation environment, or any registered gymnasium id."""
-    if name_or_gym_id in TASKS:
-        return TASKS[name_or_gym_id].make(**kw)
+    """A built-in task's evaluation environment (``TASK:key=value,...``: with those settings,
+    :func:`task_settings`), or any registered gymnasium id."""
+    base, settings = task_settings(name_or_gym_id)
+    if base in TASKS:
+        return TASKS[base].make(**settings, **kw)
     try:
         return gymnasium.make(name_or_gym_id, **kw)
     except gymnasium.error.DependencyNotInstalled as err:
@@ -109,4 +141,4 @@ sepsis_tables = icu_sepsis.tables
 swingup_action = pendulum_het.swingup_action
 
 __all__ = ["TASKS", "Episode", "Task", "collect", "collected_task", "get_task", "make_env",
-           "sepsis_tables", "swingup_action"]
+           "sepsis_tables", "swingup_action", "task_settings"]

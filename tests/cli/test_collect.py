@@ -35,7 +35,7 @@ def test_list_shows_every_task_with_its_defaults(aoc, store):
     assert code == 0, err
     rows = {r["name"]: r for r in json.loads(out)}
     assert list(rows) == ["pendulum-het", "pendulum-het-upright", "maze", "two-gates", "lunar",
-                          "ward", "icu-sepsis", "icu-sepsis-terminate"]
+                          "ward", "icu-sepsis", "icu-sepsis-terminate", "icu-cohort"]
     assert rows["maze"]["default_episodes"] == 1000 and rows["maze"]["horizon"] == 100
     assert rows["pendulum-het"]["default_steps"] == 100000
     assert rows["two-gates"]["policies"] == "lower-gate, upper-gate"

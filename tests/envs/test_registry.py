@@ -9,12 +9,12 @@ from aoc_cli.store import Store
 SMALL = {"pendulum-het": {"steps": 900}, "pendulum-het-upright": {"steps": 700},
          "maze": {"episodes": 12}, "two-gates": {"episodes": 6}, "lunar": {"steps": 600},
          "ward": {"episodes": 30}, "icu-sepsis": {"episodes": 40},
-         "icu-sepsis-terminate": {"episodes": 40}}
+         "icu-sepsis-terminate": {"episodes": 40}, "icu-cohort": {"episodes": 40}}
 
 
 def test_the_tasks_with_their_evaluation_settings():
     assert list(TASKS) == ["pendulum-het", "pendulum-het-upright", "maze", "two-gates", "lunar",
-                          "ward", "icu-sepsis", "icu-sepsis-terminate"]
+                          "ward", "icu-sepsis", "icu-sepsis-terminate", "icu-cohort"]
     assert TASKS["maze"].start == (0.0, 0.0) and TASKS["maze"].goal == (16.0, 0.0)
     assert TASKS["maze"].horizon == 100 and TASKS["maze"].default_episodes == 1000
     assert TASKS["two-gates"].start == (0.0, 8.0) and TASKS["two-gates"].goal == (16.0, 8.0)
@@ -77,7 +77,8 @@ def test_same_seed_gives_identical_corpus_files(tmp_path):
         (tmp_path / "two" / "corpus.h5").read_bytes()
 
 
-@pytest.mark.parametrize("name", ["pendulum-het", "maze", "two-gates", "icu-sepsis"])
+@pytest.mark.parametrize("name", ["pendulum-het", "maze", "two-gates", "icu-sepsis",
+                                  "icu-cohort"])
 def test_steps_gives_exactly_that_many_rows(name):
     data, summary = collect(name, steps=333, seed=0)
     assert data.n_rows == 333 and sum(r["rows"] for r in summary) == 333
