@@ -2,7 +2,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: install test demo bench clean
+.PHONY: install test demo bench clean reference
 
 install: $(STAMP)
 
@@ -15,6 +15,9 @@ $(STAMP): pyproject.toml
 
 test: install
 	$(PY) -m pytest -n 2 tests
+
+reference: install
+	$(PY) scripts/gen_reference.py
 
 demo: install
 	bash scripts/demo.sh

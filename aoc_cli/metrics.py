@@ -86,7 +86,7 @@ def _r2(y: np.ndarray, pred: np.ndarray) -> float:
     """R^2 of pred against y, both (S, d), averaged uniformly over the d columns, as
     scikit-learn's ``r2_score`` (a constant column scores 1 if predicted exactly, else 0).
     Written here because importing sklearn.metrics costs ~1.4 s, more than the rest of
-    ``aoc evaluate``'s summary (docs/benchmarks.md, "The whole OPE, paired")."""
+    ``aoc evaluate``'s summary (docs/notes/benchmarks-rounds.md, "The whole OPE, paired")."""
     ss_res = ((y - pred) ** 2).sum(0)
     ss_tot = ((y - y.mean(0)) ** 2).sum(0)
     ok = ss_tot != 0

@@ -13,7 +13,7 @@ each measured on both sides of the bound:
   no AUC gain and 0.7 points of accuracy lost);
 * ``aoc evaluate`` searches the index exactly; above it, an IVF structure built for the run
   (exact search of every held-out step against a large corpus costs ~0.5 ms a step, IVF
-  ~0.06 ms with a recall of the k nearest of 0.99999 on ward's beliefs: docs/benchmarks.md).
+  ~0.06 ms with a recall of the k nearest of 0.99999 on ward's beliefs: docs/notes/benchmarks-rounds.md).
 """
 
 from __future__ import annotations

@@ -26,7 +26,7 @@ is loaded (the first import of torch or FAISS). The ``aoc`` command sets it to `
 A program using the library decides for itself. Why the command sets it: OpenMP threads
 busy-wait by default, and two torch threads training on two cores shared with other processes
 ran ~30x slower; a control step, one thread in each pool, does not depend on it
-(docs/benchmarks.md, "One thread context").
+(docs/notes/benchmarks-rounds.md, "One thread context").
 """
 
 from __future__ import annotations
@@ -138,7 +138,7 @@ def faiss_threads(n: int):
     """FAISS's OpenMP thread count set to n (0: unchanged) for the block, then restored.
 
     A single-query search gains nothing from threads and, on a busy 2-core machine, loses a
-    lot to their synchronisation (docs/benchmarks.md, "Figures once in docstrings").
+    lot to their synchronisation (docs/notes/benchmarks-rounds.md, "Figures once in docstrings").
     """
     if n <= 0:
         yield

@@ -24,7 +24,7 @@ step "run the controller for 3 episodes from the paper's upright start (normal s
 $AOC rollout pendulum --env pendulum-het-upright --episodes 3 --seed 100 \
     --audit "$OUT/audit.h5" --plot "$OUT/rollout.png" --format table
 
-step "the same controller from a random start: a swing-up, which AOC does not solve (docs/belief.md)"
+step "the same controller from a random start: a swing-up, which AOC does not solve (docs/notes/belief.md)"
 $AOC rollout pendulum --env pendulum-het --episodes 2 --seed 100 --format table
 
 step "explain the decision at step 50 of episode 0, from the audit log (and its page: the episode's overview, the decision's supporting rows)"

@@ -44,7 +44,7 @@ class OfflineRLConfig(Settings):
     """Training budget of the d3rlpy agents (d3rlpy's own defaults otherwise).
 
     ``steps`` gradient steps of batch ``batch_size``; the papers train 1M steps (TD3+BC) on
-    D4RL, the bench uses far fewer (see docs/results.md for what that costs).
+    D4RL, the bench uses far fewer (see docs/results/README.md for what that costs).
     """
 
     label = "offline RL"

@@ -94,7 +94,7 @@ class BeliefConfig(Settings):
                                           f"{DEFAULT_DYNAMICS_WEIGHT:g} unless given).")
     #: ``critic``: gradient steps of the offline critic (TD3+BC, aoc_cli.belief.critic); None:
     #: :meth:`critic_steps_for` (10,000 at 100k rows and above, what the bench's full scale
-    #: trains and docs/results.md measures: pendulum-het upright at 100k -0.051, lunar at 0.3M
+    #: trains and docs/results/ measures: pendulum-het upright at 100k -0.051, lunar at 0.3M
     #: 265.8; fewer on a smaller corpus, and at most ``max_epochs`` passes over the training
     #: rows). The resolved count is what the saved model's config records.
     critic_steps: int | None = setting(
@@ -213,7 +213,7 @@ class FQEConfig(Settings):
 
     # 60 (was 30): on a 10k-episode icu-sepsis log (p99 episode length 47, cycles through
     # repeated states) 30 backups left the values short of the fixed point; chosen by held-out
-    # returns-to-go (docs/results.md, "icu-sepsis", "FQE to its fixed point").
+    # returns-to-go (docs/notes/results-icu-sepsis.md, "FQE to its fixed point").
     iterations: int = setting(60, bounds=">= 1", help="Backups: values reach this many steps "
                                                       "back from an episode's end.")
     steps: int = setting(300, bounds=">= 1", help="Gradient steps per backup (at least two "
@@ -228,7 +228,7 @@ class FQEConfig(Settings):
     seed: int = setting(0, help="Seed of the initialisation and batches.")
     # "expected" (was the logged next row's): the same where no observation repeats; where they
     # do, it shares out the noise of which action one patient happened to take next (expected
-    # SARSA; docs/results.md, "icu-sepsis").
+    # SARSA; docs/results/icu-sepsis.md).
     next_value: str = setting("expected", choices=("expected", "logged"),
                               help="A target's value of the next step: Q(o', a) averaged over "
                                    "every row of the log at o' (expected), or the next row's "

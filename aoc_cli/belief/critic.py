@@ -22,7 +22,7 @@ the encoder. ``w_bc = 0`` is plain TD3 as in the reference code. Offline, nothin
 TD3 actor near the data, so its critic is trained on the targets of actions the corpus never
 shows (extrapolation error, the reason TD3+BC exists); the default ``w_bc = 0.4`` (TD3+BC's
 alpha = 2.5) keeps the bootstrapped actions near the logged ones. At the budgets measured here
-the two did not differ yet (benchmarks/notes/critic_bc.py, docs/belief.md). Rows that end a truncated episode have no next
+the two did not differ yet (benchmarks/notes/critic_bc.py, docs/notes/belief.md). Rows that end a truncated episode have no next
 observation in the corpus and are left out of the TD loss.
 
 The belief is the target critic's Q_1 layer ``fc3`` (d_b units, the config's activation).

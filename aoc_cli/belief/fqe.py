@@ -20,7 +20,7 @@ the step of the cut (:mod:`aoc_cli.belief.censoring`). Unlike the Monte-Carlo re
 each target averages the next step's value over every row that shares its input, so on a log
 whose states repeat (ICU-Sepsis) the noise of one patient's outcome, and of the dose they were
 given next, is shared out among all the patients that reached the same state:
-docs/results.md ("icu-sepsis").
+docs/results/icu-sepsis.md.
 
 Q is a small MLP on the standardised observation with one output per action (discrete
 actions) or on [o, a] with one output (continuous). Rows with the same input are regressed as

@@ -36,7 +36,7 @@ tried (each candidate's log-loss and AUC on every fold and their means), what wa
 why go to the output and to the model's config (``metrics.selection``).
 
 **Where it runs** (:func:`searches`): only for imitation of discrete actions, where it was
-measured (docs/results.md, "ward"). For a decision's accountability the action's validation
+measured (docs/results/ward.md). For a decision's accountability the action's validation
 loss is the thing decided (the head and ABC both score actions); a value model's validation
 loss is not: on the maze (19,138 rows) every candidate had a validation R^2 of 0.998, the search
 kept width 256 and its weight decay, and AOC on that belief failed every episode (success 0.0,

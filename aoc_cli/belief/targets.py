@@ -129,7 +129,7 @@ def held_out_targets(corpus, value: str, gamma: float, progress=None) -> np.ndar
     """(N,) :func:`value_targets` of a corpus used as a held-out log (``aoc evaluate``'s
     value target, where no other estimate is given), computed once and kept beside it
     (:func:`kept_values`): a fitted Q evaluation of a held-out log costs what fitting the model's
-    own values did (60 backups of gradient steps; docs/benchmarks.md, "Figures once in
+    own values did (60 backups of gradient steps; docs/notes/benchmarks-rounds.md, "Figures once in
     docstrings"). The other targets cost a pass over the rewards and are not kept."""
     if value not in KEPT_TARGETS:
         return value_targets(corpus, value, gamma, progress=progress)

@@ -114,7 +114,7 @@ def decompose(
     ``BeliefIndex.build(beliefs)`` and pass it as ``index``: its cell structure, built on its
     first batch, skips most rows, and an approximate kind ("ivf", "hnsw") reads a fraction of
     them; the float32 beliefs it keeps are also reused (a float64 ``beliefs`` array is
-    otherwise converted on every call). docs/benchmarks.md "decompose without an index".
+    otherwise converted on every call). docs/notes/benchmarks-rounds.md "decompose without an index".
     """
     config = config or _DEFAULT
     beliefs, Y, values = _check_inputs(beliefs, queries, values)

@@ -47,7 +47,7 @@ distance of q_j from the corral's span computed from the difference vector itsel
 rounding even for nearly duplicate points; the previous rank-one update of H_S^{-1} got it
 as H_jj - g^T H_S^{-1} g, which loses all precision when S is nearly affinely dependent
 (beliefs of a trained network on a low-dimensional surface: H_S's condition number is the
-square of the lifted points'; docs/benchmarks.md, "The residual QP per belief"). A point with
+square of the lifted points'; docs/notes/benchmarks-rounds.md, "The residual QP per belief"). A point with
 rho <= RHO_MIN lies in the corral's affine hull, where its gap is rounding: x is then accepted
 when that gap passes the test above with 10 rho ||x|| added. Each problem of
 the batch runs its own loop in compiled code (numba, float64) and stops as soon as it is

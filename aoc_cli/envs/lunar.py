@@ -9,7 +9,7 @@ Why persistent: AOC's value v^c is the return of the behaviour policy *after* th
 With independent noise the heuristic corrects a deviation at the next step, so the logged
 returns barely depend on the action taken and AOC's argmax ranks noise (30k rows, 4 episodes,
 seeds 100-103: AOC -80 with independent noise against its data's 185; +145 with persistent
-noise against its data's 160; docs/results.md, "lunar"). Success (gymnasium's ``reward_threshold``): an episode
+noise against its data's 160; docs/results/lunar.md). Success (gymnasium's ``reward_threshold``): an episode
 return of at least 200, reported as ``info["success"]`` at the episode's last step by
 :class:`LanderSuccess` (False on every other step).
 """

@@ -9,7 +9,7 @@ beside ``aoc`` (the paper's objective) on the same corpus and episode seeds.
   "mb" variant);
 * ``aoc-gamma0.9``: the paper's value belief (``--belief value``) on the return-to-go at
   gamma 0.9 instead of 0.99 (``aoc train --gamma 0.9``), which balances pendulum-het's
-  upright start where gamma 0.99 does not (docs/belief.md, "Upright at 100k").
+  upright start where gamma 0.99 does not (docs/notes/belief.md, "Upright at 100k").
 
 The controller and its settings are the same for every row; only the beliefs (and so the hulls
 and residuals) differ, and for ``aoc-gamma0.9`` also the values v^c (the index stores the

@@ -30,7 +30,7 @@ def episode_seed(seed: int) -> int:
 
 @dataclass
 class Budget:
-    """Training budgets of the black-box baselines (see docs/results.md for the choices)."""
+    """Training budgets of the black-box baselines (see docs/results/README.md for the choices)."""
 
     offline_rl_steps: int = 20_000
     mpc_epochs: int = 30

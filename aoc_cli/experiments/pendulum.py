@@ -59,7 +59,7 @@ EPSILONS = (0.3, 0.5, 0.9, 1.0)
 ORACLE = "aoc-normal-rows"
 #: aoc's extension, not the paper's objective: AOC whose value model (``dynamics``, its own
 #: index) also learns the auxiliary dynamics head (``aoc train --dynamics-weight 1``), which
-#: gives the belief a reason to tell the two systems apart (docs/belief.md).
+#: gives the belief a reason to tell the two systems apart (docs/notes/belief.md).
 DYNAMICS = "aoc-dynamics"
 DYNAMICS_WEIGHT = 1.0
 

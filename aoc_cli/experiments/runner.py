@@ -216,7 +216,7 @@ def _plot(exp: Experiment, summary: list[dict], ctx: Context) -> None:
 # -- expected time --------------------------------------------------------------------------
 
 #: Seconds per unit on this project's 2-core machine, measured while other jobs shared it
-#: (see docs/results.md); an idle machine is faster.
+#: (see docs/notes/results-defaults-per-task.md); an idle machine is faster.
 COST = {
     "train_row_epoch": 1.0e-4,      # belief model, one thread
     "epochs": 35,                   # early stopping ends near here (at most max_epochs)

@@ -2,7 +2,7 @@
 
 What ``decompose(beliefs, queries)`` uses when it is given no index. A prebuilt flat index
 answers a batch by its cell search (cells.py), whose k-means cells cost far more to build than
-one control step's search; built for a single call they dominate it (docs/benchmarks.md,
+one control step's search; built for a single call they dominate it (docs/notes/benchmarks-rounds.md,
 "`decompose` without an index").
 This search builds nothing that outlives the call, in four steps for the Q queries of a batch:
 

@@ -62,7 +62,7 @@ def _split(ix, Y: np.ndarray, k: int, sel, available: int, depth: int):
     uncertified are grouped again (three rounds at most), then searched directly.
     IVF: one round of 16 groups with six times the pool (an IVF search costs its probed
     lists whatever k; faster on pendulum control steps than three rounds, the same recall:
-    docs/benchmarks.md, "Figures once in docstrings").
+    docs/notes/benchmarks-rounds.md, "Figures once in docstrings").
     """
     n = Y.shape[0]
     ivf = ix.kind == "ivf"

@@ -5,7 +5,7 @@ Why: one update of a small network (icu-sepsis's: 48 -> 64 -> 64 -> 25) is nearl
 per-call overhead (Python, autograd, Adam's dispatch), not arithmetic, and
 :func:`aoc_cli.ope.fqe.fqe_policies` runs a fit and its refits per policy, several policies
 an ``aoc evaluate``: tens of thousands of updates. Stacking the members' weights (``torch.
-baddbmm``) costs one update's overhead for all of them (docs/benchmarks.md, "FQE as one
+baddbmm``) costs one update's overhead for all of them (docs/notes/benchmarks-rounds.md, "FQE as one
 batched ensemble").
 
 Each member is fitted Q evaluation as d3rlpy's DiscreteFQE runs it (the reference of

@@ -37,7 +37,7 @@ TARGET_UPDATE = 100
 HIDDEN = (64, 64)
 #: Target syncs per step of the log's horizon (:func:`default_steps`), and the most steps: chosen
 #: on icu-sepsis's held-out logs 0-4 by the convergence of the estimates as the steps double
-#: (docs/results.md, "FQE's steps").
+#: (docs/notes/results-ope.md, "FQE's steps").
 SYNCS_PER_STEP = 2.5
 MAX_STEPS = 12000
 #: The bootstrap of refits (:func:`bootstrap_fqe`): how many, and the share of the full fit's
@@ -47,7 +47,7 @@ REFIT_SHARE = 5
 #: The learning rate over the fit and over each refit of :func:`fqe_policies`: annealed to 0
 #: (cosine), so that a fit ends on its weights' average course rather than on one noisy step
 #: (chosen on the behaviour policy, whose FQE should equal the log's mean return:
-#: docs/results.md, "icu-sepsis: offline policy evaluation").
+#: docs/results/ope.md).
 SCHEDULE = "cosine"
 
 
@@ -68,7 +68,7 @@ def default_steps(n_rows: int, starts: np.ndarray | None = None, gamma: float = 
     target syncs (one every ``target_update`` steps) per step of the log's :func:`horizon`
     (FQE moves a value one step back per target sync: too few and Q_hat stays between its
     start, 0, and the fixed point, low for a policy whose value lies far ahead;
-    docs/results.md "FQE's steps"), between 1,500 and :data:`MAX_STEPS`."""
+    docs/notes/results-ope.md "FQE's steps"), between 1,500 and :data:`MAX_STEPS`."""
     steps = 30 * n_rows // BATCH
     if starts is not None:
         syncs = int(np.ceil(SYNCS_PER_STEP * horizon(starts, gamma)))
@@ -175,7 +175,7 @@ def fqe_policies(observations, actions, rewards, starts, policies: list, gamma: 
     With refits, the estimate is the refits' mean start value over the whole log's episodes
     (bagged: one fit's value moves with its training noise, ~0.01 on icu-sepsis, and the mean
     of 10 refits less; chosen on the behaviour policy, whose FQE should equal the log's mean
-    return: docs/results.md), the interval that +- :func:`student_quantile` x the replicates'
+    return: docs/notes/results-ope.md), the interval that +- :func:`student_quantile` x the replicates'
     standard deviation (a normal bootstrap interval, Student's t for the few replicates whose
     spread it estimates: 2.26 for 10 refits; their percentiles would be their extremes);
     without, the full fit's mean start value (``fit_estimate`` either way). The P fits train

@@ -5,7 +5,7 @@ Why: a member's update never reads another member's (:mod:`aoc_cli.ope.ensemble`
 stacked weights, each member's own loss, Adam elementwise), so the members divide with no
 exchange during training; ``aoc evaluate``'s FQE (a fit of every policy, then 10 refits
 each) is most of its time, and one thread gains little on these small products (its
-synchronisation costs what the second core adds: docs/benchmarks.md). Processes, not threads:
+synchronisation costs what the second core adds: docs/notes/benchmarks-rounds.md). Processes, not threads:
 the Python between the products holds the GIL (two threads: x1.2 on the fit's few members).
 
 Every part draws its mini-batches exactly as the whole ensemble would: ``make_draw(keep,

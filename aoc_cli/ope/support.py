@@ -6,7 +6,7 @@ An importance-sampling estimate (PDWIS, WDR) is shown only when
 1. the ESS of the whole-trajectory weights is at least :data:`MIN_ESS` (a weighted mean of
    ESS n has a standard error of about sd / sqrt(n): 0.41 / sqrt(500) = 0.018 for a survival
    outcome of 0.78, a mean error of 0.015; on icu-sepsis logs of 5,000 episodes AOC's ESS,
-   25 to 256, gave PDWIS and WDR a mean |error| of 0.09: docs/results.md);
+   25 to 256, gave PDWIS and WDR a mean |error| of 0.09: docs/notes/results-ope.md);
 2. PDWIS only: the share of the policy's episodes whose end the log follows (``reached``) is
    at least :data:`MIN_REACHED` (PDWIS assumes the share it does not reach ends as the reached
    share does; WDR leaves that share to its Q model);
@@ -18,7 +18,7 @@ An importance-sampling estimate (PDWIS, WDR) is shown only when
 
 FQE needs no overlap and is kept when importance sampling is refused; it is shown only with
 its refits (``fqe_refits`` >= 2): one fit's interval leaves the model's own error out and
-covered the truth on 0 to 2 of 10 icu-sepsis logs (docs/results.md); and only where its value
+covered the truth on 0 to 2 of 10 icu-sepsis logs (docs/notes/results-ope.md); and only where its value
 of the logged behaviour (fitted beside the policies) lies within the 95% interval of the
 log's mean return (:func:`fqe_refusal`): its interval does not hold its bias, and this is the
 one policy whose value the log gives directly.

@@ -2,7 +2,7 @@
 
 Hand-written rather than matplotlib: a decision page draws one chart per supporting row (up
 to d_b + 1 = 21) and an overview page links every step's marker to its section; matplotlib
-renders a small figure to SVG slowly for a page of cards (docs/benchmarks.md, "Figures once
+renders a small figure to SVG slowly for a page of cards (docs/notes/benchmarks-rounds.md, "Figures once
 in docstrings") and cannot put a link on a marker. These are polylines and circles with escaped labels, a few hundred bytes each,
 crisp when printed.
 """

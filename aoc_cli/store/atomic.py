@@ -167,7 +167,7 @@ def array_checksum(a) -> str:
     """CRC-32 (hex) of an array's dtype, shape and bytes: recorded per array of a corpus so that
     ``aoc verify`` names the changed ones. A checksum that finds damage, not a content identity
     (that is :func:`hash_arrays`); CRC-32 as HDF5's and zlib's own, faster than SHA-256
-    (docs/benchmarks.md, "Figures once in docstrings")."""
+    (docs/notes/benchmarks-rounds.md, "Figures once in docstrings")."""
     crc = 0
     for part in array_bytes(a):
         crc = zlib.crc32(part, crc)
@@ -197,7 +197,7 @@ def file_record(path: str | os.PathLike, checksum: str = "sha256") -> dict:
     """``{"bytes", "sha256"}`` of a file, as recorded beside what is written; ``checksum``
     ``"crc32"``: ``{"bytes", "crc32"}``, for ``corpus.h5``, whose arrays the content hash
     (SHA-256) already identifies: the file's own record only has to find damage (any changed
-    byte, as the CRC-32 per array does), at ~2.5x SHA-256's speed (docs/benchmarks.md)."""
+    byte, as the CRC-32 per array does), at ~2.5x SHA-256's speed (docs/notes/benchmarks-rounds.md)."""
     if checksum == "crc32":
         return {"bytes": os.path.getsize(path), "crc32": crc32_file(path)}
     return {"bytes": os.path.getsize(path), "sha256": sha256_file(path)}

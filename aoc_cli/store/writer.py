@@ -121,7 +121,7 @@ def concat(a: CorpusData, b: CorpusData) -> CorpusData:
 
 
 #: Float columns (observations, actions, rewards, numeric columns) are stored contiguous and
-#: uncompressed: measured on 1M random-walk rows (benchmarks/perf/ingest.py, docs/benchmarks.md),
+#: uncompressed: measured on 1M random-walk rows (benchmarks/perf/ingest.py, docs/notes/benchmarks-rounds.md),
 #: gzip-1 + shuffle saved 25% of the bytes for 20x the write time and lzf 2%, and a contiguous
 #: uncompressed dataset can be memory-mapped (:meth:`Corpus.read` of large columns).
 #: Flags, step counters and tag codes compress 50-100x cheaply: gzip-1 + shuffle, chunked.

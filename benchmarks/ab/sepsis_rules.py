@@ -1,5 +1,5 @@
 """AOC's decision rules on an icu-sepsis corpus, valued exactly: which part of the rule (the
-residual filter, the residual cap, the support penalty) does what (docs/results.md,
+residual filter, the residual cap, the support penalty) does what (docs/notes/results-icu-sepsis.md,
 "icu-sepsis").
 
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/ab/sepsis_rules.py --store DIR --corpus NAME

@@ -4,7 +4,7 @@ For each model of a corpus: the beliefs b(o, a, h) of every row (``row_beliefs``
 probe of the ``system`` tag fitted on rows of the model's training episodes and scored on rows
 of its validation episodes, linear and quadratic (``logistic_probe(..., quadratic=True)``: the
 system as an interaction, s = sign(a * s a)); the same probes on the raw (o, a) for reference.
-docs/belief.md reads the figures.
+docs/notes/belief.md reads the figures.
 
     python benchmarks/notes/belief_probe.py --store bench/store \\
         --corpus pendulum-het-upright-100000r-s0 --models default,dynamics,critic,reward

@@ -7,7 +7,7 @@ decide, epsilon filter and hull v_hat as in a rollout). Printed per model: the s
 whose chosen torque has the logged (expert's) sign, and the same for the model's own head
 l(b) (the argmax of ``predict`` over the candidates, no hull) and, for a ``--belief critic``
 model, for the critic's own Q (its Q head on the same beliefs, config.json ``critic``).
-docs/belief.md uses the same measurement for the value belief with and without the dynamics
+docs/notes/belief.md uses the same measurement for the value belief with and without the dynamics
 head. On the upright corpus the noiseless controller logs no torque at all (it starts exactly
 upright), so ``--policy swingup-noise0.5 --sign-of expert`` takes the rows of a noisy
 controller and the sign of the noiseless controller's torque at the row's state

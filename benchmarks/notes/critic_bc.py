@@ -1,4 +1,4 @@
-"""Plain TD3 against TD3+BC as the offline critic of ``--belief critic`` (docs/belief.md).
+"""Plain TD3 against TD3+BC as the offline critic of ``--belief critic`` (docs/notes/belief.md).
 
 Trains the critic of aoc_cli/belief/critic.py on a pendulum-het corpus with the behaviour-
 cloning weight 0 (plain TD3, as the paper's reference code) and 0.4 (TD3+BC, aoc's default),

@@ -2,7 +2,7 @@
 D4RL keys (no trace of the task), ingested, ``aoc train`` / ``aoc index`` with no flags, and
 every live state decided once by the controller with the settings saved with the model; the
 exact survival of that state policy (one linear solve over the package's tables), beside the
-clinicians'. docs/results.md, "icu-sepsis", "From a plain file".
+clinicians'. docs/notes/results-icu-sepsis.md, "From a user's plain file".
 
     python benchmarks/notes/sepsis_plain_file.py --episodes 10000 --seed 0 --store /tmp/x \
         [--threads 1] [--train-seed 0]

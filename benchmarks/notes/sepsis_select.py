@@ -3,7 +3,7 @@
 ``benchmarks/notes/sepsis_plain_file.py`` (its store), each candidate controller's FQE estimate
 on the model's validation episodes (what the rule sees) beside its exact survival as a state
 policy with the final index (what the user gets; read only here, never by the rule).
-docs/results.md, "icu-sepsis", "From a plain file".
+docs/notes/results-icu-sepsis.md, "From a user's plain file".
 
     python benchmarks/notes/sepsis_select.py --store /tmp/x [--task icu-sepsis]
 """

@@ -1,4 +1,4 @@
-"""Which row values would lift AOC on an icu-sepsis log (docs/results.md, "icu-sepsis"): the
+"""Which row values would lift AOC on an icu-sepsis log (docs/notes/results-icu-sepsis.md): the
 controller's decisions with other values v^c swapped into its index, valued exactly.
 
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/notes/sepsis_values.py --store DIR --corpus NAME

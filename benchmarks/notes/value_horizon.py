@@ -11,7 +11,7 @@ For each value target (the return-to-go at several gammas, the mean of the remai
   (``aoc_cli.envs.pendulum_het.swingup_action``): how much of what the target varies by among a
   policy's rows is the quality of the row's own torque.
 
-docs/belief.md ("Upright at 100k") reads the figures:
+docs/notes/belief.md ("Upright at 100k") reads the figures:
 
     python benchmarks/notes/value_horizon.py --store bench/store --corpus pendulum-het-upright-100000r-s0
 """

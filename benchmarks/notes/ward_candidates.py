@@ -1,4 +1,4 @@
-"""How many rows of each action ABC's step 1 should take on ward (docs/results.md, "ward";
+"""How many rows of each action ABC's step 1 should take on ward (docs/notes/results-ward.md;
 docs/design.md, "Candidates of every action"), and why a split scores low.
 
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/notes/ward_candidates.py --store DIR

@@ -1,4 +1,4 @@
-"""How ABC's score should be computed from the named rows on ward (docs/results.md, "ward";
+"""How ABC's score should be computed from the named rows on ward (docs/notes/results-ward.md;
 docs/design.md, "Row labels"), against a BC-MLP on the same splits, on any ward log.
 
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/notes/ward_row_labels.py --store DIR

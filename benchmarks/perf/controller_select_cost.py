@@ -1,5 +1,5 @@
 """What choosing the controller on held-out episodes costs ``aoc train`` on an icu-sepsis log
-(docs/benchmarks.md, "The controller chosen on held-out episodes").
+(docs/notes/benchmarks-rounds.md, "The controller chosen on held-out episodes").
 
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/perf/controller_select_cost.py
         [--episodes 10000] [--repeats 2] [--seed 0] [-f json]

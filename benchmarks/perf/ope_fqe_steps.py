@@ -1,4 +1,4 @@
-"""How many gradient steps FQE needs on icu-sepsis's held-out logs (docs/results.md, "icu-sepsis:
+"""How many gradient steps FQE needs on icu-sepsis's held-out logs (docs/notes/results-ope.md, "icu-sepsis:
 offline policy evaluation"): ``aoc evaluate``'s direct method (``ope_fqe.fqe_policies``: the
 fit, 10 warm-started refits, cosine learning rate, bagged estimate) of AOC, BC and the
 clinicians at each ``--steps`` count, per log, for a choice by convergence.

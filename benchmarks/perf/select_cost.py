@@ -1,5 +1,5 @@
 """What choosing the settings by cross-validation costs ``aoc train`` on a ward-sized log
-(docs/benchmarks.md, "Settings chosen by cross-validation").
+(docs/notes/benchmarks-rounds.md, "Settings chosen by cross-validation").
 
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/perf/select_cost.py [--split 0]
         [--folds 1,3] [--rules auc] [--repeats 3] [--log-seed 0] [-f json]

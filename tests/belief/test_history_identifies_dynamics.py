@@ -50,7 +50,7 @@ def pendulum(tmp_path_factory):
 def test_pendulum_het_value_is_better_predicted_with_the_history(pendulum):
     # At this size (collect seed 0, default hidden 128, up to 200 epochs) we measured
     # L = 4 0.80 and L = 0 0.72 (README, "Training the belief model").
-    # docs/belief.md has the figures at 100k rows and why the system probe is not asserted
+    # docs/notes/belief.md has the figures at 100k rows and why the system probe is not asserted
     # in value mode.
     cfg = dict(max_epochs=15, **FAST)
     with_history = train_model(pendulum, BeliefConfig(history_length=4, **cfg), "L4")
@@ -105,7 +105,7 @@ def test_dynamics_weight_must_not_be_negative(store, aoc):
 
 
 def test_pendulum_het_dynamics_head_makes_the_system_readable_from_the_beliefs(tmp_path):
-    # Issue 4's probe check. The value alone barely depends on the system (docs/belief.md), so
+    # Issue 4's probe check. The value alone barely depends on the system (docs/notes/belief.md), so
     # the check is made with the auxiliary dynamics head, which needs the effective torque
     # s * a: the belief then holds s as an interaction with a, read by a quadratic logistic
     # probe (measured with these settings: 0.61 on the beliefs, 0.46 on (o, a)).

@@ -7,7 +7,7 @@ one linear solve over the package's tables).
 
 Guards decision quality: AOC must beat the clinicians who wrote the log by the task's
 :data:`THRESHOLD`, with every decision backed by at most d_b + 1 named rows of named patients.
-Sizes: docs/results.md, "icu-sepsis" (the bench at 1k, 10k and 50k episodes).
+Sizes: docs/results/icu-sepsis.md (the bench at 1k, 10k and 50k episodes).
 """
 
 import numpy as np
@@ -27,13 +27,13 @@ pytestmark = pytest.mark.long_setup
 #: Pi_b-SPIBB told the state 0.8032): measured 0.8150 with the settings the log's evidence
 #: decides (2026-11-29; 0.7946 at 1k, 0.8413 at 50k), and 0.8150 / 0.8150 / 0.8138 / 0.8133
 #: with two other training seeds and two other seeds of the FQE that computes the row values
-#: (a perturbation far larger than another CPU's rounding; docs/results.md, "icu-sepsis").
+#: (a perturbation far larger than another CPU's rounding; docs/results/icu-sepsis.md).
 #: icu-sepsis-terminate (a dose outside the clinicians' admissible set is fatal; the clinicians'
 #: estimated policy 0.4158, which puts ~16% of its mass there; their modal dose 0.7868):
 #: measured 0.657 with the settings the log decides (penalty 2.857 measured on the log; rule
 #: 2's controller kept, FQE diverged on the held-out episodes), fatal doses in 11.4% of the
 #: live states (0.632 and 12.6% with the former task presets); the paper's controller (epsilon 0.5, no cap, no support rule) on the same model 0.384, fatal
-#: doses in 25.4% (docs/results.md, "icu-sepsis").
+#: doses in 25.4% (docs/results/icu-sepsis.md).
 THRESHOLD = {"icu-sepsis": 0.81, "icu-sepsis-terminate": 0.60}
 STRATEGY = {"icu-sepsis": "mean", "icu-sepsis-terminate": "terminate"}
 

@@ -3,9 +3,9 @@
 What holds (asserted): on the paper's upright start AOC keeps the pendulum up far better than
 the data's average episode, and epsilon = 1.0 (no residual filter) loses it. What does not
 hold at this size (a strict xfail, so it fails the suite the day it starts passing): on the
-random start AOC does not beat the data's average nor doing nothing — docs/belief.md, "Why AOC
+random start AOC does not beat the data's average nor doing nothing — docs/notes/belief.md, "Why AOC
 does not swing up", has the traced decisions and the data variants tried. At the paper's sizes
-(100k and 300k rows, full training; docs/results.md) the same AOC swings up to the data's level
+(100k and 300k rows, full training; docs/results/pendulum.md) the same AOC swings up to the data's level
 (-392 and -449 against -376 and -374, doing nothing -1154) but not above it; those runs take 20-70
 minutes each here, too long for the suite.
 """
@@ -65,7 +65,7 @@ def test_upright_aoc_beats_the_data_and_epsilon_one_does_worse(pendulum):
 
 @pytest.mark.xfail(strict=True, reason="issue 6: at 30k rows AOC does not swing up; at 100k-300k "
                                         "it reaches the data's average, not above it "
-                                        "(docs/belief.md, docs/results.md)")
+                                        "(docs/notes/belief.md, docs/results/pendulum.md)")
 def test_random_start_aoc_beats_the_data_and_doing_nothing(pendulum):
     corpus, data_mean = pendulum
     aoc = mean_return(corpus, "pendulum-het", epsilon=0.5)

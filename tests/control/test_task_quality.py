@@ -8,16 +8,16 @@ return. No setting can come from the task's name.
 These guard decision quality: a change of a default (training, selection, index, controller)
 that makes a task's control worse fails here, as the small-log settings selection did on the
 maze (success 0.0 with the chosen width; issue 24). Sizes and thresholds were measured on this
-project's machine (docs/results.md, "Defaults per task"); the ``quality`` mark spreads them
+project's machine (docs/notes/results-defaults-per-task.md); the ``quality`` mark spreads them
 over pytest-xdist's workers (tests/conftest.py). ward (reward-free, ABC) is guarded by
 ``tests/belief/test_select.py::test_default_training_on_ward_beats_the_majority_clearly`` and
 icu-sepsis and icu-sepsis-terminate by ``tests/control/test_icu_sepsis_quality.py`` (both on
 plain files too).
 pendulum-het's random start has no test here: at 10,000 rows AOC with the defaults scores -1245
 and -855 on seeds 1-2, no better than doing nothing (-680, -1181), as at every size below 100k
-(docs/results.md, "pendulum-het"), so no return threshold both holds and guards it; nor does the
+(docs/results/pendulum.md), so no return threshold both holds and guards it; nor does the
 expert's torque sign on held-out swing-up rows (77.9%, below always pushing the majority's way,
-81.4%; docs/results.md, "Defaults per task").
+81.4%; docs/notes/results-defaults-per-task.md).
 """
 
 from __future__ import annotations
@@ -88,7 +88,7 @@ def test_lunar_does_better_than_doing_nothing_with_the_default_training(tmp_path
     # file, epsilon 0.2 decided on held-out episodes: AOC's returns on seeds 11-12 57.3 and
     # -60.0 (2026-11-28; at the paper's 0.5: 30.0 and -45.0), the zero action's -120.8 and
     # -14.4 (a lander that fires at random: -69.6 and -214.6). At this size AOC does not land
-    # yet (30k rows: half the episodes; docs/results.md "lunar")
+    # yet (30k rows: half the episodes; docs/results/lunar.md)
     out = _pipeline(tmp_path, "lunar", {"steps": 10000, "seed": 0},
                     ("--episodes", "2", "--seed", "11"))
     seeds = [11 + e["episode"] for e in out["episodes"]]  # episode e runs on seed + e
@@ -100,7 +100,7 @@ def test_pendulum_het_upright_balances_with_the_default_training(tmp_path):
     # 10,000 rows from a plain file: gamma 0.9 decided from the log's time limit (every
     # episode stops at 200 steps), epsilon 0.3 on held-out episodes: -0.114 and -0.025 on
     # seeds 1-2 (2026-11-28; a fall costs hundreds). With gamma 0.99: -802 and -821
-    # (docs/results.md "Defaults per task")
+    # (docs/notes/results-defaults-per-task.md)
     out = _pipeline(tmp_path, "pendulum-het-upright", {"steps": 10000, "seed": 0},
                     ("--episodes", "2", "--seed", "1"))
     assert all(e["return"] >= -2 for e in out["episodes"]), out["episodes"]

@@ -109,7 +109,7 @@ def relu_surface_problems(seed: int, rank: int, spread: float, n: int = 16, k: i
 @pytest.mark.parametrize("rank,spread", [(2, 1e-3), (3, 1e-3), (5, 1e-4), (3, 1e-2)])
 def test_nearly_affinely_dependent_neighbourhoods_are_certified_and_exact(rank, spread):
     """The failing kind, generated: the previous loop certified 0-9 of 64 such problems at
-    spread 1e-3 (docs/benchmarks.md); every one must now be certified with the exact answer."""
+    spread 1e-3 (docs/notes/benchmarks-rounds.md); every one must now be certified with the exact answer."""
     B, y = relu_surface_problems(rank * 100 + int(-np.log10(spread)), rank, spread)
     out = min_norm_point(B - y[:, None, :])
     assert out.ok.all()
