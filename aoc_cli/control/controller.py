@@ -208,6 +208,29 @@ class Controller:
             return self.evaluate(observation, history, candidates, choose=True,
                                  selection=selection)
 
+    def decide_batch(self, observations: np.ndarray) -> np.ndarray:
+        """(S,) int64 the discrete actions decided at S first steps at once (observations
+        (S, d_o), an empty history): what :meth:`decide` decides at each, with every action a
+        candidate, in one belief pass and one decomposition (a vectorised rollout's policy).
+        Value mode, discrete actions, a model that reads no history."""
+        if not self.discrete or self.model.mode != "value" or self.model.history_length:
+            raise AocError("decide_batch decides discrete actions in value mode from the "
+                           "observation alone (a model of history length 0)")
+        obs = np.asarray(observations, dtype=np.float32).reshape(len(observations), -1)
+        s, n = len(obs), int(self.corpus.n_actions)
+        acts = np.tile(np.arange(n), s)
+        with one_thread():
+            beliefs = self.model.beliefs(np.repeat(obs, n, axis=0), acts, None)
+            dec = self.index.decompose(beliefs, k=self.k, selection=self._rows(None))
+        residual = np.asarray(dec.residual, np.float64).reshape(s, n)
+        value = np.asarray(dec.value, np.float64).reshape(s, n)
+        support = (self.support(dec)[0].reshape(s, n) if reads_support(self.config) else None)
+        lower, likely = self.harm_inputs(obs, value, support)
+        _t, _p, chosen = _choose(residual, value, self.config, cap=self.residual_cap,
+                                 support=support, value_std=self.value_std, lower=lower,
+                                 kept=likely)
+        return chosen.astype(np.int64)
+
     def evaluate(self, observation: np.ndarray, history: History, candidates: np.ndarray,
                  choose: bool = True, selection: np.ndarray | None = None) -> Decision:
         """Decompose every candidate; with ``choose``, the decision rule (the epsilon filter

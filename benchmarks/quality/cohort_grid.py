@@ -1,0 +1,103 @@
+"""AOC on the cohort test bed (aoc_cli/envs/icu_cohort.py): a cohort CSV written from the
+ICU-Sepsis MDP with noisy features, gaps and censored stays, ingested, trained and indexed
+with no flag beyond the ingest's own (as docs/guide/clinical.md does), and AOC's true survival
+measured by rolling it out in the same MDP through the same noise (2,000 episodes), beside
+the clinicians' exact value and the nearest-centre references. One JSON line per run.
+
+    python benchmarks/quality/cohort_grid.py --stays 10000 --noise 0.3 --store /tmp/c \\
+        [--seed 0] [--episodes 2000] [--threads 1] [--controller '{"do_no_harm": "off"}']
+
+Each (stays, noise) cell of docs/results/icu-cohort.md is one run of this command.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+import aoc_cli
+from aoc_cli.envs import icu_cohort as cohort
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def aoc(*args: str, store: Path) -> str:
+    """One ``aoc`` command, as a user runs it; its stdout."""
+    env = {**os.environ, "AOC_STORE": str(store)}
+    cmd = [sys.executable, "-c", "from aoc_cli.cli.app import main; main()", *args]
+    return subprocess.run(cmd, env=env, check=True, capture_output=True, text=True).stdout
+
+
+def prepare(stays: int, noise: float, seed: int, store: Path, threads: int | None) -> dict:
+    """Write the CSV, ingest it, train and index: what a user runs. Returns the timings."""
+    store.mkdir(parents=True, exist_ok=True)
+    csv = store.parent / f"{store.name}-cohort.csv"
+    subprocess.run([sys.executable, str(ROOT / "scripts" / "icu_cohort.py"), str(csv),
+                    "--stays", str(stays), "--noise", str(noise), "--seed", str(seed)],
+                   check=True, capture_output=True)
+    aoc("ingest", str(csv), "--name", "c", "--discrete-actions", "--impute", "hold",
+        "--outcome", "died_in_hosp", "--outcome-reward", "1=0,0=1", "--overwrite",
+        store=store)
+    started = time.perf_counter()
+    extra = ["--threads", str(threads)] if threads else []
+    trained = json.loads(aoc("train", "c", "--overwrite", "-f", "json", *extra, store=store))
+    seconds = time.perf_counter() - started
+    aoc("index", "c", store=store)
+    return {"train_seconds": round(seconds, 1), "trained": trained}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--stays", type=int, default=10_000)
+    ap.add_argument("--noise", type=float, default=0.3)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--episodes", type=int, default=2000)
+    ap.add_argument("--store", required=True)
+    ap.add_argument("--threads", type=int, default=None)
+    ap.add_argument("--reuse", action="store_true", help="decide with the model already there")
+    ap.add_argument("--controller", default="{}", help="controller settings, JSON")
+    args = ap.parse_args()
+    store = Path(args.store)
+    info = {} if args.reuse else prepare(args.stays, args.noise, args.seed, store, args.threads)
+    session = aoc_cli.open_session("c", store=store, controller=json.loads(args.controller))
+    started = time.perf_counter()
+    kept = []
+
+    def decide(obs):
+        acts = session.controller.decide_batch(obs)
+        kept.append(np.mean(acts == session.controller.neighbourhood.at(obs).likely)
+                    if session.controller.do_no_harm else np.nan)
+        return acts
+
+    aoc_value = cohort.rollout_value(decide, args.episodes, noise=args.noise, seed=args.seed + 1)
+    t = cohort.sepsis.tables("mean")
+    near = {name: cohort.rollout_value(cohort.nearest_centre_policy(pol), args.episodes,
+                                       noise=args.noise, seed=args.seed + 1)["value"]
+            for name, pol in (("clinicians_nearest", t.clinicians),
+                              ("modal_nearest", t.modal()))}
+    settings = (info.get("trained") or {}).get("metrics", {}).get("settings", {})
+    print(json.dumps({
+        "stays": args.stays, "noise": args.noise, "seed": args.seed,
+        "aoc": round(aoc_value["value"], 4), "low": round(aoc_value["low"], 4),
+        "high": round(aoc_value["high"], 4), "clinicians": round(cohort.clinicians_value(), 4),
+        **{k: round(v, 4) for k, v in near.items()},
+        "kept_share": round(float(np.nanmean(kept)), 3) if kept else None,
+        "do_no_harm": session.controller.do_no_harm,
+        "noise_measured": (round(session.controller.neighbourhood.noise, 4)
+                           if session.controller.do_no_harm else None),
+        "controller": dict(session.controller.config.to_dict()),
+        "decided": [(r["setting"], r["value"]) for r in settings.get("decided", [])],
+        "val_r2": (info.get("trained") or {}).get("metrics", {}).get("val_r2"),
+        "train_seconds": info.get("train_seconds"),
+        "rollout_seconds": round(time.perf_counter() - started, 1)}))
+
+
+if __name__ == "__main__":
+    main()
