@@ -45,6 +45,8 @@ def write_explained(records: list[dict], fmt: str) -> None:
                                                   if "action_label" in rec else {}),
                     "value (v_hat)": rec["value"], "residual": rec["residual"],
                     "support (episodes)": rec.get("support_episodes")}
+            if "rule" in rec:    # rule 7, do no harm
+                head["rule"] = rec["rule"]
             if "scores" in rec:  # discrete imitation: sum over the rows of weight x label
                 head["scores"] = [round(v, 4) for v in rec["scores"]]
             if typical:

@@ -208,19 +208,22 @@ class Controller:
             return self.evaluate(observation, history, candidates, choose=True,
                                  selection=selection)
 
-    def decide_batch(self, observations: np.ndarray) -> np.ndarray:
-        """(S,) int64 the discrete actions decided at S first steps at once (observations
-        (S, d_o), an empty history): what :meth:`decide` decides at each, with every action a
-        candidate, in one belief pass and one decomposition (a vectorised rollout's policy).
-        Value mode, discrete actions, a model that reads no history."""
-        if not self.discrete or self.model.mode != "value" or self.model.history_length:
-            raise AocError("decide_batch decides discrete actions in value mode from the "
-                           "observation alone (a model of history length 0)")
+    def decide_batch(self, observations: np.ndarray, history: History | None = None
+                     ) -> np.ndarray:
+        """(S,) int64 the discrete actions decided at S steps at once (observations (S, d_o),
+        ``history`` S rows, or None: an empty one): what :meth:`decide` decides at each, with
+        every action a candidate, in one belief pass and one decomposition (a vectorised
+        rollout's policy, :class:`aoc_cli.control.batch.BatchPolicy`). Value mode, discrete
+        actions."""
+        if not self.discrete or self.model.mode != "value":
+            raise AocError("decide_batch decides discrete actions in value mode")
         obs = np.asarray(observations, dtype=np.float32).reshape(len(observations), -1)
         s, n = len(obs), int(self.corpus.n_actions)
-        acts = np.tile(np.arange(n), s)
+        if history is not None:
+            history = type(history)(*[np.repeat(np.asarray(x), n, axis=0) for x in history])
         with one_thread():
-            beliefs = self.model.beliefs(np.repeat(obs, n, axis=0), acts, None)
+            beliefs = self.model.beliefs(np.repeat(obs, n, axis=0), np.tile(np.arange(n), s),
+                                         history)
             dec = self.index.decompose(beliefs, k=self.k, selection=self._rows(None))
         residual = np.asarray(dec.residual, np.float64).reshape(s, n)
         value = np.asarray(dec.value, np.float64).reshape(s, n)

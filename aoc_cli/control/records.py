@@ -21,6 +21,10 @@ def episode_ids(corpus) -> list[str] | None:
     return getattr(corpus, "episode_ids", None)
 
 
+#: What a decision rule 7 kept says (aoc explain, the decision page).
+KEPT = "kept the clinicians' dose: no better-supported alternative"
+
+
 def decision_record(decision: Decision, corpus, index, step: int | None = None,
                     observation: np.ndarray | None = None, typical_residual: float | None = None
                     ) -> dict:
@@ -64,6 +68,10 @@ def decision_record(decision: Decision, corpus, index, step: int | None = None,
         "support": support,
         "warnings": list(decision.warnings),
     }
+    if decision.kept is not None:   # rule 7, do no harm
+        record["rule"] = (KEPT if decision.kept else
+                          "a better-supported alternative: its lower bound beat the "
+                          "clinicians' likely dose's value")
     if len(decision.scores):  # discrete imitation: sum over the rows of weight x label
         record["scores"] = decision.scores.tolist()
     if typical_residual and decision.residual > 3 * typical_residual:

@@ -297,7 +297,9 @@ def rollout_value(decide_batch: DecideBatch, n_episodes: int, noise: float = NOI
     """Survival of a policy that decides from the observations alone, by ``n_episodes``
     episodes run at once in the MDP through the environment's noise, gap and hold model:
     ``decide_batch(obs (n, 47) float32) -> actions (n,) int`` is called once a step on all
-    the episodes still alive. ``{"value", "low", "high", "episodes"}``, the interval the 95%
+    the episodes still alive; a policy with a ``reset(n)`` method (one that keeps each
+    episode's history, :class:`aoc_cli.control.batch.BatchPolicy`) is reset first and called
+    as ``decide_batch(obs, alive)``, ``alive`` the running episodes' indices. ``{"value", "low", "high", "episodes"}``, the interval the 95%
     normal approximation (an episode still alive after 500 steps counts as not surviving)."""
     _check(noise, gap)
     t = sepsis.tables(strategy)
@@ -309,10 +311,14 @@ def rollout_value(decide_batch: DecideBatch, n_episodes: int, noise: float = NOI
     obs = _noisy(C[s], noise, rng)
     alive = np.arange(n)
     survived = np.zeros(n, dtype=bool)
+    stateful = hasattr(decide_batch, "reset")
+    if stateful:
+        decide_batch.reset(n)
     for _ in range(MAX_STEPS):
         if len(alive) == 0:
             break
-        a = np.asarray(decide_batch(obs), dtype=np.int64).reshape(-1)
+        a = np.asarray(decide_batch(obs, alive) if stateful else decide_batch(obs),
+                       dtype=np.int64).reshape(-1)
         if len(a) != len(alive) or a.min() < 0 or a.max() >= t.mdp.P.shape[1]:
             raise AocError(f"decide_batch gave {len(a)} actions in "
                            f"{a.min() if len(a) else '-'}..{a.max() if len(a) else '-'} for "

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 import aoc_cli
+from aoc_cli.control.batch import BatchPolicy
 from aoc_cli.envs import icu_cohort as cohort
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -35,7 +36,8 @@ def aoc(*args: str, store: Path) -> str:
     return subprocess.run(cmd, env=env, check=True, capture_output=True, text=True).stdout
 
 
-def prepare(stays: int, noise: float, seed: int, store: Path, threads: int | None) -> dict:
+def prepare(stays: int, noise: float, seed: int, store: Path, threads: int | None,
+            train_args: list[str]) -> dict:
     """Write the CSV, ingest it, train and index: what a user runs. Returns the timings."""
     store.mkdir(parents=True, exist_ok=True)
     csv = store.parent / f"{store.name}-cohort.csv"
@@ -47,7 +49,8 @@ def prepare(stays: int, noise: float, seed: int, store: Path, threads: int | Non
         store=store)
     started = time.perf_counter()
     extra = ["--threads", str(threads)] if threads else []
-    trained = json.loads(aoc("train", "c", "--overwrite", "-f", "json", *extra, store=store))
+    trained = json.loads(aoc("train", "c", "--overwrite", "-f", "json", *extra, *train_args,
+                             store=store))
     seconds = time.perf_counter() - started
     aoc("index", "c", store=store)
     return {"train_seconds": round(seconds, 1), "trained": trained}
@@ -63,19 +66,26 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=None)
     ap.add_argument("--reuse", action="store_true", help="decide with the model already there")
     ap.add_argument("--controller", default="{}", help="controller settings, JSON")
+    ap.add_argument("--train-args", default="", help="more aoc train flags, one string")
     args = ap.parse_args()
     store = Path(args.store)
-    info = {} if args.reuse else prepare(args.stays, args.noise, args.seed, store, args.threads)
+    info = {} if args.reuse else prepare(args.stays, args.noise, args.seed, store,
+                                                  args.threads, args.train_args.split())
     session = aoc_cli.open_session("c", store=store, controller=json.loads(args.controller))
     started = time.perf_counter()
     kept = []
+    policy = BatchPolicy(session.controller)
 
-    def decide(obs):
-        acts = session.controller.decide_batch(obs)
-        kept.append(np.mean(acts == session.controller.neighbourhood.at(obs).likely)
-                    if session.controller.do_no_harm else np.nan)
-        return acts
+    class Decide:
+        reset = staticmethod(policy.reset)
 
+        def __call__(self, obs, alive):
+            acts = policy(obs, alive)
+            kept.append(np.mean(acts == session.controller.neighbourhood.at(obs).likely)
+                        if session.controller.do_no_harm else np.nan)
+            return acts
+
+    decide = Decide()
     aoc_value = cohort.rollout_value(decide, args.episodes, noise=args.noise, seed=args.seed + 1)
     t = cohort.sepsis.tables("mean")
     near = {name: cohort.rollout_value(cohort.nearest_centre_policy(pol), args.episodes,
@@ -95,6 +105,7 @@ def main() -> None:
         "controller": dict(session.controller.config.to_dict()),
         "decided": [(r["setting"], r["value"]) for r in settings.get("decided", [])],
         "val_r2": (info.get("trained") or {}).get("metrics", {}).get("val_r2"),
+        "best_epoch": (info.get("trained") or {}).get("metrics", {}).get("best_epoch"),
         "train_seconds": info.get("train_seconds"),
         "rollout_seconds": round(time.perf_counter() - started, 1)}))
 
