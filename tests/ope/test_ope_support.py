@@ -236,3 +236,72 @@ def test_a_small_ess_is_warned_of_only_beside_a_shown_importance_sampling_estima
                                                        "high": 0.9}, "fqe": fqe}}
     out = warnings_for("aoc", shown_is, 3000)
     assert len(out) == 1 and "effective sample size 4.6 of 3000" in out[0]
+
+
+def _noisy_two_step_log(episodes=300, seed=0, noise=0.3):
+    """Two-step stays over 3 latent states seen through Gaussian noise (no observation
+    repeats); the clinicians give dose 0 or 1, never 2 or 3; the outcome at the second step.
+    Returns (starts, rewards, observations, actions, survival table (3, 4))."""
+    rng = np.random.default_rng(seed)
+    centres = rng.normal(0, 2, size=(3, 4))
+    surv = np.array([[0.8, 0.75, 0.6, 0.7]] * 3)
+    obs, act, rew = [], [], []
+    for _ in range(episodes):
+        s = rng.integers(0, 3)
+        a1 = rng.integers(0, 2)
+        obs.append(centres[s] + rng.normal(0, noise, 4)); act.append(a1); rew.append(0.0)
+        s2 = (s + a1) % 3
+        a2 = rng.integers(0, 2)
+        obs.append(centres[s2] + rng.normal(0, noise, 4)); act.append(a2)
+        rew.append(float(rng.random() < surv[s2, a2]))
+    starts = np.arange(0, 2 * episodes + 1, 2)
+    return starts, np.asarray(rew), np.asarray(obs), np.asarray(act), surv
+
+
+def test_fqe_extrapolating_off_a_continuous_log_is_not_a_confident_verdict():
+    """The issue's 300-stay case in small: a policy that gives a dose the clinicians never
+    gave, on noisy features; FQE's Q there is its network's extrapolation and came out low and
+    narrow (0.137 [0.035, 0.239] against a truth near 0.7): "worse ... shown", a confident
+    wrong verdict. With the log's neighbourhoods (no episode near any step took the dose) the
+    interval is widened by the share hardly held, and the verdict is not shown."""
+    from aoc_cli.neighbours.neighbourhood import Neighbourhood
+
+    starts, rewards, obs, logged, surv = _noisy_two_step_log()
+    log = ope.Log(starts, rewards)
+    n = len(logged)
+    policy = np.full(n, 3)                         # a dose the log never holds
+    e = len(starts) - 1
+    counts = np.random.default_rng(0).multinomial(e, np.full(e, 1 / e), size=10)
+    reps = 0.137 + np.random.default_rng(1).normal(0, 0.045, 10)
+    fqe = {"q": np.full((n, 4), 0.137), "estimate": 0.137, "fit_estimate": 0.14,
+           "low": 0.035, "high": 0.239, "replicates": reps, "counts": counts, "steps": 100,
+           "refit_steps": 20}
+    settings = OPESettings(estimators=("fqe",), n_boot=200)
+    propensity = np.full(n, 0.5)
+    before = policy_value(log, None, logged, propensity, policy, 4, settings, fqe=fqe)
+    truth = surv[0, 3] - log.returns().mean()      # dose 3 at the last step: 0.7 vs ~0.77
+    assert before["verdict"].startswith("worse than the logged behaviour by") and \
+        before["verdict"].endswith("(FQE): shown")
+    assert before["improvement"]["fqe"]["high"] < truth      # confidently wrong
+    episode = np.repeat(np.arange(e), 2)
+    held = Neighbourhood(obs, logged, episode, 4).at(obs).episodes
+    assert (held[:, 2:] == 0).all() and (held[:, :2] >= 3).mean() > 0.9
+    after = policy_value(log, None, logged, propensity, policy, 4, settings, fqe=dict(fqe),
+                         held=held)
+    assert after["support"]["hardly_held"] == 1.0
+    assert after["policy_value"]["fqe"]["estimate"] is None
+    assert after["policy_value"]["fqe"]["reason"].startswith("the log hardly holds 100%")
+    assert "shown" not in after["verdict"].replace("not shown", "")
+    # a policy the log holds is shown, its interval widened only by its thin share
+    mostly = np.where(np.arange(n) % 10 == 0, 3, logged)
+    fqe_near = {**fqe, "estimate": 0.77, "low": 0.74, "high": 0.80,
+                "replicates": reps - 0.137 + 0.77}
+    shown = policy_value(log, None, logged, propensity, mostly, 4, settings,
+                         fqe=dict(fqe_near), held=held)
+    share = shown["support"]["hardly_held"]
+    assert 0.05 < share < 0.2
+    widened = shown["policy_value"]["fqe"]
+    returns = log.returns()
+    assert widened["low"] == pytest.approx(0.74 - share * np.ptp(returns), abs=1e-12)
+    assert widened["high"] == pytest.approx(0.80 + share * np.ptp(returns), abs=1e-12)
+    assert any("hardly holds" in note for note in shown["notes"])
