@@ -9,8 +9,8 @@ from aoc_cli.belief.config import BeliefConfig
 from aoc_cli.belief.evidence import CONTROLLER
 from aoc_cli.belief.fit import Trained, check_settings, train_corpus
 from aoc_cli.control.config import ControllerConfig, ControllerLike, given_settings
-from aoc_cli.corpus_index import CorpusIndex
-from aoc_cli.corpus_index import build_index as _build_index
+from aoc_cli.index import CorpusIndex
+from aoc_cli.index import build_index as _build_index
 from aoc_cli.errors import BadSetting, param
 from aoc_cli.evaluation import selection
 from aoc_cli.progress import Progress
@@ -78,7 +78,7 @@ def controller_given(controller: ControllerLike) -> dict:
 
 @dataclass
 class Indexed:
-    """An index built: the corpus's name and the :class:`~aoc_cli.corpus_index.CorpusIndex`."""
+    """An index built: the corpus's name and the :class:`~aoc_cli.index.CorpusIndex`."""
 
     corpus: str
     index: CorpusIndex

@@ -25,7 +25,7 @@ import torch
 
 from aoc_cli.belief.model import Encoder
 from aoc_cli.decompose import decompose, default_k
-from aoc_cli.neighbours import BeliefIndex
+from aoc_cli.index.search import BeliefIndex
 
 #: Held-out rows measured, K uniform candidates each.
 ROWS, K = 200, 100

@@ -59,7 +59,7 @@ import numpy as np
 from aoc_cli.belief.config import BeliefConfig
 from aoc_cli.belief.data import episode_folds, episode_rows
 from aoc_cli.belief.row_labels import default_row_smoothing, subset_scores
-from aoc_cli.neighbours.strata import PER_ACTION
+from aoc_cli.index.search.strata import PER_ACTION
 from aoc_cli.metrics import auc
 from aoc_cli.settings import SMALL_LOG_ROWS
 
@@ -190,7 +190,7 @@ def abc_validation(actions: np.ndarray, n_actions: int, k: int | None = None):
     import torch
 
     from aoc_cli.decompose import decompose, per_action_k
-    from aoc_cli.neighbours import BeliefIndex, PerAction
+    from aoc_cli.index.search import BeliefIndex, PerAction
 
     actions = np.asarray(actions, dtype=np.int64)
 

@@ -94,7 +94,7 @@ def candidate_actions(rng: np.random.Generator, count: int, low: np.ndarray | No
 class Controller:
     """AOC (value mode) or ABC (imitation mode) over one corpus, model and index.
 
-    ``index`` is a :class:`aoc_cli.corpus_index.CorpusIndex` (beliefs of every corpus row,
+    ``index`` is a :class:`aoc_cli.index.CorpusIndex` (beliefs of every corpus row,
     values, the nearest-neighbour index); ``selection`` an optional (N,) bool row mask applied
     at query time, with no rebuild.
     """

@@ -45,7 +45,7 @@ from aoc_cli.evaluation.context import (
     heterogeneity,
 )
 from aoc_cli.evaluation.records import step_records  # noqa: F401 (re-exported)
-from aoc_cli.neighbours.strata import PerAction
+from aoc_cli.index.search.strata import PerAction
 from aoc_cli.ope.policies import ope_block, put_ope, wanted
 from aoc_cli.rows import distinct_rows
 from aoc_cli.threads import one_thread

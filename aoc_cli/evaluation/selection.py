@@ -48,7 +48,7 @@ from aoc_cli.control.config import ControllerConfig
 from aoc_cli.control.rule import choose, residual_cap
 from aoc_cli.control.support import row_episodes, support_episodes
 from aoc_cli.decompose import decompose
-from aoc_cli.neighbours import BeliefIndex
+from aoc_cli.index.search import BeliefIndex
 from aoc_cli.ope.fqe import REFITS, fqe_policies, student_quantile
 from aoc_cli.ope.policies import truncated
 from aoc_cli.rows import distinct_rows

@@ -50,7 +50,7 @@ from aoc_cli.experiments import sepsis_policies as sp
 from aoc_cli.experiments.results import write_rows_csv
 from aoc_cli.experiments.spibb import spibb_policy
 from aoc_cli.control import open_session
-from aoc_cli.corpus_index import build_index
+from aoc_cli.index import build_index
 from aoc_cli.store import DEFAULT_MODEL, Store, atomic_path
 
 SCALES = {

@@ -33,7 +33,7 @@ import numpy as np
 
 from aoc_cli.belief.fit import train_corpus
 from aoc_cli.control import ControllerConfig, open_session
-from aoc_cli.corpus_index import build_index
+from aoc_cli.index import build_index
 from aoc_cli.envs import collect, medkit_ward, render
 from aoc_cli.errors import BadSetting, param
 from aoc_cli.evaluation.score import evaluate

@@ -7,7 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from aoc_cli.control.explain import audit_band
-from aoc_cli.corpus_index import load_index
+from aoc_cli.index import load_index
 from aoc_cli.errors import BadInput, call
 from aoc_cli.report.html import check_html_path, write_page
 from aoc_cli.report.overview import action_names, audit_episode, steps_episodes

@@ -347,8 +347,8 @@ def _check_abc_validation(ward, m, err, name="ward"):
     from aoc_cli.belief.data import prepare
     from aoc_cli.metrics import auc
     from aoc_cli.decompose import decompose
-    from aoc_cli.neighbours import BeliefIndex
-    from aoc_cli.neighbours.strata import PerAction
+    from aoc_cli.index.search import BeliefIndex
+    from aoc_cli.index.search.strata import PerAction
 
     assert "ABC's own decisions on the validation episodes" in err
     corpus = ward.corpus(name)

@@ -17,7 +17,7 @@ from aoc_cli.cli.app import app
 from aoc_cli.cli.errors import flag
 from aoc_cli.control.config import ControllerConfig
 from aoc_cli.ope.policies import OPESettings
-from aoc_cli.neighbours.config import IndexConfig
+from aoc_cli.index.search.config import IndexConfig
 from aoc_cli.settings import param_name
 
 #: The settings each command offers as options.

@@ -201,7 +201,7 @@ def test_a_models_settings_under_the_flags_given():
 
 
 def test_the_typical_residual_has_one_typed_accessor(maze):
-    from aoc_cli.corpus_index import TypicalResidual, load_index
+    from aoc_cli.index import TypicalResidual, load_index
 
     ci = open_session(maze).index
     recorded = ci.meta["typical_residual"]

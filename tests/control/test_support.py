@@ -9,7 +9,7 @@ from aoc_cli.control.support import penalised, row_episodes, support_episodes, s
 from aoc_cli.decompose import decompose
 from aoc_cli.errors import AocError
 from aoc_cli.control import open_session
-from aoc_cli.corpus_index import build_index
+from aoc_cli.index import build_index
 from aoc_cli.store import (CorpusData, History, Store, box_space, discrete_space,
                            episode_starts_from_lengths)
 

@@ -12,9 +12,9 @@ import pytest
 from aoc_cli.control import Controller, open_session
 from aoc_cli.control.explain import explain_logged_step
 from aoc_cli.control.whatif import redecide, removal
-from aoc_cli.corpus_index import CorpusIndex
+from aoc_cli.index import CorpusIndex
 from aoc_cli.errors import AocError
-from aoc_cli.neighbours import BeliefIndex
+from aoc_cli.index.search import BeliefIndex
 from tests.control.corpora import corridor_store
 
 

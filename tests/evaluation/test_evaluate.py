@@ -8,7 +8,7 @@ import pytest
 
 from aoc_cli.belief import BeliefConfig, train_model
 from aoc_cli.control import ControllerConfig, explain_logged_step, open_session
-from aoc_cli.corpus_index import build_index
+from aoc_cli.index import build_index
 from aoc_cli.envs import collect
 from aoc_cli.evaluation.score import LeaveEpisodeOut, evaluate, step_records
 from aoc_cli.store import Store
@@ -132,7 +132,7 @@ def test_own_corpus_leaves_each_episode_out_as_explain_does(ward):
 
 
 def test_leave_episode_out_search_drops_only_the_own_episode():
-    from aoc_cli.neighbours import BeliefIndex
+    from aoc_cli.index.search import BeliefIndex
 
     rng = np.random.default_rng(0)
     beliefs = rng.standard_normal((60, 3)).astype(np.float32)

@@ -10,7 +10,7 @@ import pytest
 
 from aoc_cli.belief import BeliefConfig, train_model
 from aoc_cli.control import ControllerConfig, open_session
-from aoc_cli.corpus_index import build_index
+from aoc_cli.index import build_index
 from aoc_cli.envs import collect
 from aoc_cli.errors import AocError
 from aoc_cli.evaluation.context import EvalContext, episode_rows

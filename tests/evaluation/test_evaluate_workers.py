@@ -9,7 +9,7 @@ import ray
 
 from aoc_cli.belief import BeliefConfig, train_model
 from aoc_cli.control import ControllerConfig, open_session
-from aoc_cli.corpus_index import build_index
+from aoc_cli.index import build_index
 from aoc_cli.envs import collect
 from aoc_cli.evaluation.ray import evaluate_on_ray
 from aoc_cli.evaluation.score import evaluate

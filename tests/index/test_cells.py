@@ -7,8 +7,8 @@ import faiss
 import numpy as np
 import pytest
 
-from aoc_cli.neighbours import BeliefIndex
-from aoc_cli.neighbours.cells import CellData, cells_search
+from aoc_cli.index.search import BeliefIndex
+from aoc_cli.index.search.cells import CellData, cells_search
 
 
 def brute(B: np.ndarray, Y: np.ndarray, k: int, allowed=None):
@@ -113,7 +113,7 @@ def test_row_beliefs_come_from_the_cells_with_the_arrays_values(kind):
 
 
 def test_many_queries_are_searched_in_chunks_with_the_same_answer(monkeypatch):
-    import aoc_cli.neighbours.cells as cells_module
+    import aoc_cli.index.search.cells as cells_module
 
     B = clustered(3000, seed=10)
     cells = CellData.kmeans(B, 0)

@@ -10,7 +10,7 @@ import faiss
 import numpy as np
 
 from aoc_cli.errors import AocError
-from aoc_cli.neighbours.config import IndexConfig
+from aoc_cli.index.search.config import IndexConfig
 
 #: Rows added to a FAISS index at once.
 ADD_CHUNK = 1 << 20

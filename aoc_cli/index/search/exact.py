@@ -30,9 +30,9 @@ import numba
 import numpy as np
 
 from aoc_cli.errors import AocError
-from aoc_cli.neighbours.faiss_kinds import as_queries
-from aoc_cli.neighbours.pooled import exact_among, within_pool
-from aoc_cli.neighbours.scan_kernels import replace_top, sort_heaps, sq32, up32
+from aoc_cli.index.search.faiss_kinds import as_queries
+from aoc_cli.index.search.pooled import exact_among, within_pool
+from aoc_cli.index.search.scan_kernels import replace_top, sort_heaps, sq32, up32
 
 #: Rows in the pool searched at the batch's centre, as a multiple of k (and at least POOL_MIN).
 POOL_FACTOR = 4

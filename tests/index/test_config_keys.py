@@ -6,8 +6,8 @@ import pytest
 
 from aoc_cli.belief.config import BeliefConfig
 from aoc_cli.errors import AocError
-from aoc_cli.neighbours import BeliefIndex
-from aoc_cli.neighbours.config import IndexConfig
+from aoc_cli.index.search import BeliefIndex
+from aoc_cli.index.search.config import IndexConfig
 
 
 def test_an_unknown_index_setting_is_refused_with_its_name():

@@ -1,4 +1,4 @@
-"""Step 1 per action (aoc_cli.neighbours.strata): the nearest rows of each action, against a brute
+"""Step 1 per action (aoc_cli.index.search.strata): the nearest rows of each action, against a brute
 force; a rare action far from a query is among its candidates (the k nearest rows hold none);
 the row selection and the evaluation's IVF structure restrict it alike."""
 
@@ -9,9 +9,9 @@ import pytest
 
 from aoc_cli.decompose import decompose
 from aoc_cli.errors import AocError
-from aoc_cli.evaluation.context import BatchSearch
-from aoc_cli.neighbours import BeliefIndex
-from aoc_cli.neighbours.strata import PerAction, candidate_search
+from aoc_cli.index.search.batch import BatchSearch
+from aoc_cli.index.search import BeliefIndex
+from aoc_cli.index.search.strata import PerAction, candidate_search
 
 
 def _corpus(n=600, seed=0):
@@ -107,15 +107,16 @@ def test_an_approximate_index_finds_a_far_action_exactly():
 def test_the_index_rule_per_action_on_small_logs_only():
     from types import SimpleNamespace
 
-    from aoc_cli.corpus_index import SMALL_MAX_ROWS, neighbours
+    from aoc_cli.decompose.k_rule import SMALL_MAX_ROWS
+    from aoc_cli.index import model_k
 
     def corpus(n):
         acts = (np.arange(n) % 10 == 0).astype(np.int64)        # the rare action: 10%
         return SimpleNamespace(n_rows=n, discrete=True, actions=acts, name="c")
 
     imitation, value = SimpleNamespace(mode="imitation", d_b=20), SimpleNamespace(mode="value", d_b=20)
-    assert neighbours(corpus(5000), imitation) == (126, "per_action")
-    assert neighbours(corpus(SMALL_MAX_ROWS + 10), imitation) == (210, "nearest")  # 21 / 0.1
-    assert neighbours(corpus(SMALL_MAX_ROWS + 10), imitation, "per_action") == (126, "per_action")
-    assert neighbours(corpus(5000), imitation, "nearest") == (42, "nearest")
-    assert neighbours(corpus(5000), value) == (42, "nearest")
+    assert model_k(corpus(5000), imitation) == (126, "per_action")
+    assert model_k(corpus(SMALL_MAX_ROWS + 10), imitation) == (210, "nearest")  # 21 / 0.1
+    assert model_k(corpus(SMALL_MAX_ROWS + 10), imitation, "per_action") == (126, "per_action")
+    assert model_k(corpus(5000), imitation, "nearest") == (42, "nearest")
+    assert model_k(corpus(5000), value) == (42, "nearest")

@@ -1,5 +1,6 @@
-"""The flow reads one way (store -> belief -> index -> decompose -> corpus_index -> control): the
-index package knows only beliefs, so importing it must not import torch or anything above it."""
+"""The flow reads one way (store -> belief -> index.search -> decompose -> index -> control): the
+index room's search floor (aoc_cli.index.search) knows only beliefs, so importing it must not
+import torch or anything above it, not even the corpus index of its own room."""
 
 import subprocess
 import sys
@@ -13,11 +14,12 @@ def _modules_after(statement: str) -> set[str]:
 
 
 def test_index_depends_on_numpy_and_faiss_only():
-    mods = _modules_after("from aoc_cli.neighbours import BeliefIndex, IndexConfig, PerAction")
+    mods = _modules_after("from aoc_cli.index.search import BeliefIndex, IndexConfig, PerAction")
     assert "faiss" in mods and "numpy" in mods
     assert "torch" not in mods
     above = {m for m in mods if m.startswith(("aoc_cli.decompose", "aoc_cli.control",
-                                              "aoc_cli.belief", "aoc_cli.corpus_index"))}
+                                              "aoc_cli.belief", "aoc_cli.index."))
+             and not m.startswith("aoc_cli.index.search")}
     assert not above, above
 
 
@@ -29,5 +31,5 @@ def test_belief_artefact_and_train_import_in_either_order():
 
 def test_the_index_settings_load_without_faiss():
     # the package loads its names on first use: aoc index --help reads IndexConfig's fields
-    mods = _modules_after("from aoc_cli.neighbours.config import IndexConfig")
+    mods = _modules_after("from aoc_cli.index.search.config import IndexConfig")
     assert "faiss" not in mods and "torch" not in mods

@@ -19,10 +19,10 @@ import faiss
 import numpy as np
 
 from aoc_cli.errors import AocError, call
-from aoc_cli.neighbours.config import IndexConfig
-from aoc_cli.neighbours.cells import CellData, cells_search
-from aoc_cli.neighbours.faiss_kinds import ADD_CHUNK, as_beliefs, as_queries, kind_of, new_faiss, storage_view
-from aoc_cli.neighbours.pooled import exact_among as _exact_among, pooled_search
+from aoc_cli.index.search.config import IndexConfig
+from aoc_cli.index.search.cells import CellData, cells_search
+from aoc_cli.index.search.faiss_kinds import ADD_CHUNK, as_beliefs, as_queries, kind_of, new_faiss, storage_view
+from aoc_cli.index.search.pooled import exact_among as _exact_among, pooled_search
 from aoc_cli.threads import faiss_threads, single_threaded_blas
 from aoc_cli.store.atomic import atomic_path, write_json, write_npy
 
@@ -202,7 +202,7 @@ class BeliefIndex:
     def search_exact(self, queries: np.ndarray, k: int, selection) -> tuple[np.ndarray, np.ndarray]:
         """``search``'s answer computed exactly among every selected position (each one read):
         what a restricted search of an approximate index (IVF, HNSW) falls back to when it
-        found fewer than k rows, e.g. a stratum far from the query (aoc_cli.neighbours.strata)."""
+        found fewer than k rows, e.g. a stratum far from the query (aoc_cli.index.search.strata)."""
         Y = as_queries(queries, self.dim)
         sel = self.select(selection)
         positions = np.flatnonzero(sel.mask)

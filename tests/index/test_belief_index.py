@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from aoc_cli.errors import AocError
-from aoc_cli.neighbours import BeliefIndex, IndexConfig
+from aoc_cli.index.search import BeliefIndex, IndexConfig
 
 
 def mixture(n: int, d: int = 20, centres: int = 50, seed: int = 0) -> np.ndarray:

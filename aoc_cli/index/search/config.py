@@ -27,7 +27,7 @@ class IndexConfig(Settings):
     ivf_nlist: number of inverted lists (0: sqrt(N) rounded down to a power of two, at most 4096);
         ivf_nprobe: lists visited per query; ivf_train_max: rows used to train the coarse quantiser.
     pool_factor, pool_min: batched search of an HNSW index (a flat or IVF-Flat index answers a
-        batch exactly by the cell search of ``aoc_cli/neighbours/cells.py`` instead). The Q queries of
+        batch exactly by the cell search of ``aoc_cli/index/search/cells.py`` instead). The Q queries of
         one control step lie close together, so the index is searched once, at their centroid c, for k' = max(pool_factor * k,
         pool_min) rows. A row outside that pool is at least d_k'(c) - ||y_i - c|| from query i
         (triangle inequality), so query i's k nearest rows inside the pool are its exact k

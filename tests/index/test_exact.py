@@ -8,11 +8,11 @@ import pytest
 
 from aoc_cli.decompose import decompose
 from aoc_cli.errors import AocError
-from aoc_cli.neighbours import BeliefIndex
-from aoc_cli.neighbours import exact
-from aoc_cli.neighbours.exact import nearest_rows
+from aoc_cli.index.search import BeliefIndex
+from aoc_cli.index.search import exact
+from aoc_cli.index.search.exact import nearest_rows
 
-from tests.neighbours.test_batch_search import Beliefs, brute_force
+from tests.index.test_batch_search import Beliefs, brute_force
 
 
 @pytest.fixture(scope="module")

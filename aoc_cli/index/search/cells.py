@@ -34,7 +34,7 @@ import numba
 import numpy as np
 from numba.typed import List
 
-from aoc_cli.neighbours.scan_kernels import replace_top, sort_heaps, sq32, up32
+from aoc_cli.index.search.scan_kernels import replace_top, sort_heaps, sq32, up32
 
 #: Principal coordinates kept per row for the projection bound.
 HEAD = 4

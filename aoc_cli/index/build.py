@@ -23,11 +23,11 @@ from pathlib import Path
 import numpy as np
 
 from aoc_cli import belief
-from aoc_cli.corpus_index.index import CorpusIndex
 from aoc_cli.decompose.k_rule import index_k
 from aoc_cli.errors import AocError, BadSetting, IndexMissing, IndexStale, call, param
-from aoc_cli.neighbours import BeliefIndex
-from aoc_cli.neighbours.strata import NEAREST, PER_ACTION
+from aoc_cli.index.corpus import CorpusIndex
+from aoc_cli.index.search import BeliefIndex
+from aoc_cli.index.search.strata import NEAREST, PER_ACTION
 from aoc_cli.progress import Progress
 from aoc_cli.rows import episode_multiplicity
 from aoc_cli.store import (DEFAULT_INDEX, Corpus, atomic_dir, derived, index_dir, model_dir,
@@ -37,8 +37,8 @@ from aoc_cli.store import (DEFAULT_INDEX, Corpus, atomic_dir, derived, index_dir
 TYPICAL_SAMPLE = 500
 
 
-def neighbours(corpus: Corpus, model, candidates: str = "auto") -> tuple[int, str]:
-    """The default neighbours per query of ``model`` on ``corpus`` and where they come from:
+def model_k(corpus: Corpus, model, candidates: str = "auto") -> tuple[int, str]:
+    """The default k (neighbours per query) of ``model`` on ``corpus`` and where it comes from:
     the k saved with the model (``metrics.controller.k``: the k rule's when ``aoc train``
     ran it, or the ``--k`` it was given), else the k rule,
     :func:`aoc_cli.decompose.k_rule.index_k` (docs/design.md, "Candidates of every action"),
@@ -73,7 +73,7 @@ def build_index(corpus: Corpus, model_id: str | None = None, kind: str = "auto",
     ``episode_rates`` ``{"TAG=VALUE": rate}`` derive an index that keeps or repeats whole
     episodes (:func:`aoc_cli.rows.episode_multiplicity`); ``resample`` and ``subsample``, the
     older names, are merged into them. ``candidates``: step 1's, "auto", "nearest" or
-    "per_action" (:func:`neighbours`), recorded with its k in ``index.json``.
+    "per_action" (:func:`model_k`), recorded with its k in ``index.json``.
 
     Built in a temporary folder beside the index folder (new beliefs staged in it) and
     swapped in only when everything succeeded (:mod:`aoc_cli.store.derived`)."""
@@ -81,7 +81,7 @@ def build_index(corpus: Corpus, model_id: str | None = None, kind: str = "auto",
 
     episode_rates = {**(resample or {}), **(subsample or {}), **(episode_rates or {})}
     model = belief.load_model(corpus, model_id)  # torch, loaded here (the package is lazy)
-    model_k = neighbours(corpus, model, candidates)
+    k, how = model_k(corpus, model, candidates)
     if episode_rates and index_id == DEFAULT_INDEX:
         raise AocError("index_id must name a new index for a re-sampled or sub-sampled one "
                        "(the default index holds every row once)", "index_id")
@@ -118,7 +118,7 @@ def build_index(corpus: Corpus, model_id: str | None = None, kind: str = "auto",
             "episode_rates": episode_rates, "seed": seed,
             "build_seconds": seconds, "built": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         }
-        meta["k"], meta["candidates"] = model_k
+        meta["k"], meta["candidates"] = k, how
         ci = CorpusIndex(index_id, model, beliefs, model.values, index, meta,
                          _strata(corpus, meta))
         meta["typical_residual"] = typical_residual(ci, seed)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from aoc_cli.neighbours.pooled import exact_among
+from aoc_cli.index.search.pooled import exact_among
 
 
 def brute(Y, V, k):

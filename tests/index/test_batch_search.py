@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from aoc_cli.neighbours import BeliefIndex
-from aoc_cli.neighbours.pooled import exact_among as _exact_among
-from aoc_cli.neighbours.cells import CellData, cells_search
+from aoc_cli.index.search import BeliefIndex
+from aoc_cli.index.search.pooled import exact_among as _exact_among
+from aoc_cli.index.search.cells import CellData, cells_search
 
 
 def brute_force(beliefs: np.ndarray, queries: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from aoc_cli.neighbours.scan_kernels import pool_knn
+from aoc_cli.index.search.scan_kernels import pool_knn
 from aoc_cli.threads import faiss_threads
 
 

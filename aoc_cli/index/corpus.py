@@ -1,6 +1,6 @@
 """A built corpus index: a corpus's beliefs (N, d_b), their row values and the FAISS index
 over them, with what it was built from (:class:`CorpusIndex`), and the corpus's typical
-residual (:class:`TypicalResidual`). Built and loaded by :mod:`aoc_cli.corpus_index.build`."""
+residual (:class:`TypicalResidual`). Built and loaded by :mod:`aoc_cli.index.build`."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from aoc_cli.decompose import decompose, default_k
-from aoc_cli.neighbours import BeliefIndex
-from aoc_cli.neighbours.strata import NEAREST, candidate_search
+from aoc_cli.index.search import BeliefIndex
+from aoc_cli.index.search.strata import NEAREST, candidate_search
 
 if TYPE_CHECKING:
     from aoc_cli.belief.artefact import BeliefModel
@@ -54,7 +54,7 @@ class CorpusIndex:
     def candidates(self) -> str:
         """Step 1's candidates (``index.json`` ``candidates``): "nearest", the k nearest rows;
         "per_action", the k / n nearest rows of each of the n actions
-        (:mod:`aoc_cli.neighbours.strata`). An index that recorded none: "nearest"."""
+        (:mod:`aoc_cli.index.search.strata`). An index that recorded none: "nearest"."""
         return self.meta.get("candidates") or NEAREST
 
     @property
@@ -92,5 +92,5 @@ class CorpusIndex:
     @property
     def k(self) -> int:
         """Neighbours per query when none is given: the one the index was built with
-        (``index.json`` ``k``, :func:`neighbours`); the paper's for an index without it."""
+        (``index.json`` ``k``, :func:`aoc_cli.index.build.model_k`); the paper's for an index without it."""
         return int(self.meta.get("k") or default_k(self.beliefs.shape[1]))

@@ -3,7 +3,7 @@ group's search: a certified query's k nearest rows are all inside the pool."""
 
 import numpy as np
 
-from aoc_cli.neighbours.pooled import within_pool
+from aoc_cli.index.search.pooled import within_pool
 
 
 def test_a_certified_query_has_its_k_nearest_rows_inside_the_pool():
