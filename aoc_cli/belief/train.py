@@ -72,7 +72,7 @@ def train_model(corpus, config: BeliefConfig, model_id: str = DEFAULT_MODEL,
     ``inspect(net, inputs, data, norm)``, when given, is called with the trained network (best
     weights, eval mode), the encoded corpus, the split and the inputs' normalisation; its dict
     is merged into the metrics (the model selection's validation of the decomposition,
-    aoc_cli.belief.select; the held-out epsilon rule, aoc_cli.belief.epsilon_rule).
+    aoc_cli.training.tuning; the held-out epsilon rule, aoc_cli.training.epsilon_rule).
     """
     if streams(corpus, config):  # a large corpus: trained a block of rows at a time
         return train_streaming(corpus, config, model_id, overwrite, progress, save=save,
@@ -115,7 +115,7 @@ def _train(corpus, config: BeliefConfig, model_id: str, data: TrainingData,
                     "threads": threads if device.type == "cpu" else None,
                     "belief": config.belief})
     metrics["seconds"] = time.perf_counter() - started
-    metrics.update(extra or {})  # e.g. how the settings were chosen (aoc_cli.belief.select)
+    metrics.update(extra or {})  # e.g. how the settings were chosen (aoc_cli.training.tuning)
     if not save:  # a candidate of the model selection: its metrics only
         return metrics
     save_model(corpus, model_id, net=net.cpu(), config=config, dims=problem.dims,

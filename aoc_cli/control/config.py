@@ -102,7 +102,7 @@ class ControllerConfig(Settings):
     def for_model(cls, saved: Mapping | None = None, **given) -> "ControllerConfig":
         """The settings of a decision with a model: those ``given`` (None: not given) over the
         settings saved with the model (``saved``: its config's ``metrics.controller``, decided
-        by ``aoc train`` from the log's evidence, aoc_cli.belief.evidence) over the paper's
+        by ``aoc train`` from the log's evidence, aoc_cli.training.evidence) over the paper's
         defaults. A model trained without them (by the library's ``train_model``, or before
         they were recorded) has none: the paper's."""
         # the model's k reaches the controller through its index, built with it (an index

@@ -39,8 +39,7 @@ import numpy as np
 
 from aoc_cli.baselines import make_baseline
 from aoc_cli.baselines.offline_rl import OfflineRLConfig
-from aoc_cli.belief.fit import train_corpus
-from aoc_cli.evaluation import selection
+from aoc_cli.training.fit import train_corpus
 from aoc_cli.envs import collect, make_env
 from aoc_cli.envs.icu_sepsis import STRATEGIES
 from aoc_cli.envs.icu_sepsis import tables as sepsis_tables
@@ -79,10 +78,10 @@ def references(tables) -> dict[str, dict]:
 def train_aoc(store_root: Path, name: str, seed: int = 0) -> dict:
     """AOC as a user gets it: what ``aoc train NAME --seed S`` does with no other flag (the
     settings it takes from the task or chooses from the log: the one training path,
-    :func:`aoc_cli.belief.fit.train_corpus`) and ``aoc index NAME``; the training metrics."""
+    :func:`aoc_cli.training.fit.train_corpus`) and ``aoc index NAME``; the training metrics."""
     corpus = Store.open(store_root).corpus(name)
     metrics = train_corpus(corpus, seed=seed, overwrite=True,
-                           choose_controller=selection.recording_hook).metrics
+                           choose_controller=True).metrics
     build_index(corpus)
     return metrics
 

@@ -53,7 +53,7 @@ from aoc_cli.store import DEFAULT_MODEL, CorpusData, Store, model_dir  # noqa: E
 from aoc_cli.threads import one_thread  # noqa: E402
 
 #: The value model's settings ``aoc train NAME`` decides for an icu-sepsis log (its
-#: observations recur: aoc_cli.belief.evidence, rule 2).
+#: observations recur: aoc_cli.training.evidence, rule 2).
 TASK_VALUE = {"value": "fqe", "gamma": 1.0, "history_length": 0}
 
 

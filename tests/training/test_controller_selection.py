@@ -1,4 +1,4 @@
-"""The controller chosen on held-out episodes (aoc_cli.evaluation.selection, rule 6 of
+"""The controller chosen on held-out episodes (aoc_cli.training.controller_selection, rule 6 of
 docs/design.md "Settings from the log's evidence"): each candidate decides by the controller's
 own rule, the rule takes the highest lower bound (ties: the more conservative), ``aoc train``
 records what it chose and why, a setting given or --no-select skips it; the k saved with the
@@ -11,20 +11,20 @@ import pytest
 
 import aoc_cli
 from aoc_cli.envs import collect
-from aoc_cli.evaluation import selection
+from aoc_cli.training import controller_selection
 from aoc_cli.store import Store
 from tests.plain_log import write_plain_npz
 
 
 def test_the_rule_takes_the_highest_lower_bound_and_the_first_of_equals():
-    assert selection.pick([{"low": 0.5}, {"low": 0.6}, {"low": 0.6}, {"low": 0.1}]) == 1
-    assert selection.pick([{"low": 0.3}] * 4) == 0
-    both = selection.candidates(5.75)
+    assert controller_selection.pick([{"low": 0.5}, {"low": 0.6}, {"low": 0.6}, {"low": 0.1}]) == 1
+    assert controller_selection.pick([{"low": 0.3}] * 4) == 0
+    both = controller_selection.candidates(5.75)
     assert both[0] == {"residual_cap": 0.01, "support_penalty": 5.75}
     assert both[1] == {"residual_cap": None, "support_penalty": 5.75}
     assert both[-1] == {"residual_cap": None, "support_penalty": None} and len(both) == 4
     # no noise measured: the cap and the paper's, no penalty candidate
-    assert selection.candidates(None) == both[2:]
+    assert controller_selection.candidates(None) == both[2:]
 
 
 def test_an_estimate_outside_the_returns_is_none_and_keeps_rule_2s_candidate():
@@ -34,10 +34,10 @@ def test_an_estimate_outside_the_returns_is_none_and_keeps_rule_2s_candidate():
         return {"estimate": estimate, "low": low}
 
     span = (0.0, 1.0)
-    assert selection.pick([e(0.8, 0.7), e(26.7, 0.9), e(0.85, 0.75)], span) == 2
-    assert selection.pick([e(26.7, -60.8), e(0.32, 0.2), e(0.53, 0.47)], span) == 0
-    assert selection.pick([e(26.7, -60.8), e(0.32, 0.2), e(0.53, 0.47)]) == 2  # no span
-    assert selection.pick([e(0.5, 0.4), e(1.05, 0.95)], span) == 1  # within a tenth
+    assert controller_selection.pick([e(0.8, 0.7), e(26.7, 0.9), e(0.85, 0.75)], span) == 2
+    assert controller_selection.pick([e(26.7, -60.8), e(0.32, 0.2), e(0.53, 0.47)], span) == 0
+    assert controller_selection.pick([e(26.7, -60.8), e(0.32, 0.2), e(0.53, 0.47)]) == 2  # no span
+    assert controller_selection.pick([e(0.5, 0.4), e(1.05, 0.95)], span) == 1  # within a tenth
 
 
 def test_a_candidate_the_held_out_log_does_not_take_is_not_valued():
@@ -50,13 +50,13 @@ def test_a_candidate_the_held_out_log_does_not_take_is_not_valued():
     seen = [e(0.8419, 0.8338, 33), e(0.8213, 0.7953, 18), e(0.8878, 0.8521, 1),
             e(0.8680, 0.8319, 1)]
     span = (0.0, 1.0)
-    assert selection.pick(seen, span) == 0
-    assert selection.pick([{k: v for k, v in c.items() if k != "pairs"} for c in seen],
+    assert controller_selection.pick(seen, span) == 0
+    assert controller_selection.pick([{k: v for k, v in c.items() if k != "pairs"} for c in seen],
                           span) == 2   # FQE alone takes the extrapolated one
-    assert selection.valued(seen, span)[2].startswith("fewer than 3")
+    assert controller_selection.valued(seen, span)[2].startswith("fewer than 3")
     # rule 2's candidate unsupported: the log cannot weigh the others against it
-    assert selection.pick([e(0.80, 0.70, 2), e(0.85, 0.80, 40)], span) == 0
-    assert selection.pick([e(0.80, 0.70, 3), e(0.85, 0.80, 40)], span) == 1
+    assert controller_selection.pick([e(0.80, 0.70, 2), e(0.85, 0.80, 40)], span) == 0
+    assert controller_selection.pick([e(0.80, 0.70, 3), e(0.85, 0.80, 40)], span) == 1
 
 
 def test_decisions_the_held_out_log_hardly_holds_come_off_the_bound():
@@ -68,21 +68,24 @@ def test_decisions_the_held_out_log_hardly_holds_come_off_the_bound():
 
     seen = [e(0.8233, 11, 0.074), e(0.8949, 7, 0.329), e(0.7496, 0, 0.763)]
     span = (0.0, 1.0)
-    assert selection.bounds(seen, span) == pytest.approx([0.7493, 0.5659, -0.0134], abs=1e-12)
-    assert selection.pick(seen, span) == 0
-    assert selection.pick([{k: v for k, v in c.items() if k != "rare"} for c in seen],
+    assert controller_selection.bounds(seen, span) == pytest.approx([0.7493, 0.5659, -0.0134],
+                                                                    abs=1e-12)
+    assert controller_selection.pick(seen, span) == 0
+    assert controller_selection.pick([{k: v for k, v in c.items() if k != "rare"} for c in seen],
                           span) == 1   # the interval alone takes the extrapolated one
     # the widening scales with the returns' range; no span, no widening
-    assert selection.bounds(seen, (0.0, 2.0))[1] == pytest.approx(0.8949 - 0.658, abs=1e-12)
-    assert selection.bounds(seen).tolist() == [c["low"] for c in seen]
+    assert controller_selection.bounds(seen, (0.0, 2.0))[1] == pytest.approx(0.8949 - 0.658,
+                                                                             abs=1e-12)
+    assert controller_selection.bounds(seen).tolist() == [c["low"] for c in seen]
     # a candidate far better where the log holds its decisions still wins
-    assert selection.pick([e(0.70, 20, 0.05), e(0.80, 20, 0.05)], span) == 1
+    assert controller_selection.pick([e(0.70, 20, 0.05), e(0.80, 20, 0.05)], span) == 1
 
 
 def test_pair_counts_count_the_held_out_steps_of_each_decisions_state_and_action():
     obs = np.array([[0.0, 1.0], [0.0, 1.0], [2.0, 0.0], [0.0, 1.0], [2.0, 0.0]])
     logged = np.array([1, 1, 0, 2, 1])
-    stay, other = selection.pair_counts(obs, logged, 3, [logged, np.array([2, 0, 2, 0, 0])])
+    stay, other = controller_selection.pair_counts(obs, logged, 3,
+                                                   [logged, np.array([2, 0, 2, 0, 0])])
     # state (0, 1) took action 1 twice and 2 once; state (2, 0) took 0 once and 1 once
     assert stay.tolist() == [2, 2, 1, 1, 1]
     assert other.tolist() == [1, 0, 0, 0, 1]
@@ -94,7 +97,8 @@ def test_each_candidate_decides_by_the_controllers_rule():
     parts = {"residual": np.array([[0.0, 0.02, 0.02, 0.02]]),
              "value": np.array([[0.0, 0.5, 1.0, 0.2]]),
              "support": np.array([[50.0, 50.0, 1.0, 50.0]]), "value_std": 1.0, "p90": 1.0}
-    chosen = [int(c[0]) for c in selection.decisions(parts, selection.candidates(5.0))]
+    chosen = [int(c[0]) for c in
+              controller_selection.decisions(parts, controller_selection.candidates(5.0))]
     # cap and penalty: 0; penalty: 1 (0.5 - 5/sqrt(50) beats 1 - 5); cap: 0; neither: 2
     assert chosen == [0, 1, 0, 2]
 
@@ -112,15 +116,15 @@ def icu(tmp_path_factory):
     code, _out, err = run_aoc("--store", str(root / "store"), "ingest", str(path), "--name",
                               "icu")
     assert code == 0, err
-    steps, refits = selection.FQE_STEPS, selection.FQE_REFITS
-    selection.FQE_STEPS, selection.FQE_REFITS = 200, 3
+    steps, refits = controller_selection.FQE_STEPS, controller_selection.FQE_REFITS
+    controller_selection.FQE_STEPS, controller_selection.FQE_REFITS = 200, 3
     labels = []
     try:
         trained = aoc_cli.train("icu", store=root / "store", threads=1, max_epochs=1, hidden=8,
                                 progress=lambda done, total=None, label=None:
                                 labels.append(label))
     finally:
-        selection.FQE_STEPS, selection.FQE_REFITS = steps, refits
+        controller_selection.FQE_STEPS, controller_selection.FQE_REFITS = steps, refits
     aoc_cli.build_index("icu", store=root / "store")
     return root / "store", trained.metrics, labels
 
@@ -131,13 +135,13 @@ def test_train_chooses_the_controller_on_held_out_episodes(icu):
     lows = [c["low"] for c in chosen["candidates"]]
     assert len(lows) == 4 and all(np.isfinite(lows))
     # the highest lower bound among the valued, rule 2's where it is not valued itself
-    assert all(c["valued"] == (c["pairs"] >= selection.MIN_PAIRS) for c in
+    assert all(c["valued"] == (c["pairs"] >= controller_selection.MIN_PAIRS) for c in
                chosen["candidates"])
     ok = [c["valued"] for c in chosen["candidates"]]
-    # the penalty candidates carry rule 2's measured bound (aoc_cli.belief.evidence)
+    # the penalty candidates carry rule 2's measured bound (aoc_cli.training.evidence)
     measured = metrics["settings"]["support_penalty"]
     assert measured["value"] > 0 and measured["noise"] > 0
-    tried = selection.candidates(measured["value"])
+    tried = controller_selection.candidates(measured["value"])
     assert [c["settings"] for c in chosen["candidates"]] == list(tried)
     bounds = [c["bound"] for c in chosen["candidates"]]
     lo, hi = chosen["returns"]

@@ -1,4 +1,4 @@
-"""Settings chosen by validation on small corpora (aoc_cli.belief.select), reported and kept
+"""Settings chosen by validation on small corpora (aoc_cli.training.tuning), reported and kept
 in the model's config; the paper's settings by flag; the no-better-than-majority warning."""
 
 import json
@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from aoc_cli.belief import select
+from aoc_cli.training import tuning
 from aoc_cli.envs import collect
 from aoc_cli.store import Store
 
@@ -36,7 +36,7 @@ def test_open_settings_are_chosen_by_validation_and_recorded(aoc, ward):
     # the chosen history length has the lowest validation loss of the three, up to the margin
     by_l = {c["history_length"]: c["val_loss"] for c in sel["candidates"]
             if c["weight_decay"] == 0.0}
-    assert by_l[chosen["history_length"]] <= min(by_l.values()) / (1 - select.MARGIN) + 1e-12
+    assert by_l[chosen["history_length"]] <= min(by_l.values()) / (1 - tuning.MARGIN) + 1e-12
     assert "lowest mean held-out log-loss" in sel["why"] and "chose history_length" in err
     # every candidate printed with both figures
     assert err.count("held-out log-loss") >= len(sel["candidates"]) and "ABC AUC" in err
@@ -54,7 +54,7 @@ def test_settings_are_chosen_by_their_mean_validation_loss_over_folds(ward):
 
     from aoc_cli.belief.config import BeliefConfig
     from aoc_cli.belief.data import prepare
-    from aoc_cli.belief.fit import train_corpus
+    from aoc_cli.training.fit import train_corpus
     from aoc_cli.belief.train import train_model
 
     corpus = ward.corpus("ward")
@@ -62,36 +62,36 @@ def test_settings_are_chosen_by_their_mean_validation_loss_over_folds(ward):
                            threads=1, max_epochs=3).metrics
     sel = metrics["selection"]
     assert sel["searched"] == ["history_length", "weight_decay"]
-    assert sel["folds"] == select.FOLDS == 3 and sel["fold_val_episodes"] == [32, 32, 32]
+    assert sel["folds"] == tuning.FOLDS == 3 and sel["fold_val_episodes"] == [32, 32, 32]
     for c in sel["candidates"]:
-        assert len(c["val_losses"]) == select.FOLDS and len(c["epochs"]) == select.FOLDS
+        assert len(c["val_losses"]) == tuning.FOLDS and len(c["epochs"]) == tuning.FOLDS
         assert c["val_loss"] == pytest.approx(np.mean(c["val_losses"]), rel=1e-12)
-        assert len(set(c["val_losses"])) == select.FOLDS  # three validation sets, three losses
-        assert len(c["val_aucs"]) == select.FOLDS and all(0.5 < a <= 1 for a in c["val_aucs"])
+        assert len(set(c["val_losses"])) == tuning.FOLDS  # three validation sets, three losses
+        assert len(c["val_aucs"]) == tuning.FOLDS and all(0.5 < a <= 1 for a in c["val_aucs"])
         assert c["val_auc"] == pytest.approx(np.mean(c["val_aucs"]), rel=1e-12)
     mean = {(c["history_length"], c["weight_decay"]): c["val_loss"] for c in sel["candidates"]}
     aucs = {(c["history_length"], c["weight_decay"]): c["val_auc"] for c in sel["candidates"]}
     # the rule by hand over the means: within AUC_MARGIN of the best AUC, then the log-loss
     top = max(aucs[(h, 0.0)] for h in (0, 1, 4))
-    kept = [h for h in (0, 1, 4) if aucs[(h, 0.0)] >= top - select.AUC_MARGIN]
+    kept = [h for h in (0, 1, 4) if aucs[(h, 0.0)] >= top - tuning.AUC_MARGIN]
     chosen_l = kept[0]
     for h in kept[1:]:
-        if mean[(h, 0.0)] < mean[(chosen_l, 0.0)] * (1 - select.MARGIN):
+        if mean[(h, 0.0)] < mean[(chosen_l, 0.0)] * (1 - tuning.MARGIN):
             chosen_l = h
     assert sel["chosen"]["history_length"] == chosen_l
     assert "log-loss over 3 folds" in sel["why"] and "ABC AUC" in sel["why"]
-    assert sel["margins"] == {"log_loss_relative": select.MARGIN, "auc": select.AUC_MARGIN}
+    assert sel["margins"] == {"log_loss_relative": tuning.MARGIN, "auc": tuning.AUC_MARGIN}
     # a recorded fold loss is that candidate trained on that fold: the first fold is the
     # usual split, the second the next block of the same random order of the episodes
     config = BeliefConfig(mode="imitation", hidden=16, threads=1, max_epochs=3,
-                          label_smoothing=select.LABEL_SMOOTHING, history_length=chosen_l,
-                          patience=select.SEARCH_PATIENCE)
+                          label_smoothing=tuning.LABEL_SMOOTHING, history_length=chosen_l,
+                          patience=tuning.SEARCH_PATIENCE)
     usual = prepare(corpus, config, "x", True)
-    folds = select.fold_data(corpus, usual, config, select.FOLDS)
+    folds = tuning.fold_data(corpus, usual, config, tuning.FOLDS)
     assert np.array_equal(folds[0].val_rows, usual.val_rows)
     record = next(c for c in sel["candidates"] if c["history_length"] == chosen_l
                   and c["weight_decay"] == 0.0)
-    hook = select.abc_validation(corpus.actions, 2)
+    hook = tuning.abc_validation(corpus.actions, 2)
     for j in (0, 1):
         m = train_model(corpus, replace(config), "x", overwrite=True, prepared=folds[j],
                         save=False, inspect=hook)
@@ -105,26 +105,26 @@ def test_the_rule_takes_the_lowest_log_loss_among_candidates_near_the_best_auc()
     # 0.01 of 1's 0.96), 1's log-loss is lower by more than the 1% margin
     loss = {0: 1.0, 1: 0.9, 4: 0.8}.get
     auc = {0: 0.955, 1: 0.96, 4: 0.94}.get
-    assert select.eligible((0, 1, 4), auc) == (0, 1)
-    assert select.choose_rule((0, 1, 4), loss, auc) == (1, 0.9)
-    assert select.choose((0, 1, 4), loss) == (4, 0.8)   # the log-loss alone would take 4
+    assert tuning.eligible((0, 1, 4), auc) == (0, 1)
+    assert tuning.choose_rule((0, 1, 4), loss, auc) == (1, 0.9)
+    assert tuning.choose((0, 1, 4), loss) == (4, 0.8)   # the log-loss alone would take 4
     # all within the AUC margin: the log-loss decides, ties keeping the simpler
-    assert select.choose_rule((0, 1, 4), loss, {0: 0.95, 1: 0.955, 4: 0.9501}.get) == (4, 0.8)
-    assert select.choose_rule((0, 1, 4), {0: 1.0, 1: 0.995, 4: 0.9901}.get,
+    assert tuning.choose_rule((0, 1, 4), loss, {0: 0.95, 1: 0.955, 4: 0.9501}.get) == (4, 0.8)
+    assert tuning.choose_rule((0, 1, 4), {0: 1.0, 1: 0.995, 4: 0.9901}.get,
                               {0: 0.95, 1: 0.96, 4: 0.955}.get) == (0, 1.0)
     # the best AUC with the worst log-loss is chosen when it alone is near the top
-    assert select.choose_rule((0, 1, 4), loss, {0: 0.99, 1: 0.97, 4: 0.96}.get) == (0, 1.0)
+    assert tuning.choose_rule((0, 1, 4), loss, {0: 0.99, 1: 0.97, 4: 0.96}.get) == (0, 1.0)
     # no fold held two actions out: no AUC, the log-loss alone
-    assert select.choose_rule((0, 1, 4), loss, {0: None, 1: None, 4: None}.get) == (4, 0.8)
+    assert tuning.choose_rule((0, 1, 4), loss, {0: None, 1: None, 4: None}.get) == (4, 0.8)
 
 
 def test_the_margin_rule_keeps_the_simpler_setting_on_a_tie():
     losses = {0: 1.0, 1: 0.995, 4: 0.9}
-    assert select.choose((0, 1, 4), losses.get) == (4, 0.9)
+    assert tuning.choose((0, 1, 4), losses.get) == (4, 0.9)
     losses = {0: 1.0, 1: 0.995, 4: 0.9901}  # 1% lower is not more than 1% lower
-    assert select.choose((0, 1, 4), losses.get) == (0, 1.0)
+    assert tuning.choose((0, 1, 4), losses.get) == (0, 1.0)
     losses = {0: 1.0, 1: 0.98, 4: 0.975}    # 4 is better than 1 but not by the margin
-    assert select.choose((0, 1, 4), losses.get) == (1, 0.98)
+    assert tuning.choose((0, 1, 4), losses.get) == (1, 0.98)
 
 
 def test_validation_folds_are_disjoint_blocks_of_whole_episodes():
@@ -169,26 +169,26 @@ def test_large_corpora_keep_the_paper_settings(ward):
 
     corpus = ward.corpus("ward")
     given = {"history_length": None, "hidden": None, "weight_decay": None}
-    cfg = select.with_defaults(BeliefConfig(mode="imitation"), given)
+    cfg = tuning.with_defaults(BeliefConfig(mode="imitation"), given)
     assert (cfg.history_length, cfg.hidden, cfg.weight_decay) == (4, 128, 0.0)
-    assert select.open_settings(corpus, cfg, given) == ["history_length", "hidden",
+    assert tuning.open_settings(corpus, cfg, given) == ["history_length", "hidden",
                                                         "weight_decay"]
-    old = select.SELECT_MAX_ROWS
+    old = tuning.SELECT_MAX_ROWS
     try:
-        select.SELECT_MAX_ROWS = corpus.n_rows - 1
-        assert select.open_settings(corpus, cfg, given) == []
-        assert "over the" in select.why_no_search(corpus, cfg, given, False)
+        tuning.SELECT_MAX_ROWS = corpus.n_rows - 1
+        assert tuning.open_settings(corpus, cfg, given) == []
+        assert "over the" in tuning.why_no_search(corpus, cfg, given, False)
     finally:
-        select.SELECT_MAX_ROWS = old
-    assert select.open_settings(corpus, cfg, given, paper=True) == []
+        tuning.SELECT_MAX_ROWS = old
+    assert tuning.open_settings(corpus, cfg, given, paper=True) == []
 
 
 def test_no_better_than_majority_or_mean_is_said():
-    assert "majority" in select.baseline_check({"val_accuracy": 0.93,
+    assert "majority" in tuning.baseline_check({"val_accuracy": 0.93,
                                                 "val_majority_accuracy": 0.93})
-    assert select.baseline_check({"val_accuracy": 0.96, "val_majority_accuracy": 0.93}) is None
-    assert "mean" in select.baseline_check({"val_r2": 0.001})
-    assert select.baseline_check({"val_r2": 0.4}) is None
+    assert tuning.baseline_check({"val_accuracy": 0.96, "val_majority_accuracy": 0.93}) is None
+    assert "mean" in tuning.baseline_check({"val_r2": 0.001})
+    assert tuning.baseline_check({"val_r2": 0.4}) is None
 
 
 @pytest.fixture
@@ -217,7 +217,7 @@ def test_default_training_on_ward_beats_the_majority_clearly(aoc, ward_file):
     _check_abc_validation(ward_file, json.loads(out), err, "mine")
     saved = json.loads((ward_file.corpus("mine").models_dir / "default" / "config.json")
                        .read_text())
-    assert saved["config"]["label_smoothing"] == select.LABEL_SMOOTHING == 0.1  # the default
+    assert saved["config"]["label_smoothing"] == tuning.LABEL_SMOOTHING == 0.1  # the default
     assert "label smoothing 0.1" in err
     code, out, err = aoc("index", "mine", "--format", "json")
     assert code == 0, err
@@ -247,40 +247,42 @@ def test_label_smoothing_default_only_where_it_was_measured():
     acts = np.array([0] * 88 + [1] * 12)   # the rarer action at 12% of the rows
     small = SimpleNamespace(n_rows=5000, discrete=True, actions=acts, n_actions=2)
     imit = BeliefConfig(mode="imitation")
-    assert select.with_imitation_defaults(small, imit, {}).label_smoothing == 0.1
-    assert select.with_imitation_defaults(small, imit, {"label_smoothing": 0.0}).label_smoothing == 0
-    assert select.with_imitation_defaults(small, imit, {"label_smoothing": 0.2}).label_smoothing == 0.2
-    assert select.with_imitation_defaults(small, imit, {}, paper=True).label_smoothing == 0
+    assert tuning.with_imitation_defaults(small, imit, {}).label_smoothing == 0.1
+    assert tuning.with_imitation_defaults(small, imit,
+                                          {"label_smoothing": 0.0}).label_smoothing == 0
+    assert tuning.with_imitation_defaults(small, imit,
+                                          {"label_smoothing": 0.2}).label_smoothing == 0.2
+    assert tuning.with_imitation_defaults(small, imit, {}, paper=True).label_smoothing == 0
     # a rare action under the 0.1 / 2 = 5% the smoothing gives each action: no smoothing
     rare = SimpleNamespace(n_rows=5000, discrete=True, actions=np.array([0] * 96 + [1] * 4),
                            n_actions=2)
-    assert select.with_imitation_defaults(rare, imit, {}).label_smoothing == 0
-    assert "4.0% of the rows" in select.why_no_smoothing(rare, imit, {}, False)
-    assert select.why_no_smoothing(small, imit, {}, False) is None
-    assert select.with_imitation_defaults(rare, imit, {"label_smoothing": 0.1}).label_smoothing \
+    assert tuning.with_imitation_defaults(rare, imit, {}).label_smoothing == 0
+    assert "4.0% of the rows" in tuning.why_no_smoothing(rare, imit, {}, False)
+    assert tuning.why_no_smoothing(small, imit, {}, False) is None
+    assert tuning.with_imitation_defaults(rare, imit, {"label_smoothing": 0.1}).label_smoothing \
         == 0.1                                 # given: kept
     at = SimpleNamespace(n_rows=5000, discrete=True, actions=np.array([0] * 95 + [1] * 5),
                          n_actions=2)           # exactly 5%: it fits
-    assert select.smoothing_fits(at)
+    assert tuning.smoothing_fits(at)
     # three actions, one never logged (not the rarest): 0.1 / 3 against the 3% of action 1
-    assert select.rarest_share(SimpleNamespace(actions=np.array([0] * 97 + [1] * 3))) == 0.03
-    assert not select.smoothing_fits(SimpleNamespace(actions=np.array([0] * 97 + [1] * 3),
+    assert tuning.rarest_share(SimpleNamespace(actions=np.array([0] * 97 + [1] * 3))) == 0.03
+    assert not tuning.smoothing_fits(SimpleNamespace(actions=np.array([0] * 97 + [1] * 3),
                                                      n_actions=3))
-    assert select.smoothing_fits(SimpleNamespace(actions=np.array([0] * 96 + [1] * 4),
+    assert tuning.smoothing_fits(SimpleNamespace(actions=np.array([0] * 96 + [1] * 4),
                                                  n_actions=3))
-    big = SimpleNamespace(n_rows=select.SELECT_MAX_ROWS + 1, discrete=True)
-    assert select.with_imitation_defaults(big, imit, {}).label_smoothing == 0
+    big = SimpleNamespace(n_rows=tuning.SELECT_MAX_ROWS + 1, discrete=True)
+    assert tuning.with_imitation_defaults(big, imit, {}).label_smoothing == 0
     boxes = SimpleNamespace(n_rows=5000, discrete=False)
-    assert select.with_imitation_defaults(boxes, imit, {}).label_smoothing == 0
+    assert tuning.with_imitation_defaults(boxes, imit, {}).label_smoothing == 0
     value = BeliefConfig(mode="value")
-    assert select.with_imitation_defaults(small, value, {}).label_smoothing == 0
+    assert tuning.with_imitation_defaults(small, value, {}).label_smoothing == 0
 
 
 def test_abc_scores_are_each_actions_weight_in_the_subset():
     rows = np.array([[3, 0, -1], [1, 2, 4]])
     weights = np.array([[0.7, 0.3, 0.0], [0.5, 0.25, 0.25]])
     actions = np.array([0, 1, 2, 1, 0])
-    s = select.abc_scores(rows, weights, actions, 3)
+    s = tuning.abc_scores(rows, weights, actions, 3)
     assert np.allclose(s, [[0.3, 0.7, 0.0], [0.25, 0.5, 0.25]], rtol=0, atol=1e-15)
 
 
@@ -365,7 +367,7 @@ def _check_abc_validation(ward, m, err, name="ward"):
     assert m["val_abc_k"] == k
     search = PerAction(BeliefIndex.build(b[split.train_rows], kind="flat"), a_tr)
     dec = decompose(b[split.train_rows], b[split.val_rows], k=k, index=search)
-    scores = select.abc_scores(dec.rows, dec.weights, a_tr, 2)
+    scores = tuning.abc_scores(dec.rows, dec.weights, a_tr, 2)
     # the same network; beliefs through the saved model's float32 path (a row may flip)
     assert m["val_abc_accuracy"] == pytest.approx(np.mean(scores.argmax(1) == y), abs=0.01)
     assert m["val_abc_auc"] == pytest.approx(auc(y, scores), abs=0.02)
@@ -390,19 +392,19 @@ def test_settings_are_searched_only_when_imitating_discrete_actions():
     from aoc_cli.belief.config import BeliefConfig
 
     given = {"history_length": None, "hidden": None, "weight_decay": None}
-    value = select.with_defaults(BeliefConfig(), given)
-    imitation = select.with_defaults(BeliefConfig(mode="imitation"), given)
+    value = tuning.with_defaults(BeliefConfig(), given)
+    imitation = tuning.with_defaults(BeliefConfig(mode="imitation"), given)
     for discrete in (False, True):
         small = SimpleNamespace(n_rows=5000, discrete=discrete)
-        assert select.open_settings(small, value, given) == []
-        assert "value mode" in select.why_no_search(small, value, given, False)
+        assert tuning.open_settings(small, value, given) == []
+        assert "value mode" in tuning.why_no_search(small, value, given, False)
     continuous = SimpleNamespace(n_rows=5000, discrete=False)
-    assert select.open_settings(continuous, imitation, given) == []
-    assert "continuous actions" in select.why_no_search(continuous, imitation, given, False)
+    assert tuning.open_settings(continuous, imitation, given) == []
+    assert "continuous actions" in tuning.why_no_search(continuous, imitation, given, False)
     # the reason is saved in the model's metrics: the library's words, not a CLI flag
-    paper = select.why_no_search(continuous, imitation, given, True)
+    paper = tuning.why_no_search(continuous, imitation, given, True)
     assert "paper's settings" in paper and "--" not in paper
-    assert select.with_imitation_defaults(continuous, imitation, {}).label_smoothing == 0
+    assert tuning.with_imitation_defaults(continuous, imitation, {}).label_smoothing == 0
     discrete = SimpleNamespace(n_rows=5000, discrete=True)
-    assert select.open_settings(discrete, imitation, given) == ["history_length", "hidden",
+    assert tuning.open_settings(discrete, imitation, given) == ["history_length", "hidden",
                                                                 "weight_decay"]

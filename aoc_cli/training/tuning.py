@@ -42,7 +42,7 @@ loss is not: on the maze (19,138 rows) every candidate had a validation R^2 of 0
 kept width 256 and its weight decay, and AOC on that belief failed every episode (success 0.0,
 1.0 with the paper's settings; docs/design.md "Settings chosen on small logs"). So value-mode
 models (every belief), continuous imitation, corpora over the limit and ``--paper`` take the
-paper's value (or the one the log's evidence decides, aoc_cli.belief.evidence) for whatever is
+paper's value (or the one the log's evidence decides, aoc_cli.training.evidence) for whatever is
 open; ``--no-select`` skips the search.
 
 After training, :func:`baseline_check` says when the model is no better than predicting the

@@ -1,7 +1,7 @@
 """Train a corpus's belief model as ``aoc train`` does, in one call: the settings checked, the
-settings the log's evidence decides under the ones given (:mod:`aoc_cli.belief.evidence`), the
+settings the log's evidence decides under the ones given (:mod:`aoc_cli.training.evidence`), the
 small-log defaults and the choice of the settings left open by validation
-(:mod:`aoc_cli.belief.select`), one writer per model id, the inputs checked against the
+(:mod:`aoc_cli.training.tuning`), one writer per model id, the inputs checked against the
 corpus's content hash, then training (:func:`aoc_cli.belief.train.train_model`). ``aoc
 train``, ``aoc bench ward`` and the icu-sepsis bench all train through :func:`train_corpus`.
 
@@ -18,13 +18,13 @@ import time
 from dataclasses import dataclass
 from typing import Callable
 
-from aoc_cli.belief import evidence, select
 from aoc_cli.belief.censoring import censoring_of
 from aoc_cli.belief.config import CRITIC_STEP_SECONDS, BeliefConfig
 from aoc_cli.belief.data import prepare
 from aoc_cli.decompose.k_rule import index_k
 from aoc_cli.progress import Progress
 from aoc_cli.store import DEFAULT_MODEL, Corpus, check_name, writing_model
+from aoc_cli.training import evidence, tuning
 
 #: Settings left to the log's evidence or to validation when None.
 OPEN = evidence.TRAINING + ("hidden", "weight_decay")
@@ -52,10 +52,10 @@ def _split(settings: dict) -> tuple[dict, dict, float | None]:
 def _config(given: dict, fixed: dict) -> BeliefConfig:
     """The checked configuration of the settings ``given`` (None: not given; the paper's value
     for a searched one) and the settings ``fixed``."""
-    searched = {k: given.get(k) for k in select.PAPER}
+    searched = {k: given.get(k) for k in tuning.PAPER}
     config = BeliefConfig(**{k: v for k, v in given.items()
-                             if v is not None and k not in select.PAPER}, **fixed)
-    return select.with_defaults(config, searched)
+                             if v is not None and k not in tuning.PAPER}, **fixed)
+    return tuning.with_defaults(config, searched)
 
 
 def check_settings(settings: dict) -> BeliefConfig:
@@ -68,7 +68,7 @@ def train_corpus(corpus: Corpus, model: str = DEFAULT_MODEL, *, paper: bool = Fa
                  select_settings: bool = True, overwrite: bool = False,
                  progress: Progress | None = None,
                  log: Callable[[str], None] | None = None, controller: dict | None = None,
-                 choose_controller: Callable | None = None, **settings) -> Trained:
+                 choose_controller: bool = False, **settings) -> Trained:
     """Train model ``model`` of ``corpus`` with ``settings`` (BeliefConfig fields; see the
     module docstring); ``paper``: the paper's settings for everything not given (no rules of
     the evidence, no selection); ``select_settings`` False: no choice by validation (the
@@ -76,11 +76,10 @@ def train_corpus(corpus: Corpus, model: str = DEFAULT_MODEL, *, paper: bool = Fa
     settings the evidence decided and why, the critic's step budget). ``progress``: fitted Q
     evaluation, the candidates tried, then the epochs (or critic steps).
 
-    ``controller``: the controller settings given (:data:`aoc_cli.belief.evidence.CONTROLLER`;
-    None values: not given), saved with the model as given. ``choose_controller(corpus,
-    config, k, extra, progress)``: the ``inspect`` hook that chooses the controller on the
-    validation episodes (:mod:`aoc_cli.evaluation.selection`, a later stage: the API passes
-    it), run where :func:`aoc_cli.belief.evidence.selects_controller` says."""
+    ``controller``: the controller settings given (:data:`aoc_cli.training.evidence.CONTROLLER`;
+    None values: not given), saved with the model as given. ``choose_controller``: choose the
+    controller on the validation episodes (:mod:`aoc_cli.training.controller_selection`, as
+    ``aoc train`` does), where :func:`aoc_cli.training.evidence.selects_controller` says."""
     note = log or (lambda _text: None)
     given, fixed, smoothing = _split(settings)
     _config(given, fixed)  # the settings checked before the corpus is read
@@ -95,12 +94,12 @@ def train_corpus(corpus: Corpus, model: str = DEFAULT_MODEL, *, paper: bool = Fa
                               "seconds": time.perf_counter() - started},
                  "controller": {**chosen, **{k: v for k, v in decided.items()
                                              if k in evidence.CONTROLLER}}}
-    searched = {k: given[k] for k in select.PAPER}
+    searched = {k: given[k] for k in tuning.PAPER}
     config = _config(given, fixed)
     no_search = paper or not select_settings
-    config = select.with_imitation_defaults(
+    config = tuning.with_imitation_defaults(
         corpus, config, {"label_smoothing": smoothing}, paper)
-    unsmoothed = select.why_no_smoothing(corpus, config, {"label_smoothing": smoothing},
+    unsmoothed = tuning.why_no_smoothing(corpus, config, {"label_smoothing": smoothing},
                                          paper)
     if unsmoothed:
         extra = {**extra, "label_smoothing_rule": unsmoothed}
@@ -110,38 +109,40 @@ def train_corpus(corpus: Corpus, model: str = DEFAULT_MODEL, *, paper: bool = Fa
     measure = ev is not None and not no_search and "epsilon" not in chosen \
         and evidence.held_out(ev, config)
     penalty = ev is not None and evidence.penalises(ev, config, chosen)
-    hook = None
-    if ev is not None and not no_search and choose_controller is not None \
-            and evidence.selects_controller(ev, config, chosen):
-        hook = choose_controller(corpus, config, extra["controller"]["k"], extra, progress)
+    choose = ev is not None and not no_search and choose_controller \
+        and evidence.selects_controller(ev, config, chosen)
     with writing_model(corpus.path, check_name(model, "model")):  # one writer per model id
         metrics = _train(corpus, config, model, overwrite,
-                         select.open_settings(corpus, config, searched, no_search),
-                         select.why_no_search(corpus, config, searched, paper,
+                         tuning.open_settings(corpus, config, searched, no_search),
+                         tuning.why_no_search(corpus, config, searched, paper,
                                               select_settings), extra, progress, note,
-                         measure, hook, penalty)
+                         measure, choose, penalty)
     return Trained(corpus.name, model, metrics, config,
                    smoothing is None and config.label_smoothing > 0)
 
 
 def _train(corpus, config: BeliefConfig, model: str, overwrite: bool, open_names: list[str],
            defaults_note: str | None, extra: dict, progress: Progress | None,
-           note: Callable[[str], None], measure: bool = False, hook=None,
+           note: Callable[[str], None], measure: bool = False, choose: bool = False,
            penalty: bool = False) -> dict:
     """Check the inputs (and the corpus's content hash), then train; with ``open_names``,
-    choose those settings by validation first (aoc_cli.belief.select). ``extra``: more
+    choose those settings by validation first (aoc_cli.training.tuning). ``extra``: more
     entries of the saved metrics (the settings the evidence decided); ``measure``: decide the
     controller's epsilon on the validation episodes after training
-    (aoc_cli.belief.epsilon_rule), into ``extra``'s ``controller`` before the model is
-    saved; ``hook``: another such ``inspect`` (the controller chosen on the validation
-    episodes, :func:`train_corpus`); ``penalty``: rule 2's support penalty measured on the row
-    values once they exist (:func:`aoc_cli.belief.evidence.state_penalty`), into ``extra``."""
+    (aoc_cli.training.epsilon_rule), into ``extra``'s ``controller`` before the model is
+    saved; ``choose``: another such ``inspect``, the controller chosen on the validation
+    episodes (:mod:`aoc_cli.training.controller_selection`); ``penalty``: rule 2's support
+    penalty measured on the row values once they exist
+    (:func:`aoc_cli.training.evidence.state_penalty`), into ``extra``."""
     name = corpus.name
     fqe = config.mode == "value" and config.value == "fqe"
     if fqe and progress is not None:
         progress(0, 1, f"fitted Q evaluation of {name}")
-    # lazy: torch (and FAISS, for the epsilon rule), once the settings are good
-    from aoc_cli.belief import epsilon_rule, stream, train as trainer
+    # lazy: torch (and FAISS: the epsilon rule, the controller's selection), settings checked
+    from aoc_cli.belief import stream, train as trainer
+    from aoc_cli.training import controller_selection, epsilon_rule
+    hook = controller_selection.recording_hook(corpus, config, extra["controller"]["k"], extra,
+                                               progress) if choose else None
     trainer.pick_device(config.device)  # a GPU asked for where torch sees none: before the targets
     prepared = prepare(corpus, config, model, overwrite, progress=progress if fqe else None)
     corpus.verify_content()  # the columns prepare read are cached: hashing reads nothing again
@@ -166,7 +167,7 @@ def _train(corpus, config: BeliefConfig, model: str, overwrite: bool, open_names
     if progress is not None:
         progress(0, total, f"training {name}/{model}")
     if open_names:
-        return select.select_and_train(corpus, config, open_names, model, overwrite,
+        return tuning.select_and_train(corpus, config, open_names, model, overwrite,
                                        prepared, progress, extra)
     if defaults_note:
         extra = {**extra, "selection": {"searched": [], "why": defaults_note}}

@@ -29,12 +29,12 @@ unless its own flag is given.
    limit except in the last ~5% of an episode), between :data:`GAMMA_MIN` and the paper's 0.99.
 4. **continuous actions, value mode**: the controller's ``epsilon`` keeps as many of the K
    uniform candidates as lie as near the corpus as the log's own actions do, measured on
-   held-out episodes after training (:mod:`aoc_cli.belief.epsilon_rule`; :func:`held_out`
+   held-out episodes after training (:mod:`aoc_cli.training.epsilon_rule`; :func:`held_out`
    says where it runs).
 5. **imitation of discrete actions on a small log**: the history length, width and weight
    decay by cross-validation over episodes: the lowest mean held-out log-loss among the
    candidates whose mean held-out ABC AUC is within 0.01 of the best
-   (:mod:`aoc_cli.belief.select`).
+   (:mod:`aoc_cli.training.tuning`).
 
 >>> ev = Evidence(rows=10_000, episodes=50, discrete=False, n_actions=None, rewards=True,
 ...               length_median=200.0, length_max=200, at_limit=0.98, repeats=0.2)
@@ -174,7 +174,7 @@ def held_out(ev: Evidence, config) -> bool:
 
 
 #: The controller settings rule 2's selection chooses on held-out episodes
-#: (:mod:`aoc_cli.evaluation.selection`); given any of them, it does not run.
+#: (:mod:`aoc_cli.training.controller_selection`); given any of them, it does not run.
 SELECTED = ("residual_cap", "support_penalty")
 
 
@@ -276,8 +276,8 @@ def describe(reasons: list[dict]) -> list[str]:
 
 def selection_lines(out: dict) -> list[str]:
     """What ``aoc train`` prints of the controller chosen on held-out episodes (the record of
-    :func:`aoc_cli.evaluation.selection.select_controller`): one line per candidate, its FQE
-    estimate and interval, the chosen one marked."""
+    :func:`aoc_cli.training.controller_selection.select_controller`): one line per candidate,
+    its FQE estimate and interval, the chosen one marked."""
     width = max(len(label(e["settings"])) for e in out["candidates"])
     def pairs(e: dict) -> str:
         if "pairs" not in e:

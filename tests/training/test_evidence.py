@@ -1,4 +1,4 @@
-"""Settings decided from the log's own evidence (aoc_cli.belief.evidence), never from a task's
+"""Settings decided from the log's own evidence (aoc_cli.training.evidence), never from a task's
 name: the same log collected or written to a plain file gets the same settings; the rules;
 flags win, --paper skips; the controller's settings travel with the model."""
 
@@ -7,8 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from aoc_cli.belief import epsilon_rule, evidence
-from aoc_cli.belief.evidence import Evidence, decide
+from aoc_cli.training import epsilon_rule, evidence
+from aoc_cli.training.evidence import Evidence, decide
 from aoc_cli.envs import collect
 from aoc_cli.store import Store
 from tests.plain_log import write_plain_npz
@@ -234,8 +234,8 @@ def test_the_controller_settings_travel_with_the_model(aoc, store, tmp_path):
     from tests.conftest import run_aoc
 
     assert run_aoc("ingest", str(path), "--name", "icu")[0] == 0
-    # rule 2's controller (--no-select: not chosen on held-out episodes, tests/evaluation/
-    # test_selection.py) and the k rule's k
+    # rule 2's controller (--no-select: not chosen on held-out episodes, tests/training/
+    # test_controller_selection.py) and the k rule's k
     # (--value return: rule 2's controller does not depend on how the values were computed,
     # and fitted Q evaluation costs a minute here; tests/control/test_icu_sepsis_quality.py
     # trains with no flags)
@@ -269,7 +269,7 @@ def test_the_controller_settings_travel_with_the_model(aoc, store, tmp_path):
 
 
 def test_the_held_out_epsilon_shows_on_the_progress_bar(store):
-    from aoc_cli.belief.fit import train_corpus
+    from aoc_cli.training.fit import train_corpus
 
     corpus = Store(store).write("m", _data("maze", episodes=30))
     labels = []

@@ -1,5 +1,5 @@
 """The controller chosen on held-out episodes of the user's own log (value mode, discrete
-actions, a finite state the log revisits: rule 2 of :mod:`aoc_cli.belief.evidence`), by a rule
+actions, a finite state the log revisits: rule 2 of :mod:`aoc_cli.training.evidence`), by a rule
 stated in advance (docs/design.md, "Settings from the log's evidence").
 
 ``aoc train`` holds out the validation episodes (``val_fraction``, 20% by default) from the
@@ -42,7 +42,7 @@ import time
 import numpy as np
 import torch
 
-from aoc_cli.belief.evidence import SELECTED, STATE_CAP
+from aoc_cli.training.evidence import SELECTED, STATE_CAP
 from aoc_cli.belief.model import Encoder
 from aoc_cli.control.config import ControllerConfig
 from aoc_cli.control.rule import choose, residual_cap
@@ -75,7 +75,7 @@ RULE = ("the highest lower bound of the 95% interval of FQE on the held-out epis
 def candidates(penalty: float | None, cap: float = STATE_CAP) -> tuple[dict, ...]:
     """The candidate controllers, the most conservative first (the ties' order): rule 2's (an
     action trusted only where the log took it in that state, ranked by the lower bound of its
-    value: ``penalty`` the support penalty rule 2 measured, :func:`aoc_cli.belief.evidence.
+    value: ``penalty`` the support penalty rule 2 measured, :func:`aoc_cli.training.evidence.
     state_penalty`), each of its two parts alone, and the paper's. ``penalty`` None (the log
     gave no noise to bound): the cap and the paper's."""
     bounded = () if penalty is None else (
@@ -264,7 +264,7 @@ def recording_hook(corpus, config, k: int, extra: dict, progress=None):
     settings saved with the model, the ``settings`` reasons ``aoc train`` prints)."""
 
     def inspect(net, inputs, data, norm) -> dict:
-        # rule 2's penalty, measured on the row values before training (aoc_cli.belief.fit)
+        # rule 2's penalty, measured on the row values before training (aoc_cli.training.fit)
         out = select_controller(net, inputs, data, norm, corpus, config, k,
                                 candidates(extra["controller"].get("support_penalty")),
                                 progress)
