@@ -19,7 +19,8 @@ LOW = ["lazy", "errors", "settings", "progress", "metrics", "rows", "threads", "
 #: A stage is a package of aoc_cli, or a floor of one ("index.search": the arrays-only search of
 #: the index room, below decompose; "index": the rest of the room, the corpus index, above belief).
 STAGES = ["store", "formats", "envs", "index.search", "decompose", "belief", "index", "ope",
-          "control", "training", "evaluation", "baselines", "report", "experiments", "api", "cli"]
+          "control", "training", "evaluation", "baselines", "report", "explanation",
+          "experiments", "api", "cli"]
 
 
 def _modules() -> dict[str, Path]:

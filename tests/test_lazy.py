@@ -27,7 +27,7 @@ def test_a_submodule_named_after_a_public_name_is_refused():
 
 def test_every_lazy_package_gives_its_names_not_modules():
     for name in ("aoc_cli.api", "aoc_cli.belief", "aoc_cli.index", "aoc_cli.index.search",
-                 "aoc_cli.control", "aoc_cli.training"):
+                 "aoc_cli.control", "aoc_cli.training", "aoc_cli.explanation"):
         package = sys.modules.get(name) or __import__(name, fromlist=["_"])
         for public in package.__all__:
             assert not isinstance(getattr(package, public), types.ModuleType), (name, public)

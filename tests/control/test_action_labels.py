@@ -10,7 +10,8 @@ import pytest
 
 from aoc_cli.belief.config import BeliefConfig
 from aoc_cli.belief.train import train_model
-from aoc_cli.control import ControllerConfig, explain_logged_step, open_session
+from aoc_cli.control import ControllerConfig, open_session
+from aoc_cli.explanation import explain_logged_step
 from aoc_cli.index import build_index
 from aoc_cli.envs.ward import read_options, write_csv
 from aoc_cli.evaluation.score import evaluate, step_records

@@ -137,7 +137,7 @@ def test_the_support_penalty_prefers_the_well_tried_action_to_the_lucky_one(luck
 
 
 def test_the_contrast_says_the_lucky_action_lost_to_the_penalty(lucky):
-    from aoc_cli.control.contrast import contrast_record
+    from aoc_cli.explanation.contrast import contrast_record
 
     history = History(np.zeros((1, 0, 2), np.float32), np.zeros((1, 0), np.int64),
                       np.zeros((1, 0), np.float32), np.zeros((1, 0), bool))

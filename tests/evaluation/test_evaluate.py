@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from aoc_cli.belief import BeliefConfig, train_model
-from aoc_cli.control import ControllerConfig, explain_logged_step, open_session
+from aoc_cli.control import ControllerConfig, open_session
+from aoc_cli.explanation import explain_logged_step
 from aoc_cli.index import build_index
 from aoc_cli.envs import collect
 from aoc_cli.evaluation.score import LeaveEpisodeOut, evaluate, step_records

@@ -1,14 +1,15 @@
 """`aoc explain ... --html FILE`: the decision page of explained decisions and the overview
-page of an ``aoc evaluate --steps`` file, written (the pages themselves are built in
-:mod:`aoc_cli.report.pages`)."""
+page of an ``aoc evaluate --steps`` file, written: what goes on them (the audit episode's OOD
+band, the index's typical residual) gathered here, the HTML built by :mod:`aoc_cli.report`
+(:mod:`aoc_cli.report.pages`)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from aoc_cli.control.explain import audit_band
-from aoc_cli.index import load_index
 from aoc_cli.errors import BadInput, call
+from aoc_cli.explanation.decisions import audit_band
+from aoc_cli.index import load_index
 from aoc_cli.report.html import check_html_path, write_page
 from aoc_cli.report.overview import action_names, audit_episode, steps_episodes
 from aoc_cli.report.pages import decision_page, overview_page

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import aoc_cli
-from aoc_cli.control.explain import parse_query
+from aoc_cli.explanation.decisions import parse_query
 from aoc_cli.errors import AocError
 from aoc_cli.store import Store
 from tests.formats.cohorts import OBS, cohort, roles, write

@@ -6,7 +6,7 @@ answered exactly by a row mask on the same index (:mod:`aoc_cli.rows`): the same
 beliefs, the same candidates (a continuous control step reuses the candidates it drew), the
 decomposition searched among the remaining rows. A decision none of whose step-1 candidate
 rows were removed is unchanged bit for bit; one that used them equals the decision over a
-corpus rebuilt without them (same model, beliefs and index kind; tests/control/test_whatif.py).
+corpus rebuilt without them (same model, beliefs and index kind; tests/explanation/test_whatif.py).
 
 :func:`removal` turns ``--without TAG=VALUE`` / ``--without-episodes ID,...`` into an (N,) bool
 mask of the rows removed; :func:`redecide` re-runs one :class:`Decision` under the remaining

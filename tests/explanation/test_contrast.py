@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from aoc_cli.control import ControllerConfig
-from aoc_cli.control.explain import explain_query
 from aoc_cli.control import open_session
+from aoc_cli.explanation.decisions import explain_query
 from tests.control.corpora import corridor_store
-from tests.control.test_whatif import logged_query, maze  # noqa: F401 (fixture)
+from tests.explanation.test_whatif import logged_query, maze  # noqa: F401 (fixture)
 
 
 @pytest.fixture(scope="module")

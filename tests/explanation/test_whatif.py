@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from aoc_cli.control import Controller, open_session
-from aoc_cli.control.explain import explain_logged_step
-from aoc_cli.control.whatif import redecide, removal
+from aoc_cli.explanation.decisions import explain_logged_step
+from aoc_cli.explanation.whatif import redecide, removal
 from aoc_cli.index import CorpusIndex
 from aoc_cli.errors import AocError
 from aoc_cli.index.search import BeliefIndex
@@ -141,7 +141,7 @@ def test_explain_reports_unchanged_for_a_removal_far_from_the_query(corridor):
 
 
 def test_evaluate_without_rows_decides_each_step_as_explain_does(corridor):
-    from aoc_cli.control.whatif import what_if_steps
+    from aoc_cli.explanation.whatif import what_if_steps
     from aoc_cli.evaluation.score import evaluate
 
     corpus = corridor.corpus("corridor")

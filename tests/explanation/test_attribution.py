@@ -1,4 +1,4 @@
-"""SimplEx's Jacobian projection (aoc_cli.belief.attribution): complete, and the path integral
+"""SimplEx's Jacobian projection (aoc_cli.explanation.attribution): complete, and the path integral
 of the gradient as finite differences compute it."""
 
 from __future__ import annotations
@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 import torch
 
-from aoc_cli.belief.attribution import _belief, _double_net, encoded_inputs, jacobian_projection
 from aoc_cli.belief.model import BeliefNet, Encoder, Normalisation
+from aoc_cli.explanation.attribution import (_belief, _double_net, encoded_inputs,
+                                             jacobian_projection)
 from aoc_cli.store import History
 
 D_O, D_A, L = 3, 2, 2

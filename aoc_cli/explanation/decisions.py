@@ -10,8 +10,8 @@ each source a decision can come from, given a session (:mod:`aoc_cli.control.ses
 
 Each turns its decisions into records with :func:`explain_decisions`: the decision record
 (:func:`aoc_cli.control.decision_record`), the best action not chosen (``contrast``,
-:mod:`aoc_cli.control.contrast`), each supporting row's attribution, and what changes without
-some rows (``what_if``, :mod:`aoc_cli.control.whatif`).
+:mod:`aoc_cli.explanation.contrast`), each supporting row's attribution, and what changes without
+some rows (``what_if``, :mod:`aoc_cli.explanation.whatif`).
 """
 
 from __future__ import annotations
@@ -23,16 +23,16 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from aoc_cli.belief.attribution import NODES, feature_names, jacobian_projection
 from aoc_cli.control.audit import read_audit_step, recorded_selection
 from aoc_cli.control.config import ControllerConfig
-from aoc_cli.control.contrast import contrast_record
 from aoc_cli.control.controller import Decision
 from aoc_cli.control.episodes import HistoryBuffer, check_same_spaces
 from aoc_cli.control.monitor import OODMonitor, band_limits
 from aoc_cli.control.records import decision_record, episode_ids, label_of
-from aoc_cli.control.whatif import Removal, redecide, what_if_record
 from aoc_cli.errors import AocError, param
+from aoc_cli.explanation.attribution import NODES, feature_names, jacobian_projection
+from aoc_cli.explanation.contrast import contrast_record
+from aoc_cli.explanation.whatif import Removal, redecide, what_if_record
 from aoc_cli.formats.impute import fill_query
 from aoc_cli.store import History, action_labels
 
@@ -46,7 +46,7 @@ def explain_query(session: Session, observation, history, action=None,
                   selection: np.ndarray | None = None, removal=None) -> list[dict]:
     """Records for a query: the controller's own choice (no action), one given action, or
     several actions side by side (``compare``); ``selection`` an (N,) bool row mask instead
-    of the controller's own; ``removal`` (:func:`aoc_cli.control.whatif.removal`): each also
+    of the controller's own; ``removal`` (:func:`aoc_cli.explanation.whatif.removal`): each also
     re-decided without those rows (the record's ``what_if``)."""
     ctl = session.controller
     if compare:
@@ -232,7 +232,7 @@ def attribute(session: Session, observation: np.ndarray, history: History, decis
               record: dict) -> None:
     """Add to each supporting row of ``record`` its ``attribution``: SimplEx's Jacobian
     projection of the row on the decision's query belief
-    (:func:`aoc_cli.belief.attribution.jacobian_projection`): ``projection`` (the row's belief
+    (:func:`aoc_cli.explanation.attribution.jacobian_projection`): ``projection`` (the row's belief
     shift projected on the query's), ``completeness_gap`` (the integration's error),
     ``observation`` (d_o,), ``action`` (d_a_in,) or None, ``history`` (L, F) or None; and to
     the record ``attribution_features`` (the features' names, a baseline note)."""
