@@ -14,7 +14,7 @@ from aoc_cli.control.config import ControllerLike
 from aoc_cli.errors import BadSetting, param
 from aoc_cli.evaluation.ray import evaluate_on_ray
 from aoc_cli.evaluation.score import evaluate as _evaluate
-from aoc_cli.evaluation.score import step_records
+from aoc_cli.evaluation.records import step_records
 from aoc_cli.explanation.whatif import removal as removal_of
 from aoc_cli.explanation.whatif import what_if_steps
 from aoc_cli.ope.policies import OPESettings, parse_estimators

@@ -25,7 +25,6 @@ Independent chunks of episodes: :func:`score_episodes` scores one (a :class:`Ste
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -44,7 +43,7 @@ from aoc_cli.evaluation.context import (
     episode_rows,
     heterogeneity,
 )
-from aoc_cli.evaluation.records import step_records  # noqa: F401 (re-exported)
+from aoc_cli.evaluation.step_scores import StepScores
 from aoc_cli.index.search.strata import PerAction
 from aoc_cli.ope.policies import ope_block, put_ope, wanted
 from aoc_cli.rows import distinct_rows
@@ -52,35 +51,6 @@ from aoc_cli.threads import one_thread
 
 #: Held-out steps per chunk (whole episodes; a chunk has at least one episode).
 CHUNK_STEPS = 4096
-
-
-@dataclass
-class StepScores:
-    """Per-step results of a chunk (S steps), all arrays with S rows.
-
-    ``row`` held-out rows; ``episode``, ``step``; ``logged`` (S,) int or (S, d_a);
-    ``decided`` likewise; ``scores`` (S, n) action weights (discrete imitation) or None;
-    ``v_hat`` / ``target`` (S,) value mode (v_hat of the logged action; the target is set
-    by the driver after the chunks merge, :meth:`EvalContext.targets`), ``decided_value``
-    (S,) v_hat of the decision; ``residual`` (S,) of the decision; ``warning``
-    (S,) bool heterogeneity; ``support_rows``/``support_weights`` (S, m) (-1 / 0 padded);
-    ``baselines`` name -> {"decided", "scores" or "v_hat"} arrays on the same steps.
-    """
-
-    row: np.ndarray
-    episode: np.ndarray
-    step: np.ndarray
-    logged: np.ndarray
-    decided: np.ndarray
-    residual: np.ndarray
-    warning: np.ndarray
-    support_rows: np.ndarray
-    support_weights: np.ndarray
-    scores: np.ndarray | None = None
-    v_hat: np.ndarray | None = None
-    target: np.ndarray | None = None
-    baselines: dict = field(default_factory=dict)
-    decided_value: np.ndarray | None = None
 
 
 def merge(parts: list[StepScores]) -> StepScores:
@@ -393,6 +363,5 @@ def conclude(ctx: EvalContext, data, res: StepScores, ope, seed: int, started: f
     return summary, res
 
 
-__all__ = ["BASELINES", "EXACT_MAX_ROWS", "LeaveEpisodeOut", "StepScores", "check_inputs",
-           "chunks", "conclude", "evaluate", "merge", "score_episodes", "step_records",
-           "summarise"]
+__all__ = ["BASELINES", "EXACT_MAX_ROWS", "LeaveEpisodeOut", "check_inputs", "chunks", "conclude",
+           "evaluate", "merge", "score_episodes", "summarise"]

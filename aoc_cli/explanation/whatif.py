@@ -159,7 +159,7 @@ def _spread(x: np.ndarray) -> dict:
 
 def what_if_steps(before, after, removal: Removal, corpus, summary_after: dict) -> dict:
     """What removing rows changes over every step of an evaluation: ``before`` and ``after``
-    the :class:`aoc_cli.evaluation.score.StepScores` of the same steps with every row and
+    the :class:`aoc_cli.evaluation.step_scores.StepScores` of the same steps with every row and
     without ``removal``'s. The JSON key ``what_if`` of ``aoc evaluate --without``.
 
     ``flipped``: the steps whose decision differs (discrete: another action; continuous:

@@ -14,7 +14,8 @@ from aoc_cli.control import ControllerConfig, open_session
 from aoc_cli.explanation import explain_logged_step
 from aoc_cli.index import build_index
 from aoc_cli.envs.ward import read_options, write_csv
-from aoc_cli.evaluation.score import evaluate, step_records
+from aoc_cli.evaluation.records import step_records
+from aoc_cli.evaluation.score import evaluate
 from aoc_cli.formats import read_dataset
 from aoc_cli.store import Store
 

@@ -11,7 +11,8 @@ from aoc_cli.control import ControllerConfig, open_session
 from aoc_cli.explanation import explain_logged_step
 from aoc_cli.index import build_index
 from aoc_cli.envs import collect
-from aoc_cli.evaluation.score import LeaveEpisodeOut, evaluate, step_records
+from aoc_cli.evaluation.records import step_records
+from aoc_cli.evaluation.score import LeaveEpisodeOut, evaluate
 from aoc_cli.store import Store
 from tests.conftest import run_aoc
 
