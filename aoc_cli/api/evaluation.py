@@ -17,7 +17,7 @@ from aoc_cli.evaluation.score import evaluate as _evaluate
 from aoc_cli.evaluation.records import step_records
 from aoc_cli.explanation.whatif import removal as removal_of
 from aoc_cli.explanation.whatif import what_if_steps
-from aoc_cli.ope.policies import OPESettings, parse_estimators
+from aoc_cli.ope.evaluate_block import OPESettings, parse_estimators
 from aoc_cli.progress import Progress
 from aoc_cli.store import DEFAULT_INDEX, atomic_path
 

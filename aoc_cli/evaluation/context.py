@@ -15,7 +15,7 @@ from aoc_cli.decompose import subset_size
 from aoc_cli.errors import AocError, NoRewards, call
 from aoc_cli.index.search import BatchSearch, BeliefIndex
 from aoc_cli.index.search.strata import candidate_search
-from aoc_cli.ope.policies import behaviour_targets
+from aoc_cli.ope.evaluate_block import behaviour_targets
 from aoc_cli.settings import SMALL_LOG_ROWS
 
 #: The baselines ``aoc evaluate`` scores on the same steps (``--baselines``).
@@ -228,7 +228,7 @@ class EvalContext:
         mode): the model's own values when the data are its corpus, else the target computed
         on the held-out log as the model's values were. For ``fqe`` values, the logged
         behaviour's Q(o, a) by fitted Q evaluation of the held-out log
-        (:func:`aoc_cli.ope.policies.behaviour_targets`: the OPE's own when ``ope``, its
+        (:func:`aoc_cli.ope.evaluate_block.behaviour_targets`: the OPE's own when ``ope``, its
         block, fitted it at the model's discount and FQE's default steps and schedule; else
         fitted alone at those: an OPE made quicker does not change the target; kept beside
         the log), or where that cannot

@@ -27,7 +27,7 @@ from aoc_cli.evaluation.score import (
     merge,
     score_episodes,
 )
-from aoc_cli.ope.policies import wanted
+from aoc_cli.ope.evaluate_block import wanted
 from aoc_cli.parallel import capacity, map_chunks, start_ray
 from aoc_cli.store import Store
 from aoc_cli.threads import one_thread

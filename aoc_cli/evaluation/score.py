@@ -45,7 +45,7 @@ from aoc_cli.evaluation.context import (
 )
 from aoc_cli.evaluation.step_scores import StepScores
 from aoc_cli.index.search.strata import PerAction
-from aoc_cli.ope.policies import ope_block, put_ope, wanted
+from aoc_cli.ope.evaluate_block import ope_block, put_ope, wanted
 from aoc_cli.rows import distinct_rows
 from aoc_cli.threads import one_thread
 
@@ -330,9 +330,9 @@ def evaluate(session, data, baselines=BASELINES, seed: int = 0, progress=None,
     session's own index (True), an IVF structure built for the run (False), or the index up
     to :data:`EXACT_MAX_ROWS` corpus rows and IVF beyond (None). ``selection``: an (N,) bool
     mask of the corpus rows the decisions may use (None: every row; the baselines always use
-    every row). ``ope``: :class:`aoc_cli.ope.policies.OPESettings` of the offline policy
+    every row). ``ope``: :class:`aoc_cli.ope.evaluate_block.OPESettings` of the offline policy
     evaluation of the decisions (value mode; None: all estimators when the log allows it, see
-    :func:`aoc_cli.ope.policies.wanted`). Returns (summary, steps).
+    :func:`aoc_cli.ope.evaluate_block.wanted`). Returns (summary, steps).
     Runs with one thread in torch, FAISS and BLAS (:func:`aoc_cli.threads.one_thread`)."""
     started = time.perf_counter()
     with one_thread():

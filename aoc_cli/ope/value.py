@@ -2,7 +2,7 @@
 bootstrap intervals, FQE with its refits' (:func:`fqe_values`), each shown where the log
 supports it (:mod:`aoc_cli.ope.support`), V(policy) - V(logged behaviour) by each with a
 paired interval, and the verdict line. ``settings`` is an
-:class:`aoc_cli.ope.policies.OPESettings` (its estimators, gamma, bootstrap, seed and FQE
+:class:`aoc_cli.ope.evaluate_block.OPESettings` (its estimators, gamma, bootstrap, seed and FQE
 settings)."""
 
 from __future__ import annotations

@@ -50,7 +50,7 @@ from aoc_cli.control.support import row_episodes, support_episodes
 from aoc_cli.decompose import decompose
 from aoc_cli.index.search import BeliefIndex
 from aoc_cli.ope.fqe import REFITS, fqe_policies, student_quantile
-from aoc_cli.ope.policies import truncated
+from aoc_cli.ope.evaluate_block import truncated
 from aoc_cli.rows import distinct_rows
 from aoc_cli.threads import one_thread
 

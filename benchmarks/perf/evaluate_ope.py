@@ -73,7 +73,7 @@ from aoc_cli.control import ControllerConfig, open_session  # noqa: E402
 from aoc_cli.evaluation import context as ei  # noqa: E402
 from aoc_cli.evaluation import score as ev  # noqa: E402
 from aoc_cli.ope import ensemble as ens  # noqa: E402
-from aoc_cli.ope.policies import OPESettings  # noqa: E402
+from aoc_cli.ope.evaluate_block import OPESettings  # noqa: E402
 from aoc_cli.store import Store, targets_dir  # noqa: E402
 from aoc_cli.threads import one_thread  # noqa: E402
 

@@ -43,7 +43,7 @@ import json, os, sys, time
 store_dir, held = sys.argv[1], sys.argv[2]
 import aoc_cli
 from aoc_cli.evaluation import score as ev
-from aoc_cli.ope.policies import OPESettings
+from aoc_cli.ope.evaluate_block import OPESettings
 from aoc_cli.store import Store
 from aoc_cli.threads import one_thread
 store = Store(store_dir)

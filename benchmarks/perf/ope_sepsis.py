@@ -18,7 +18,7 @@ clinicians' modal action as the log shows it). The clinicians are the behaviour 
 package's stochastic policy). Truths: the package's tables by a linear solve
 (``aoc_cli.envs.icu_sepsis.tables``). Then for each of ``--logs`` held-out logs of
 ``--episodes`` clinician episodes (seeds 1000, 1001, ...), the estimators of ``aoc evaluate``
-(:mod:`aoc_cli.ope.policies`: PDWIS, WDR, FQE with the log's ``propensity`` column) for
+(:mod:`aoc_cli.ope.evaluate_block`: PDWIS, WDR, FQE with the log's ``propensity`` column) for
 each policy. Prints one row per policy and estimator: coverage (of the logs), mean estimate,
 mean error, mean |error|, mean interval width, mean ESS.
 """
@@ -42,7 +42,7 @@ from aoc_cli.errors import AocError  # noqa: E402
 from aoc_cli.evaluation.score import evaluate  # noqa: E402
 from aoc_cli.ope import estimators as ope  # noqa: E402
 from aoc_cli.ope.fqe import REFITS, SCHEDULE  # noqa: E402
-from aoc_cli.ope.policies import (  # noqa: E402  # noqa: E402
+from aoc_cli.ope.evaluate_block import (  # noqa: E402  # noqa: E402
     ESTIMATORS,
     OPESettings,
     fqe_values,

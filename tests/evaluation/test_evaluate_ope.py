@@ -16,7 +16,7 @@ from aoc_cli.errors import AocError
 from aoc_cli.evaluation.context import EvalContext, episode_rows
 from aoc_cli.evaluation.score import _value, _value_distinct, evaluate
 from aoc_cli.ope import estimators as ope
-from aoc_cli.ope.policies import OPESettings
+from aoc_cli.ope.evaluate_block import OPESettings
 from aoc_cli.store import Store
 from tests.conftest import run_in_process
 
@@ -265,7 +265,7 @@ def test_an_fqe_models_held_out_target_is_the_behaviours_fqe_kept_beside_the_log
     at its default settings: the OPE's own fit when it ran at the model's discount and those
     settings, kept beside the log and read back by a later evaluate; fitted alone at another
     discount or when the OPE's FQE took other steps."""
-    from aoc_cli.ope import policies as ope_eval
+    from aoc_cli.ope import evaluate_block as ope_eval
     from aoc_cli.store import targets_dir
 
     _root, store, _ = sepsis
@@ -316,7 +316,7 @@ def test_an_fqe_models_held_out_target_is_the_behaviours_fqe_kept_beside_the_log
 def test_fqe_off_on_the_logged_behaviour_is_a_warning_and_withheld(sepsis, monkeypatch):
     """The direct method values the logged behaviour beside the policies; outside the
     interval of the log's mean return, the OPE says so and withholds FQE's values."""
-    from aoc_cli.ope import policies as ope_eval
+    from aoc_cli.ope import evaluate_block as ope_eval
 
     _root, store, _ = sepsis
     held = store.corpus("held")
@@ -350,7 +350,7 @@ def test_fqe_off_on_the_logged_behaviour_is_a_warning_and_withheld(sepsis, monke
 def test_fqe_is_given_the_history_the_policies_decide_from(sepsis, monkeypatch):
     """With a history length, FQE's Q is a function of the observation and the last steps'
     observations and actions (the propensity model's features), as the policy's decision is."""
-    from aoc_cli.ope import policies as ope_eval
+    from aoc_cli.ope import evaluate_block as ope_eval
 
     _root, store, _ = sepsis
     held = store.corpus("held")
