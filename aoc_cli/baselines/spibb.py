@@ -1,7 +1,7 @@
 """Pi_b-SPIBB (Laroche, Trichelair and Tachet des Combes, "Safe Policy Improvement with Baseline
 Bootstrapping", ICML 2019), tabular and told the state: the peer of ``aoc bench icu-sepsis``.
 
-On the log's count model (:func:`aoc_cli.experiments.sepsis_policies.log_model`: the MLE MDP,
+On the log's count model (:func:`aoc_cli.baselines.sepsis_policies.log_model`: the MLE MDP,
 the behaviour's estimate pi_b and the counts N(s, a)) the bootstrapped set is
 B = {(s, a): N(s, a) < N_wedge}. Policy iteration in the MLE MDP, each improvement projected
 onto the policies that copy pi_b on B (the paper's Pi_b-SPIBB):
@@ -28,7 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from aoc_cli.envs.tabular import TabularMDP
-from aoc_cli.experiments.sepsis_policies import log_model
+from aoc_cli.baselines.sepsis_policies import log_model
 
 #: The paper's grid of N_wedge.
 THRESHOLDS = (5, 7, 10, 15, 20, 30, 50, 70, 100)
