@@ -164,11 +164,12 @@ class Controller:
                 return self._imitate(observation, history, selection)
             if candidates is None:
                 candidates = self.sample_candidates(observation, history)
-            return self.evaluate(observation, history, candidates, choose=True,
-                                 selection=selection)
+            return self.decompose_candidates(observation, history, candidates, choose=True,
+                                             selection=selection)
 
-    def evaluate(self, observation: np.ndarray, history: History, candidates: np.ndarray,
-                 choose: bool = True, selection: np.ndarray | None = None) -> Decision:
+    def decompose_candidates(self, observation: np.ndarray, history: History,
+                             candidates: np.ndarray, choose: bool = True,
+                             selection: np.ndarray | None = None) -> Decision:
         """Decompose every candidate; with ``choose``, the decision rule (the epsilon filter
         and the argmax: :func:`aoc_cli.control.rule.choose`).
 

@@ -19,7 +19,7 @@ For a chunk of whole episodes of the held-out corpus (S steps):
 
 Independent chunks of episodes: :func:`score_episodes` scores one (a :class:`StepScores`),
 :func:`merge` joins chunks in any grouping, :func:`conclude` adds the OPE and the summary;
-:func:`evaluate` runs them in one process (aoc_cli.evaluation.ray farms the chunks out).
+:func:`score_log` runs them in one process (aoc_cli.evaluation.ray farms the chunks out).
 """
 
 from __future__ import annotations
@@ -166,7 +166,7 @@ def _imitate(ctx, rows, ep, obs, hist, logged) -> StepScores:
 
 
 def _candidates_decided(ctx, rows, ep, obs, hist):
-    """The controller's rule (:func:`aoc_cli.control.rule.choose`, as Controller.evaluate's)
+    """The controller's rule (:func:`aoc_cli.control.rule.choose`, as Controller.decompose_candidates's)
     over its candidates at S steps:
     (candidates (S, K[, d_a]), the decomposition of every candidate (S * K queries), values
     (S, K), the chosen candidate (S,), its query (S,), the bc head (S, K) or None)."""
@@ -322,7 +322,7 @@ def summarise(ctx: EvalContext, res: StepScores) -> dict:
     return out
 
 
-def evaluate(session, data, baselines=BASELINES, seed: int = 0, progress=None,
+def score_log(session, data, baselines=BASELINES, seed: int = 0, progress=None,
              chunk_steps: int = CHUNK_STEPS, exact: bool | None = None,
              selection: np.ndarray | None = None, ope=None) -> tuple[dict, StepScores]:
     """Score every step of corpus ``data`` with ``session`` (its corpus, model, index and
@@ -364,4 +364,4 @@ def conclude(ctx: EvalContext, data, res: StepScores, ope, seed: int, started: f
 
 
 __all__ = ["BASELINES", "EXACT_MAX_ROWS", "LeaveEpisodeOut", "check_inputs", "chunks", "conclude",
-           "evaluate", "merge", "score_episodes", "summarise"]
+           "merge", "score_episodes", "score_log", "summarise"]

@@ -36,7 +36,7 @@ from aoc_cli.control import ControllerConfig, open_session
 from aoc_cli.index import build_index
 from aoc_cli.envs import collect, medkit_ward, render
 from aoc_cli.errors import BadSetting, param
-from aoc_cli.evaluation.score import evaluate
+from aoc_cli.evaluation.score import score_log
 from aoc_cli.experiments.results import write_rows_csv
 from aoc_cli.store import DEFAULT_MODEL, Store, atomic_path
 
@@ -104,7 +104,7 @@ def run_split(store, data, split: int, patients: int, seed: int = 0,
                            seed=split).metrics
     build_index(tr, DEFAULT_MODEL)
     session = open_session(tr, DEFAULT_MODEL, config=ControllerConfig())
-    summary, _res = evaluate(session, te, ["knn", "bc"])
+    summary, _res = score_log(session, te, ["knn", "bc"])
     abc_seconds = time.perf_counter() - started
     chosen = metrics["selection"]["chosen"]
     rows = [{"method": "abc", "accuracy": summary["accuracy"], "auc": summary["auc"],

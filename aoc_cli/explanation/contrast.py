@@ -38,8 +38,9 @@ def contrast_record(controller: Controller, observation: np.ndarray, history: Hi
     others = np.flatnonzero(np.arange(len(value)) != decision.chosen)
     j = int(others[np.lexsort((residual[others], -value[others]))[0]])
     observation = np.asarray(observation, dtype=np.float32).reshape(-1)
-    alone = controller.evaluate(observation, history, decision.candidates[j:j + 1],
-                                choose=False, selection=selection)
+    alone = controller.decompose_candidates(observation, history,
+                                            decision.candidates[j:j + 1], choose=False,
+                                            selection=selection)
     rec = decision_record(alone, corpus, index, observation=None,
                           typical_residual=typical_residual)
     rec.pop("observation", None)

@@ -50,14 +50,16 @@ def explain_query(session: Session, observation, history, action=None,
     re-decided without those rows (the record's ``what_if``)."""
     ctl = session.controller
     if compare:
-        decisions = [ctl.evaluate(observation, history, _as_candidates(session.corpus, [a]),
-                                  choose=False, selection=selection) for a in compare]
+        decisions = [ctl.decompose_candidates(observation, history,
+                                              _as_candidates(session.corpus, [a]),
+                                              choose=False, selection=selection)
+                     for a in compare]
     elif action is not None:
         if session.model.mode == "imitation":
             raise AocError("an imitation-mode model explains its own decision; drop \"action\"")
-        decisions = [ctl.evaluate(observation, history,
-                                  _as_candidates(session.corpus, [action]), choose=False,
-                                  selection=selection)]
+        decisions = [ctl.decompose_candidates(observation, history,
+                                              _as_candidates(session.corpus, [action]),
+                                              choose=False, selection=selection)]
     else:
         decisions = [ctl.decide(observation, history, selection=selection)]
     return explain_decisions(session, observation, history, decisions, selection=selection,

@@ -117,9 +117,9 @@ def redecide(controller: Controller, observation: np.ndarray, history: History,
         return controller.decide(observation, history, selection=selection)
     observation = np.asarray(observation, dtype=np.float32).reshape(-1)
     # a chosen decision has its epsilon threshold; an explained given action has none
-    return controller.evaluate(observation, history, decision.candidates,
-                               choose=bool(np.isfinite(decision.threshold)),
-                               selection=selection)
+    return controller.decompose_candidates(observation, history, decision.candidates,
+                                           choose=bool(np.isfinite(decision.threshold)),
+                                           selection=selection)
 
 
 def what_if_record(before: dict, after: dict, removal: Removal, corpus) -> dict:

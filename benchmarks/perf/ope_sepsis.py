@@ -39,7 +39,7 @@ import numpy as np  # noqa: E402
 import aoc_cli  # noqa: E402
 from aoc_cli.envs.icu_sepsis import tables  # noqa: E402
 from aoc_cli.errors import AocError  # noqa: E402
-from aoc_cli.evaluation.score import evaluate  # noqa: E402
+from aoc_cli.evaluation.score import score_log  # noqa: E402
 from aoc_cli.ope import estimators as ope  # noqa: E402
 from aoc_cli.ope.fqe import REFITS, SCHEDULE  # noqa: E402
 from aoc_cli.ope.evaluate_block import (  # noqa: E402  # noqa: E402
@@ -86,7 +86,7 @@ def aoc_policy(store: Store, corpus, t) -> np.ndarray:
     except AocError:
         every = store.write("every-state", data)
     session = aoc_cli.open_session(corpus.name, store=store)  # the task's controller settings
-    _, res = evaluate(session, every, [], ope=OPESettings(estimators=()))
+    _, res = score_log(session, every, [], ope=OPESettings(estimators=()))
     policy = np.zeros(t.mdp.n_states, np.int64)
     policy[states] = res.decided
     return policy
@@ -175,7 +175,7 @@ def main() -> None:
         prop = held.column("propensity")
         if i == args.first and args.check:   # aoc evaluate's own decisions are the policy evaluated here
             session = aoc_cli.open_session(corpus.name, store=store)
-            _, res = evaluate(session, held, [], ope=OPESettings(estimators=()))
+            _, res = score_log(session, held, [], ope=OPESettings(estimators=()))
             agree = float(np.mean(res.decided == policies["aoc"][s]))
             print(f"aoc evaluate's decisions = the state policy on {agree:.4f} of the steps",
                   file=sys.stderr)

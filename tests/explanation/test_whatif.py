@@ -94,7 +94,7 @@ def test_a_decision_without_rows_equals_the_decision_over_a_rebuilt_corpus(which
         keep = rem.keep(None)
         after = redecide(ctl, obs, hist, decision, keep)
         want = rebuilt(session, keep)
-        ref = want.evaluate(obs, hist, decision.candidates, choose=True) \
+        ref = want.decompose_candidates(obs, hist, decision.candidates, choose=True) \
             if session.model.mode == "value" else want.decide(obs, hist)
         assert_same_decision(after, ref, np.flatnonzero(keep))
         assert not np.isin(after.support_rows, np.flatnonzero(rem.mask)).any()
@@ -142,13 +142,13 @@ def test_explain_reports_unchanged_for_a_removal_far_from_the_query(corridor):
 
 def test_evaluate_without_rows_decides_each_step_as_explain_does(corridor):
     from aoc_cli.explanation.whatif import what_if_steps
-    from aoc_cli.evaluation.score import evaluate
+    from aoc_cli.evaluation.score import score_log
 
     corpus = corridor.corpus("corridor")
     session = open_session(corpus)
     rem = removal(corpus, without_episodes=[str(e) for e in range(0, 60, 3)])
-    _, before = evaluate(session, corpus, [])
-    summary, after = evaluate(session, corpus, [], selection=rem.keep(None))
+    _, before = score_log(session, corpus, [])
+    summary, after = score_log(session, corpus, [], selection=rem.keep(None))
     w = what_if_steps(before, after, rem, corpus, summary)
     flipped = before.decided != after.decided
     assert w["flipped"] == int(flipped.sum()) and w["steps"] == corpus.n_rows
