@@ -1,7 +1,7 @@
 """The decision rule of value mode, steps 4 and 5 of a control step (docs/design.md, "The
 method, precisely"), written once and batched: the controller calls it for one step
-(:meth:`aoc_cli.control.Controller.decompose_candidates`, S = 1) and ``aoc evaluate`` for every held-out
-step at once (:mod:`aoc_cli.evaluation.score`). Over the K candidates of each of S steps:
+(:meth:`aoc_cli.control.Controller.decompose_candidates`, S = 1) and ``aoc evaluate`` for
+every held-out step at once (:mod:`aoc_cli.evaluation.score`). Over the K candidates of each of S steps:
 
 4. keep the candidates whose corpus residual is within the epsilon-quantile of the K
    residuals and, with a residual cap c, within c x the corpus's typical p90 residual
