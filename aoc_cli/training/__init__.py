@@ -2,7 +2,8 @@
 driver (:func:`train_corpus`, fit.py), the settings decided from the log's evidence
 (evidence.py; the controller's epsilon measured on held-out episodes, epsilon_rule.py), the
 settings chosen by validation on small logs (tuning.py) and the controller chosen on held-out
-episodes by FQE (controller_selection.py).
+episodes by FQE (controller_selection.py). What it decided is one record, saved with the
+model's metrics (:class:`TrainingRecord`, record.py).
 
 >>> from aoc_cli.training import train_corpus
 >>> trained = train_corpus(corpus, "default")                    # doctest: +SKIP
@@ -18,6 +19,7 @@ from aoc_cli.lazy import exports
 _WHERE = {
     "Evidence": "evidence",
     "Trained": "fit",
+    "TrainingRecord": "record",
     "abc_scores": "tuning",
     "check_settings": "fit",
     "train_corpus": "fit",

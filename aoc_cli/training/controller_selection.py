@@ -42,17 +42,18 @@ import time
 import numpy as np
 import torch
 
-from aoc_cli.training.evidence import SELECTED, STATE_CAP
 from aoc_cli.belief.model import Encoder
 from aoc_cli.control.config import ControllerConfig
 from aoc_cli.control.rule import choose, residual_cap
 from aoc_cli.control.support import row_episodes, support_episodes
 from aoc_cli.decompose import decompose
 from aoc_cli.index.search import BeliefIndex
-from aoc_cli.ope.fqe import REFITS, fqe_policies, student_quantile
 from aoc_cli.ope.evaluate_block import truncated
+from aoc_cli.ope.fqe import REFITS, fqe_policies, student_quantile
 from aoc_cli.rows import distinct_rows
 from aoc_cli.threads import one_thread
+from aoc_cli.training.evidence import SELECTED, STATE_CAP
+from aoc_cli.training.record import Recording
 
 #: Training rows sampled for their typical residual (leave-those-rows-out), as the index does.
 TYPICAL_SAMPLE = 500
@@ -258,19 +259,20 @@ def _select(net, inputs, data, norm, corpus, config, k, progress, controllers) -
             "fqe_steps": int(fits[0]["steps"]), "seconds": time.perf_counter() - started}
 
 
-def recording_hook(corpus, config, k: int, extra: dict, progress=None):
+def recording_hook(corpus, config, k: int, recording: Recording, progress=None):
     """An ``inspect`` hook for :func:`aoc_cli.belief.train.train_model`: runs
-    :func:`select_controller` and records its choice in ``extra`` (the ``controller``
+    :func:`select_controller` and records its choice in ``recording`` (the ``controller``
     settings saved with the model, the ``settings`` reasons ``aoc train`` prints)."""
 
     def inspect(net, inputs, data, norm) -> dict:
         # rule 2's penalty, measured on the row values before training (aoc_cli.training.fit)
+        record = recording.record
         out = select_controller(net, inputs, data, norm, corpus, config, k,
-                                candidates(extra["controller"].get("support_penalty")),
+                                candidates(record.controller.get("support_penalty")),
                                 progress)
-        extra["controller"].update(out["chosen"])
-        prior = {r["setting"]: r for r in extra["settings"]["decided"]}
-        decided = [r for r in extra["settings"]["decided"] if r["setting"] not in SELECTED]
+        record = record.with_controller(**out["chosen"])
+        prior = {r["setting"]: r for r in record.settings["decided"]}
+        decided = [r for r in record.settings["decided"] if r["setting"] not in SELECTED]
         for i, name in enumerate(SELECTED):
             value = out["chosen"][name]
             measured = prior.get(name, {})
@@ -286,8 +288,7 @@ def recording_hook(corpus, config, k: int, extra: dict, progress=None):
                         f"chosen with {SELECTED[0]}, by the same rule")
                        + (f"; the penalty: {measured['why']}" if kept else ""),
                 "seconds": out["seconds"], **kept})
-        extra["settings"]["decided"] = decided
-        extra["settings"]["controller_selection"] = out
+        recording.record = record.with_settings(decided=decided, controller_selection=out)
         return {}
 
     return inspect

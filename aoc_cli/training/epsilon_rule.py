@@ -26,6 +26,7 @@ import torch
 from aoc_cli.belief.model import Encoder
 from aoc_cli.decompose import decompose, default_k
 from aoc_cli.index.search import BeliefIndex
+from aoc_cli.training.record import Recording
 
 #: Held-out rows measured, K uniform candidates each.
 ROWS, K = 200, 100
@@ -87,10 +88,10 @@ def epsilon_validation(corpus, seed: int = 0):
     return inspect
 
 
-def recording_hook(corpus, seed: int, extra: dict, progress=None):
-    """:func:`epsilon_validation`'s hook, also recording its choice in ``extra`` (the
+def recording_hook(corpus, seed: int, recording: Recording, progress=None):
+    """:func:`epsilon_validation`'s hook, also recording its choice in ``recording`` (the
     ``controller`` settings and the ``settings`` reasons that ``aoc train`` saves with the
-    model: training merges ``extra`` into the metrics after the hook ran). ``progress``
+    model: training merges the record into the metrics after the hook ran). ``progress``
     (:mod:`aoc_cli.progress`): a label while it measures."""
     measure = epsilon_validation(corpus, seed)
 
@@ -100,8 +101,8 @@ def recording_hook(corpus, seed: int, extra: dict, progress=None):
             progress(0, None, f"deciding epsilon: {ROWS} held-out steps x {K + 1} actions")
         out = measure(net, inputs, data, norm)
         q = out["val_epsilon_q"]
-        extra["controller"]["epsilon"] = out["val_epsilon"]
-        extra["settings"]["decided"].append({
+        record = recording.record.with_controller(epsilon=out["val_epsilon"])
+        recording.record = record.deciding({
             "setting": "epsilon", "value": out["val_epsilon"],
             "why": f"at {out['val_epsilon_rows']} steps of held-out episodes the logged action "
                    f"is nearer the corpus than {q[2]:.0%} of {K} uniform candidates (median; "

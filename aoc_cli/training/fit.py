@@ -9,13 +9,14 @@ Settings are :class:`~aoc_cli.belief.config.BeliefConfig`'s fields. Those the ev
 decide or validation may choose (:data:`OPEN`: mode, belief, gamma, value, dynamics_weight,
 history_length, hidden, weight_decay) and ``label_smoothing`` are None when not given; every
 other field defaults to the paper's value. The controller's settings the evidence decides are
-saved with the model (``metrics.controller``).
+saved with the model (``metrics.controller``): what training decided is one
+:class:`~aoc_cli.training.record.TrainingRecord`, saved with the metrics.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable
 
 from aoc_cli.belief.censoring import censoring_of
@@ -25,6 +26,7 @@ from aoc_cli.decompose.k_rule import index_k
 from aoc_cli.progress import Progress
 from aoc_cli.store import DEFAULT_MODEL, Corpus, check_name, writing_model
 from aoc_cli.training import evidence, tuning
+from aoc_cli.training.record import Recording, TrainingRecord
 
 #: Settings left to the log's evidence or to validation when None.
 OPEN = evidence.TRAINING + ("hidden", "weight_decay")
@@ -84,16 +86,16 @@ def train_corpus(corpus: Corpus, model: str = DEFAULT_MODEL, *, paper: bool = Fa
     given, fixed, smoothing = _split(settings)
     _config(given, fixed)  # the settings checked before the corpus is read
     chosen = {k: v for k, v in (controller or {}).items() if v is not None}
-    extra, ev = {"controller": dict(chosen)}, None
+    record, ev = TrainingRecord(dict(chosen)), None
     if not paper:
         started = time.perf_counter()
         ev = evidence.Evidence.of(corpus)
         decided, reasons = evidence.decide(ev, {**given, **chosen})
         given = {**given, **{k: v for k, v in decided.items() if k in OPEN}}
-        extra = {"settings": {"evidence": ev.to_dict(), "decided": reasons,
-                              "seconds": time.perf_counter() - started},
-                 "controller": {**chosen, **{k: v for k, v in decided.items()
-                                             if k in evidence.CONTROLLER}}}
+        record = TrainingRecord(
+            {**chosen, **{k: v for k, v in decided.items() if k in evidence.CONTROLLER}},
+            settings={"evidence": ev.to_dict(), "decided": reasons,
+                      "seconds": time.perf_counter() - started})
     searched = {k: given[k] for k in tuning.PAPER}
     config = _config(given, fixed)
     no_search = paper or not select_settings
@@ -102,38 +104,39 @@ def train_corpus(corpus: Corpus, model: str = DEFAULT_MODEL, *, paper: bool = Fa
     unsmoothed = tuning.why_no_smoothing(corpus, config, {"label_smoothing": smoothing},
                                          paper)
     if unsmoothed:
-        extra = {**extra, "label_smoothing_rule": unsmoothed}
+        record = replace(record, label_smoothing_rule=unsmoothed)
     if "k" not in chosen and corpus.n_rows > 0:  # the k rule's, recorded with the model
         imitation = config.mode == "imitation" and bool(corpus.discrete)
-        extra["controller"]["k"] = index_k(config.belief_dim, corpus, imitation)[0]
+        record = record.with_controller(k=index_k(config.belief_dim, corpus, imitation)[0])
     measure = ev is not None and not no_search and "epsilon" not in chosen \
         and evidence.held_out(ev, config)
     penalty = ev is not None and evidence.penalises(ev, config, chosen)
     choose = ev is not None and not no_search and choose_controller \
         and evidence.selects_controller(ev, config, chosen)
     with writing_model(corpus.path, check_name(model, "model")):  # one writer per model id
-        metrics = _train(corpus, config, model, overwrite,
-                         tuning.open_settings(corpus, config, searched, no_search),
-                         tuning.why_no_search(corpus, config, searched, paper,
-                                              select_settings), extra, progress, note,
-                         measure, choose, penalty)
+        metrics = _train(corpus, config, model, record, overwrite=overwrite,
+                         open_names=tuning.open_settings(corpus, config, searched, no_search),
+                         defaults_note=tuning.why_no_search(corpus, config, searched, paper,
+                                                            select_settings),
+                         progress=progress, note=note, measure=measure, choose=choose,
+                         penalty=penalty)
     return Trained(corpus.name, model, metrics, config,
                    smoothing is None and config.label_smoothing > 0)
 
 
-def _train(corpus, config: BeliefConfig, model: str, overwrite: bool, open_names: list[str],
-           defaults_note: str | None, extra: dict, progress: Progress | None,
-           note: Callable[[str], None], measure: bool = False, choose: bool = False,
-           penalty: bool = False) -> dict:
+def _train(corpus, config: BeliefConfig, model: str, record: TrainingRecord, *,
+           overwrite: bool, open_names: list[str], defaults_note: str | None,
+           progress: Progress | None, note: Callable[[str], None], measure: bool = False,
+           choose: bool = False, penalty: bool = False) -> dict:
     """Check the inputs (and the corpus's content hash), then train; with ``open_names``,
-    choose those settings by validation first (aoc_cli.training.tuning). ``extra``: more
-    entries of the saved metrics (the settings the evidence decided); ``measure``: decide the
-    controller's epsilon on the validation episodes after training
-    (aoc_cli.training.epsilon_rule), into ``extra``'s ``controller`` before the model is
+    choose those settings by validation first (aoc_cli.training.tuning). ``record``: what
+    training decided so far (the settings the evidence decided), saved with the metrics;
+    ``measure``: decide the controller's epsilon on the validation episodes after training
+    (aoc_cli.training.epsilon_rule), into the record's ``controller`` before the model is
     saved; ``choose``: another such ``inspect``, the controller chosen on the validation
     episodes (:mod:`aoc_cli.training.controller_selection`); ``penalty``: rule 2's support
     penalty measured on the row values once they exist
-    (:func:`aoc_cli.training.evidence.state_penalty`), into ``extra``."""
+    (:func:`aoc_cli.training.evidence.state_penalty`), into the record."""
     name = corpus.name
     fqe = config.mode == "value" and config.value == "fqe"
     if fqe and progress is not None:
@@ -141,8 +144,6 @@ def _train(corpus, config: BeliefConfig, model: str, overwrite: bool, open_names
     # lazy: torch (and FAISS: the epsilon rule, the controller's selection), settings checked
     from aoc_cli.belief import stream, train as trainer
     from aoc_cli.training import controller_selection, epsilon_rule
-    hook = controller_selection.recording_hook(corpus, config, extra["controller"]["k"], extra,
-                                               progress) if choose else None
     trainer.pick_device(config.device)  # a GPU asked for where torch sees none: before the targets
     prepared = prepare(corpus, config, model, overwrite, progress=progress if fqe else None)
     corpus.verify_content()  # the columns prepare read are cached: hashing reads nothing again
@@ -152,10 +153,9 @@ def _train(corpus, config: BeliefConfig, model: str, overwrite: bool, open_names
                                            censoring_of(corpus))
         reason["seconds"] = time.perf_counter() - started
         if z is not None:
-            extra["controller"]["support_penalty"] = z
-        extra["settings"]["decided"].append(reason)
-        extra["settings"]["support_penalty"] = {k: v for k, v in reason.items()
-                                                if k not in ("setting", "why")}
+            record = record.with_controller(support_penalty=z)
+        record = record.deciding(reason).with_settings(
+            support_penalty={k: v for k, v in reason.items() if k not in ("setting", "why")})
 
     total = config.max_epochs
     if config.belief == "critic":  # counted in gradient steps, not epochs
@@ -168,15 +168,17 @@ def _train(corpus, config: BeliefConfig, model: str, overwrite: bool, open_names
         progress(0, total, f"training {name}/{model}")
     if open_names:
         return tuning.select_and_train(corpus, config, open_names, model, overwrite,
-                                       prepared, progress, extra)
+                                       prepared, progress, record)
     if defaults_note:
-        extra = {**extra, "selection": {"searched": [], "why": defaults_note}}
-    inspect = epsilon_rule.recording_hook(corpus, config.seed, extra, progress) \
+        record = replace(record, selection={"searched": [], "why": defaults_note})
+    recording = Recording(record)  # the hooks below record into it while the belief trains
+    inspect = epsilon_rule.recording_hook(corpus, config.seed, recording, progress) \
         if measure and not stream.streams(corpus, config) else None
-    if hook is not None and not stream.streams(corpus, config):
-        inspect = hook
+    if choose and not stream.streams(corpus, config):
+        inspect = controller_selection.recording_hook(corpus, config, record.controller["k"],
+                                                      recording, progress)
     return trainer.train_model(corpus, config, model, overwrite=overwrite, progress=progress,
-                               prepared=prepared, extra=extra or None, inspect=inspect)
+                               prepared=prepared, extra=recording, inspect=inspect)
 
 
 def duration(seconds: float) -> str:

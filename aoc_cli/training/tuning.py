@@ -62,6 +62,7 @@ from aoc_cli.belief.row_labels import default_row_smoothing, subset_scores
 from aoc_cli.index.search.strata import PER_ACTION
 from aoc_cli.metrics import auc
 from aoc_cli.settings import SMALL_LOG_ROWS
+from aoc_cli.training.record import TrainingRecord
 
 #: Up to this many rows the settings are chosen by validation (aoc_cli.settings).
 SELECT_MAX_ROWS = SMALL_LOG_ROWS
@@ -276,12 +277,14 @@ def _fmt(x: float | None) -> str:
 
 
 def select_and_train(corpus, config: BeliefConfig, open_names: list[str], model_id: str,
-                     overwrite: bool, prepared, progress=None, extra: dict | None = None) -> dict:
+                     overwrite: bool, prepared, progress=None,
+                     training_record: TrainingRecord | None = None) -> dict:
     """Search ``open_names`` (see the module docstring), then train and save the chosen
     configuration as ``model_id``; the final metrics, with ``selection`` (what was tried on
     each fold and why the winner was chosen). ``progress`` (:mod:`aoc_cli.progress`): each
     candidate tried on each fold as a label (its settings and loss), then the final
-    training's epochs."""
+    training's epochs. ``training_record``: what training decided before, saved with the
+    metrics."""
     from aoc_cli.belief.train import train_model  # lazy: torch; settings are checked first
 
     started = time.perf_counter()
@@ -352,7 +355,9 @@ def select_and_train(corpus, config: BeliefConfig, open_names: list[str], model_
     if config.mode == "imitation" and corpus.discrete:  # ABC's own decisions, validated
         inspect = abc_validation(corpus.actions, int(corpus.n_actions))
     return train_model(corpus, best, model_id, overwrite=overwrite, progress=progress,
-                       prepared=prepared, extra={**(extra or {}), "selection": selection},
+                       prepared=prepared,
+                       extra={**(training_record.as_dict() if training_record else {}),
+                              "selection": selection},
                        inspect=inspect)
 
 
