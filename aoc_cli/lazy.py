@@ -1,6 +1,7 @@
 """Lazy re-exports of a package's public names (PEP 562), one implementation for every package
 that must not load its heavy modules on import (``aoc_cli.api``, ``belief``, ``index``,
-``control``: ``import aoc_cli`` and ``aoc --help`` load no torch, FAISS or environments).
+``index.search``, ``control``, ``training``, ``explanation``: ``import aoc_cli`` and
+``aoc --help`` load no torch, FAISS or environments).
 
 >>> __getattr__, __dir__ = exports(__name__, {"train_model": "train"})   # doctest: +SKIP
 

@@ -7,7 +7,7 @@ applies at query time, with no rebuild; a multiplicity (:func:`episode_multiplic
 
 Two rates, two names. An *episode rate* (``build_index(episode_rates=...)``, ``aoc index
 --episode-rate``) keeps or repeats whole episodes of a tag value: 0.5 keeps half of its
-episodes. A *row rate* (:meth:`aoc_cli.neighbours.BeliefIndex.resample`, the index layer, which
+episodes. A *row rate* (:meth:`aoc_cli.index.search.BeliefIndex.resample`, the index layer, which
 knows rows, not episodes) samples single index positions: 0.5 keeps half of the positions.
 """
 
@@ -24,7 +24,7 @@ def episode_multiplicity(corpus, episode_rates: dict | None, seed: int) -> np.nd
 
     Rates are per tag value: an integer part repeats the rows, a fractional part keeps that
     fraction of whole episodes (chosen with ``seed``), so trajectories stay whole. The counts
-    are integers: :meth:`aoc_cli.neighbours.BeliefIndex.resample` then only repeats or drops rows
+    are integers: :meth:`aoc_cli.index.search.BeliefIndex.resample` then only repeats or drops rows
     (its own fractional row rates, which sample single rows, are not used here).
     """
     n = corpus.n_rows

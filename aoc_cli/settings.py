@@ -6,10 +6,10 @@ help and choices on the fields; docs/design.md, "Every setting in one home").
 each measured on both sides of the bound:
 
 * the training settings (history length, hidden units, weight decay) of a model imitating
-  discrete actions are chosen by validation on held-out episodes (:mod:`aoc_cli.belief.select`;
+  discrete actions are chosen by validation on held-out episodes (:mod:`aoc_cli.training.tuning`;
   never for a value model: a value loss does not track decisions); above it, the paper's;
 * an imitation index of discrete actions takes the nearest rows of each action
-  (:func:`aoc_cli.corpus_index.neighbours`; ward at 5k rows: AUC 0.939 -> 0.962; at 100k rows
+  (:func:`aoc_cli.index.model_k`; ward at 5k rows: AUC 0.939 -> 0.962; at 100k rows
   no AUC gain and 0.7 points of accuracy lost);
 * ``aoc evaluate`` searches the index exactly; above it, an IVF structure built for the run
   (exact search of every held-out step against a large corpus costs ~0.5 ms a step, IVF

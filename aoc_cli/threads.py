@@ -4,7 +4,7 @@ FAISS's OpenMP threads and numpy's OpenBLAS threads.
 Library code never changes them for good. Work with a thread need of its own runs inside
 :func:`thread_limits`, which restores the caller's settings when the block ends:
 
-* a control step (``Controller.decide`` / ``Controller.evaluate``) and the batched scoring of
+* a control step (``Controller.decide`` / ``Controller.decompose_candidates``) and the batched scoring of
   ``aoc evaluate`` run in :func:`one_thread`: a step is ~100 small queries, threads only add
   synchronisation there, and torch's and FAISS's pools must not fight over the cores;
 * training runs with ``BeliefConfig.threads`` torch threads (default: every core);

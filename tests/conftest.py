@@ -65,7 +65,7 @@ def small_maze(tmp_path_factory):
     model and index, built once per test process (explanations, what-if, pages)."""
     from aoc_cli.belief import BeliefConfig, train_model
     from aoc_cli.envs import collect
-    from aoc_cli.corpus_index import build_index
+    from aoc_cli.index import build_index
     from aoc_cli.store import Store
 
     store = Store(tmp_path_factory.mktemp("small-maze") / "store")

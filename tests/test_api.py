@@ -4,6 +4,7 @@ data: tests/cli/)."""
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import subprocess
 import sys
@@ -52,6 +53,13 @@ def test_importing_the_api_modules_first_hides_no_entry():
     out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
                          check=True).stdout
     assert out.strip() == "[]"
+
+
+def test_no_module_of_the_package_is_named_after_an_entry():
+    """The same one level up: ``aoc_cli.<entry>`` is the API's entry, so no module or package of
+    aoc_cli takes an entry's name (a package ``aoc_cli/explain/``, once imported, would make
+    ``aoc_cli.explain`` that package)."""
+    assert [n for n in aoc_cli.API if importlib.util.find_spec(f"aoc_cli.{n}")] == []
 
 
 def test_collect_writes_the_corpus_the_command_writes(tmp_path, aoc):

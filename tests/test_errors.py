@@ -13,7 +13,7 @@ import pytest
 import aoc_cli
 import aoc_cli.errors as errors
 from aoc_cli.belief import BeliefConfig, load_model, train_model
-from aoc_cli.corpus_index import build_index, load_index
+from aoc_cli.index import build_index, load_index
 from aoc_cli.errors import (AocError, AocWarning, BadSetting, CorpusNotFound, IndexMissing,
                             IndexStale, ModelMissing, call, param)
 from aoc_cli.store import Store

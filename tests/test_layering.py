@@ -16,8 +16,11 @@ ROOT = Path(__file__).resolve().parents[1] / "aoc_cli"
 #: Modules any stage may import; each imports only the ones before it in this list.
 LOW = ["lazy", "errors", "settings", "progress", "metrics", "rows", "threads", "parallel"]  # docs/design.md, "Module map"
 #: The stages, in the order of the flow: each may import the low modules and the stages before it.
-STAGES = ["store", "formats", "envs", "neighbours", "decompose", "belief", "corpus_index", "ope", "control",
-          "evaluation", "baselines", "report", "experiments", "api", "cli"]
+#: A stage is a package of aoc_cli, or a floor of one ("index.search": the arrays-only search of
+#: the index room, below decompose; "index": the rest of the room, the corpus index, above belief).
+STAGES = ["store", "formats", "envs", "index.search", "decompose", "belief", "index", "ope",
+          "control", "training", "evaluation", "baselines", "report", "explanation",
+          "experiments", "api", "cli"]
 
 
 def _modules() -> dict[str, Path]:
@@ -71,8 +74,11 @@ def _imports(module: str, path: Path) -> list[tuple[str, int]]:
 
 
 def _unit(module: str) -> str:
-    """The stage or low module a module belongs to (``aoc_cli.control.run`` -> ``control``)."""
+    """The stage or low module a module belongs to (``aoc_cli.control.run`` -> ``control``,
+    ``aoc_cli.index.search.strata`` -> ``index.search``)."""
     parts = module.split(".")
+    if len(parts) > 2 and f"{parts[1]}.{parts[2]}" in STAGES:
+        return f"{parts[1]}.{parts[2]}"
     return parts[1] if len(parts) > 1 else "aoc_cli"
 
 
@@ -160,8 +166,9 @@ def test_the_module_map_of_the_design_lists_the_stages_in_this_order():
                 if line.strip() and line.startswith("  ") and not line.startswith("   ")]
                for part in (low_part, stage_part)]
     low = [name.removesuffix(".py") for name in entries[0] if name.endswith(".py")]
-    named = [name.rstrip("/").removesuffix(".py") for name in entries[1]]
-    assert named == [s for s in STAGES if (ROOT / s).exists() or (ROOT / f"{s}.py").exists()]
+    named = [name.rstrip("/").removesuffix(".py").replace("/", ".") for name in entries[1]]
+    path = {s: ROOT / s.replace(".", "/") for s in STAGES}
+    assert named == [s for s in STAGES if path[s].exists() or path[s].with_suffix(".py").exists()]
     assert low == LOW
 
 
@@ -223,7 +230,7 @@ def test_the_inner_import_count_sees_a_lazy_import_and_its_reason(tmp_path):
     module = tmp_path / "m.py"
     module.write_text("def f():\n    # lazy: torch\n    import torch\n"
                       "    from aoc_cli.belief import train_model\n"
-                      "    from aoc_cli.neighbours import BeliefIndex\n\n"
+                      "    from aoc_cli.index.search import BeliefIndex\n\n"
                       "def g():\n    from aoc_cli.store import Store\n    return Store\n")
     assert _inner_imports(module) == [(4, True), (5, True), (8, False)]
 

@@ -45,9 +45,9 @@ def test_collection_and_rollout_report_through_the_protocol(tmp_path):
 
 
 def test_the_library_never_loads_a_terminal_library():
-    code = ("import sys, aoc_cli.corpus_index, aoc_cli.control, aoc_cli.belief.train, "
+    code = ("import sys, aoc_cli.index.build, aoc_cli.control, aoc_cli.belief.train, "
             "aoc_cli.belief.stream, aoc_cli.formats, aoc_cli.envs, aoc_cli.baselines, "
-            "aoc_cli.decompose, aoc_cli.neighbours, aoc_cli.store, aoc_cli.progress, aoc_cli.threads; "
+            "aoc_cli.decompose, aoc_cli.index.search, aoc_cli.store, aoc_cli.progress, aoc_cli.threads; "
             "print(sorted(m for m in sys.modules if m.split('.')[0] in ('rich', 'typer')))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True)

@@ -12,10 +12,10 @@ from aoc_cli.baselines.mpc import MPCConfig
 from aoc_cli.baselines.offline_rl import OfflineRLConfig
 from aoc_cli.belief.config import BeliefConfig, FQEConfig
 from aoc_cli.control.config import ControllerConfig
-from aoc_cli.ope.policies import OPESettings
+from aoc_cli.ope.evaluate_block import OPESettings
 from aoc_cli.decompose.engine import DecomposeConfig
 from aoc_cli.errors import BadSetting
-from aoc_cli.neighbours.config import IndexConfig
+from aoc_cli.index.search.config import IndexConfig
 from aoc_cli.settings import Settings, within
 
 CONFIGS = [BeliefConfig, FQEConfig, ControllerConfig, IndexConfig, DecomposeConfig,

@@ -13,7 +13,7 @@ import torch
 from aoc_cli.belief import BeliefConfig, train_model
 from aoc_cli.control import ControllerConfig, HistoryBuffer
 from aoc_cli.envs import collect
-from aoc_cli.corpus_index import build_index
+from aoc_cli.index import build_index
 from aoc_cli.control import open_session
 from aoc_cli.store import Store
 from aoc_cli.threads import one_thread, thread_limits
@@ -86,7 +86,7 @@ def _wait_policy(code: str, **env) -> str:
 
 
 def test_importing_the_library_leaves_omp_wait_policy_alone_the_command_sets_it():
-    assert _wait_policy("import aoc_cli, aoc_cli.corpus_index, aoc_cli.control") == "None"
+    assert _wait_policy("import aoc_cli, aoc_cli.index.build, aoc_cli.control") == "None"
     assert _wait_policy("import aoc_cli.cli.app") == "PASSIVE"
     assert _wait_policy("import aoc_cli.cli.app", OMP_WAIT_POLICY="ACTIVE") == "ACTIVE"
 

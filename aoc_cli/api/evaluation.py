@@ -11,13 +11,13 @@ from typing import Sequence
 from aoc_cli.api.common import StoreLike, controller_config, open_store
 from aoc_cli.control import open_session
 from aoc_cli.control.config import ControllerLike
-from aoc_cli.control.whatif import removal as removal_of
-from aoc_cli.control.whatif import what_if_steps
 from aoc_cli.errors import BadSetting, param
 from aoc_cli.evaluation.ray import evaluate_on_ray
-from aoc_cli.evaluation.score import evaluate as _evaluate
-from aoc_cli.evaluation.score import step_records
-from aoc_cli.ope.policies import OPESettings, parse_estimators
+from aoc_cli.evaluation.score import score_log
+from aoc_cli.evaluation.records import step_records
+from aoc_cli.explanation.whatif import removal as removal_of
+from aoc_cli.explanation.whatif import what_if_steps
+from aoc_cli.ope.evaluate_block import OPESettings, parse_estimators
 from aoc_cli.progress import Progress
 from aoc_cli.store import DEFAULT_INDEX, atomic_path
 
@@ -65,7 +65,7 @@ def evaluate(name: str, data: str, *, store: StoreLike = None,
     if progress is not None:
         progress(0, held_out.n_rows, f"evaluate {name} on {data}")
     if workers is None and ray_address is None:
-        summary, res = _evaluate(session, held_out, names, seed=seed, progress=progress,
+        summary, res = score_log(session, held_out, names, seed=seed, progress=progress,
                                  exact=exact, ope=settings)
     else:  # the chunks of episodes as Ray tasks (aoc_cli.evaluation.ray)
         if workers is not None and workers < 1:
@@ -76,7 +76,7 @@ def evaluate(name: str, data: str, *, store: StoreLike = None,
     if removal is not None:  # the same steps decided again without the rows
         if progress is not None:
             progress(0, held_out.n_rows, f"without {removal.label}")
-        after_summary, after = _evaluate(session, held_out, [], seed=seed, progress=progress,
+        after_summary, after = score_log(session, held_out, [], seed=seed, progress=progress,
                                          exact=exact, selection=removal.keep(None),
                                          ope=OPESettings(estimators=()))
         summary["what_if"] = what_if_steps(res, after, removal, corpus, after_summary)

@@ -1,5 +1,5 @@
 """The API's explain entries, one per source of the decisions explained (the supporting rows,
-weights and residual behind each; the library is :mod:`aoc_cli.control.explain`):
+weights and residual behind each; the library is :mod:`aoc_cli.explanation.decisions`):
 
 * :func:`explain_queries`: JSONL queries;
 * :func:`explain_recorded`: a decision an ``aoc rollout --audit`` log recorded;
@@ -18,13 +18,13 @@ from pathlib import Path
 from aoc_cli.api.common import StoreLike, controller_config, open_store
 from aoc_cli.control import open_session
 from aoc_cli.control.config import ControllerLike
-from aoc_cli.control.explain import explain_logged_step
-from aoc_cli.control.explain import explain_queries as _explain_queries
-from aoc_cli.control.explain import explain_recorded as _explain_recorded
-from aoc_cli.control.explain import recorded_session
-from aoc_cli.control.whatif import removal as removal_of
 from aoc_cli.errors import AocError, BadSetting, param
-from aoc_cli.report.explain_pages import check_html, steps_overview, write_html
+from aoc_cli.explanation.decisions import explain_logged_step
+from aoc_cli.explanation.decisions import explain_queries as _explain_queries
+from aoc_cli.explanation.decisions import explain_recorded as _explain_recorded
+from aoc_cli.explanation.decisions import recorded_session
+from aoc_cli.explanation.pages import check_html, steps_overview, write_html
+from aoc_cli.explanation.whatif import removal as removal_of
 from aoc_cli.store import DEFAULT_INDEX
 
 PathLike = str | os.PathLike

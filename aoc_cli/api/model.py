@@ -6,13 +6,12 @@ from dataclasses import dataclass
 
 from aoc_cli.api.common import Log, StoreLike, open_store
 from aoc_cli.belief.config import BeliefConfig
-from aoc_cli.belief.evidence import CONTROLLER
-from aoc_cli.belief.fit import Trained, check_settings, train_corpus
+from aoc_cli.training.evidence import CONTROLLER
+from aoc_cli.training.fit import Trained, check_settings, train_corpus
 from aoc_cli.control.config import ControllerConfig, ControllerLike, given_settings
-from aoc_cli.corpus_index import CorpusIndex
-from aoc_cli.corpus_index import build_index as _build_index
+from aoc_cli.index import CorpusIndex
+from aoc_cli.index import build_index as _build_index
 from aoc_cli.errors import BadSetting, param
-from aoc_cli.evaluation import selection
 from aoc_cli.progress import Progress
 from aoc_cli.store import DEFAULT_INDEX, DEFAULT_MODEL
 
@@ -35,7 +34,7 @@ def train(name: str, *, store: StoreLike = None, model: str = DEFAULT_MODEL,
           log: Log | None = None, controller: ControllerLike = None) -> Trained:
     """Train the belief model ``model`` of corpus ``name`` (``aoc train``): ``mode`` value
     (AOC: b(o, a, h) predicts ``value``) or imitation (ABC: b(o, h) predicts the action).
-    Settings left None are decided from the log's evidence (:mod:`aoc_cli.belief.evidence`:
+    Settings left None are decided from the log's evidence (:mod:`aoc_cli.training.evidence`:
     rewards or none, discrete actions, the episodes' lengths, how often observations recur),
     then chosen by validation on a small log (history_length, hidden, weight_decay), else the
     paper's; ``paper``: the paper's for all; ``no_select``: no choice by validation. The
@@ -44,8 +43,8 @@ def train(name: str, *, store: StoreLike = None, model: str = DEFAULT_MODEL,
     model id; ``overwrite`` replaces one. ``controller``: controller settings to save with the
     model (a mapping or ControllerConfig of epsilon, residual_cap, support_penalty, k; None
     values: decided), instead of those the evidence decides or the validation episodes
-    choose (:mod:`aoc_cli.evaluation.selection`). Returns
-    :class:`~aoc_cli.belief.fit.Trained` (``.metrics`` as saved)."""
+    choose (:mod:`aoc_cli.training.controller_selection`). Returns
+    :class:`~aoc_cli.training.fit.Trained` (``.metrics`` as saved)."""
     settings = dict(mode=mode, belief=belief, value=value, gamma=gamma,
                     history_length=history_length, dynamics_weight=dynamics_weight,
                     hidden=hidden, weight_decay=weight_decay, label_smoothing=label_smoothing,
@@ -58,12 +57,12 @@ def train(name: str, *, store: StoreLike = None, model: str = DEFAULT_MODEL,
     corpus = open_store(store).corpus(name)
     return train_corpus(corpus, model, paper=paper, select_settings=not no_select,
                         overwrite=overwrite, progress=progress, log=log, controller=given,
-                        choose_controller=selection.recording_hook, **settings)
+                        choose_controller=True, **settings)
 
 
 def controller_given(controller: ControllerLike) -> dict:
     """The controller settings ``train`` saves as given: checked as ControllerConfig's, and
-    only those training records (:data:`aoc_cli.belief.evidence.CONTROLLER`)."""
+    only those training records (:data:`aoc_cli.training.evidence.CONTROLLER`)."""
     given = given_settings(controller)
     if isinstance(controller, ControllerConfig):  # a whole config: its recorded fields only
         given = {k: v for k, v in given.items() if k in CONTROLLER}
@@ -78,7 +77,7 @@ def controller_given(controller: ControllerLike) -> dict:
 
 @dataclass
 class Indexed:
-    """An index built: the corpus's name and the :class:`~aoc_cli.corpus_index.CorpusIndex`."""
+    """An index built: the corpus's name and the :class:`~aoc_cli.index.CorpusIndex`."""
 
     corpus: str
     index: CorpusIndex

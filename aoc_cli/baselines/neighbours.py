@@ -21,7 +21,7 @@ import numpy as np
 from aoc_cli.baselines.common import ActionSpace, corpus_values
 from aoc_cli.baselines.features import RawFeatures
 from aoc_cli.decompose import default_k
-from aoc_cli.neighbours import BeliefIndex, IndexConfig
+from aoc_cli.index.search import BeliefIndex, IndexConfig
 
 
 def knn_k(session) -> int:

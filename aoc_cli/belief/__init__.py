@@ -31,8 +31,6 @@ _WHERE = {
     "episode_rows": "data",
     "prepare": "data",
     "train_model": "train",
-    "train_corpus": "fit",
-    "abc_scores": "select",
     "FQEConfig": "fqe",
     "fitted_q_values": "fqe",
     "default_row_smoothing": "row_labels",

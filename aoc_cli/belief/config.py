@@ -111,7 +111,7 @@ class BeliefConfig(Settings):
                                           "dead units) or relu.")
     lr: float = setting(1e-3, bounds="> 0", help="Adam learning rate.")
     #: L2 penalty of Adam (0: the paper's objective; ``aoc train`` may choose one on small
-    #: corpora, aoc_cli.belief.select).
+    #: corpora, aoc_cli.training.tuning).
     weight_decay: float = setting(0.0, bounds=">= 0", help="Adam's L2 penalty.")
     #: Imitation, discrete actions: ``balanced`` weighs each action's cross-entropy by
     #: N / (n_actions * N_action) over the corpus rows, so a rare action counts as much as a

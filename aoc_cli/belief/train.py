@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -60,37 +61,44 @@ def _evaluate(net, inputs: CorpusInputs, rows: torch.Tensor, y: torch.Tensor, ob
 
 def train_model(corpus, config: BeliefConfig, model_id: str = DEFAULT_MODEL,
                 overwrite: bool = False, progress=None, prepared: TrainingData | None = None, save: bool = True,
-                extra: dict | None = None, inspect=None) -> dict:
+                extra: dict | Callable[[], dict] | None = None, inspect=None) -> dict:
     """Learn b and l on ``corpus`` and write ``corpus.models_dir/<model_id>/``; final metrics.
 
     ``progress`` (:mod:`aoc_cli.progress`): the epochs done of ``max_epochs``, every few
     batches and at the end of every epoch, labelled with the batch and the running train,
     validation and best validation losses (the per-epoch records are the saved ``history``).
     ``save=False`` trains and returns the
-    metrics without writing the model; ``extra`` is merged into the saved metrics. ``prepared`` is the
+    metrics without writing the model; ``extra`` is merged into the saved metrics (a dict, or a
+    function giving it, called once ``inspect`` ran: aoc_cli.training.record). ``prepared`` is the
     result of :func:`aoc_cli.belief.data.prepare` for the same arguments, when already known.
     ``inspect(net, inputs, data, norm)``, when given, is called with the trained network (best
     weights, eval mode), the encoded corpus, the split and the inputs' normalisation; its dict
     is merged into the metrics (the model selection's validation of the decomposition,
-    aoc_cli.belief.select; the held-out epsilon rule, aoc_cli.belief.epsilon_rule).
+    aoc_cli.training.tuning; the held-out epsilon rule, aoc_cli.training.epsilon_rule).
     """
     if streams(corpus, config):  # a large corpus: trained a block of rows at a time
         return train_streaming(corpus, config, model_id, overwrite, progress, save=save,
-                               extra=extra)
+                               extra=_entries(extra))
     started = time.perf_counter()
     data = prepared or prepare(corpus, config, model_id, overwrite)
     device = pick_device(config.device)
     threads = config.resolved_threads()
     with thread_limits(torch=threads if device.type == "cpu" else None):
         if config.belief == "critic":  # its own training (aoc_cli.belief.kinds)
-            return train_critic_model(corpus, config, model_id, data, progress, extra)
+            return train_critic_model(corpus, config, model_id, data, progress,
+                                      _entries(extra))
         return _train(corpus, config, model_id, data, device, threads, started, progress, save,
                       extra, inspect)
 
 
+def _entries(extra: dict | Callable[[], dict] | None) -> dict:
+    """The entries ``extra`` gives the metrics: a dict, or what a function of none returns."""
+    return (extra() if callable(extra) else extra) or {}
+
+
 def _train(corpus, config: BeliefConfig, model_id: str, data: TrainingData,
            device: torch.device, threads: int, started: float, progress, save: bool,
-           extra: dict | None, inspect=None) -> dict:
+           extra: dict | Callable[[], dict] | None, inspect=None) -> dict:
     """train_model's in-memory path, in its thread context."""
     problem = _Problem.build(corpus, config, data.values, device)
     with torch.random.fork_rng(devices=[]):
@@ -115,7 +123,7 @@ def _train(corpus, config: BeliefConfig, model_id: str, data: TrainingData,
                     "threads": threads if device.type == "cpu" else None,
                     "belief": config.belief})
     metrics["seconds"] = time.perf_counter() - started
-    metrics.update(extra or {})  # e.g. how the settings were chosen (aoc_cli.belief.select)
+    metrics.update(_entries(extra))  # e.g. the settings chosen (aoc_cli.training.tuning)
     if not save:  # a candidate of the model selection: its metrics only
         return metrics
     save_model(corpus, model_id, net=net.cpu(), config=config, dims=problem.dims,

@@ -23,7 +23,7 @@ from aoc_cli.belief.config import BeliefConfig
 from aoc_cli.cli.fields import MODEL, choices_of, from_field
 from aoc_cli.control.config import ControllerConfig
 from aoc_cli.errors import AocError
-from aoc_cli.neighbours.config import IndexConfig
+from aoc_cli.index.search.config import IndexConfig
 
 
 @dataclass
@@ -75,7 +75,7 @@ Device = choices_of(BeliefConfig, "device")
 
 class StepCandidates(str, Enum):
     """``aoc index --candidates``: where step 1 takes its candidate rows
-    (:func:`aoc_cli.corpus_index.neighbours`)."""
+    (:func:`aoc_cli.index.model_k`)."""
 
     auto = "auto"
     nearest = "nearest"

@@ -15,7 +15,7 @@ from aoc_cli.cli.common import (CorpusArgument, FormatOption, IndexOption, Model
                                 WorkersOption, deciding, parse_episodes, parse_selection, state)
 from aoc_cli.cli.fields import from_field
 from aoc_cli.errors import warn
-from aoc_cli.ope.policies import OPESettings
+from aoc_cli.ope.evaluate_block import OPESettings
 from aoc_cli.cli.output import ProgressBar, resolve_format
 from aoc_cli.cli.evaluate_view import write_evaluation
 from aoc_cli.settings import SMALL_LOG_ROWS

@@ -21,7 +21,7 @@ from aoc_cli.cli.errors import flag
 from aoc_cli.settings import bounds_text, param_name
 
 #: ``given=EVIDENCE``: None means the value ``aoc train`` decides from the log's evidence
-#: (aoc_cli.belief.evidence), else the field's default.
+#: (aoc_cli.training.evidence), else the field's default.
 EVIDENCE = "decided from the log's evidence where a rule applies (docs/design.md), else {default}"
 #: ``given=MODEL``: None means the controller setting saved with the model (decided by ``aoc
 #: train`` from the log's evidence), else the field's default.

@@ -11,7 +11,7 @@ from aoc_cli.cli.common import (CorpusArgument, FormatOption, IndexKind, ModelOp
                                 StepCandidates, choice, parse_rates, state)
 from aoc_cli.cli.fields import from_field
 from aoc_cli.errors import AocError
-from aoc_cli.neighbours.config import IndexConfig
+from aoc_cli.index.search.config import IndexConfig
 from aoc_cli.cli.output import ProgressBar, write_object
 from aoc_cli.settings import SMALL_LOG_ROWS
 from aoc_cli.store import DEFAULT_INDEX

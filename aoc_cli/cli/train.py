@@ -13,7 +13,7 @@ from typing import Annotated, Optional
 import typer
 
 import aoc_cli
-from aoc_cli.belief import select
+from aoc_cli.training import tuning
 from aoc_cli.belief.config import BeliefConfig
 from aoc_cli.control.config import ControllerConfig
 from aoc_cli.cli.common import (BeliefKind, BeliefMode, ClassWeight, CorpusArgument, Device,
@@ -29,7 +29,7 @@ _SMALL = f"when imitating discrete actions on up to {SMALL_LOG_ROWS:,} rows"
 
 def _searched(name: str) -> str:
     """The default shown for a setting chosen by validation on a small log."""
-    values = ", ".join(f"{v:g}" for v in dict(select.SEARCH)[name])
+    values = ", ".join(f"{v:g}" for v in dict(tuning.SEARCH)[name])
     return (f"decided from the log's evidence, else chosen by validation among {values} "
             f"{_SMALL}, else {{default}}")
 
@@ -48,7 +48,7 @@ def _controller(name: str):
                       else "the k rule's, " + _SAVED)
 
 
-_PAPER = ", ".join(f"{k} {v:g}" for k, v in {**select.PAPER, "label_smoothing": 0,
+_PAPER = ", ".join(f"{k} {v:g}" for k, v in {**tuning.PAPER, "label_smoothing": 0,
                                               "gamma": BeliefConfig.gamma}.items())
 
 
@@ -71,7 +71,7 @@ def train(
     dropout: float = _option("dropout"),
     class_weight: ClassWeight = _option("class_weight"),
     label_smoothing: Optional[float] = _option(
-        "label_smoothing", given=f"{select.LABEL_SMOOTHING:g} {_SMALL}, else {{default}}"),
+        "label_smoothing", given=f"{tuning.LABEL_SMOOTHING:g} {_SMALL}, else {{default}}"),
     epsilon: Optional[float] = _controller("epsilon"),
     residual_cap: Optional[float] = _controller("residual_cap"),
     support_penalty: Optional[float] = _controller("support_penalty"),

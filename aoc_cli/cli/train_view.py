@@ -1,4 +1,4 @@
-"""What ``aoc train`` prints of a trained model (:class:`aoc_cli.belief.fit.Trained`): the
+"""What ``aoc train`` prints of a trained model (:class:`aoc_cli.training.fit.Trained`): the
 notes on stderr (the score, the settings chosen and why, ABC's own validation, a model no
 better than the trivial predictor) and the metrics table."""
 
@@ -6,11 +6,11 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from aoc_cli.belief import evidence, select
-from aoc_cli.belief.evidence import Evidence
+from aoc_cli.training import evidence, tuning
+from aoc_cli.training.evidence import Evidence
 
 if TYPE_CHECKING:  # an annotation only: aoc --help (which imports this view) loads no training
-    from aoc_cli.belief.fit import Trained
+    from aoc_cli.training.fit import Trained
 
 
 def _chosen(metrics: dict) -> dict | None:
@@ -73,7 +73,7 @@ def notes(trained: Trained) -> list[str]:
                    "paper's)")
     if metrics.get("label_smoothing_rule"):
         out.append(metrics["label_smoothing_rule"])
-    warning = select.baseline_check(metrics)
+    warning = tuning.baseline_check(metrics)
     if warning:
         out.append(f"[yellow]warning:[/] {warning}")
     if not chosen and "selection" in metrics:

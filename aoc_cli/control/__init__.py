@@ -1,5 +1,5 @@
 """The accountable controller: candidates, the decision rule, decision records, OOD monitor,
-rollouts, explanations and the audit log.
+rollouts and the audit log (the decision's explanation is :mod:`aoc_cli.explanation`'s).
 
 Names are imported lazily (PEP 562), so that reading the controller's settings
 (:mod:`aoc_cli.control.config`, as every CLI start does for its help) imports neither FAISS
@@ -22,19 +22,13 @@ _WHERE = {
     "OODMonitor": "monitor",
     "Session": "session",
     "decision_record": "records",
-    "explain_logged_step": "explain",
-    "explain_queries": "explain",
-    "explain_query": "explain",
-    "explain_recorded": "explain",
     "flags_against": "monitor",
     "given_settings": "config",
     "model_controller": "session",
     "model_free_session": "session",
     "open_session": "session",
-    "parse_query": "explain",
     "read_audit_step": "audit",
     "reference_band": "monitor",
-    "replay_decision": "explain",
     "rollout": "run",
     "run_episode": "episodes",
     "summarize": "episodes",

@@ -61,7 +61,7 @@ class ControllerConfig(Settings):
         help="Value mode: z, rank the candidates that pass by v_hat - z sigma_v / "
              "sqrt(support), a value shrunk by how many episodes back it.")
     #: Rule 7 (docs/design.md, "Settings from the log's evidence"): None is on for a
-    #: value-mode model of discrete actions (aoc_cli.neighbours.neighbourhood).
+    #: value-mode model of discrete actions (aoc_cli.index.search.neighbourhood).
     do_no_harm: str | None = setting(
         None, choices=("on", "off"),
         none="on (value mode, discrete actions), unless rule 2's exact-repeat bound ranks "
@@ -110,7 +110,7 @@ class ControllerConfig(Settings):
     def for_model(cls, saved: Mapping | None = None, **given) -> "ControllerConfig":
         """The settings of a decision with a model: those ``given`` (None: not given) over the
         settings saved with the model (``saved``: its config's ``metrics.controller``, decided
-        by ``aoc train`` from the log's evidence, aoc_cli.belief.evidence) over the paper's
+        by ``aoc train`` from the log's evidence, aoc_cli.training.evidence) over the paper's
         defaults. A model trained without them (by the library's ``train_model``, or before
         they were recorded) has none: the paper's."""
         # the model's k reaches the controller through its index, built with it (an index

@@ -26,7 +26,7 @@ import numpy as np
 
 from aoc_cli.belief.row_labels import default_row_smoothing, row_labels
 from aoc_cli.control.config import ControllerConfig
-from aoc_cli.neighbours.neighbourhood import Neighbourhood
+from aoc_cli.index.search.neighbourhood import Neighbourhood
 from aoc_cli.control.rule import choose as _choose
 from aoc_cli.control.rule import reads_support, residual_cap
 from aoc_cli.control.support import row_episodes, support_episodes
@@ -70,7 +70,7 @@ class Decision:
     support_labels: np.ndarray = field(default_factory=lambda: np.empty((0, 0)))
     scores: np.ndarray = field(default_factory=lambda: np.empty(0))
     #: Rule 7 (do no harm): the clinicians' likely action was kept, no alternative's lower
-    #: bound beating its value (aoc_cli.neighbours.neighbourhood); None where the rule is off.
+    #: bound beating its value (aoc_cli.index.search.neighbourhood); None where the rule is off.
     kept: bool | None = None
 
 
@@ -98,7 +98,7 @@ def candidate_actions(rng: np.random.Generator, count: int, low: np.ndarray | No
 class Controller:
     """AOC (value mode) or ABC (imitation mode) over one corpus, model and index.
 
-    ``index`` is a :class:`aoc_cli.corpus_index.CorpusIndex` (beliefs of every corpus row,
+    ``index`` is a :class:`aoc_cli.index.CorpusIndex` (beliefs of every corpus row,
     values, the nearest-neighbour index); ``selection`` an optional (N,) bool row mask applied
     at query time, with no rebuild.
     """
@@ -205,8 +205,8 @@ class Controller:
                 return self._imitate(observation, history, selection)
             if candidates is None:
                 candidates = self.sample_candidates(observation, history)
-            return self.evaluate(observation, history, candidates, choose=True,
-                                 selection=selection)
+            return self.decompose_candidates(observation, history, candidates, choose=True,
+                                             selection=selection)
 
     def decide_batch(self, observations: np.ndarray, history: History | None = None
                      ) -> np.ndarray:
@@ -234,8 +234,9 @@ class Controller:
                                  kept=likely)
         return chosen.astype(np.int64)
 
-    def evaluate(self, observation: np.ndarray, history: History, candidates: np.ndarray,
-                 choose: bool = True, selection: np.ndarray | None = None) -> Decision:
+    def decompose_candidates(self, observation: np.ndarray, history: History,
+                             candidates: np.ndarray, choose: bool = True,
+                             selection: np.ndarray | None = None) -> Decision:
         """Decompose every candidate; with ``choose``, the decision rule (the epsilon filter
         and the argmax: :func:`aoc_cli.control.rule.choose`).
 

@@ -1,7 +1,7 @@
 """The decision rule of value mode, steps 4 and 5 of a control step (docs/design.md, "The
 method, precisely"), written once and batched: the controller calls it for one step
-(:meth:`aoc_cli.control.Controller.evaluate`, S = 1) and ``aoc evaluate`` for every held-out
-step at once (:mod:`aoc_cli.evaluation.score`). Over the K candidates of each of S steps:
+(:meth:`aoc_cli.control.Controller.decompose_candidates`, S = 1) and ``aoc evaluate`` for
+every held-out step at once (:mod:`aoc_cli.evaluation.score`). Over the K candidates of each of S steps:
 
 4. keep the candidates whose corpus residual is within the epsilon-quantile of the K
    residuals and, with a residual cap c, within c x the corpus's typical p90 residual
@@ -66,7 +66,7 @@ def choose(residual: np.ndarray, value: np.ndarray, config: ControllerConfig, *,
     penalty. Rule 7, do no harm (discrete actions, the candidates every action):
     ``lower`` (S, K) each candidate's lower bound (the rank key in place of v_hat, or of the
     penalised v_hat) and ``kept`` (S,) the clinicians' likely action
-    (:mod:`aoc_cli.neighbours.neighbourhood`): the best-ranked candidate is taken only where its
+    (:mod:`aoc_cli.index.search.neighbourhood`): the best-ranked candidate is taken only where its
     key beats the kept action's v_hat, else the kept action is. Returns (threshold (S, 1),
     passed (S, K) bool, chosen (S,) int64)."""
     residual = np.asarray(residual, np.float64)

@@ -13,7 +13,7 @@ import numpy as np
 from aoc_cli.control.config import ControllerConfig
 from aoc_cli.control.controller import Controller
 from aoc_cli import belief
-from aoc_cli.corpus_index import CorpusIndex, load_index
+from aoc_cli.index import CorpusIndex, load_index
 from aoc_cli.errors import AocError, call, param, warn
 from aoc_cli.store import DEFAULT_INDEX, Corpus
 

@@ -23,9 +23,9 @@ from aoc_cli.decompose.k_rule import default_k
 from aoc_cli.decompose.minnorm import min_norm_point
 from aoc_cli.decompose.reference import caratheodory, lifted_nnls_weights, reference_weights
 from aoc_cli.errors import AocError
-from aoc_cli.neighbours import BeliefIndex
-from aoc_cli.neighbours.exact import nearest_rows
-from aoc_cli.neighbours.faiss_kinds import check_queries
+from aoc_cli.index.search import BeliefIndex
+from aoc_cli.index.search.exact import nearest_rows
+from aoc_cli.index.search.faiss_kinds import check_queries
 from aoc_cli.settings import Settings, setting
 from aoc_cli.threads import single_threaded_blas
 
@@ -108,7 +108,7 @@ def decompose(
     values: (N,) row values v; index: a BeliefIndex over `beliefs` (default: exact search);
     reference: step 2 by the reference QP; selection: restrict to a row mask / row ids.
 
-    Without ``index`` step 1 is an exact search that builds nothing (aoc_cli/neighbours/exact.py:
+    Without ``index`` step 1 is an exact search that builds nothing (aoc_cli/index/search/exact.py:
     one pass over the beliefs, O(N d_b) a call), with the same neighbours as an exact ("flat")
     index. A caller that decomposes many batches against the same corpus should keep a
     ``BeliefIndex.build(beliefs)`` and pass it as ``index``: its cell structure, built on its

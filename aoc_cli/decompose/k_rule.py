@@ -1,6 +1,6 @@
 """The k rule: how many nearest corpus rows a query searches in step 1 of the decomposition
 (the rows its weights are found among). Its one home: the index records the k it is built
-with (:func:`index_k`, through :func:`aoc_cli.corpus_index.neighbours`), a decomposition given
+with (:func:`index_k`, through :func:`aoc_cli.index.model_k`), a decomposition given
 no k falls back to the paper's, training's validation decomposes as the index will, and the
 baselines that use another k say so by calling these functions with their own arguments
 (:func:`aoc_cli.baselines.neighbours.knn_k`, evaluate's kNN baseline).
@@ -8,7 +8,7 @@ baselines that use another k say so by calling these functions with their own ar
 * the paper's k = 2 (d_b + 1): twice the size of a minimal corpus subset (:func:`default_k`);
 * an imitation model of discrete actions on a small log (at most :data:`SMALL_MAX_ROWS`
   rows): the 3 (d_b + 1) nearest rows *of each action* present, n 3 (d_b + 1)
-  (:func:`per_action_k`; :mod:`aoc_cli.neighbours.strata`);
+  (:func:`per_action_k`; :mod:`aoc_cli.index.search.strata`);
 * the same on a larger log: (d_b + 1) / the rarest action's share, between the paper's k and
   :data:`MAX_K_FACTOR` (d_b + 1) (:func:`default_k` with ``rarest_share``).
 
@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from aoc_cli.neighbours.strata import NEAREST, PER_ACTION
+from aoc_cli.index.search.strata import NEAREST, PER_ACTION
 from aoc_cli.settings import SMALL_LOG_ROWS
 
 #: The most neighbours :func:`default_k` asks for, as a multiple of d_b + 1.

@@ -120,7 +120,7 @@ def collected_task(corpus) -> str:
     """The built-in task a stored corpus was collected from, as its manifest's sources record
     it (``aoc collect`` writes ``{"kind": "collect", "task": ...}``); ``""`` for a corpus
     ingested from a file or appended from several tasks. For what a page shows only (the units
-    of a task's observations): no setting is ever decided by it (aoc_cli.belief.evidence)."""
+    of a task's observations): no setting is ever decided by it (aoc_cli.training.evidence)."""
     sources = (getattr(corpus, "manifest", None) or {}).get("sources", [])
     tasks = {src.get("task") or "" for src in sources if src.get("kind") == "collect"}
     if len(tasks) != 1 or any(src.get("kind") != "collect" for src in sources):

@@ -13,9 +13,9 @@ from aoc_cli.control.controller import action_bounds, support_disagreement
 from aoc_cli.control.episodes import check_same_spaces
 from aoc_cli.decompose import subset_size
 from aoc_cli.errors import AocError, NoRewards, call
-from aoc_cli.neighbours import BeliefIndex
-from aoc_cli.neighbours.strata import candidate_search
-from aoc_cli.ope.policies import behaviour_targets
+from aoc_cli.index.search import BatchSearch, BeliefIndex
+from aoc_cli.index.search.strata import candidate_search
+from aoc_cli.ope.evaluate_block import behaviour_targets
 from aoc_cli.settings import SMALL_LOG_ROWS
 
 #: The baselines ``aoc evaluate`` scores on the same steps (``--baselines``).
@@ -86,51 +86,6 @@ def candidate_beliefs(model, obs: np.ndarray, hist, cands: np.ndarray,
 #: Above this many corpus rows, evaluate searches an IVF structure built for the run
 #: (:data:`aoc_cli.settings.SMALL_LOG_ROWS`).
 EXACT_MAX_ROWS = SMALL_LOG_ROWS
-IVF_NPROBE = 16
-
-
-class BatchSearch:
-    """Nearest rows of many scattered queries at once: a FAISS IVF-Flat structure over
-    (N, d) vectors (nlist about sqrt(N), a power of two; ``nprobe`` lists visited), one
-    threaded-free ``search`` per batch. Distances are exact for the rows found; a true
-    neighbour is missed only when it lies outside the visited lists. Quacks like a
-    BeliefIndex for :func:`aoc_cli.decompose.decompose`."""
-
-    def __init__(self, vectors: np.ndarray, nprobe: int = IVF_NPROBE, seed: int = 0):
-        import faiss
-
-        x = np.ascontiguousarray(vectors, dtype=np.float32)
-        self.n_rows, self.dim = x.shape
-        self.nlist = int(min(4096, 2 ** int(np.floor(np.log2(max(np.sqrt(self.n_rows), 1))))))
-        quantiser = faiss.IndexFlatL2(self.dim)
-        self.index = faiss.IndexIVFFlat(quantiser, self.dim, self.nlist)
-        self.index.cp.seed = int(seed)
-        self.index.train(x)
-        self.index.add(x)
-        self.index.nprobe = int(nprobe)
-        self._quantiser = quantiser
-
-    def describe(self) -> str:
-        return f"ivf (nlist {self.nlist}, nprobe {self.index.nprobe})"
-
-    def search(self, queries, k, selection=None):
-        """The k nearest rows found, within ``selection`` (an (N,) bool mask) when given: the
-        restricted search visits ``nprobe / (the selected share)`` lists (at most all), about
-        as many selected rows as the unrestricted search visits rows."""
-        params = None
-        if selection is not None:
-            import faiss
-
-            mask = np.ascontiguousarray(selection, dtype=bool)
-            bits = np.packbits(mask, bitorder="little")
-            share = max(float(mask.mean()), 1e-12)
-            params = faiss.SearchParametersIVF(
-                sel=faiss.IDSelectorBitmap(mask.size, faiss.swig_ptr(bits)),
-                nprobe=int(min(self.nlist, np.ceil(self.index.nprobe / share))))
-        dist, rows = self.index.search(np.ascontiguousarray(queries, dtype=np.float32), int(k),
-                                       params=params)
-        dist = np.where(rows >= 0, np.sqrt(np.maximum(dist, 0.0)), np.inf)
-        return dist.astype(np.float64), rows.astype(np.int64)
 
 
 def _exact(vectors: np.ndarray):
@@ -160,7 +115,7 @@ class KNNBaseline:
         self.mean, self.std = obs.mean(0), np.where(obs.std(0) > 1e-9, obs.std(0), 1.0)
         self.value = ctx.mode == "value"
         x = self.features(ctx, obs, ctx.corpus_actions)
-        # exact (flat: a batch is searched cell by cell, aoc_cli/neighbours/cells.py), or IVF when large
+        # exact (flat: a batch is searched cell by cell, aoc_cli/index/search/cells.py), or IVF when large
         x = x.astype(np.float32)
         self.nn = search_structure(None, x, ctx.exact, ctx.seed) or \
             BeliefIndex.build(x, kind="flat")
@@ -236,7 +191,7 @@ class EvalContext:
         self.index = self.session.index
         self.search = search_structure(self.index.index, self.index.beliefs, self.exact,
                                        self.seed)
-        # step 1 as the index takes its candidates (aoc_cli.neighbours.strata), prepared once;
+        # step 1 as the index takes its candidates (aoc_cli.index.search.strata), prepared once;
         # per action with the run's IVF structure: one search per action (IVF above
         # EXACT_MAX_ROWS rows of the action, else exact)
         split = None
@@ -273,7 +228,7 @@ class EvalContext:
         mode): the model's own values when the data are its corpus, else the target computed
         on the held-out log as the model's values were. For ``fqe`` values, the logged
         behaviour's Q(o, a) by fitted Q evaluation of the held-out log
-        (:func:`aoc_cli.ope.policies.behaviour_targets`: the OPE's own when ``ope``, its
+        (:func:`aoc_cli.ope.evaluate_block.behaviour_targets`: the OPE's own when ``ope``, its
         block, fitted it at the model's discount and FQE's default steps and schedule; else
         fitted alone at those: an OPE made quicker does not change the target; kept beside
         the log), or where that cannot

@@ -3,7 +3,7 @@
 The held-out episodes are cut into the same chunks as in one process
 (:func:`aoc_cli.evaluation.score.chunks`); the chunks are dealt in contiguous runs to the
 tasks. Each task opens the store by its path, builds the session and the evaluation context
-as :func:`aoc_cli.evaluation.score.evaluate` does (the same seed, so the same candidates and
+as :func:`aoc_cli.evaluation.score.score_log` does (the same seed, so the same candidates and
 search structure), scores its chunks with :func:`score_episodes` and returns their
 :class:`StepScores`; the driver merges them in chunk order and summarises. The per-step results
 and the metrics are therefore those of the run in one process. On a cluster the store must be
@@ -27,7 +27,7 @@ from aoc_cli.evaluation.score import (
     merge,
     score_episodes,
 )
-from aoc_cli.ope.policies import wanted
+from aoc_cli.ope.evaluate_block import wanted
 from aoc_cli.parallel import capacity, map_chunks, start_ray
 from aoc_cli.store import Store
 from aoc_cli.threads import one_thread

@@ -3,15 +3,11 @@ record per scored step, with its supporting rows and their episodes."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
 from aoc_cli.control.records import episode_ids, label_of
+from aoc_cli.evaluation.step_scores import StepScores
 from aoc_cli.store import action_labels
-
-if TYPE_CHECKING:
-    from aoc_cli.evaluation.score import StepScores
 
 
 def step_records(ctx_or_session, data, res: StepScores):

@@ -19,13 +19,12 @@ For a chunk of whole episodes of the held-out corpus (S steps):
 
 Independent chunks of episodes: :func:`score_episodes` scores one (a :class:`StepScores`),
 :func:`merge` joins chunks in any grouping, :func:`conclude` adds the OPE and the summary;
-:func:`evaluate` runs them in one process (aoc_cli.evaluation.ray farms the chunks out).
+:func:`score_log` runs them in one process (aoc_cli.evaluation.ray farms the chunks out).
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -44,43 +43,14 @@ from aoc_cli.evaluation.context import (
     episode_rows,
     heterogeneity,
 )
-from aoc_cli.evaluation.records import step_records  # noqa: F401 (re-exported)
-from aoc_cli.neighbours.strata import PerAction
-from aoc_cli.ope.policies import ope_block, put_ope, wanted
+from aoc_cli.evaluation.step_scores import StepScores
+from aoc_cli.index.search.strata import PerAction
+from aoc_cli.ope.evaluate_block import ope_block, put_ope, wanted
 from aoc_cli.rows import distinct_rows
 from aoc_cli.threads import one_thread
 
 #: Held-out steps per chunk (whole episodes; a chunk has at least one episode).
 CHUNK_STEPS = 4096
-
-
-@dataclass
-class StepScores:
-    """Per-step results of a chunk (S steps), all arrays with S rows.
-
-    ``row`` held-out rows; ``episode``, ``step``; ``logged`` (S,) int or (S, d_a);
-    ``decided`` likewise; ``scores`` (S, n) action weights (discrete imitation) or None;
-    ``v_hat`` / ``target`` (S,) value mode (v_hat of the logged action; the target is set
-    by the driver after the chunks merge, :meth:`EvalContext.targets`), ``decided_value``
-    (S,) v_hat of the decision; ``residual`` (S,) of the decision; ``warning``
-    (S,) bool heterogeneity; ``support_rows``/``support_weights`` (S, m) (-1 / 0 padded);
-    ``baselines`` name -> {"decided", "scores" or "v_hat"} arrays on the same steps.
-    """
-
-    row: np.ndarray
-    episode: np.ndarray
-    step: np.ndarray
-    logged: np.ndarray
-    decided: np.ndarray
-    residual: np.ndarray
-    warning: np.ndarray
-    support_rows: np.ndarray
-    support_weights: np.ndarray
-    scores: np.ndarray | None = None
-    v_hat: np.ndarray | None = None
-    target: np.ndarray | None = None
-    baselines: dict = field(default_factory=dict)
-    decided_value: np.ndarray | None = None
 
 
 def merge(parts: list[StepScores]) -> StepScores:
@@ -196,7 +166,7 @@ def _imitate(ctx, rows, ep, obs, hist, logged) -> StepScores:
 
 
 def _candidates_decided(ctx, rows, ep, obs, hist):
-    """The controller's rule (:func:`aoc_cli.control.rule.choose`, as Controller.evaluate's)
+    """The controller's rule (:func:`aoc_cli.control.rule.choose`, as Controller.decompose_candidates's)
     over its candidates at S steps:
     (candidates (S, K[, d_a]), the decomposition of every candidate (S * K queries), values
     (S, K), the chosen candidate (S,), its query (S,), the bc head (S, K) or None)."""
@@ -354,7 +324,7 @@ def summarise(ctx: EvalContext, res: StepScores) -> dict:
     return out
 
 
-def evaluate(session, data, baselines=BASELINES, seed: int = 0, progress=None,
+def score_log(session, data, baselines=BASELINES, seed: int = 0, progress=None,
              chunk_steps: int = CHUNK_STEPS, exact: bool | None = None,
              selection: np.ndarray | None = None, ope=None) -> tuple[dict, StepScores]:
     """Score every step of corpus ``data`` with ``session`` (its corpus, model, index and
@@ -362,9 +332,9 @@ def evaluate(session, data, baselines=BASELINES, seed: int = 0, progress=None,
     session's own index (True), an IVF structure built for the run (False), or the index up
     to :data:`EXACT_MAX_ROWS` corpus rows and IVF beyond (None). ``selection``: an (N,) bool
     mask of the corpus rows the decisions may use (None: every row; the baselines always use
-    every row). ``ope``: :class:`aoc_cli.ope.policies.OPESettings` of the offline policy
+    every row). ``ope``: :class:`aoc_cli.ope.evaluate_block.OPESettings` of the offline policy
     evaluation of the decisions (value mode; None: all estimators when the log allows it, see
-    :func:`aoc_cli.ope.policies.wanted`). Returns (summary, steps).
+    :func:`aoc_cli.ope.evaluate_block.wanted`). Returns (summary, steps).
     Runs with one thread in torch, FAISS and BLAS (:func:`aoc_cli.threads.one_thread`)."""
     started = time.perf_counter()
     with one_thread():
@@ -395,6 +365,5 @@ def conclude(ctx: EvalContext, data, res: StepScores, ope, seed: int, started: f
     return summary, res
 
 
-__all__ = ["BASELINES", "EXACT_MAX_ROWS", "LeaveEpisodeOut", "StepScores", "check_inputs",
-           "chunks", "conclude", "evaluate", "merge", "score_episodes", "step_records",
-           "summarise"]
+__all__ = ["BASELINES", "EXACT_MAX_ROWS", "LeaveEpisodeOut", "check_inputs", "chunks", "conclude",
+           "merge", "score_episodes", "score_log", "summarise"]

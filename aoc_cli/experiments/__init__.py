@@ -6,10 +6,10 @@ the baselines, and write results.csv, summary.md, summary.json and PNG plots.
 ['epsilon', 'k', 'lunar']
 """
 
+from aoc_cli.baselines.sepsis_policies import log_model, state_policy  # the sepsis bench's
 from aoc_cli.experiments.beliefs import model_config
 from aoc_cli.experiments.prepare import Artefacts
 from aoc_cli.experiments.runner import EXPERIMENTS, ORDER, expected_seconds, run_experiment
-from aoc_cli.experiments.sepsis_policies import log_model, state_policy
 from aoc_cli.experiments.ward import history_features
 
 __all__ = ["EXPERIMENTS", "ORDER", "Artefacts", "expected_seconds", "history_features",

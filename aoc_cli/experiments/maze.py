@@ -11,7 +11,7 @@
   at the top, [14.5, 16]) and the lower gate otherwise; a rollout that never crosses counts in
   neither. Counts are per 100 rollouts. The raw-feature kNN runs at x1 for comparison. AOC runs
   at epsilon 0.1 (:data:`MAZE_EPSILON`, what ``aoc train`` decides on a maze log's held-out
-  episodes: aoc_cli.belief.epsilon_rule).
+  episodes: aoc_cli.training.epsilon_rule).
 * ``two-gates`` (paper Table "epsilon contributes to the conservative behaviours"): AOC with
   epsilon in {0.1, 0.3, 0.5, 0.7}; the return and a PNG of the trajectories per epsilon.
 """

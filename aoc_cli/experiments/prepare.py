@@ -10,7 +10,7 @@ from the user's ``corpora/``. Names say what was built:
   ``aoc_cli.belief.train_model``; reused when the saved config equals the wanted one and the
   corpus hash matches (``load_model`` refuses stale models anyway);
 * index ``default`` and derived indexes (e.g. ``pi1x0.5``: ``--episode-rate policy=pi1:0.5``),
-  built by ``aoc_cli.corpus_index.build_index``; reused when ``load_index`` accepts them and
+  built by ``aoc_cli.index.build_index``; reused when ``load_index`` accepts them and
   they were built with the same rates.
 """
 
@@ -22,7 +22,7 @@ from dataclasses import asdict
 from pathlib import Path
 
 from aoc_cli.belief import BeliefConfig
-from aoc_cli.corpus_index import build_index, load_index
+from aoc_cli.index import build_index, load_index
 from aoc_cli.envs import TASKS, collect, replay
 from aoc_cli.errors import AocError
 from aoc_cli.progress import stage

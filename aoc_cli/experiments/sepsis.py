@@ -9,12 +9,12 @@ For each log size (episodes of the clinicians' policy, ``aoc collect icu-sepsis`
   AOC's row values (the ``knn`` baseline of ``aoc rollout``);
 * **cql**, **bcq** -- d3rlpy's DiscreteCQL and DiscreteBCQ on the same features and rewards;
 * **bc** -- behaviour cloning (the log's modal action per observation,
-  :mod:`aoc_cli.experiments.sepsis_policies`);
+  :mod:`aoc_cli.baselines.sepsis_policies`);
 * **tabular** -- reference, told the state: the behaviour's Q in a count model of the log,
   greedy over actions logged at least 10 times;
 * **spibb** -- the peer to beat, told the state: Pi_b-SPIBB (safe policy improvement with
   baseline bootstrapping) on the log's count model, its threshold N_wedge chosen by a rule on
-  the log's held-out halves (:mod:`aoc_cli.experiments.spibb`); a stochastic policy, valued
+  the log's held-out halves (:mod:`aoc_cli.baselines.spibb`); a stochastic policy, valued
   exactly;
 * **clinicians** (the behaviour), **modal** (their most frequent action), **random**,
   **one-step** (argmax of the clinicians' exact Q on their support: what a perfect AOC reaches)
@@ -38,20 +38,19 @@ from pathlib import Path
 import numpy as np
 
 from aoc_cli.baselines import make_baseline
+from aoc_cli.baselines import sepsis_policies as sp
 from aoc_cli.baselines.offline_rl import OfflineRLConfig
-from aoc_cli.belief.fit import train_corpus
-from aoc_cli.evaluation import selection
+from aoc_cli.baselines.spibb import spibb_policy
+from aoc_cli.control import open_session
 from aoc_cli.envs import collect, make_env
 from aoc_cli.envs.icu_sepsis import STRATEGIES
 from aoc_cli.envs.icu_sepsis import tables as sepsis_tables
 from aoc_cli.envs.tabular import greedy
 from aoc_cli.errors import AocError, BadSetting, param
-from aoc_cli.experiments import sepsis_policies as sp
 from aoc_cli.experiments.results import write_rows_csv
-from aoc_cli.experiments.spibb import spibb_policy
-from aoc_cli.control import open_session
-from aoc_cli.corpus_index import build_index
+from aoc_cli.index import build_index
 from aoc_cli.store import DEFAULT_MODEL, Store, atomic_path
+from aoc_cli.training.fit import train_corpus
 
 SCALES = {
     "full": {"sizes": (1000, 10000, 50000), "cql_steps": 10000, "mc_episodes": 1000},
@@ -79,10 +78,10 @@ def references(tables) -> dict[str, dict]:
 def train_aoc(store_root: Path, name: str, seed: int = 0) -> dict:
     """AOC as a user gets it: what ``aoc train NAME --seed S`` does with no other flag (the
     settings it takes from the task or chooses from the log: the one training path,
-    :func:`aoc_cli.belief.fit.train_corpus`) and ``aoc index NAME``; the training metrics."""
+    :func:`aoc_cli.training.fit.train_corpus`) and ``aoc index NAME``; the training metrics."""
     corpus = Store.open(store_root).corpus(name)
     metrics = train_corpus(corpus, seed=seed, overwrite=True,
-                           choose_controller=selection.recording_hook).metrics
+                           choose_controller=True).metrics
     build_index(corpus)
     return metrics
 

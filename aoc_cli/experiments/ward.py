@@ -3,7 +3,7 @@
 Over random 10:1 splits by patient of one ward log, on the held-out patients' steps:
 
 * **abc** -- ABC as a user gets it: ``aoc train --mode imitation`` with its default settings
-  (chosen by validation, aoc_cli.belief.select), ``aoc index``, ``aoc evaluate`` (the AUC score
+  (chosen by validation, aoc_cli.training.tuning), ``aoc index``, ``aoc evaluate`` (the AUC score
   of oxygen is the sum over the minimal corpus subset of weight x each row's label of it,
   aoc_cli.belief.row_labels; the decision is the argmax of the scores);
 * **abc-head** -- the same model's own head (the black box ABC explains);
@@ -31,12 +31,12 @@ from pathlib import Path
 
 import numpy as np
 
-from aoc_cli.belief.fit import train_corpus
+from aoc_cli.training.fit import train_corpus
 from aoc_cli.control import ControllerConfig, open_session
-from aoc_cli.corpus_index import build_index
+from aoc_cli.index import build_index
 from aoc_cli.envs import collect, medkit_ward, render
 from aoc_cli.errors import BadSetting, param
-from aoc_cli.evaluation.score import evaluate
+from aoc_cli.evaluation.score import score_log
 from aoc_cli.experiments.results import write_rows_csv
 from aoc_cli.store import DEFAULT_MODEL, Store, atomic_path
 
@@ -99,12 +99,12 @@ def run_split(store, data, split: int, patients: int, seed: int = 0,
     store.write(tr_name, data.select_episodes(~test), overwrite=True)
     store.write(te_name, data.select_episodes(test), overwrite=True)
     tr, te = store.corpus(tr_name), store.corpus(te_name)
-    started = time.perf_counter()  # as `aoc train --mode imitation` trains (belief/fit.py)
+    started = time.perf_counter()  # as `aoc train --mode imitation` trains (training/fit.py)
     metrics = train_corpus(tr, DEFAULT_MODEL, overwrite=True, mode="imitation", threads=1,
                            seed=split).metrics
     build_index(tr, DEFAULT_MODEL)
     session = open_session(tr, DEFAULT_MODEL, config=ControllerConfig())
-    summary, _res = evaluate(session, te, ["knn", "bc"])
+    summary, _res = score_log(session, te, ["knn", "bc"])
     abc_seconds = time.perf_counter() - started
     chosen = metrics["selection"]["chosen"]
     rows = [{"method": "abc", "accuracy": summary["accuracy"], "auc": summary["auc"],

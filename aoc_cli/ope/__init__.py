@@ -10,5 +10,5 @@ evaluation").
 - :mod:`aoc_cli.ope.propensity`: the behaviour estimated from a log without propensities;
 - :mod:`aoc_cli.ope.support`: what the log supports (the rule that withholds), the verdict;
 - :mod:`aoc_cli.ope.value`: one policy's estimates, improvement and verdict;
-- :mod:`aoc_cli.ope.policies`: the OPE block of ``aoc evaluate`` (settings, behaviour fit).
+- :mod:`aoc_cli.ope.evaluate_block`: the OPE block of ``aoc evaluate`` (settings, behaviour fit).
 """

@@ -2,7 +2,7 @@
 bootstrap intervals, FQE with its refits' (:func:`fqe_values`), each shown where the log
 supports it (:mod:`aoc_cli.ope.support`), V(policy) - V(logged behaviour) by each with a
 paired interval, and the verdict line. ``settings`` is an
-:class:`aoc_cli.ope.policies.OPESettings` (its estimators, gamma, bootstrap, seed and FQE
+:class:`aoc_cli.ope.evaluate_block.OPESettings` (its estimators, gamma, bootstrap, seed and FQE
 settings)."""
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ def policy_value(log: ope.Log, observations, logged, propensity, policy, n_actio
     ``policy`` (N,) decisions or (N, n) probabilities at the logged steps; ``fqe`` its direct
     method (one entry of :func:`fqe_values`, computed with the other policies'; "fit": fitted
     here for this policy alone). ``held`` (N, n): the log's episodes near each step that took
-    each action (:class:`aoc_cli.neighbours.neighbourhood.Neighbourhood`): FQE's interval is
+    each action (:class:`aoc_cli.index.search.neighbourhood.Neighbourhood`): FQE's interval is
     widened by the share of the policy's decisions the log hardly holds
     (:func:`hardly_held`)."""
     probs = _as_probs(policy, n_actions)                          # (N, n)

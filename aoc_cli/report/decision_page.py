@@ -2,7 +2,7 @@
 values of the query and of its supporting rows (:mod:`aoc_cli.report.values`), one card per
 supporting row with its history beside the query's, the contrast and the what-if.
 
-Input: the records of :func:`aoc_cli.control.explain.explain_decisions` (with
+Input: the records of :func:`aoc_cli.explanation.decisions.explain_decisions` (with
 ``attribution`` and ``query_history``), the corpus, and the corpus a logged query was read
 from (its imputed cells and columns). Every user string is escaped
 (:func:`aoc_cli.report.html.esc`); the page has no script.

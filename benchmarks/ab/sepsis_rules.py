@@ -28,7 +28,7 @@ import numpy as np
 
 from aoc_cli.control import ControllerConfig, model_controller, open_session
 from aoc_cli.envs.icu_sepsis import STRATEGIES, tables
-from aoc_cli.experiments import sepsis_policies as sp
+from aoc_cli.baselines import sepsis_policies as sp
 from aoc_cli.store import DEFAULT_MODEL, Store
 from aoc_cli.threads import one_thread
 

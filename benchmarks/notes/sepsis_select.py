@@ -1,5 +1,5 @@
 """icu-sepsis from a plain file: the controller selection of ``aoc train``
-(aoc_cli.evaluation.selection) against the truth. For a model trained by
+(aoc_cli.training.controller_selection) against the truth. For a model trained by
 ``benchmarks/notes/sepsis_plain_file.py`` (its store), each candidate controller's FQE estimate
 on the model's validation episodes (what the rule sees) beside its exact survival as a state
 policy with the final index (what the user gets; read only here, never by the rule).
@@ -26,10 +26,10 @@ from aoc_cli.store import Store
 # internal: training hands them to the selection's hook
 from aoc_cli.belief import load_model
 from aoc_cli.belief.data import TrainingData, episode_rows, split_episodes
-from aoc_cli.belief.evidence import label
 from aoc_cli.belief.inputs import encode_corpus
 from aoc_cli.belief.model import Normalisation
-from aoc_cli.evaluation import selection
+import aoc_cli.training.controller_selection as controller_selection
+from aoc_cli.training.evidence import label
 
 
 def main() -> None:
@@ -50,8 +50,8 @@ def main() -> None:
                         episode_rows(starts, train_eps), episode_rows(starts, val_eps))
     saved = model.meta["metrics"].get("controller") or {}
     k = int(saved.get("k") or 2 * (model.d_b + 1))
-    out = selection.select_controller(model.net, inputs, data, norm, corpus, config, k,
-                                      selection.candidates(saved.get("support_penalty")))
+    out = controller_selection.select_controller(model.net, inputs, data, norm, corpus, config, k,
+                                      controller_selection.candidates(saved.get("support_penalty")))
     t = sepsis_tables("terminate" if args.task.endswith("terminate") else "mean")
     for cand in out["candidates"]:
         session = aoc_cli.open_session(args.name, store=args.store,

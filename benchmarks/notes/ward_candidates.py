@@ -26,10 +26,11 @@ from pathlib import Path
 
 import numpy as np
 
-from aoc_cli.belief import abc_scores, load_model, split_episodes, train_corpus
+from aoc_cli.belief import load_model, split_episodes
+from aoc_cli.training import abc_scores, train_corpus
 from aoc_cli.decompose import decompose
 from aoc_cli.envs import collect
-from aoc_cli.neighbours import BeliefIndex, PerAction
+from aoc_cli.index import BeliefIndex, PerAction
 from aoc_cli.store import DEFAULT_MODEL, Store
 from aoc_cli.threads import one_thread
 

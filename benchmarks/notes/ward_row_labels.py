@@ -34,7 +34,7 @@ from scipy.spatial import cKDTree
 from aoc_cli.belief import subset_scores
 from aoc_cli.decompose import decompose, per_action_k
 from aoc_cli.experiments import history_features
-from aoc_cli.neighbours import BeliefIndex, PerAction
+from aoc_cli.index import BeliefIndex, PerAction
 from aoc_cli.threads import one_thread
 
 from ward_candidates import split_beliefs, split_parser, store_and_log  # this folder's

@@ -7,8 +7,8 @@
 A log of ``--episodes`` clinician episodes (``collect icu-sepsis``; the rules read its evidence
 as they read a plain file's: rule 2 holds), trained as ``aoc train NAME`` trains it, one thread,
 twice a round, interleaved: ``--no-select`` (one candidate's training: the model, rule 2's
-controller) and with the selection (aoc_cli.evaluation.selection: the same training, then the
-four candidates decided and valued by FQE on the validation episodes). One row per case: the
+controller) and with the selection (aoc_cli.training.controller_selection: the same training,
+then the four candidates decided and valued by FQE on the validation episodes). One row per case: the
 median wall and CPU seconds of the whole training; on the selection's row the selection's own
 median seconds (its record, ``metrics.settings.controller_selection.seconds``), the ratio of
 those to the same round's ``--no-select`` training (the goal: at most 1), the paired ratio of

@@ -15,7 +15,7 @@ y_i = base + A a_i with a_i uniform in [-1, 1]^2 and A a random (20, 2) matrix o
                 top-100, softmax weights fitted by 1000 Adam steps (lr 0.05)
   speed-up      paper ms / ms per batch
   no-ix ms      median of the same decompositions without an index (`decompose(beliefs, q)`:
-                the index-free exact search, aoc_cli/neighbours/exact.py), timed batch by batch
+                the index-free exact search, aoc_cli/index/search/exact.py), timed batch by batch
                 interleaved with the indexed calls
   ratio         no-ix ms / ms per batch (both from this run)
   mem x         memory of the beliefs + index + querying, in units of the belief array:
@@ -40,7 +40,7 @@ import faiss  # noqa: E402
 import numpy as np  # noqa: E402
 
 from aoc_cli.decompose import decompose  # noqa: E402
-from aoc_cli.neighbours import BeliefIndex, IndexConfig  # noqa: E402
+from aoc_cli.index import BeliefIndex, IndexConfig  # noqa: E402
 
 D = 20
 K = 42

@@ -16,7 +16,7 @@ flags: the model ``default`` (fqe values, gamma 1, history 0) and the task's con
 (residual cap 0.01, support penalty 5), as ``aoc_cli.open_session`` opens them.
 ``--model paper``: a model ``paper`` on the same corpus with the paper's value target (the
 return, gamma 0.99, history 0) and the paper's controller settings (what this benchmark timed
-before). Times :func:`aoc_cli.evaluation.score.evaluate` in this process (the session opened
+before). Times :func:`aoc_cli.evaluation.score.score_log` in this process (the session opened
 once before; 25 candidate actions a step, the knn and bc baselines), wall and CPU seconds
 (user + system of this process and of FQE's forked parts: what the wall figure would be on
 one idle core),
@@ -73,7 +73,7 @@ from aoc_cli.control import ControllerConfig, open_session  # noqa: E402
 from aoc_cli.evaluation import context as ei  # noqa: E402
 from aoc_cli.evaluation import score as ev  # noqa: E402
 from aoc_cli.ope import ensemble as ens  # noqa: E402
-from aoc_cli.ope.policies import OPESettings  # noqa: E402
+from aoc_cli.ope.evaluate_block import OPESettings  # noqa: E402
 from aoc_cli.store import Store, targets_dir  # noqa: E402
 from aoc_cli.threads import one_thread  # noqa: E402
 
@@ -188,7 +188,7 @@ def main() -> None:
                                                                  "fused": False})
                 ens._deterministic = lambda _cums: None
             try:
-                summary = ev.evaluate(session, data, ["knn", "bc"], ope=ope)[0]
+                summary = ev.score_log(session, data, ["knn", "bc"], ope=ope)[0]
                 return {**summary, "targets_wall": stages.wall, "targets_cpu": stages.cpu}
             finally:
                 ev._value_distinct, ev.chunk_size = _distinct, _chunk_size

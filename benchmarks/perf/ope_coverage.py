@@ -63,7 +63,7 @@ def run_log(i: int, episodes: int, policies: dict, settings: dict, n_boot: int) 
     propensities: one record per (propensities, policy)."""
     from aoc_cli.envs.icu_sepsis import collect_data, tables
     from aoc_cli.ope import estimators as ope
-    from aoc_cli.ope.policies import OPESettings, truncated
+    from aoc_cli.ope.evaluate_block import OPESettings, truncated
     from aoc_cli.ope.propensity import fit_propensities
     from aoc_cli.ope.support import fqe_refusal
     from aoc_cli.ope.value import fqe_values, policy_value

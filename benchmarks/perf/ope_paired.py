@@ -13,7 +13,7 @@ benchmarks/perf/ope_sepsis.py's (built here with this checkout when missing): th
 ``train`` of 10,000 clinician episodes with its model and index, and ``held0``, 5,000 held-out
 episodes (seed 1000). Each run is a fresh process with one checkout first on ``PYTHONPATH``:
 it opens the session as ``aoc evaluate`` does (:func:`aoc_cli.open_session`, the task's
-settings) and times :func:`aoc_cli.evaluation.score.evaluate` of ``held0`` with the knn and bc
+settings) and times :func:`aoc_cli.evaluation.score.score_log` of ``held0`` with the knn and bc
 baselines and the default OPE (PDWIS, WDR, FQE with its 10 refits for AOC and both baselines,
 and the behaviour's FQE), as a later ``aoc evaluate`` of the log runs it (each checkout's
 held-out targets kept by an untimed first run; ``--no-warm-up`` where an earlier run of the
@@ -43,7 +43,10 @@ import json, os, sys, time
 store_dir, held = sys.argv[1], sys.argv[2]
 import aoc_cli
 from aoc_cli.evaluation import score as ev
-from aoc_cli.ope.policies import OPESettings
+try:
+    from aoc_cli.ope.evaluate_block import OPESettings
+except ImportError:  # a checkout from before ope/policies.py was renamed
+    from aoc_cli.ope.policies import OPESettings
 from aoc_cli.store import Store
 from aoc_cli.threads import one_thread
 store = Store(store_dir)
@@ -51,7 +54,8 @@ session = aoc_cli.open_session("train", store=store)
 data = store.corpus(held)
 t0, c0 = time.perf_counter(), os.times()
 with one_thread():
-    summary = ev.evaluate(session, data, ["knn", "bc"], ope=OPESettings())[0]
+    summary = getattr(ev, "score_log", None) or ev.evaluate  # before the rename: evaluate
+    summary = summary(session, data, ["knn", "bc"], ope=OPESettings())[0]
 wall, c1 = time.perf_counter() - t0, os.times()
 cpu = sum(c1[:4]) - sum(c0[:4])
 pick = lambda rec: ((rec or {}).get("policy_value") or {}).get("fqe")

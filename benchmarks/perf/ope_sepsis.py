@@ -18,7 +18,7 @@ clinicians' modal action as the log shows it). The clinicians are the behaviour 
 package's stochastic policy). Truths: the package's tables by a linear solve
 (``aoc_cli.envs.icu_sepsis.tables``). Then for each of ``--logs`` held-out logs of
 ``--episodes`` clinician episodes (seeds 1000, 1001, ...), the estimators of ``aoc evaluate``
-(:mod:`aoc_cli.ope.policies`: PDWIS, WDR, FQE with the log's ``propensity`` column) for
+(:mod:`aoc_cli.ope.evaluate_block`: PDWIS, WDR, FQE with the log's ``propensity`` column) for
 each policy. Prints one row per policy and estimator: coverage (of the logs), mean estimate,
 mean error, mean |error|, mean interval width, mean ESS.
 """
@@ -39,10 +39,10 @@ import numpy as np  # noqa: E402
 import aoc_cli  # noqa: E402
 from aoc_cli.envs.icu_sepsis import tables  # noqa: E402
 from aoc_cli.errors import AocError  # noqa: E402
-from aoc_cli.evaluation.score import evaluate  # noqa: E402
+from aoc_cli.evaluation.score import score_log  # noqa: E402
 from aoc_cli.ope import estimators as ope  # noqa: E402
 from aoc_cli.ope.fqe import REFITS, SCHEDULE  # noqa: E402
-from aoc_cli.ope.policies import (  # noqa: E402  # noqa: E402
+from aoc_cli.ope.evaluate_block import (  # noqa: E402  # noqa: E402
     ESTIMATORS,
     OPESettings,
     fqe_values,
@@ -53,7 +53,7 @@ from aoc_cli.store import DEFAULT_MODEL, CorpusData, Store, model_dir  # noqa: E
 from aoc_cli.threads import one_thread  # noqa: E402
 
 #: The value model's settings ``aoc train NAME`` decides for an icu-sepsis log (its
-#: observations recur: aoc_cli.belief.evidence, rule 2).
+#: observations recur: aoc_cli.training.evidence, rule 2).
 TASK_VALUE = {"value": "fqe", "gamma": 1.0, "history_length": 0}
 
 
@@ -86,7 +86,7 @@ def aoc_policy(store: Store, corpus, t) -> np.ndarray:
     except AocError:
         every = store.write("every-state", data)
     session = aoc_cli.open_session(corpus.name, store=store)  # the task's controller settings
-    _, res = evaluate(session, every, [], ope=OPESettings(estimators=()))
+    _, res = score_log(session, every, [], ope=OPESettings(estimators=()))
     policy = np.zeros(t.mdp.n_states, np.int64)
     policy[states] = res.decided
     return policy
@@ -175,7 +175,7 @@ def main() -> None:
         prop = held.column("propensity")
         if i == args.first and args.check:   # aoc evaluate's own decisions are the policy evaluated here
             session = aoc_cli.open_session(corpus.name, store=store)
-            _, res = evaluate(session, held, [], ope=OPESettings(estimators=()))
+            _, res = score_log(session, held, [], ope=OPESettings(estimators=()))
             agree = float(np.mean(res.decided == policies["aoc"][s]))
             print(f"aoc evaluate's decisions = the state policy on {agree:.4f} of the steps",
                   file=sys.stderr)

@@ -31,9 +31,10 @@ import _harness as h
 import numpy as np
 
 import aoc_cli
-from aoc_cli.control import explain_logged_step, read_audit_step, replay_decision
-from aoc_cli.control.explain import explain_decisions
-from aoc_cli.report.explain_pages import write_html
+from aoc_cli.control import read_audit_step
+from aoc_cli.explanation import explain_logged_step, replay_decision
+from aoc_cli.explanation.decisions import explain_decisions
+from aoc_cli.explanation.pages import write_html
 from aoc_cli.store import Store
 
 

@@ -24,8 +24,8 @@ from pathlib import Path
 import _harness as h
 import numpy as np
 
-from aoc_cli.belief import select
-from aoc_cli.belief.fit import train_corpus
+from aoc_cli.training import tuning
+from aoc_cli.training.fit import train_corpus
 from aoc_cli.envs import collect
 from aoc_cli.store import Store
 
@@ -51,8 +51,8 @@ def main() -> None:
 
         def train(folds: int, rule: str):
             def run(_i: int) -> dict:
-                old, select.FOLDS = select.FOLDS, folds
-                hook = select.abc_validation
+                old, tuning.FOLDS = tuning.FOLDS, folds
+                hook = tuning.abc_validation
                 if rule == "loss":  # the search's folds unscored (no AUC: the log-loss
                     calls = []      # alone); the final model's validation as before
 
@@ -61,12 +61,12 @@ def main() -> None:
                         if len(calls) == 1:
                             return lambda *_a: {"val_abc_auc": None}
                         return hook(actions, n_actions, k)
-                    select.abc_validation = first_unscored
+                    tuning.abc_validation = first_unscored
                 try:
                     metrics = train_corpus(corpus, "default", overwrite=True, mode="imitation",
                                            threads=1, seed=args.split).metrics
                 finally:
-                    select.FOLDS, select.abc_validation = old, hook
+                    tuning.FOLDS, tuning.abc_validation = old, hook
                 return metrics["selection"]
             return run
 

@@ -14,7 +14,7 @@ def pendulum(tmp_path_factory):
 
     from aoc_cli.belief import BeliefConfig, train_model
     from aoc_cli.envs import collect
-    from aoc_cli.corpus_index import build_index
+    from aoc_cli.index import build_index
     from aoc_cli.store import Store
 
     torch.set_num_threads(1)

@@ -8,7 +8,7 @@ import numpy as np
 
 from aoc_cli.belief.row_labels import (ROW_SMOOTHING, default_row_smoothing, row_labels,
                                        subset_scores)
-from aoc_cli.belief.select import abc_scores
+from aoc_cli.training.tuning import abc_scores
 
 ROWS = np.array([[3, 0, -1], [1, 2, 4]])
 WEIGHTS = np.array([[0.7, 0.3, 0.0], [0.5, 0.25, 0.25]])

@@ -358,7 +358,7 @@ def test_ood_reference_band_from_a_clean_audit_log(run, tmp_path, maze_root):
     import h5py
 
     from aoc_cli.control.monitor import OODMonitor, flags_against, reference_band
-    from aoc_cli.corpus_index import load_index
+    from aoc_cli.index import load_index
     from aoc_cli.store import open_corpus
 
     clean, test = tmp_path / "clean.h5", tmp_path / "test.h5"

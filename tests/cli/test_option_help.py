@@ -16,8 +16,8 @@ from aoc_cli.belief.config import BeliefConfig
 from aoc_cli.cli.app import app
 from aoc_cli.cli.errors import flag
 from aoc_cli.control.config import ControllerConfig
-from aoc_cli.ope.policies import OPESettings
-from aoc_cli.neighbours.config import IndexConfig
+from aoc_cli.ope.evaluate_block import OPESettings
+from aoc_cli.index.search.config import IndexConfig
 from aoc_cli.settings import param_name
 
 #: The settings each command offers as options.

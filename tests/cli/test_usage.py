@@ -55,7 +55,7 @@ def test_the_choices_are_the_librarys():
     from aoc_cli.baselines import BASELINES
     from aoc_cli.belief.config import MODES
     from aoc_cli.cli.common import BeliefMode, IndexKind, OutputFormat, PolicyName, SamplerName
-    from aoc_cli.neighbours.config import KINDS
+    from aoc_cli.index.search.config import KINDS
     from aoc_cli.cli.output import FORMATS
 
     assert [p.value for p in PolicyName] == ["aoc", *BASELINES]

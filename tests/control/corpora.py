@@ -6,7 +6,7 @@ import numpy as np
 
 from aoc_cli.belief import BeliefConfig, train_model
 from aoc_cli.envs import collect
-from aoc_cli.corpus_index import build_index
+from aoc_cli.index import build_index
 from aoc_cli.store import CorpusData, Store, discrete_space, box_space, episode_starts_from_lengths
 
 

@@ -10,10 +10,12 @@ import pytest
 
 from aoc_cli.belief.config import BeliefConfig
 from aoc_cli.belief.train import train_model
-from aoc_cli.control import ControllerConfig, explain_logged_step, open_session
-from aoc_cli.corpus_index import build_index
+from aoc_cli.control import ControllerConfig, open_session
+from aoc_cli.explanation import explain_logged_step
+from aoc_cli.index import build_index
 from aoc_cli.envs.ward import read_options, write_csv
-from aoc_cli.evaluation.score import evaluate, step_records
+from aoc_cli.evaluation.records import step_records
+from aoc_cli.evaluation.score import score_log
 from aoc_cli.formats import read_dataset
 from aoc_cli.store import Store
 
@@ -66,7 +68,7 @@ def test_evaluate_step_records_carry_the_labels(labelled):
     store, _ = labelled
     corpus = store.corpus("ward")
     session = open_session(corpus, "default", config=ControllerConfig())
-    _, res = evaluate(session, corpus, ["knn"])
+    _, res = score_log(session, corpus, ["knn"])
     recs = list(step_records(session, corpus, res))
     assert len(recs) == corpus.n_rows
     for rec in recs[:50]:

@@ -133,7 +133,7 @@ def test_imitation_decision_is_the_argmax_of_its_rows_weights_times_their_labels
 
 
 def test_a_logged_step_in_imitation_mode_is_the_decision_alone_without_its_episode(corridor):
-    from aoc_cli.control import explain_logged_step
+    from aoc_cli.explanation import explain_logged_step
 
     session = open_session(corridor)
     for episode, step in [(3, 5), (20, 0), (41, 11)]:
@@ -201,7 +201,7 @@ def test_a_models_settings_under_the_flags_given():
 
 
 def test_the_typical_residual_has_one_typed_accessor(maze):
-    from aoc_cli.corpus_index import TypicalResidual, load_index
+    from aoc_cli.index import TypicalResidual, load_index
 
     ci = open_session(maze).index
     recorded = ci.meta["typical_residual"]

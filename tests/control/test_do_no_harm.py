@@ -11,7 +11,7 @@ from aoc_cli import open_session
 from aoc_cli.control.batch import BatchPolicy
 from aoc_cli.control.episodes import HistoryBuffer
 from aoc_cli.control.records import decision_record
-from aoc_cli.corpus_index import build_index
+from aoc_cli.index import build_index
 from aoc_cli.envs import collect
 from aoc_cli.store import Store
 

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from aoc_cli.envs import collect, icu_sepsis
-from aoc_cli.experiments.sepsis_policies import LIVE, state_policy
+from aoc_cli.baselines.sepsis_policies import LIVE, state_policy
 from aoc_cli.control import open_session
 from aoc_cli.store import Store
 

@@ -17,7 +17,7 @@ from aoc_cli.belief import BeliefConfig, train_model
 from aoc_cli.control.config import ControllerConfig
 from aoc_cli.control.run import rollout
 from aoc_cli.envs import collect, make_env
-from aoc_cli.corpus_index import build_index
+from aoc_cli.index import build_index
 from aoc_cli.control import model_free_session, open_session
 from aoc_cli.store import Store
 

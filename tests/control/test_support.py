@@ -9,7 +9,7 @@ from aoc_cli.control.support import penalised, row_episodes, support_episodes, s
 from aoc_cli.decompose import decompose
 from aoc_cli.errors import AocError
 from aoc_cli.control import open_session
-from aoc_cli.corpus_index import build_index
+from aoc_cli.index import build_index
 from aoc_cli.store import (CorpusData, History, Store, box_space, discrete_space,
                            episode_starts_from_lengths)
 
@@ -137,7 +137,7 @@ def test_the_support_penalty_prefers_the_well_tried_action_to_the_lucky_one(luck
 
 
 def test_the_contrast_says_the_lucky_action_lost_to_the_penalty(lucky):
-    from aoc_cli.control.contrast import contrast_record
+    from aoc_cli.explanation.contrast import contrast_record
 
     history = History(np.zeros((1, 0, 2), np.float32), np.zeros((1, 0), np.int64),
                       np.zeros((1, 0), np.float32), np.zeros((1, 0), bool))

@@ -10,7 +10,7 @@ that makes a task's control worse fails here, as the small-log settings selectio
 maze (success 0.0 with the chosen width; issue 24). Sizes and thresholds were measured on this
 project's machine (docs/notes/results-defaults-per-task.md); the ``quality`` mark spreads them
 over pytest-xdist's workers (tests/conftest.py). ward (reward-free, ABC) is guarded by
-``tests/belief/test_select.py::test_default_training_on_ward_beats_the_majority_clearly`` and
+``tests/training/test_tuning.py::test_default_training_on_ward_beats_the_majority_clearly`` and
 icu-sepsis and icu-sepsis-terminate by ``tests/control/test_icu_sepsis_quality.py`` (both on
 plain files too).
 pendulum-het's random start has no test here: at 10,000 rows AOC with the defaults scores -1245

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from aoc_cli.baselines.neighbours import knn_k
-from aoc_cli.corpus_index import neighbours
+from aoc_cli.index import model_k
 from aoc_cli.decompose import default_k, index_k, per_action_k, subset_size
 from aoc_cli.decompose.k_rule import SMALL_MAX_ROWS
 
@@ -45,7 +45,7 @@ def test_the_index_k_follows_the_rule(rows, imitation, candidates, expected):
     corpus = _corpus(rows, actions)
     assert index_k(20, corpus, imitation, candidates) == expected
     mode = "imitation" if imitation else "value"
-    assert neighbours(corpus, SimpleNamespace(d_b=20, mode=mode), candidates) == expected
+    assert model_k(corpus, SimpleNamespace(d_b=20, mode=mode), candidates) == expected
 
 
 def test_the_index_k_reads_no_actions_when_the_rule_needs_none():

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from aoc_cli.decompose import decompose
-from aoc_cli.neighbours import BeliefIndex
+from aoc_cli.index.search import BeliefIndex
 
 
 def test_with_a_row_mask_no_returned_row_is_outside_it():

@@ -7,10 +7,12 @@ import numpy as np
 import pytest
 
 from aoc_cli.belief import BeliefConfig, train_model
-from aoc_cli.control import ControllerConfig, explain_logged_step, open_session
-from aoc_cli.corpus_index import build_index
+from aoc_cli.control import ControllerConfig, open_session
+from aoc_cli.explanation import explain_logged_step
+from aoc_cli.index import build_index
 from aoc_cli.envs import collect
-from aoc_cli.evaluation.score import LeaveEpisodeOut, evaluate, step_records
+from aoc_cli.evaluation.records import step_records
+from aoc_cli.evaluation.score import LeaveEpisodeOut, score_log
 from aoc_cli.store import Store
 from tests.conftest import run_aoc
 
@@ -40,7 +42,7 @@ def test_imitation_metrics_match_a_hand_computation(ward):
     _root, store = ward
     corpus, held = store.corpus("ward"), store.corpus("held")
     session = open_session(corpus, config=ControllerConfig())
-    summary, res = evaluate(session, held, ["knn", "bc"])
+    summary, res = score_log(session, held, ["knn", "bc"])
     recs = list(step_records(session, held, res))
     assert summary["steps"] == held.n_rows == len(recs)
     y = np.array([r["logged"] for r in recs])
@@ -101,7 +103,7 @@ def test_own_corpus_leaves_each_episode_out_as_explain_does(ward):
     _root, store = ward
     corpus = store.corpus("ward")
     session = open_session(corpus, config=ControllerConfig())
-    summary, res = evaluate(session, corpus, [])
+    summary, res = score_log(session, corpus, [])
     assert summary["own_episode_left_out"] is True and summary["baselines"] == {}
     sup_ep = corpus.episode_of(np.maximum(res.support_rows, 0))
     used = res.support_rows >= 0
@@ -122,7 +124,7 @@ def test_own_corpus_leaves_each_episode_out_as_explain_does(ward):
     assert agree >= len(picks) - 1
     # the run's own structures (as above 20,000 corpus rows; here forced): one per action
     # (exact for an action of at most 20,000 rows), each leaving the query's own episode out
-    ivf, res_ivf = evaluate(session, corpus, [], exact=False)
+    ivf, res_ivf = score_log(session, corpus, [], exact=False)
     assert ivf["search"].startswith("the nearest rows of each of 2 actions (ivf (nlist")
     assert ivf["search"].endswith("; a search of each)")
     sup_ep = corpus.episode_of(np.maximum(res_ivf.support_rows, 0))
@@ -132,7 +134,7 @@ def test_own_corpus_leaves_each_episode_out_as_explain_does(ward):
 
 
 def test_leave_episode_out_search_drops_only_the_own_episode():
-    from aoc_cli.neighbours import BeliefIndex
+    from aoc_cli.index.search import BeliefIndex
 
     rng = np.random.default_rng(0)
     beliefs = rng.standard_normal((60, 3)).astype(np.float32)
@@ -150,7 +152,7 @@ def test_value_mode_scores_v_hat_against_the_logged_target(ward):
     _root, store = ward
     corpus, held = store.corpus("ward"), store.corpus("held")
     session = open_session(corpus, "value", config=ControllerConfig())
-    summary, res = evaluate(session, held, ["knn", "bc"])
+    summary, res = score_log(session, held, ["knn", "bc"])
     for key in ("mode", "steps", "value_r2", "value_mae", "agreement", "residual",
                 "extrapolating_share", "baselines"):
         assert key in summary
@@ -232,10 +234,10 @@ def test_an_index_without_its_candidates_is_read_as_the_k_nearest_rows(ward, tmp
     session = open_session(corpus, config=ControllerConfig())
     assert session.index.candidates == "nearest" and session.index.strata is None
     assert session.index.search is session.index.index
-    summary, res = evaluate(session, Store(copy).corpus("held"), [])
+    summary, res = score_log(session, Store(copy).corpus("held"), [])
     assert summary["candidates"] == "nearest" and summary["k"] == 44
     new = open_session(Store(root).corpus("ward"), config=ControllerConfig())
-    fresh, _ = evaluate(new, Store(root).corpus("held"), [])
+    fresh, _ = score_log(new, Store(root).corpus("held"), [])
     assert fresh["candidates"] == "per_action" and fresh["k"] == 30
     # per action, every decision's neighbourhood held both actions; the k nearest rows not
     assert fresh["auc"] != summary["auc"]
@@ -283,7 +285,7 @@ def test_value_decisions_in_batches_apply_the_support_and_cap_rules_as_decide_do
     corpus, held = store.corpus("ward"), store.corpus("held")
     session = open_session(corpus, "value", config=ControllerConfig(epsilon=1.0, **settings))
     plain = open_session(corpus, "value", config=ControllerConfig(epsilon=1.0)).controller
-    _summary, res = evaluate(session, held, [])
+    _summary, res = score_log(session, held, [])
     changed = 0
     for i in range(0, held.n_rows, 11):
         h = held.history([i], session.model.history_length)

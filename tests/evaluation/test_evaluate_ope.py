@@ -10,13 +10,13 @@ import pytest
 
 from aoc_cli.belief import BeliefConfig, train_model
 from aoc_cli.control import ControllerConfig, open_session
-from aoc_cli.corpus_index import build_index
+from aoc_cli.index import build_index
 from aoc_cli.envs import collect
 from aoc_cli.errors import AocError
 from aoc_cli.evaluation.context import EvalContext, episode_rows
-from aoc_cli.evaluation.score import _value, _value_distinct, evaluate
+from aoc_cli.evaluation.score import _value, _value_distinct, score_log
 from aoc_cli.ope import estimators as ope
-from aoc_cli.ope.policies import OPESettings
+from aoc_cli.ope.evaluate_block import OPESettings
 from aoc_cli.store import Store
 from tests.conftest import run_in_process
 
@@ -43,7 +43,7 @@ def test_policy_value_is_the_estimators_on_the_decisions(sepsis):
     _root, store, _ = sepsis
     held = store.corpus("held")
     settings = OPESettings(estimators=("pdwis", "wdr"), n_boot=200, fqe_steps=200)
-    summary, res = evaluate(_session(store), held, ["bc"], ope=settings)
+    summary, res = score_log(_session(store), held, ["bc"], ope=settings)
     log = ope.Log(held.episode_starts, held.rewards)
     rho = ope.ratios((res.decided == held.actions).astype(float), held.column("propensity"))
     assert summary["ess"] == pytest.approx(ope.ess(log, rho), abs=1e-9)
@@ -71,7 +71,7 @@ def test_fqe_interval_is_from_refits_and_says_so(sepsis):
     _root, store, _ = sepsis
     held = store.corpus("held")
     settings = OPESettings(estimators=("fqe",), fqe_steps=300, fqe_refits=3)
-    summary, res = evaluate(_session(store), held, [], ope=settings)
+    summary, res = score_log(_session(store), held, [], ope=settings)
     e = summary["policy_value"]["fqe"]
     # 300 steps on 150 episodes: FQE may be off on the logged behaviour, and then withheld
     off = summary["behaviour_value"]["fqe"]
@@ -87,7 +87,7 @@ def test_fqe_interval_is_from_refits_and_says_so(sepsis):
             f"FQE off on the logged behaviour ({off:.4g}, outside its mean return's")
     assert summary["ope"]["fqe_refits"] == 3
     note = [n for n in summary["ope"]["notes"] if n.startswith("fqe:")]
-    one, _ = evaluate(_session(store), held, [], ope=OPESettings(
+    one, _ = score_log(_session(store), held, [], ope=OPESettings(
         estimators=("fqe",), fqe_steps=300, fqe_refits=0))
     reason = one["policy_value"]["fqe"]["reason"]      # one fit: withheld, its value said
     assert one["policy_value"]["fqe"]["estimate"] is None
@@ -128,7 +128,7 @@ def test_without_a_propensity_column_an_imitation_model_estimates_them(sepsis, t
     bare = type(held)(**{**held.__dict__, "columns": {}})
     store.write("bare", bare)
     settings = OPESettings(estimators=("pdwis",), n_boot=100)
-    summary, _ = evaluate(_session(store), store.corpus("bare"), [], ope=settings)
+    summary, _ = score_log(_session(store), store.corpus("bare"), [], ope=settings)
     assert summary["ope"]["propensity"].startswith("estimated: multinomial logistic "
                                                    "regression of the logged action")
     assert 0 < summary["ess"] <= held.n_episodes
@@ -253,9 +253,9 @@ def test_continuous_actions_asked_for_ope_are_refused_before_any_step_is_decided
     build_index(corpus, "default")
     decided = []
     with pytest.raises(AocError, match="offline policy evaluation needs discrete actions"):
-        evaluate(open_session(corpus, config=ControllerConfig(candidates=8)), corpus,
-                 baselines=[], progress=lambda done, total: decided.append(done),
-                 ope=OPESettings(estimators=("pdwis",)))
+        score_log(open_session(corpus, config=ControllerConfig(candidates=8)), corpus,
+                  baselines=[], progress=lambda done, total: decided.append(done),
+                  ope=OPESettings(estimators=("pdwis",)))
     assert decided == []
 
 
@@ -265,7 +265,7 @@ def test_an_fqe_models_held_out_target_is_the_behaviours_fqe_kept_beside_the_log
     at its default settings: the OPE's own fit when it ran at the model's discount and those
     settings, kept beside the log and read back by a later evaluate; fitted alone at another
     discount or when the OPE's FQE took other steps."""
-    from aoc_cli.ope import policies as ope_eval
+    from aoc_cli.ope import evaluate_block as ope_eval
     from aoc_cli.store import targets_dir
 
     _root, store, _ = sepsis
@@ -316,7 +316,7 @@ def test_an_fqe_models_held_out_target_is_the_behaviours_fqe_kept_beside_the_log
 def test_fqe_off_on_the_logged_behaviour_is_a_warning_and_withheld(sepsis, monkeypatch):
     """The direct method values the logged behaviour beside the policies; outside the
     interval of the log's mean return, the OPE says so and withholds FQE's values."""
-    from aoc_cli.ope import policies as ope_eval
+    from aoc_cli.ope import evaluate_block as ope_eval
 
     _root, store, _ = sepsis
     held = store.corpus("held")
@@ -350,7 +350,7 @@ def test_fqe_off_on_the_logged_behaviour_is_a_warning_and_withheld(sepsis, monke
 def test_fqe_is_given_the_history_the_policies_decide_from(sepsis, monkeypatch):
     """With a history length, FQE's Q is a function of the observation and the last steps'
     observations and actions (the propensity model's features), as the policy's decision is."""
-    from aoc_cli.ope import policies as ope_eval
+    from aoc_cli.ope import evaluate_block as ope_eval
 
     _root, store, _ = sepsis
     held = store.corpus("held")

@@ -9,10 +9,10 @@ import ray
 
 from aoc_cli.belief import BeliefConfig, train_model
 from aoc_cli.control import ControllerConfig, open_session
-from aoc_cli.corpus_index import build_index
+from aoc_cli.index import build_index
 from aoc_cli.envs import collect
 from aoc_cli.evaluation.ray import evaluate_on_ray
-from aoc_cli.evaluation.score import evaluate
+from aoc_cli.evaluation.score import score_log
 from aoc_cli.store import Store
 
 
@@ -51,7 +51,7 @@ def test_chunks_on_two_workers_give_the_single_process_result(ward, data):
     config = ControllerConfig()
     session = open_session(corpus, "value", config=config, seed=3)
     held = store.corpus(data)
-    one, res_one = evaluate(session, held, ["knn", "bc"], seed=3, chunk_steps=300)
+    one, res_one = score_log(session, held, ["knn", "bc"], seed=3, chunk_steps=300)
     two, res_two = evaluate_on_ray(root, "ward", data, "value", "default", config,
                                    ["knn", "bc"], seed=3, workers=2, chunk_steps=300)
     assert len(res_two.row) == held.n_rows

@@ -73,7 +73,7 @@ def test_pendulum_het_tiny_covers_every_method_task_and_the_data(tmp_path, bench
     # aoc-gamma0.9: the value belief on the return-to-go at gamma 0.9, whose index (the hull's
     # values v^c) holds that return-to-go, not the default model's gamma 0.99 one
     from aoc_cli.belief.targets import discounted_return_to_go
-    from aoc_cli.corpus_index import load_index
+    from aoc_cli.index import load_index
     short = load_model(corpus, "value-gamma0.9")
     assert (short.config.belief, short.config.gamma) == ("value", 0.9)
     want = discounted_return_to_go(corpus.rewards, corpus.episode_starts, 0.9)

@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from aoc_cli.experiments import sepsis_policies as sp
+from aoc_cli.baselines import sepsis_policies as sp
 from aoc_cli.experiments.sepsis import run_sepsis
 from aoc_cli.envs import icu_sepsis
 from aoc_cli.cli.errors import message
@@ -50,7 +50,7 @@ def test_tabular_policy_without_enough_counts_is_the_logged_modal_action():
 
 def test_spibb_copies_the_behaviour_where_it_bootstraps_and_improves_elsewhere():
     """The hand-made log above: in s3, a1 (twice, half die) and a7 (once, to s4, survives)."""
-    from aoc_cli.experiments.spibb import _model, spibb
+    from aoc_cli.baselines.spibb import _model, spibb
 
     states = np.array([3, 4, 3, 4, 3])
     actions = np.array([1, 2, 7, 2, 1])
@@ -125,7 +125,7 @@ def test_run_writes_the_table_with_the_references_and_log_policies(tmp_path):
         assert 0.7 < by[m]["value"] < by["optimal"]["value"]
         assert 0.0 <= by[m]["agree_one_step"] <= 1.0
         assert 0.0 <= by[m]["inadmissible_states"] <= 1.0
-    from aoc_cli.experiments.spibb import THRESHOLDS
+    from aoc_cli.baselines.spibb import THRESHOLDS
 
     assert by["spibb"]["kind"] == "exact" and 0.7 < by["spibb"]["value"] < by["optimal"]["value"]
     assert [r["n_wedge"] for r in report["rows"] if r["method"] == "spibb"][0] in THRESHOLDS

@@ -69,7 +69,7 @@ def test_wdr_with_a_cross_fitted_q_recovers_the_exact_value():
 def test_only_a_policy_whose_wdr_the_rule_can_show_gets_fold_fits():
     """fqe_values with the propensities: fold fits for a policy whose ESS meets the rule's 500
     (the behaviour itself here), none for one it withholds at any Q (a far greedy policy)."""
-    from aoc_cli.ope.policies import OPESettings
+    from aoc_cli.ope.evaluate_block import OPESettings
     from aoc_cli.ope.support import MIN_ESS
     from aoc_cli.ope.value import fqe_values
 

@@ -11,7 +11,7 @@ import pytest
 
 from aoc_cli.ope import estimators as ope
 from aoc_cli.ope.fqe import student_quantile
-from aoc_cli.ope.policies import OPESettings
+from aoc_cli.ope.evaluate_block import OPESettings
 from aoc_cli.ope.support import cell, min_ess, outside_returns, refusal, verdict
 from aoc_cli.ope.value import policy_value
 from tests.ope.mdps import SmallMDP
@@ -225,7 +225,7 @@ def test_the_improvement_of_a_better_policy_covers_the_true_difference():
 def test_a_small_ess_is_warned_of_only_beside_a_shown_importance_sampling_estimate():
     """The withheld cells already say "not estimable: ESS ..."; the warning on stderr is left
     for a shown PDWIS or WDR whose ESS is small (a rule given other settings)."""
-    from aoc_cli.ope.policies import warnings_for
+    from aoc_cli.ope.evaluate_block import warnings_for
 
     fqe = {"estimate": 0.8, "low": 0.78, "high": 0.82}
     withheld_is = {"ess": 4.6, "policy_value": {"pdwis": {"estimate": None, "reason": "ESS"},
@@ -264,7 +264,7 @@ def test_fqe_extrapolating_off_a_continuous_log_is_not_a_confident_verdict():
     narrow (0.137 [0.035, 0.239] against a truth near 0.7): "worse ... shown", a confident
     wrong verdict. With the log's neighbourhoods (no episode near any step took the dose) the
     interval is widened by the share hardly held, and the verdict is not shown."""
-    from aoc_cli.neighbours.neighbourhood import Neighbourhood
+    from aoc_cli.index.search.neighbourhood import Neighbourhood
 
     starts, rewards, obs, logged, surv = _noisy_two_step_log()
     log = ope.Log(starts, rewards)

@@ -24,7 +24,7 @@ def pristine(tmp_path_factory):
     from aoc_cli.belief.config import BeliefConfig
     from aoc_cli.belief.train import train_model
     from aoc_cli.envs import collect
-    from aoc_cli.corpus_index import build_index
+    from aoc_cli.index import build_index
     from aoc_cli.store import Store
 
     store = Store(root)
@@ -219,7 +219,7 @@ def test_a_corpus_folder_without_its_manifest_is_damaged_not_absent(store, aoc, 
 def test_a_failed_index_leaves_the_previous_beliefs_and_index(store, aoc, fail_in):
     """Issue 13, "Data lost" 4: the beliefs of a retrained model are staged with the index
     and swapped in only when everything succeeded."""
-    import aoc_cli.corpus_index.build as session
+    import aoc_cli.index.build as session
     from aoc_cli.belief.config import BeliefConfig
     from aoc_cli.belief.train import train_model
     from aoc_cli.store import Store

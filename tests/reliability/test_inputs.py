@@ -141,7 +141,7 @@ def test_collect_csv_into_the_store_is_refused(store, aoc):
 def test_jsonl_queries_that_are_not_numbers(tmp_path):
     from types import SimpleNamespace
 
-    from aoc_cli.control.explain import parse_query
+    from aoc_cli.explanation.decisions import parse_query
     from aoc_cli.errors import AocError
 
     corpus = SimpleNamespace(name="m", observation_dim=2, action_dim=2, discrete=False)

@@ -255,7 +255,7 @@ def fed_malformed_jsonl_queries(query, raw):
     """The explain query reader: an AocError (one line) or a query of the right shapes."""
     from types import SimpleNamespace
 
-    from aoc_cli.control.explain import parse_query
+    from aoc_cli.explanation.decisions import parse_query
     from aoc_cli.errors import AocError
 
     corpus = SimpleNamespace(name="m", observation_dim=2, action_dim=1, discrete=False)

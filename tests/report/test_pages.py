@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from tests.control.corpora import HOSTILE_TAGS, hostile_corridor_store
-from tests.control.test_whatif import maze  # noqa: F401 (fixture)
+from tests.explanation.test_whatif import maze  # noqa: F401 (fixture)
 
 HOSTILE_ID = "<img src=x onerror=alert(3)>"
 
