@@ -35,6 +35,10 @@ unless its own flag is given.
    decay by cross-validation over episodes: the lowest mean held-out log-loss among the
    candidates whose mean held-out ABC AUC is within 0.01 of the best
    (:mod:`aoc_cli.training.tuning`).
+7. **do no harm** (value mode, discrete actions, no finite state: rule 2 cannot run): the
+   controller keeps the clinicians' likely action unless another action's lower bound over
+   the log's nearest rows beats its value (:mod:`aoc_cli.index.search.neighbourhood`); off
+   where rule 2 runs.
 
 >>> ev = Evidence(rows=10_000, episodes=50, discrete=False, n_actions=None, rewards=True,
 ...               length_median=200.0, length_max=200, at_limit=0.98, repeats=0.2)
@@ -68,7 +72,7 @@ STATE_CAP, STATE_LEVEL = 0.01, 0.95
 #: The training settings a rule may decide (BeliefConfig fields; None when not given).
 TRAINING = ("mode", "belief", "gamma", "value", "dynamics_weight", "history_length")
 #: The controller settings a rule may decide (ControllerConfig fields).
-CONTROLLER = ("epsilon", "residual_cap", "support_penalty", "k")
+CONTROLLER = ("epsilon", "residual_cap", "support_penalty", "k", "do_no_harm")
 
 
 @dataclass(frozen=True)
@@ -159,6 +163,16 @@ def decide(ev: Evidence, given: dict) -> tuple[dict, list[dict]]:
         take("residual_cap", STATE_CAP, "a finite state the log revisits: an action is "
                                         "trusted only where the log took it in (nearly) that "
                                         "state")
+    if ev.discrete and ev.finite_states:
+        take("do_no_harm", "off", "a finite state the log revisits: rule 2's exact-repeat "
+                                  "bound ranks the actions and rule 6 chooses on held-out "
+                                  "episodes")
+    elif ev.discrete:
+        take("do_no_harm", "on", f"observations recur at {ev.repeats:.0%} of the rows, too "
+                                 "few for rule 2's exact repeats: each action is ranked by "
+                                 "its lower bound over the log's nearest rows, and the "
+                                 "clinicians' likely action is kept unless another's bound "
+                                 "beats its value (rule 7)")
     if ev.time_limit and value_belief:
         take("gamma", horizon_gamma(ev.length_max),
              f"{ev.at_limit:.0%} of the episodes stop at {ev.length_max} steps (a time limit): "

@@ -75,7 +75,7 @@ def test_rule_2_a_finite_state_revisited():
              at_limit=0.001)
     out, _ = decide(ev, {})
     assert out == {"mode": "value", "history_length": 0, "value": "fqe", "gamma": 1.0,
-                   "residual_cap": evidence.STATE_CAP}
+                   "residual_cap": evidence.STATE_CAP, "do_no_harm": "off"}
     # the penalty is measured once the row values exist (state_penalty, below)
     from aoc_cli.belief.config import BeliefConfig
 
@@ -86,8 +86,13 @@ def test_rule_2_a_finite_state_revisited():
     out, _ = decide(ev, {"gamma": 0.9, "support_penalty": 1.0})
     assert "gamma" not in out and "support_penalty" not in out and out["value"] == "fqe"
     assert "value" not in decide(ev, {"belief": "critic"})[0]
-    # observations that do not recur: none of it
-    assert decide(_ev(discrete=True, n_actions=25), {})[0] == {"mode": "value"}
+    # observations that do not recur: none of it, and rule 7 keeps the clinicians' likely
+    # action unless a bound beats it
+    out, why = decide(_ev(discrete=True, n_actions=25), {})
+    assert out == {"mode": "value", "do_no_harm": "on"}
+    assert "rule 7" in why[-1]["why"] and why[-1]["setting"] == "do_no_harm"
+    # continuous actions: no rule 7
+    assert "do_no_harm" not in decide(_ev(discrete=False), {})[0]
 
 
 def _noise_by_hand(obs, actions, rewards, starts, values, gamma, censored=None):
@@ -244,12 +249,14 @@ def test_the_controller_settings_travel_with_the_model(aoc, store, tmp_path):
     metrics = json.loads(out)
     z = metrics["settings"]["support_penalty"]["value"]
     assert metrics["controller"] == {"residual_cap": 0.01, "support_penalty": z,
-                                     "k": 2 * (_saved(s, "icu")["config"]["belief_dim"] + 1)}
+                                     "k": 2 * (_saved(s, "icu")["config"]["belief_dim"] + 1),
+                                     "do_no_harm": "off"}
     assert 1.0 < z < 20.0  # the log's noise over the values' spread, times z_25 = 2.88
     assert _saved(s, "icu")["config"]["history_length"] == 0
     assert aoc("index", "icu", "--format", "json")[0] == 0
     own = aoc_cli.open_session("icu", store=store).controller.config
-    assert (own.residual_cap, own.support_penalty, own.epsilon) == (0.01, z, 0.5)
+    assert (own.residual_cap, own.support_penalty, own.epsilon, own.do_no_harm) == \
+        (0.01, z, 0.5, "off")
     flag = aoc_cli.open_session("icu", store=store,
                                 controller={"support_penalty": 0.0}).controller.config
     assert (flag.residual_cap, flag.support_penalty) == (0.01, 0.0)
