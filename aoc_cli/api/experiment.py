@@ -12,6 +12,7 @@ from aoc_cli.api.common import Log, StoreLike, open_store
 from aoc_cli.control.config import ControllerLike, given_settings
 from aoc_cli.errors import BadSetting, param
 from aoc_cli.experiments import ORDER, expected_seconds, run_experiment
+from aoc_cli.experiments.cohort import run_cohort
 from aoc_cli.experiments.runner import SIZED, VARIED, check
 from aoc_cli.experiments.sepsis import run_sepsis
 from aoc_cli.experiments.ward import run_ward
@@ -42,19 +43,21 @@ def bench(experiment: str, *, store: StoreLike = None, scale: str = "full",
           controller: ControllerLike = None, sizes: Sequence[int] | None = None, behaviour: str = "mix",
           bench_store: str | os.PathLike = "bench/store", workers: int | None = None,
           ray_address: str | None = None, source: str = "ward",
-          progress: Progress | None = None, log: Log | None = None) -> Benched:
+          noise: Sequence[float] | None = None, progress: Progress | None = None,
+          log: Log | None = None) -> Benched:
     """Run ``experiment`` (pendulum-het, epsilon, k, maze-adapt, two-gates, lunar, ood, all,
-    ward, icu-sepsis, icu-sepsis-terminate) at ``scale`` (full, quick: <= 15 min each, tiny:
-    seconds) with ``seeds`` seeds (ward: patient splits) and ``episodes`` per evaluation;
-    ``methods``: a subset of the methods; ``controller``: AOC's controller settings (a
-    ControllerConfig or a mapping of its fields; None: not given) over each experiment's own
+    ward, icu-sepsis, icu-sepsis-terminate, icu-cohort) at ``scale`` (full, quick: <= 15 min
+    each, tiny: seconds) with ``seeds`` seeds (ward: patient splits) and ``episodes`` per
+    evaluation; ``methods``: a subset of the methods; ``controller``: AOC's controller settings
+    (a ControllerConfig or a mapping of its fields; None: not given) over each experiment's own
     (the paper's; maze-adapt at epsilon 0.1) in the rollout experiments, each but the one an
-    experiment varies; ``sizes``: rows per corpus (pendulum-het, lunar),
-    episodes per log (icu-sepsis) or the patients of ward's log (one count). Writes results.csv, summary.md, summary.json and plots to
-    ``out`` (default bench/EXPERIMENT; ``all``: out/EXPERIMENT); corpora and models go to
-    ``bench_store`` and are reused. ``source``: ward's log, ``ward`` (the simulated ward) or
-    ``medkit`` (medkit-learn's ward simulator; the ``medkit`` extra). ``log``: the expected
-    time, each experiment's outputs."""
+    experiment varies; ``sizes``: rows per corpus (pendulum-het, lunar), episodes per log
+    (icu-sepsis), stays per cohort (icu-cohort) or the patients of ward's log (one count);
+    ``noise``: icu-cohort's feature noise sds (default: the scale's). Writes results.csv,
+    summary.md, summary.json and plots to ``out`` (default bench/EXPERIMENT; ``all``:
+    out/EXPERIMENT); corpora and models go to ``bench_store`` and are reused. ``source``:
+    ward's log, ``ward`` (the simulated ward) or ``medkit`` (medkit-learn's ward simulator; the
+    ``medkit`` extra). ``log``: the expected time, each experiment's outputs."""
     note = log or (lambda _text: None)
     if out is not None:
         check_output(out, "out", open_store(store).root, folder=True)
@@ -68,6 +71,9 @@ def bench(experiment: str, *, store: StoreLike = None, scale: str = "full",
     if source != "ward" and experiment != "ward":
         raise BadSetting("source", source, f"{param('source')} is ward's alone (the log it "
                          f"reads), not {experiment}'s")
+    if noise is not None and experiment != "icu-cohort":
+        raise BadSetting("noise", list(noise), f"{param('noise')} is icu-cohort's alone (its "
+                         f"feature noise), not {experiment}'s")
     if experiment == "ward":  # imitation on a log: splits, not rollouts (experiments/ward.py)
         _no_controller(experiment, given)
         if seeds is not None and seeds < 1:
@@ -86,6 +92,15 @@ def bench(experiment: str, *, store: StoreLike = None, scale: str = "full",
         _no_controller(experiment, given)
         report = run_sepsis(Path(out) if out is not None else Path("bench") / experiment,
                             bench_store, scale, seeds, chosen, sizes, experiment, log=note,
+                            progress=progress)
+        note(f"{experiment}: wrote {report['out']}/results.csv, summary.md and summary.json in "
+             f"{duration(report['seconds'])}")
+        return Benched(experiment, scale, report["summary"], None)
+    if experiment == "icu-cohort":  # true survival through the cohort's noise (cohort.py)
+        _no_controller(experiment, given)
+        report = run_cohort(Path(out) if out is not None else Path("bench") / experiment,
+                            bench_store, scale, seeds, chosen, sizes,
+                            list(noise) if noise is not None else None, episodes, log=note,
                             progress=progress)
         note(f"{experiment}: wrote {report['out']}/results.csv, summary.md and summary.json in "
              f"{duration(report['seconds'])}")
@@ -122,7 +137,7 @@ def bench(experiment: str, *, store: StoreLike = None, scale: str = "full",
 
 
 def _no_controller(experiment: str, given: dict) -> None:
-    """ward and icu-sepsis run their own controller: a setting given is an error."""
+    """ward, icu-sepsis and icu-cohort run their own controller: a setting given is an error."""
     if given:
         key = sorted(given)[0]
         raise BadSetting(key, given[key], f"{param(key)} applies to the rollout experiments, "

@@ -1,4 +1,4 @@
-"""Black-box offline RL from d3rlpy (the ``bench`` extra): TD3+BC, CQL and BCQ.
+"""Black-box offline RL from d3rlpy (the ``bench`` extra): TD3+BC, CQL, BCQ and BC.
 
 The paper's "model-free RL" baseline is TD3 with a recurrent context encoder. aoc uses the
 offline-RL algorithms of d3rlpy 2.8 rather than a home-made copy:
@@ -12,7 +12,10 @@ offline-RL algorithms of d3rlpy 2.8 rather than a home-made copy:
   ``min_Q  alpha E_s[ log sum_a exp Q(s, a) - E_{a ~ D} Q(s, a) ] + TD error``;
 * BCQ (Fujimoto et al. 2019), ``d3rlpy.algos.DiscreteBCQConfig`` for discrete actions (Q
   learning restricted to the actions an imitation head gives at least ``tau`` times the
-  likeliest one's probability), ``BCQConfig`` for continuous ones.
+  likeliest one's probability), ``BCQConfig`` for continuous ones;
+* BC, ``d3rlpy.algos.DiscreteBCConfig`` (``BCConfig`` for continuous actions) at d3rlpy's
+  defaults: a classifier (regressor) of the logged action, for ``aoc bench icu-cohort`` (the
+  ``bc`` baseline of ``aoc rollout`` is the imitation-mode belief model, :mod:`.bc`).
 
 The agents' state is the same context AOC sees: the standardised observation and the flattened,
 standardised history of the previous L transitions (see :mod:`aoc_cli.baselines.features`), so
@@ -32,7 +35,7 @@ from aoc_cli.errors import AocError
 from aoc_cli.settings import Settings, setting
 from aoc_cli.threads import thread_limits
 
-ALGOS = ("td3bc", "cql", "bcq")
+ALGOS = ("td3bc", "cql", "bcq", "bc")
 #: The discrete agents' settings where d3rlpy's defaults are Atari's (learning rate 6.25e-5, the
 #: target network copied every 8,000 steps): with a bench budget of 5,000-20,000 steps the
 #: target would be copied 0-2 times, too few to carry a return through episodes of ~10 steps.
@@ -101,7 +104,7 @@ def corpus_dataset(corpus, features: RawFeatures):
 
 def train_agent(algo: str, corpus, history_length: int, config: OfflineRLConfig,
                 bounds: tuple[np.ndarray, np.ndarray] | None = None, progress=None):
-    """Train a d3rlpy ``algo`` (td3bc | cql) on ``corpus`` with ``config.threads`` torch
+    """Train a d3rlpy ``algo`` (td3bc | cql | bcq | bc) on ``corpus`` with ``config.threads`` torch
     threads (for the fit only, aoc_cli.threads); returns (agent, features)."""
     d3rlpy = require("d3rlpy", algo)
 
@@ -128,6 +131,9 @@ def _fit_agent(d3rlpy, algo: str, corpus, history_length: int, config: OfflineRL
             maximum=np.asarray(high, np.float32).reshape(-1))
     if algo == "td3bc":
         agent = d3rlpy.algos.TD3PlusBCConfig(**common).create(device="cpu:0")
+    elif algo == "bc":
+        bc = d3rlpy.algos.DiscreteBCConfig if corpus.discrete else d3rlpy.algos.BCConfig
+        agent = bc(**common).create(device="cpu:0")
     elif algo == "bcq" and not corpus.discrete:
         agent = d3rlpy.algos.BCQConfig(**common).create(device="cpu:0")
     elif corpus.discrete:

@@ -23,7 +23,9 @@ def register(app: typer.Typer) -> None:
             ..., help="pendulum-het, epsilon, k, maze-adapt, two-gates, lunar, ood, all, "
                       "ward (ABC against BC, kNN and the majority on held-out patients), or "
                       "icu-sepsis, icu-sepsis-terminate (AOC against BC, kNN, CQL, BCQ on "
-                      "clinicians' logs, valued exactly)."),
+                      "clinicians' logs, valued exactly), icu-cohort (AOC against BC, CQL, "
+                      "SPIBB told the state and the clinicians on noisy cohorts, by true "
+                      "survival)."),
         quick: bool = typer.Option(False, "--quick", help="A reduced run (<= 15 min each)."),
         tiny: bool = typer.Option(False, "--tiny", help="A smoke-test run (seconds; no effect "
                                                         "to read from it)."),
@@ -37,8 +39,12 @@ def register(app: typer.Typer) -> None:
         sizes: Optional[str] = typer.Option(
             None, "--sizes", help="pendulum-het, lunar: comma-separated rows per corpus "
                                   "instead of the scale's (e.g. 100000, the paper's Low-Data); "
-                                  "icu-sepsis: episodes per log (e.g. 1000,10000); ward: "
-                                  "patients in its log (one count)."),
+                                  "icu-sepsis: episodes per log (e.g. 1000,10000); "
+                                  "icu-cohort: stays per cohort; ward: patients in its log "
+                                  "(one count)."),
+        noise: Optional[str] = typer.Option(
+            None, "--noise", help="icu-cohort: comma-separated feature noise sds instead of "
+                                  "the scale's (e.g. 0.3)."),
         behaviour: str = typer.Option(
             "mix", "--behaviour", help="pendulum-het, lunar: mix (the task's behaviour "
                                        "policies) or replay (an agent that starts random and "
@@ -64,7 +70,8 @@ def register(app: typer.Typer) -> None:
                 methods=[m.strip() for m in methods.split(",") if m.strip()] if methods else None,
                 out=out, controller=controller, sizes=_sizes(sizes),
                 behaviour=behaviour, bench_store=bench_store, workers=workers,
-                ray_address=ray_address, source=source, progress=bar, log=message)
+                ray_address=ray_address, source=source, noise=_noise(noise),
+                progress=bar, log=message)
         write_records(done.rows, fmt, columns=done.columns,
                       title=f"aoc bench {experiment} ({scale})")
 
@@ -77,3 +84,13 @@ def _sizes(text: str | None) -> list[int] | None:
         return [int(float(part)) for part in text.split(",") if part.strip()]
     except ValueError:
         raise AocError(f"--sizes must be comma-separated row counts, got {text!r}") from None
+
+
+def _noise(text: str | None) -> list[float] | None:
+    """``--noise 0,0.3`` -> [0.0, 0.3]; anything else is a one-line error."""
+    if text is None:
+        return None
+    try:
+        return [float(part) for part in text.split(",") if part.strip()]
+    except ValueError:
+        raise AocError(f"--noise must be comma-separated numbers, got {text!r}") from None
