@@ -34,7 +34,9 @@ _WHERE = {
     "explain": "explanation", "explain_queries": "explanation",
     "explain_recorded": "explanation", "explain_logged": "explanation",
     "explain_steps": "explanation", "Explained": "explanation",
-    "evaluate": "evaluation",
+    "evaluate": "evaluation", "Evaluation": "evaluation",
+    "Store": "common", "ControllerConfig": "common", "BeliefConfig": "common",
+    "Session": "session", "Decision": "session",
     "bench": "experiment", "Benched": "experiment",
 }
 

@@ -161,9 +161,12 @@ def evaluate_session(session, held_out, *, names: Sequence[str] = ("knn", "bc"),
                      without_episodes: list[str] | None = None,
                      steps_file: PathLike | None = None, html: PathLike | None = None,
                      pages: PathLike | None = None, by: str | None = None, top: int = TOP,
-                     progress: Progress | None = None) -> Evaluation:
+                     progress: Progress | None = None, store_root=None) -> Evaluation:
     """:func:`evaluate` with an open session (its model, index and controller) on held-out
-    corpus ``held_out``, in this process (``Session.evaluate``)."""
+    corpus ``held_out``, in this process (``Session.evaluate``); ``store_root``: the report's
+    paths checked against it first."""
+    if store_root is not None:
+        _check_report(html, pages, store_root)
     corpus = session.corpus
     removal = removal_of(corpus, without, without_episodes)
     check_by(held_out, by)
