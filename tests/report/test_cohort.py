@@ -14,7 +14,6 @@ import pytest
 
 from aoc_cli.belief import BeliefConfig, train_model
 from aoc_cli.envs import collect
-from aoc_cli.evaluation.cohort import cohort
 from aoc_cli.index import build_index
 from aoc_cli.report.cohort import cohort_page
 from aoc_cli.store import Store
@@ -175,4 +174,3 @@ def test_the_cohort_data_of_a_bad_by_and_top(aoc_inproc, corridor, tmp_path):
     code, _out, err = aoc_inproc("--store", str(corridor), "evaluate", "corridor", "--data",
                                  "corridor", "--pages", str(tmp_path))
     assert code == 2 and "--html" in err
-    assert callable(cohort)
