@@ -9,6 +9,7 @@ entry per command, re-exported here: ``aoc_cli.train(...)``, ``aoc_cli.open_sess
 __version__ = "0.1.0"
 
 from aoc_cli.errors import AocError  # noqa: E402
+from aoc_cli.lazy import exports  # noqa: E402
 
 #: The entries of :mod:`aoc_cli.api`, loaded on first use (PEP 562): ``import aoc_cli`` and
 #: ``aoc --help`` stay light (no torch, FAISS or environments until an entry is called).
@@ -16,16 +17,13 @@ API = ("ingest", "split", "collect", "train", "build_index", "open_session", "ro
        "explain", "explain_queries", "explain_recorded", "explain_logged", "explain_steps",
        "evaluate", "bench", "verify", "export", "tasks", "info", "corpora")
 
-__all__ = ["AocError", "__version__", *API]
+#: The library's types, loaded the same way: the store, the settings of a model and of its
+#: controller, the session a notebook works in and the results it shows.
+TYPES = ("Store", "BeliefConfig", "ControllerConfig", "Session", "Decision", "Explained",
+         "Evaluation")
 
+__all__ = ["AocError", "__version__", *API, *TYPES]
 
-def __getattr__(name: str):
-    if name in API:
-        from aoc_cli import api  # lazy: import aoc_cli loads no entry (tests/test_api.py)
-
-        return getattr(api, name)
-    raise AttributeError(f"module 'aoc_cli' has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(API))
+# each name is aoc_cli.api's, loaded on first use (aoc_cli.lazy): import aoc_cli loads no entry
+# (tests/test_api.py)
+__getattr__, __dir__ = exports(__name__, {name: "api" for name in API + TYPES})

@@ -3,9 +3,10 @@ job (locks, existence checks, settings, the session) and returning data, never p
 
 >>> import aoc_cli
 >>> aoc_cli.collect("two-gates", "gates", episodes=40, store="corpora")     # doctest: +SKIP
->>> aoc_cli.train("gates", store="corpora", max_epochs=20)                 # doctest: +SKIP
+>>> aoc_cli.train("gates", store="corpora", belief={"max_epochs": 20})    # doctest: +SKIP
 >>> aoc_cli.build_index("gates", store="corpora")                         # doctest: +SKIP
 >>> session = aoc_cli.open_session("gates", store="corpora", env="two-gates")  # doctest: +SKIP
+>>> session.explain(data="gates", episode=0, step=3)                   # doctest: +SKIP
 
 Every entry takes ``store=``: a :class:`aoc_cli.store.Store`, a folder, or None (``$AOC_STORE``,
 else ``./corpora``). ``progress=``: an :class:`aoc_cli.progress.Progress` callable; ``log=``:
@@ -13,8 +14,10 @@ a function of one line of text, for the notes a command prints on stderr. Errors
 :class:`aoc_cli.errors.AocError`. The ``aoc`` commands parse their options, make one call
 here and print what it returns (aoc_cli/cli/); docs/design.md, "Library API", lists them.
 The entries live in data.py (ingest, info, verify, export), collection.py (collect, tasks),
-model.py (train, build_index), control.py (open_session, rollout), explanation.py (explain
-and its entries per source), evaluation.py
+model.py (train, build_index), control.py (open_session, rollout), session.py (the Session
+open_session returns: explain and evaluate on what it loaded), explanation.py (explain
+and its entries per source, Explained), evaluation.py (evaluate, Evaluation), common.py (the
+types Store, ControllerConfig, BeliefConfig)
 and experiment.py (bench), each loaded when its entry is first used. No module here is named
 after an entry: importing a submodule binds its name in this package, which would hide the
 entry of that name.
@@ -34,7 +37,9 @@ _WHERE = {
     "explain": "explanation", "explain_queries": "explanation",
     "explain_recorded": "explanation", "explain_logged": "explanation",
     "explain_steps": "explanation", "Explained": "explanation",
-    "evaluate": "evaluation",
+    "evaluate": "evaluation", "Evaluation": "evaluation",
+    "Store": "common", "ControllerConfig": "common", "BeliefConfig": "common",
+    "Session": "session", "Decision": "session",
     "bench": "experiment", "Benched": "experiment",
 }
 

@@ -5,8 +5,12 @@ from __future__ import annotations
 import os
 from typing import Callable
 
+from aoc_cli.belief.config import BeliefConfig
 from aoc_cli.control.config import ControllerConfig, ControllerLike, given_settings
 from aoc_cli.store import Store
+
+__all__ = ["BeliefConfig", "ControllerConfig", "Log", "Store", "StoreLike", "controller_config",
+           "open_store"]
 
 #: ``store=``: a Store, a folder, or None ($AOC_STORE, else ./corpora).
 StoreLike = Store | str | os.PathLike | None

@@ -9,7 +9,8 @@ from pathlib import Path
 
 from aoc_cli.api.common import StoreLike, controller_config, open_store
 from aoc_cli.baselines import make_baseline
-from aoc_cli.control import EpisodeResult, Session, model_free_session, rollout as _rollout
+from aoc_cli.api.session import Session
+from aoc_cli.control import EpisodeResult, model_free_session, rollout as _rollout
 from aoc_cli.control.config import ControllerLike
 from aoc_cli.control import open_session as _open_session
 from aoc_cli.control.episodes import action_space_of
@@ -38,12 +39,16 @@ def open_session(name: str, *, store: StoreLike = None, model: str | None = None
     evidence, else the paper's). ``env``: a built-in task or gymnasium id whose action box
     applies (default: the corpus's).
     ``session.controller.decide(observation (d_o,), history (L, d_o + d_a + 1))`` -> a
-    Decision (action, value, residual, supporting rows and weights)."""
-    corpus = open_store(store).corpus(name)
+    Decision (action, value, residual, supporting rows and weights); ``session.explain(...)``
+    and ``session.evaluate(...)`` reuse the model and index it has loaded
+    (:class:`aoc_cli.api.session.Session`)."""
+    s = open_store(store)
+    corpus = s.corpus(name)
     config = controller_config(controller)
     action_space = action_space_of(make_env(env)) if env is not None else None
-    return _open_session(corpus, model, index_id, config, row_selection(corpus, select, exclude),
-                         seed, action_space)
+    return Session.of(_open_session(corpus, model, index_id, config,
+                                    row_selection(corpus, select, exclude), seed,
+                                    action_space), s)
 
 
 @dataclass

@@ -12,7 +12,7 @@ weights and residual behind each; the library is :mod:`aoc_cli.explanation.decis
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from aoc_cli.api.common import StoreLike, controller_config, open_store
@@ -25,19 +25,56 @@ from aoc_cli.explanation.decisions import explain_recorded as _explain_recorded
 from aoc_cli.explanation.decisions import recorded_session
 from aoc_cli.explanation.pages import check_html, steps_overview, write_html
 from aoc_cli.explanation.whatif import removal as removal_of
+from aoc_cli.report.decision_page import PageContext, decision_section
+from aoc_cli.report.html import esc, fragment
 from aoc_cli.store import DEFAULT_INDEX
 
 PathLike = str | os.PathLike
 
 
-@dataclass
+@dataclass(repr=False)
 class Explained:
     """One record per decision explained (action, value, residual, the minimal corpus subset
-    with weights, warnings, the contrast, the what-if), and the HTML page written, if any."""
+    with weights, warnings, the contrast, the what-if), and the HTML page written, if any.
+    In a notebook it shows the decision page's body (``_repr_html_``); ``to_frame()`` is one
+    row per supporting row of each record (pandas)."""
 
     corpus: str
     records: list[dict]
     html: Path | None = None
+    #: The corpus itself and the one a logged step was read from (the page reads them).
+    source_corpus: object = field(default=None, compare=False)
+    data_corpus: object = field(default=None, compare=False)
+
+    def __repr__(self) -> str:
+        parts = []
+        for rec in self.records[:3]:
+            value = "" if rec.get("value") is None else f" value {rec['value']:.4g}"
+            parts.append(f"{rec.get('role', 'decision')}: action {rec['action']}{value}, "
+                         f"residual {rec['residual']:.3g}, {len(rec['support'])} rows")
+        more = f"; +{len(self.records) - 3} more" if len(self.records) > 3 else ""
+        page = f", html={str(self.html)!r}" if self.html is not None else ""
+        return f"Explained({self.corpus!r}: {'; '.join(parts) or 'no records'}{more}{page})"
+
+    def _repr_html_(self) -> str:
+        if self.source_corpus is None or not self.records:
+            return f"<pre>{esc(repr(self))}</pre>"
+        ctx = PageContext(self.source_corpus, self.data_corpus)
+        return fragment("".join(decision_section(rec, ctx, f"decision-{i}")
+                                for i, rec in enumerate(self.records)))
+
+    def to_frame(self):
+        """One row per supporting row of each record: the record's index, role, action,
+        value and residual beside the row's episode, step, action, value and weight."""
+        import pandas as pd  # a notebook's library, imported only here
+
+        rows = [{"record": i, "role": rec.get("role", "decision"),
+                 "decision": rec["action"], "decision_value": rec.get("value"),
+                 "residual": rec["residual"], "row": s["row"], "episode": s["episode"],
+                 "episode_id": s.get("episode_id"), "step": s["step"], "action": s["action"],
+                 "value": s.get("value"), "weight": s["weight"]}
+                for i, rec in enumerate(self.records) for s in rec["support"]]
+        return pd.DataFrame(rows)
 
 
 def explain_queries(name: str, queries: PathLike, *, store: StoreLike = None,
@@ -158,4 +195,5 @@ def _written(corpus, records: list[dict], html, **page) -> Explained:
     """The records, and the decision page written where ``html`` says."""
     if html is not None:
         write_html(Path(html), records, corpus, **page)
-    return Explained(corpus.name, records, None if html is None else Path(html))
+    return Explained(corpus.name, records, None if html is None else Path(html), corpus,
+                     page.get("source"))

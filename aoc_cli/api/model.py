@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import warnings
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
 
 from aoc_cli.api.common import Log, StoreLike, open_store
 from aoc_cli.belief.config import BeliefConfig
@@ -15,49 +17,96 @@ from aoc_cli.errors import BadSetting, param
 from aoc_cli.progress import Progress
 from aoc_cli.store import DEFAULT_INDEX, DEFAULT_MODEL
 
-_D = BeliefConfig()  # the paper's settings: the defaults of train()
+#: train()'s flat keyword arguments of BeliefConfig's fields, kept for a release: give them
+#: as ``belief={...}`` (or a BeliefConfig) instead.
+FLAT = ("mode", "value", "gamma", "history_length", "dynamics_weight", "hidden", "weight_decay",
+        "label_smoothing", "belief_dim", "max_epochs", "batch_size", "lr", "patience",
+        "val_fraction", "seed", "threads", "dropout", "class_weight", "critic_steps",
+        "critic_bc_weight", "device")
+BeliefLike = BeliefConfig | Mapping | str | None
 
 
 def train(name: str, *, store: StoreLike = None, model: str = DEFAULT_MODEL,
-          mode: str | None = None, belief: str | None = None, value: str | None = None,
-          gamma: float | None = None, history_length: int | None = None,
-          dynamics_weight: float | None = None, hidden: int | None = None,
-          weight_decay: float | None = None, label_smoothing: float | None = None,
-          belief_dim: int = _D.belief_dim, max_epochs: int = _D.max_epochs,
-          batch_size: int = _D.batch_size, lr: float = _D.lr, patience: int = _D.patience,
-          val_fraction: float = _D.val_fraction, seed: int = _D.seed,
-          threads: int | None = None, dropout: float = _D.dropout,
-          class_weight: str = _D.class_weight, critic_steps: int | None = None,
-          critic_bc_weight: float = _D.critic_bc_weight, device: str = _D.device,
-          paper: bool = False, no_select: bool = False,
-          overwrite: bool = False, progress: Progress | None = None,
-          log: Log | None = None, controller: ControllerLike = None) -> Trained:
-    """Train the belief model ``model`` of corpus ``name`` (``aoc train``): ``mode`` value
-    (AOC: b(o, a, h) predicts ``value``) or imitation (ABC: b(o, h) predicts the action).
-    Settings left None are decided from the log's evidence (:mod:`aoc_cli.training.evidence`:
-    rewards or none, discrete actions, the episodes' lengths, how often observations recur),
-    then chosen by validation on a small log (history_length, hidden, weight_decay), else the
-    paper's; ``paper``: the paper's for all; ``no_select``: no choice by validation. The
-    controller settings the evidence decides are saved with the model. The other arguments are :class:`~aoc_cli.belief.BeliefConfig`'s
-    (``belief_dim`` d_b, ``max_epochs``, ``device`` auto|cpu|cuda, ...). One writer per
-    model id; ``overwrite`` replaces one. ``controller``: controller settings to save with the
-    model (a mapping or ControllerConfig of epsilon, residual_cap, support_penalty, k; None
-    values: decided), instead of those the evidence decides or the validation episodes
-    choose (:mod:`aoc_cli.training.controller_selection`). Returns
+          belief: BeliefLike = None, controller: ControllerLike = None,
+          paper: bool = False, no_select: bool = False, overwrite: bool = False,
+          progress: Progress | None = None, log: Log | None = None,
+          mode: str | None = None, value: str | None = None, gamma: float | None = None,
+          history_length: int | None = None, dynamics_weight: float | None = None,
+          hidden: int | None = None, weight_decay: float | None = None,
+          label_smoothing: float | None = None, belief_dim: int | None = None,
+          max_epochs: int | None = None, batch_size: int | None = None, lr: float | None = None,
+          patience: int | None = None, val_fraction: float | None = None,
+          seed: int | None = None, threads: int | None = None, dropout: float | None = None,
+          class_weight: str | None = None, critic_steps: int | None = None,
+          critic_bc_weight: float | None = None, device: str | None = None) -> Trained:
+    """Train the belief model ``model`` of corpus ``name`` (``aoc train``). ``belief``: the
+    belief's settings, as ``controller=`` takes the controller's: a mapping of
+    :class:`~aoc_cli.belief.BeliefConfig`'s fields (``{"mode": "imitation", "max_epochs":
+    20}``: the settings given), a BeliefConfig (taken whole: every field given, the evidence
+    decides none of them), or a string, the belief's kind (value, critic, reward, dynamics;
+    as before). ``mode`` value (AOC: b(o, a, h) predicts ``value``) or imitation (ABC: b(o,
+    h) predicts the action). Settings not given are decided from the log's evidence
+    (:mod:`aoc_cli.training.evidence`: rewards or none, discrete actions, the episodes'
+    lengths, how often observations recur), then chosen by validation on a small log
+    (history_length, hidden, weight_decay), else the paper's; ``paper``: the paper's for all;
+    ``no_select``: no choice by validation. The controller settings the evidence decides are
+    saved with the model. One writer per model id; ``overwrite`` replaces one.
+    ``controller``: controller settings to save with the model (a mapping or ControllerConfig
+    of epsilon, residual_cap, support_penalty, k; None values: decided), instead of those the
+    evidence decides or the validation episodes choose
+    (:mod:`aoc_cli.training.controller_selection`). The flat keyword arguments (``mode=``,
+    ``max_epochs=``, ...) still work for this release, with a DeprecationWarning. Returns
     :class:`~aoc_cli.training.fit.Trained` (``.metrics`` as saved)."""
-    settings = dict(mode=mode, belief=belief, value=value, gamma=gamma,
-                    history_length=history_length, dynamics_weight=dynamics_weight,
-                    hidden=hidden, weight_decay=weight_decay, label_smoothing=label_smoothing,
-                    belief_dim=belief_dim, max_epochs=max_epochs, batch_size=batch_size, lr=lr,
-                    patience=patience, val_fraction=val_fraction, seed=seed, threads=threads,
-                    dropout=dropout, class_weight=class_weight, critic_steps=critic_steps,
-                    critic_bc_weight=critic_bc_weight, device=device)
+    flat = {k: v for k, v in dict(
+        mode=mode, value=value, gamma=gamma, history_length=history_length,
+        dynamics_weight=dynamics_weight, hidden=hidden, weight_decay=weight_decay,
+        label_smoothing=label_smoothing, belief_dim=belief_dim, max_epochs=max_epochs,
+        batch_size=batch_size, lr=lr, patience=patience, val_fraction=val_fraction, seed=seed,
+        threads=threads, dropout=dropout, class_weight=class_weight,
+        critic_steps=critic_steps, critic_bc_weight=critic_bc_weight,
+        device=device).items() if v is not None}
+    if flat:
+        warnings.warn(f"train({', '.join(f'{k}=' for k in flat)}): give the belief's settings "
+                      f"as belief={{{', '.join(repr(k) + ': ...' for k in flat)}}} (or a "
+                      "BeliefConfig); the flat keyword arguments go in a later release",
+                      DeprecationWarning, stacklevel=2)
+    settings = {**flat, **belief_given(belief, flat)}
     check_settings(settings)  # bad settings fail before the store is read
     given = controller_given(controller)
     corpus = open_store(store).corpus(name)
     return train_corpus(corpus, model, paper=paper, select_settings=not no_select,
                         overwrite=overwrite, progress=progress, log=log, controller=given,
                         choose_controller=True, **settings)
+
+
+def belief_given(belief: BeliefLike, flat: dict | None = None) -> dict:
+    """The belief settings ``belief`` gives, {field: value}: a string is the belief's kind; a
+    BeliefConfig's every field; a mapping's fields that are not None. A key that is no field
+    of BeliefConfig, or one given twice (here and as a flat keyword argument), is a
+    BadSetting."""
+    if belief is None:
+        return {}
+    if isinstance(belief, str):
+        return {"belief": belief}
+    if isinstance(belief, BeliefConfig):
+        given = belief.to_dict()
+    elif isinstance(belief, Mapping):
+        known = {f.name for f in fields(BeliefConfig)}
+        unknown = sorted(set(belief) - known)
+        if unknown:
+            raise BadSetting(unknown[0], belief[unknown[0]],
+                             f"unknown belief setting {param(unknown[0])}: the settings are "
+                             f"{', '.join(sorted(known))}")
+        given = {k: v for k, v in belief.items() if v is not None}
+    else:
+        raise BadSetting("belief", belief, f"{param('belief')} must be a BeliefConfig, a "
+                         f"mapping of its settings or the belief's kind, got "
+                         f"{type(belief).__name__}")
+    twice = sorted(set(given) & set(flat or {}))
+    if twice:
+        raise BadSetting(twice[0], given[twice[0]], f"{param(twice[0])} is given twice: in "
+                         f"{param('belief')} and as a keyword argument")
+    return given
 
 
 def controller_given(controller: ControllerLike) -> dict:

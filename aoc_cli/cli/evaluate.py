@@ -16,7 +16,7 @@ from aoc_cli.cli.common import (CorpusArgument, FormatOption, IndexOption, Model
 from aoc_cli.cli.fields import from_field
 from aoc_cli.errors import warn
 from aoc_cli.ope.evaluate_block import OPESettings
-from aoc_cli.cli.output import ProgressBar, resolve_format
+from aoc_cli.cli.output import ProgressBar, message, resolve_format
 from aoc_cli.cli.evaluate_view import write_evaluation
 from aoc_cli.settings import SMALL_LOG_ROWS
 from aoc_cli.store import DEFAULT_INDEX
@@ -58,6 +58,22 @@ def register(app: typer.Typer) -> None:
         ray_address: RayAddressOption = None,
         without: WithoutOption = None,
         without_episodes: WithoutEpisodesOption = None,
+        html: Annotated[Optional[Path], typer.Option(
+            "--html", help="Also write the cohort report to this HTML file (self-contained: "
+                           "the verdict, a forest plot of every estimate with its interval or "
+                           "why it is withheld, the log's support, where the decisions differ "
+                           "from the logged actions, the residuals, and the steps to read, "
+                           "each linked to its decision page).")] = None,
+        pages: Annotated[Optional[Path], typer.Option(
+            "--pages", help="Folder of the decision pages the report links (default: "
+                            "REPORT-pages beside the report).")] = None,
+        by: Annotated[Optional[str], typer.Option(
+            "--by", help="The report's agreement by a tag of the held-out corpus, or by the "
+                         "quartiles of an observation feature or numeric column.")] = None,
+        top: Annotated[int, typer.Option(
+            "--top", help="Steps the report lists, each with its decision page: where the "
+                          "policy departs most from the logged action, then the thinnest "
+                          "support.")] = 20,
         fmt: FormatOption = None,
     ) -> None:
         """Decide every logged step of a held-out corpus in batches and score the decisions
@@ -73,7 +89,10 @@ def register(app: typer.Typer) -> None:
                 workers=workers,
                 ray_address=ray_address,
                 without=parse_selection(without, "--without"),
-                without_episodes=parse_episodes(without_episodes), progress=bar)
+                without_episodes=parse_episodes(without_episodes), html=html, pages=pages,
+                by=by, top=top, progress=bar)
         for text in summary.get("ope_warnings", []):
             warn(text)
+        if html is not None:
+            message(f"wrote {html}")
         write_evaluation(summary, fmt)

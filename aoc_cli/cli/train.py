@@ -97,14 +97,14 @@ def train(
     fmt = resolve_format(fmt)
     with ProgressBar("train", transient=True) as bar:
         trained = aoc_cli.train(
-            name, store=state.store, model=model, mode=choice(mode), belief=choice(belief),
-            gamma=gamma, value=value, dynamics_weight=dynamics_weight,
-            history_length=history_length, hidden=hidden, weight_decay=weight_decay,
-            label_smoothing=label_smoothing, critic_steps=critic_steps,
-            critic_bc_weight=critic_bc_weight, belief_dim=belief_dim, max_epochs=epochs,
-            batch_size=batch_size, lr=lr, patience=patience, val_fraction=val_fraction,
-            seed=seed, threads=threads, device=choice(device), dropout=dropout,
-            class_weight=choice(class_weight),
+            name, store=state.store, model=model, belief=dict(
+                mode=choice(mode), belief=choice(belief), gamma=gamma, value=value,
+                dynamics_weight=dynamics_weight, history_length=history_length, hidden=hidden,
+                weight_decay=weight_decay, label_smoothing=label_smoothing,
+                critic_steps=critic_steps, critic_bc_weight=critic_bc_weight,
+                belief_dim=belief_dim, max_epochs=epochs, batch_size=batch_size, lr=lr,
+                patience=patience, val_fraction=val_fraction, seed=seed, threads=threads,
+                device=choice(device), dropout=dropout, class_weight=choice(class_weight)),
             paper=paper, no_select=no_select, overwrite=overwrite, progress=bar, log=message,
             controller={"epsilon": epsilon, "residual_cap": residual_cap,
                         "support_penalty": support_penalty, "k": k})

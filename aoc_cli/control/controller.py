@@ -20,6 +20,7 @@ actions' scores, the subset's weighted sum of its rows' labels (aoc_cli.belief.r
 
 from __future__ import annotations
 
+import html
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -35,7 +36,7 @@ from aoc_cli.store import History
 from aoc_cli.threads import one_thread
 
 
-@dataclass
+@dataclass(repr=False)
 class Decision:
     """One decision and everything needed to audit it.
 
@@ -72,6 +73,39 @@ class Decision:
     #: Rule 7 (do no harm): the clinicians' likely action was kept, no alternative's lower
     #: bound beating its value (aoc_cli.index.search.neighbourhood); None where the rule is off.
     kept: bool | None = None
+
+    def __repr__(self) -> str:
+        """One line: the action, v_hat, residual and supporting rows (never the candidates'
+        arrays: ``.candidates`` holds them)."""
+        action = np.asarray(self.action)
+        shown = int(action) if action.ndim == 0 else np.round(action.astype(float), 4).tolist()
+        value = "" if self.value is None else f", value={self.value:.4g}"
+        rows = ", ".join(f"{int(r)}: {w:.2f}" for r, w in zip(self.support_rows[:6],
+                                                              self.support_weights[:6]))
+        more = ", ..." if len(self.support_rows) > 6 else ""
+        return (f"Decision(action={shown}{value}, residual={self.residual:.4g}, "
+                f"support=[{rows}{more}] ({len(self.support_rows)} rows), "
+                f"candidates={len(self.candidates)}"
+                + (f", warnings={len(self.warnings)}" if self.warnings else "") + ")")
+
+    def to_frame(self):
+        """The minimal corpus subset, one row per supporting row: row, weight, distance,
+        and the distinct episodes at its belief (pandas, imported only here)."""
+        import pandas as pd  # a notebook's library
+
+        m = len(self.support_rows)
+        counts = self.support_counts if len(self.support_counts) == m else np.full(m, np.nan)
+        return pd.DataFrame({"row": np.asarray(self.support_rows, np.int64),
+                             "weight": self.support_weights,
+                             "distance": self.support_distances, "episodes_here": counts})
+
+    def _repr_html_(self) -> str:
+        rows = "".join(f"<tr><td>{int(r)}</td><td>{w:.1%}</td><td>{d:.4g}</td></tr>"
+                       for r, w, d in zip(self.support_rows, self.support_weights,
+                                          self.support_distances))
+        warn = "".join(f"<p>warning: {html.escape(w)}</p>" for w in self.warnings)
+        return (f"<p><b>{html.escape(repr(self))}</b></p>{warn}<table><tr><th>row</th>"
+                f"<th>weight</th><th>distance</th></tr>{rows}</table>")
 
 
 def action_bounds(action_space: dict, actions: np.ndarray | None = None):

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import html
 import os
+import re
 import tempfile
 from pathlib import Path
 
@@ -78,6 +79,22 @@ def page(title: str, body: str) -> str:
             "style-src 'unsafe-inline'; img-src data:\">"
             f"<title>{esc(title)}</title><style>{STYLE}</style></head><body>\n"
             f"{body}\n</body></html>\n")
+
+
+def scoped_style(scope: str = ".aoc-page") -> str:
+    """:data:`STYLE` with every rule under ``scope`` (``body`` becomes the scope itself): a
+    page's look inside a notebook's cell without restyling the notebook."""
+    def rule(match):
+        selectors = ",".join(scope if s.strip() == "body" else f"{scope} {s.strip()}"
+                             for s in match.group(1).split(","))
+        return f"{selectors}{{{match.group(2)}}}"
+    return re.sub(r"([^{}@]+)\{([^{}]*)\}", rule, STYLE)
+
+
+def fragment(body: str) -> str:
+    """``body`` (a page's HTML) as a notebook cell shows it: in a ``div.aoc-page`` with the
+    pages' style scoped to it (:func:`scoped_style`); no script, as on the pages."""
+    return f'<div class="aoc-page"><style>{scoped_style()}</style>{body}</div>'
 
 
 def check_html_path(path, store_root) -> Path:

@@ -42,7 +42,8 @@ class Browser:
 
         with urllib.request.urlopen(f"http://127.0.0.1:{port}/json/list") as r:
             target = next(t for t in json.load(r) if t["type"] == "page")
-        self.ws = websocket.create_connection(target["webSocketDebuggerUrl"], timeout=30)
+        self.ws = websocket.create_connection(target["webSocketDebuggerUrl"], timeout=30,
+                                              suppress_origin=True)  # chromium >= 111
         self.next_id = 0
         self.events: list[dict] = []
         for domain in ("Page", "Runtime", "Network", "Log"):
