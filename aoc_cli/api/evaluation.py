@@ -14,7 +14,7 @@ from typing import Sequence
 from aoc_cli.api.common import StoreLike, controller_config, open_store
 from aoc_cli.control import open_session
 from aoc_cli.control.config import ControllerLike
-from aoc_cli.errors import BadSetting, param
+from aoc_cli.errors import AocError, BadSetting, param
 from aoc_cli.evaluation.cohort import TOP, check_by
 from aoc_cli.evaluation.ray import evaluate_on_ray
 from aoc_cli.evaluation.score import score_log
@@ -53,8 +53,8 @@ class Evaluation(dict):
     def cohort(self, by: str | None = None, top: int | None = None) -> dict:
         """The cohort report's data (:func:`aoc_cli.evaluation.cohort.cohort`)."""
         if self.steps is None or self._session is None:
-            raise BadSetting("steps", None, "this evaluation kept no per-step results "
-                             "(run on Ray): evaluate in one process for its report")
+            raise AocError("this evaluation kept no per-step results (run on Ray): "
+                           "evaluate in one process for its report")
         return cohort_data(self._session, self._data, dict(self), self.steps,
                            by or self._by, self._top if top is None else top)
 
@@ -68,7 +68,8 @@ class Evaluation(dict):
 
         res = self.steps
         if res is None:
-            raise BadSetting("steps", None, "this evaluation kept no per-step results")
+            raise AocError("this evaluation kept no per-step results (run on Ray): evaluate "
+                           "in one process for its steps")
         cols = {"episode": res.episode, "step": res.step, "row": res.row,
                 "logged": list(res.logged) if res.logged.ndim > 1 else res.logged,
                 "decided": list(res.decided) if res.decided.ndim > 1 else res.decided,

@@ -13,11 +13,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from aoc_cli.control.rule import choose, reads_support
+from aoc_cli.errors import AocError
 from aoc_cli.store import History
+from aoc_cli.threads import one_thread
 
 
 class BatchPolicy:
-    """:meth:`aoc_cli.control.Controller.decide_batch` with per-episode histories."""
+    """:func:`decide_batch` with per-episode histories."""
 
     def __init__(self, controller):
         self.controller = controller
@@ -38,10 +41,36 @@ class BatchPolicy:
         alive = np.asarray(alive, np.int64)
         history = (History(self.obs[alive], self.act[alive], self.rew[alive], self.mask[alive])
                    if self.length else None)
-        actions = self.controller.decide_batch(obs, history)
+        actions = decide_batch(self.controller, obs, history)
         if self.length:
             for arr in (self.obs, self.act, self.rew, self.mask):
                 arr[alive] = np.roll(arr[alive], -1, axis=1)
             self.obs[alive, -1], self.act[alive, -1] = obs, actions
             self.rew[alive, -1], self.mask[alive, -1] = 0.0, True
         return actions
+
+
+def decide_batch(controller, observations: np.ndarray, history: History | None = None
+                 ) -> np.ndarray:
+    """(S,) int64 the discrete actions ``controller`` decides at S steps at once (observations
+    (S, d_o), ``history`` S rows, or None: an empty one): what ``controller.decide`` decides at
+    each, with every action a candidate, in one belief pass and one decomposition. Value mode,
+    discrete actions."""
+    ctl = controller
+    if not ctl.discrete or ctl.model.mode != "value":
+        raise AocError("decide_batch decides discrete actions in value mode")
+    obs = np.asarray(observations, dtype=np.float32).reshape(len(observations), -1)
+    s, n = len(obs), int(ctl.corpus.n_actions)
+    if history is not None:
+        history = type(history)(*[np.repeat(np.asarray(x), n, axis=0) for x in history])
+    with one_thread():
+        beliefs = ctl.model.beliefs(np.repeat(obs, n, axis=0), np.tile(np.arange(n), s),
+                                    history)
+        dec = ctl.index.decompose(beliefs, k=ctl.k, selection=ctl.selection)
+    residual = np.asarray(dec.residual, np.float64).reshape(s, n)
+    value = np.asarray(dec.value, np.float64).reshape(s, n)
+    support = ctl.support(dec)[0].reshape(s, n) if reads_support(ctl.config) else None
+    lower, likely = ctl.harm_inputs(obs, value, support)
+    _t, _p, chosen = choose(residual, value, ctl.config, cap=ctl.residual_cap, support=support,
+                            value_std=ctl.value_std, lower=lower, kept=likely)
+    return chosen.astype(np.int64)

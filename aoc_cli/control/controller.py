@@ -242,32 +242,6 @@ class Controller:
             return self.decompose_candidates(observation, history, candidates, choose=True,
                                              selection=selection)
 
-    def decide_batch(self, observations: np.ndarray, history: History | None = None
-                     ) -> np.ndarray:
-        """(S,) int64 the discrete actions decided at S steps at once (observations (S, d_o),
-        ``history`` S rows, or None: an empty one): what :meth:`decide` decides at each, with
-        every action a candidate, in one belief pass and one decomposition (a vectorised
-        rollout's policy, :class:`aoc_cli.control.batch.BatchPolicy`). Value mode, discrete
-        actions."""
-        if not self.discrete or self.model.mode != "value":
-            raise AocError("decide_batch decides discrete actions in value mode")
-        obs = np.asarray(observations, dtype=np.float32).reshape(len(observations), -1)
-        s, n = len(obs), int(self.corpus.n_actions)
-        if history is not None:
-            history = type(history)(*[np.repeat(np.asarray(x), n, axis=0) for x in history])
-        with one_thread():
-            beliefs = self.model.beliefs(np.repeat(obs, n, axis=0), np.tile(np.arange(n), s),
-                                         history)
-            dec = self.index.decompose(beliefs, k=self.k, selection=self._rows(None))
-        residual = np.asarray(dec.residual, np.float64).reshape(s, n)
-        value = np.asarray(dec.value, np.float64).reshape(s, n)
-        support = (self.support(dec)[0].reshape(s, n) if reads_support(self.config) else None)
-        lower, likely = self.harm_inputs(obs, value, support)
-        _t, _p, chosen = _choose(residual, value, self.config, cap=self.residual_cap,
-                                 support=support, value_std=self.value_std, lower=lower,
-                                 kept=likely)
-        return chosen.astype(np.int64)
-
     def decompose_candidates(self, observation: np.ndarray, history: History,
                              candidates: np.ndarray, choose: bool = True,
                              selection: np.ndarray | None = None) -> Decision:

@@ -68,20 +68,22 @@ def task_settings(name: str) -> tuple[str, dict[str, float]]:
         return name, {}
     known = TASKS[base].extra.get("settings") or {}
     if not known:
-        raise BadSetting("env", name, f"task {base!r} takes no settings (got {rest!r}): use "
-                         f"{base!r} alone")
+        raise BadSetting("env", name, f"{param('env')}: task {base!r} takes no settings (got "
+                         f"{rest!r}): use {base!r} alone")
     out: dict[str, float] = {}
     for item in rest.split(","):
         key, eq, value = (part.strip() for part in item.partition("="))
         if key not in known or not eq:
-            raise BadSetting("env", name, f"{name!r}: {item.strip()!r} is not a setting of "
+            raise BadSetting("env", name, f"{param('env')} {name!r}: {item.strip()!r} is not a "
+                             "setting of "
                              f"{base!r}: use {base}:KEY=VALUE,... with KEY among "
                              f"{', '.join(known)} (defaults "
                              f"{', '.join(f'{k}={v}' for k, v in known.items())})")
         try:
             out[key] = float(value)
         except ValueError:
-            raise BadSetting("env", name, f"{name!r}: {key}={value!r} is not a number "
+            raise BadSetting("env", name, f"{param('env')} {name!r}: {key}={value!r} is not a "
+                             "number "
                              f"(settings of {base!r}: {', '.join(known)})") from None
     return base, out
 

@@ -299,8 +299,9 @@ def rollout_value(decide_batch: DecideBatch, n_episodes: int, noise: float = NOI
     ``decide_batch(obs (n, 47) float32) -> actions (n,) int`` is called once a step on all
     the episodes still alive; a policy with a ``reset(n)`` method (one that keeps each
     episode's history, :class:`aoc_cli.control.batch.BatchPolicy`) is reset first and called
-    as ``decide_batch(obs, alive)``, ``alive`` the running episodes' indices. ``{"value", "low", "high", "episodes"}``, the interval the 95%
-    normal approximation (an episode still alive after 500 steps counts as not surviving)."""
+    as ``decide_batch(obs, alive)``, ``alive`` the running episodes' indices. Returns
+    ``{"value", "low", "high", "episodes"}``, the interval the 95% normal approximation (an
+    episode still alive after 500 steps counts as not surviving)."""
     _check(noise, gap)
     t = sepsis.tables(strategy)
     C = centres(strategy)

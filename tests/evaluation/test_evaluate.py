@@ -276,15 +276,18 @@ def test_the_papers_candidates_stay_reachable_by_a_flag(ward, tmp_path):
 # (ward's two actions, epsilon 1 so both pass the quantile: a minimum no candidate meets keeps
 # the better supported one, a tiny cap the smaller residual, a large penalty the better
 # supported one; each changes decisions here)
+# (rule 7, do no harm, is off in these but the last, which turns it on over the plain rule)
 @pytest.mark.parametrize("settings", [{"min_support": 1000.0}, {"residual_cap": 1e-3},
                                       {"residual_cap": 1e-3, "min_support": 1000.0},
-                                      {"support_penalty": 100.0}])
+                                      {"support_penalty": 100.0}, {"do_no_harm": "on"}])
 def test_value_decisions_in_batches_apply_the_support_and_cap_rules_as_decide_does(ward,
                                                                                   settings):
     _root, store = ward
     corpus, held = store.corpus("ward"), store.corpus("held")
-    session = open_session(corpus, "value", config=ControllerConfig(epsilon=1.0, **settings))
-    plain = open_session(corpus, "value", config=ControllerConfig(epsilon=1.0)).controller
+    session = open_session(corpus, "value", config=ControllerConfig(
+        epsilon=1.0, **{"do_no_harm": "off", **settings}))
+    plain = open_session(corpus, "value", config=ControllerConfig(
+        epsilon=1.0, do_no_harm="off")).controller
     _summary, res = score_log(session, held, [])
     changed = 0
     for i in range(0, held.n_rows, 11):

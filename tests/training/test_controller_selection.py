@@ -188,7 +188,8 @@ def test_a_setting_given_skips_the_choice_and_k_travels_with_the_model(icu, aoc)
     metrics = json.loads(out)
     assert "controller_selection" not in metrics["settings"]
     # what was given, and rule 2's cap for the setting not given
-    assert metrics["controller"] == {"support_penalty": 2.0, "residual_cap": 0.01, "k": 7}
+    assert metrics["controller"] == {"support_penalty": 2.0, "residual_cap": 0.01, "k": 7,
+                                     "do_no_harm": "off"}
     code, out, err = aoc("--store", store, "index", "icu", "--model", "given", "--format",
                          "json")
     assert code == 0, err

@@ -8,7 +8,7 @@ in the MDP over ``--truth-episodes`` episodes (its 95% interval), the clinicians
 A shown verdict is wrong when the true difference's interval lies on the other side of 0.
 One JSON line per log, then a summary line.
 
-    python benchmarks/quality/cohort_ope.py --store /tmp/c --noise 0.3 --logs 10 \\
+    python benchmarks/notes/cohort_ope.py --store /tmp/c --noise 0.3 --logs 10 \\
         --stays 2000 [--truth-episodes 10000]
 """
 

@@ -4,7 +4,7 @@ with no flag beyond the ingest's own (as docs/guide/clinical.md does), and AOC's
 measured by rolling it out in the same MDP through the same noise (2,000 episodes), beside
 the clinicians' exact value and the nearest-centre references. One JSON line per run.
 
-    python benchmarks/quality/cohort_grid.py --stays 10000 --noise 0.3 --store /tmp/c \\
+    python benchmarks/notes/cohort_grid.py --stays 10000 --noise 0.3 --store /tmp/c \\
         [--seed 0] [--episodes 2000] [--threads 1] [--controller '{"do_no_harm": "off"}']
 
 Each (stays, noise) cell of docs/results/icu-cohort.md is one run of this command.
