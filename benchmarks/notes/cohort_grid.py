@@ -23,8 +23,9 @@ from pathlib import Path
 import numpy as np
 
 import aoc_cli
+# internal: the test bed's vectorised rollout and the controller over many episodes at once
 from aoc_cli.control.batch import BatchPolicy
-from aoc_cli.envs import icu_cohort as cohort
+import aoc_cli.envs.icu_cohort as cohort
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -22,12 +22,21 @@ from pathlib import Path
 
 import numpy as np
 
-import aoc_cli
-from aoc_cli.control.batch import BatchPolicy
-from aoc_cli.envs import icu_cohort as cohort
+import os
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from cohort_grid import ROOT, aoc  # noqa: E402
+import aoc_cli
+# internal: the test bed's vectorised rollout and the controller over many episodes at once
+from aoc_cli.control.batch import BatchPolicy
+import aoc_cli.envs.icu_cohort as cohort
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def aoc(*args: str, store: Path) -> str:
+    """One ``aoc`` command, as a user runs it; its stdout."""
+    env = {**os.environ, "AOC_STORE": str(store)}
+    cmd = [sys.executable, "-c", "from aoc_cli.cli.app import main; main()", *args]
+    return subprocess.run(cmd, env=env, check=True, capture_output=True, text=True).stdout
 
 
 def main() -> None:
