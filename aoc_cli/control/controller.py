@@ -194,9 +194,7 @@ class Controller:
     @property
     def do_no_harm(self) -> bool:
         """Whether rule 7 decides: value mode, discrete actions, and ``do_no_harm`` on, or
-        None where rule 2's exact-repeat bound does not rank the actions (no
-        ``support_penalty``: on a log whose states repeat, rule 2 ranks and rule 6 chooses
-        on held-out episodes)."""
+        None where rule 2's exact-repeat bound (a ``support_penalty``) does not rank."""
         if not (self.discrete and self.model.mode == "value" and self.index.values is not None):
             return False
         if self.config.do_no_harm is None:
@@ -214,16 +212,17 @@ class Controller:
 
     def harm_inputs(self, observations: np.ndarray, value: np.ndarray,
                     support: np.ndarray | None) -> tuple[np.ndarray | None, np.ndarray | None]:
-        """Rule 7's (lower (S, K), kept (S,)) at observations (S, d_o) whose candidates are
-        the discrete actions with v_hat ``value`` (S, K); (None, None) where it is off. Where
-        rule 2 ranks by its exact-repeat lower bound (``support_penalty``), that bound stays
-        the key; elsewhere the neighbourhood's."""
+        """Rule 7's (lower (S, K), kept (S,)) at observations (S, d_o), v_hat ``value``
+        (S, K) of the discrete actions; (None, None) where it is off. Rule 2's bound stays
+        the key where it ranks; elsewhere the neighbourhood's, where its rows back the move."""
         if not self.do_no_harm:
             return None, None
         near = self.neighbourhood.at(observations)
         lower = None
         if not reads_support(self.config):
-            lower = self.neighbourhood.lower(value, near.episodes[:, :value.shape[1]])
+            k = value.shape[1]
+            lower = np.where(self.neighbourhood.backed(near)[:, :k],
+                             self.neighbourhood.lower(value, near.episodes[:, :k]), -np.inf)
         return lower, near.likely
 
     # -- one step --------------------------------------------------------------------------

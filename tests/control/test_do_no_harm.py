@@ -68,6 +68,7 @@ def test_kept_decisions_are_the_likely_action_and_their_record_says_so(cohort):
             bound = ctl.neighbourhood.lower(d.candidate_values[None],
                                             near.episodes[i:i + 1])[0, int(d.action)]
             assert bound > d.candidate_values[int(near.likely[i])]
+            assert ctl.neighbourhood.backed(near)[i, int(d.action)]   # the rows back it too
     assert kept_any
     off = open_session("c", store=cohort, controller={"do_no_harm": "off"}).controller
     assert not off.do_no_harm

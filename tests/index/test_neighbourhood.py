@@ -111,3 +111,27 @@ def test_rule_7_never_takes_an_action_whose_bound_does_not_beat_the_kept_value(s
     best = np.where(passed, lower, -np.inf).max(1)
     # (the kept action's own bound never beats its value: lower <= v_hat)
     assert (moved == (best > value[rows, kept])).all()
+
+
+def test_the_rows_back_a_move_only_where_their_own_bound_beats_the_likely_actions_mean():
+    obs, action, episode, values, state, centres, modal = _noisy_log()
+    near = Neighbourhood(obs, action, episode, 4, values=values, nearest=50)
+    got = near.at(centres)
+    for q in range(len(centres)):
+        for a in range(4):
+            took = action[got.rows[q]] == a
+            if took.any():
+                assert got.mean[q, a] == pytest.approx(values[got.rows[q]][took].mean(),
+                                                       rel=1e-12)
+            else:
+                assert np.isnan(got.mean[q, a])
+    backed = near.backed(got)
+    low = near.lower(np.nan_to_num(got.mean, nan=-np.inf), got.episodes)
+    base = got.mean[np.arange(len(centres)), got.likely]
+    assert (backed == (low > base[:, None])).all()
+    assert not backed[np.arange(len(centres)), got.likely].any()   # never the likely itself
+    # values that favour action 3 by far more than the noise: its move is backed
+    better = values + np.where(action == 3, 5.0, 0.0)
+    strong = Neighbourhood(obs, action, episode, 4, values=better, nearest=50)
+    moved = strong.backed(strong.at(centres))
+    assert moved[:, 3][np.arange(6) % 4 != 3].all()

@@ -22,9 +22,11 @@ patient's value where the log cannot tell states apart.
 The rule (:func:`aoc_cli.control.rule.choose`, ``lower``, ``kept``): each candidate's lower
 bound is v_hat(a) - z_K noise / sqrt(episodes[a]) (z_K the simultaneous one-sided 95% bound
 over the step's K actions, Bonferroni; no episode: no bound, -inf); the action of the highest
-bound is taken only when that bound beats the clinicians' likely action's own v_hat;
-otherwise the clinicians' likely action is kept (Pi_b-SPIBB's principle: leave the behaviour
-where the log cannot show better).
+bound is taken only when that bound beats the clinicians' likely action's own v_hat, and the
+log's rows near the step back the move too (:meth:`Neighbourhood.backed`: the same bound on
+the mean value of the rows that took it beats the likely action's rows' mean); otherwise the
+clinicians' likely action is kept (Pi_b-SPIBB's principle: leave the behaviour where the log
+cannot show better).
 
 Shapes: observations (N, d_o), actions (N,) int, row_episode (N,) int, values (N,) float64;
 ``at(obs (S, d_o))`` -> :class:`Near` with episodes (S, n) int64, likely (S,) int64,
@@ -57,11 +59,13 @@ def lower_bound_z(n_actions: int, level: float = LEVEL) -> float:
 class Near:
     """The neighbourhoods of S observations: ``episodes`` (S, n) distinct episodes per
     action, ``likely`` (S,) the action most rows took (ties: the lowest), ``rows`` (S, m)
-    the rows, nearest first."""
+    the rows, nearest first, ``mean`` (S, n) their mean value per action."""
 
     episodes: np.ndarray
     likely: np.ndarray
     rows: np.ndarray
+    #: (S, n) the mean value of the rows that took each action (NaN: none; or no values)
+    mean: np.ndarray | None = None
 
 
 class Neighbourhood:
@@ -83,8 +87,8 @@ class Neighbourhood:
         self.index = faiss.IndexFlatL2(obs.shape[1])
         self.index.add(self._standard(obs))
         self.z = lower_bound_z(self.n_actions)
-        self.noise = (float("nan") if values is None
-                      else self._noise(obs, np.asarray(values, np.float64), seed))
+        self.values = None if values is None else np.asarray(values, np.float64)
+        self.noise = (float("nan") if values is None else self._noise(obs, self.values, seed))
 
     def _standard(self, obs: np.ndarray) -> np.ndarray:
         return np.ascontiguousarray((np.asarray(obs, np.float64) - self.mean) / self.scale,
@@ -114,7 +118,14 @@ class Neighbourhood:
         span = int(self.row_episode.max()) + 1
         q, j = np.nonzero(first)
         np.add.at(episodes, (q, key[q, j] // span), 1)
-        return Near(episodes, rowcount.argmax(1).astype(np.int64), rows)
+        mean = None
+        if self.values is not None:
+            total = np.zeros((s, self.n_actions))
+            np.add.at(total, (np.repeat(np.arange(s), rows.shape[1]), acts.ravel()),
+                      self.values[rows].ravel())
+            with np.errstate(invalid="ignore", divide="ignore"):
+                mean = np.where(rowcount > 0, total / rowcount, np.nan)
+        return Near(episodes, rowcount.argmax(1).astype(np.int64), rows, mean)
 
     def _noise(self, obs: np.ndarray, values: np.ndarray, seed: int) -> float:
         """The pooled sd of a row's value about its (neighbourhood, action) mean (module
@@ -138,6 +149,15 @@ class Neighbourhood:
         with np.errstate(divide="ignore"):
             half = self.z * self.noise / np.sqrt(episodes.astype(np.float64))
         return np.where(episodes > 0, np.asarray(value, np.float64) - half, -np.inf)
+
+    def backed(self, near: Near) -> np.ndarray:
+        """(S, n) bool: the log's own rows near the step back a move to each action: the
+        mean value of the rows that took it, less z_K noise / sqrt(its episodes), beats the
+        mean value of the rows that took the likely action (the second test of rule 7: the
+        decomposition's v_hat alone may be biased where the belief learns little)."""
+        low = self.lower(np.nan_to_num(near.mean, nan=-np.inf), near.episodes)
+        base = near.mean[np.arange(len(near.likely)), near.likely]
+        return low > base[:, None]
 
     def describe(self) -> dict:
         """What the rule measured, for the record."""
