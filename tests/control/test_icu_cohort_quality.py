@@ -6,7 +6,7 @@ survival.
 
 Guards the cohort's promise as far as 2,000 rollouts can: on noisy features, where no
 observation repeats, AOC is not shown worse than the clinicians it learned from (rule 7, do no
-harm: docs/design.md, "Settings from the log's evidence"); measured 0.789 [0.771, 0.807], the
+harm: docs/design.md, "Settings from the log's evidence"); measured 0.774 [0.756, 0.792], the
 clinicians 0.7818 exact (docs/results/icu-cohort.md).
 """
 
@@ -65,10 +65,11 @@ def test_aoc_on_a_noisy_cohort_is_never_worse_than_the_clinicians(cohort):
     result = icu_cohort.rollout_value(Decide(), EPISODES, noise=NOISE, seed=1)
     clinicians = icu_cohort.clinicians_value()
     # not shown worse than the clinicians by more than the margin: 2,000 episodes measure a
-    # survival to +- 0.018 (measured 0.789 [0.771, 0.807]; another seed's 1,000 episodes
-    # 0.760 [0.734, 0.786]: docs/results/icu-cohort.md)
+    # survival to +- 0.018 (measured 0.774 [0.756, 0.792]; 1,000 episodes 0.783 [0.757,
+    # 0.809]: docs/results/icu-cohort.md)
     assert result["high"] >= clinicians - MARGIN, (result, clinicians)
     assert result["value"] >= clinicians - MARGIN - 0.02, (result, clinicians)
-    # it decides: mostly the clinicians' likely dose, and elsewhere a better-supported one
+    # it keeps the clinicians' likely dose nearly everywhere: on these features no other
+    # dose's bound, on v_hat and on the nearby rows' outcomes, beats it (measured 99.97%)
     share = float(np.mean(kept))
-    assert 0.5 < share < 1.0, share
+    assert share > 0.9, share
