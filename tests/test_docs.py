@@ -39,16 +39,7 @@ def findings(path: Path) -> list[str]:
     return out
 
 
-#: Pages still over the limit, each a strict xfail so that the test says when it is fixed.
-OVER_LIMIT: dict[str, str] = {}
-
-
-def _sized(path: Path):
-    reason = OVER_LIMIT.get(str(path.relative_to(ROOT)))
-    return pytest.param(path, marks=pytest.mark.xfail(strict=True, reason=reason)) if reason else path
-
-
-@pytest.mark.parametrize("path", [_sized(p) for p in user_documents()],
+@pytest.mark.parametrize("path", user_documents(),
                          ids=lambda p: str(p.relative_to(ROOT)))
 def test_a_user_document_is_at_most_40_kb(path):
     assert path.stat().st_size <= LIMIT, f"{path.relative_to(ROOT)}: {path.stat().st_size} bytes"

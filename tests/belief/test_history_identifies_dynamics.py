@@ -105,7 +105,7 @@ def test_dynamics_weight_must_not_be_negative(store, aoc):
 
 
 def test_pendulum_het_dynamics_head_makes_the_system_readable_from_the_beliefs(tmp_path):
-    # Issue 4's probe check. The value alone barely depends on the system (docs/notes/belief.md), so
+    # The probe check. The value alone barely depends on the system (docs/notes/belief.md), so
     # the check is made with the auxiliary dynamics head, which needs the effective torque
     # s * a: the belief then holds s as an interaction with a, read by a quadratic logistic
     # probe (measured with these settings: 0.61 on the beliefs, 0.46 on (o, a)).

@@ -203,7 +203,7 @@ def test_invalid_corpus_name(filled_store, aoc, d4rl_file, name):
     assert not (filled_store.parent / "escape").exists()
 
 
-# --- a cohort table: a study's own dose levels, no column in two roles (issue 45) -------------
+# --- a cohort table: a study's own dose levels, no column in two roles -------------------------
 
 FLUID_EDGES = [0.0, 50.0, 180.0, 530.0]  # the AI Clinician's MIMIC-III fluid levels
 VASO_EDGES = [0.0, 0.08, 0.22, 0.45]

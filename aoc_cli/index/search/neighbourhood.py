@@ -108,21 +108,21 @@ class Neighbourhood:
         rows = self.rows(obs)
         acts = self.actions[rows]                                         # (S, m)
         s = len(rows)
+        at = (np.repeat(np.arange(s), rows.shape[1]), acts.ravel())      # (query, action)
         rowcount = np.zeros((s, self.n_actions), np.int64)
-        np.add.at(rowcount, (np.repeat(np.arange(s), rows.shape[1]), acts.ravel()), 1)
+        np.add.at(rowcount, at, 1)
         # distinct (action, episode) pairs per neighbourhood
-        key = np.sort(acts * (int(self.row_episode.max()) + 1) + self.row_episode[rows], axis=1)
+        span = int(self.row_episode.max()) + 1
+        key = np.sort(acts * span + self.row_episode[rows], axis=1)
         first = np.ones(key.shape, bool)
         first[:, 1:] = key[:, 1:] != key[:, :-1]
         episodes = np.zeros((s, self.n_actions), np.int64)
-        span = int(self.row_episode.max()) + 1
         q, j = np.nonzero(first)
         np.add.at(episodes, (q, key[q, j] // span), 1)
         mean = None
         if self.values is not None:
             total = np.zeros((s, self.n_actions))
-            np.add.at(total, (np.repeat(np.arange(s), rows.shape[1]), acts.ravel()),
-                      self.values[rows].ravel())
+            np.add.at(total, at, self.values[rows].ravel())
             with np.errstate(invalid="ignore", divide="ignore"):
                 mean = np.where(rowcount > 0, total / rowcount, np.nan)
         return Near(episodes, rowcount.argmax(1).astype(np.int64), rows, mean)
