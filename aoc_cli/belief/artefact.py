@@ -6,7 +6,9 @@ Files (the folder is written in a temporary folder beside it and renamed into pl
 * ``config.json``: the BeliefConfig, mode, value spec, normalisation, input dims, split,
   final metrics, and ``corpus_hash`` (the corpus the model was trained on);
 * ``metrics.csv``: one line per epoch (train/validation loss, R^2 or accuracy, seconds);
-* ``values.npy``: (N,) float64 the value target v of every corpus row (value mode only).
+* ``values.npy``: (N,) float64 the value target v of every corpus row (value mode only);
+* ``neighbourhood.npy``: (N,) float64 rule 7's values of the rows, FQE over the log's
+  neighbourhoods (only where ``aoc train`` decided rule 7).
 """
 
 from __future__ import annotations
@@ -53,11 +55,12 @@ def list_models(corpus) -> list[str]:
 def save_model(corpus, model_id: str, *, net: BeliefNet, config: BeliefConfig, dims: dict,
                norm: Normalisation, value: dict | None, values: np.ndarray | None,
                metrics: dict, history: list[dict], split: dict,
-               dynamics_target: dict | None = None, extra: dict | None = None) -> Path:
+               dynamics_target: dict | None = None, extra: dict | None = None,
+               neighbourhood: np.ndarray | None = None) -> Path:
     """Write the model folder atomically (replacing any previous one of that id).
     ``dynamics_target``: the standardisation {"mean", "std"} (d_o,) of the auxiliary head's
     target o' - o, when the model has the head; ``extra``: more JSON entries of config.json
-    (e.g. the critic's Q head, ``--belief critic``)."""
+    (e.g. the critic's Q head, ``--belief critic``); ``neighbourhood``: rule 7's row values."""
     path = model_dir(corpus.path, model_id)
     meta = {
         "format": FORMAT, "format_version": FORMAT_VERSION,
@@ -75,6 +78,8 @@ def save_model(corpus, model_id: str, *, net: BeliefNet, config: BeliefConfig, d
                    tmp / "weights.pt")
         if values is not None:
             write_npy(tmp / "values.npy", np.asarray(values, dtype=np.float64))
+        if neighbourhood is not None:
+            write_npy(tmp / "neighbourhood.npy", np.asarray(neighbourhood, dtype=np.float64))
         columns = list(dict.fromkeys(k for r in history for k in r))
         with open(tmp / "metrics.csv", "w", newline="") as f:
             writer = csv.DictWriter(f, fieldnames=columns, lineterminator="\n")
@@ -109,6 +114,8 @@ class BeliefModel:
         self.dims: dict = meta["dims"]
         self.corpus_hash: str = meta["corpus_hash"]
         self.values = values
+        #: (N,) rule 7's values of the rows (``neighbourhood.npy``), or None
+        self.neighbourhood_values: np.ndarray | None = None
         self.net = net.eval()
         self._hash: tuple | None = None  # (weights' versions, hash): see ``hash``
         self.device = device
@@ -290,7 +297,7 @@ def load_model(corpus, model_id: str | None = None, device: str | None = None) -
     if meta.get("format") != FORMAT or meta.get("format_version") != FORMAT_VERSION:
         raise AocError(f"model {model_id!r} of corpus {corpus.name!r} has an unknown format: "
                        f"{todo}")
-    check_files(path, meta, ("weights.pt", "values.npy"), what, todo)
+    check_files(path, meta, ("weights.pt", "values.npy", "neighbourhood.npy"), what, todo)
     try:
         dev = pick_device(device or "auto")
         net = build_net(meta["dims"], BeliefConfig.from_dict(meta["config"], strict=False))
@@ -299,6 +306,8 @@ def load_model(corpus, model_id: str | None = None, device: str | None = None) -
         values = None
         if (path / "values.npy").is_file():
             values = np.load(path / "values.npy", allow_pickle=False)
+        hood = (np.load(path / "neighbourhood.npy", allow_pickle=False)
+                if (path / "neighbourhood.npy").is_file() else None)
     except AocError:
         raise
     except Exception as err:  # a truncated zip, a bad .npy header, keys or shapes that differ
@@ -306,5 +315,6 @@ def load_model(corpus, model_id: str | None = None, device: str | None = None) -
         raise AocError(f"{what}: reading {path} failed ({type(err).__name__}: {first}); "
                        f"{todo}") from None
     model = BeliefModel(path, meta, net.to(dev), values, dev)
+    model.neighbourhood_values = hood
     check_corpus(model, corpus)
     return model

@@ -54,13 +54,16 @@ def episode_rows(episode_starts: np.ndarray, episodes: np.ndarray) -> np.ndarray
 
 @dataclass
 class TrainingData:
-    """values (N,) float64 in value mode (else None); train/validation rows (R,) int64."""
+    """values (N,) float64 in value mode (else None); train/validation rows (R,) int64;
+    ``neighbourhood`` (N,) float64 rule 7's values of the rows, saved with the model
+    (:func:`aoc_cli.index.search.neighbourhood.neighbourhood_values`), or None."""
 
     values: np.ndarray | None
     train_episodes: np.ndarray
     val_episodes: np.ndarray
     train_rows: np.ndarray
     val_rows: np.ndarray
+    neighbourhood: np.ndarray | None = None
 
 
 def prepare(corpus, config: BeliefConfig, model_id: str, overwrite: bool,

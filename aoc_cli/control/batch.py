@@ -61,6 +61,12 @@ def decide_batch(controller, observations: np.ndarray, history: History | None =
         raise AocError("decide_batch decides discrete actions in value mode")
     obs = np.asarray(observations, dtype=np.float32).reshape(len(observations), -1)
     s, n = len(obs), int(ctl.corpus.n_actions)
+    if ctl.do_no_harm and not reads_support(ctl.config):
+        # rule 7 decides from the log's rows near each step alone (control/rule.py): the
+        # decomposition, which explains a decision, does not change it
+        lower, likely = ctl.harm_inputs(obs, np.zeros((s, n)), None)
+        return choose(np.zeros((s, n)), np.zeros((s, n)), ctl.config, lower=lower,
+                      kept=likely)[2].astype(np.int64)
     if history is not None:
         history = type(history)(*[np.repeat(np.asarray(x), n, axis=0) for x in history])
     with one_thread():

@@ -203,26 +203,26 @@ class Controller:
 
     @property
     def neighbourhood(self) -> Neighbourhood:
-        """The log's rows near an observation (built on first use)."""
+        """The log's rows near an observation, valued by the model's neighbourhood values
+        (``aoc train``, rule 7), else by its row values (built on first use)."""
         if self._neighbourhood is None:
+            saved = getattr(self.model, "neighbourhood_values", None)
             self._neighbourhood = Neighbourhood(
                 self.corpus.observations, self.corpus_actions, self.row_episode,
-                self.corpus.n_actions, values=self.index.values)
+                self.corpus.n_actions, values=self.index.values if saved is None else saved)
         return self._neighbourhood
 
     def harm_inputs(self, observations: np.ndarray, value: np.ndarray,
                     support: np.ndarray | None) -> tuple[np.ndarray | None, np.ndarray | None]:
         """Rule 7's (lower (S, K), kept (S,)) at observations (S, d_o), v_hat ``value``
         (S, K) of the discrete actions; (None, None) where it is off. Rule 2's bound stays
-        the key where it ranks; elsewhere the neighbourhood's, where its rows back the move."""
+        the key where it ranks; elsewhere each action's bound over the neighbourhood."""
         if not self.do_no_harm:
             return None, None
         near = self.neighbourhood.at(observations)
         lower = None
         if not reads_support(self.config):
-            k = value.shape[1]
-            lower = np.where(self.neighbourhood.backed(near)[:, :k],
-                             self.neighbourhood.lower(value, near.episodes[:, :k]), -np.inf)
+            lower = self.neighbourhood.bounds(near)[:, :value.shape[1]]
         return lower, near.likely
 
     # -- one step --------------------------------------------------------------------------

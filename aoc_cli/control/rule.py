@@ -9,8 +9,9 @@ every held-out step at once (:mod:`aoc_cli.evaluation.score`). Over the K candid
    distinct episodes (:func:`aoc_cli.control.support.support_filter`);
 5. the argmax of v_hat among them, or with ``support_penalty`` z of the penalised v_hat
    (:func:`aoc_cli.control.support.penalised`); ties: the smaller residual, then the first;
-   with rule 7 (do no harm) the argmax of a lower bound, taken only where it beats the
-   clinicians' likely action's v_hat, else that action is kept (:func:`choose`).
+   with rule 7 (do no harm) the argmax of a lower bound over the actions the log's rows near
+   the step took (they replace the residual filter), taken only where it beats the
+   clinicians' likely action's own bound, else that action is kept (:func:`choose`).
 """
 
 from __future__ import annotations
@@ -65,9 +66,11 @@ def choose(residual: np.ndarray, value: np.ndarray, config: ControllerConfig, *,
     candidate's support (needed when :func:`reads_support`); ``value_std``: sigma_v of the
     penalty. Rule 7, do no harm (discrete actions, the candidates every action):
     ``lower`` (S, K) each candidate's lower bound (the rank key in place of v_hat, or of the
-    penalised v_hat) and ``kept`` (S,) the clinicians' likely action
+    penalised v_hat; the candidates it bounds, finite, are those that pass) and ``kept`` (S,) the clinicians' likely action
     (:mod:`aoc_cli.index.search.neighbourhood`): the best-ranked candidate is taken only where its
-    key beats the kept action's v_hat, else the kept action is. Returns (threshold (S, 1),
+    key beats the kept action's own bound (its v_hat where no ``lower`` is given: rule 2's
+    key ranks), else the kept action is; the residual plays no part in it (the first of
+    equal bounds). Returns (threshold (S, 1),
     passed (S, K) bool, chosen (S,) int64)."""
     residual = np.asarray(residual, np.float64)
     value = np.asarray(value, np.float64)
@@ -76,14 +79,18 @@ def choose(residual: np.ndarray, value: np.ndarray, config: ControllerConfig, *,
     if reads_support(config):
         passed = support_filter(passed, support, config.min_support)
         key = penalised(value, support, config.support_penalty, value_std)
-    if lower is not None:
+    if lower is not None:   # rule 7: the neighbourhood's episodes are the support
         key = np.asarray(lower, np.float64)
+        passed = np.isfinite(key)
     key = np.where(passed, key, -np.inf)
     best = key.max(-1, keepdims=True)
-    # of the best (penalised) v_hat the smaller residual; argmin takes the first of equals
-    chosen = np.where(key == best, residual, np.inf).argmin(-1)
+    if lower is not None and kept is not None:
+        chosen = key.argmax(-1)   # rule 7 reads no residual: ties go to the kept action below
+    else:   # of the best (penalised) v_hat the smaller residual; argmin: the first of equals
+        chosen = np.where(key == best, residual, np.inf).argmin(-1)
     if kept is not None:
         s = np.arange(len(chosen))
         kept = np.asarray(kept, np.int64)
-        chosen = np.where(key[s, chosen] > value[s, kept], chosen, kept)
+        base = (value if lower is None else np.asarray(lower, np.float64))[s, kept]
+        chosen = np.where(key[s, chosen] > base, chosen, kept)
     return threshold, passed, chosen

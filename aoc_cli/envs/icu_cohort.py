@@ -300,13 +300,32 @@ def rollout_value(decide_batch: DecideBatch, n_episodes: int, noise: float = NOI
     the episodes still alive; a policy with a ``reset(n)`` method (one that keeps each
     episode's history, :class:`aoc_cli.control.batch.BatchPolicy`) is reset first and called
     as ``decide_batch(obs, alive)``, ``alive`` the running episodes' indices. Returns
-    ``{"value", "low", "high", "episodes"}``, the interval the 95% normal approximation (an
-    episode still alive after 500 steps counts as not surviving)."""
+    ``{"value", "low", "high", "episodes", "survived"}``, the interval the 95% normal
+    approximation, ``survived`` (n,) bool per episode (an episode still alive after 500 steps
+    counts as not surviving).
+
+    The draws are common random numbers: episode i's first state, its noise, its gaps and the
+    uniform that picks its next state at step t come from a stream of (seed, t) alone, never
+    from what other episodes did. Two policies rolled out with the same seed therefore meet
+    the same patients, and where they choose the same doses, the same courses:
+    :func:`paired_difference` compares them episode by episode, far more tightly than two
+    independent values."""
+    survived = rollouts(decide_batch, n_episodes, noise, gap, seed, strategy)
+    n = len(survived)
+    value = float(survived.mean())
+    half = 1.96 * np.sqrt(value * (1 - value) / n)
+    return {"value": value, "low": float(value - half), "high": float(value + half),
+            "episodes": n, "survived": survived}
+
+
+def rollouts(decide_batch: DecideBatch, n_episodes: int, noise: float = NOISE,
+             gap: float = GAP, seed: int = 0, strategy: str = "mean") -> np.ndarray:
+    """(n,) bool: whether each of ``n_episodes`` episodes survived (:func:`rollout_value`)."""
     _check(noise, gap)
     t = sepsis.tables(strategy)
     C = centres(strategy)
-    rng = np.random.default_rng(seed)
     n = int(n_episodes)
+    rng = np.random.default_rng([int(seed), 0])
     s = sepsis._sample(np.broadcast_to(np.cumsum(t.mdp.d0)[None], (n, len(t.mdp.d0))),
                        rng.random(n))
     obs = _noisy(C[s], noise, rng)
@@ -315,7 +334,7 @@ def rollout_value(decide_batch: DecideBatch, n_episodes: int, noise: float = NOI
     stateful = hasattr(decide_batch, "reset")
     if stateful:
         decide_batch.reset(n)
-    for _ in range(MAX_STEPS):
+    for step in range(1, MAX_STEPS + 1):
         if len(alive) == 0:
             break
         a = np.asarray(decide_batch(obs, alive) if stateful else decide_batch(obs),
@@ -324,18 +343,33 @@ def rollout_value(decide_batch: DecideBatch, n_episodes: int, noise: float = NOI
             raise AocError(f"decide_batch gave {len(a)} actions in "
                            f"{a.min() if len(a) else '-'}..{a.max() if len(a) else '-'} for "
                            f"{len(alive)} observations: expected one in 0..24 each")
-        nxt = sepsis._sample(np.cumsum(t.mdp.P[s, a], axis=1), rng.random(len(alive)))
+        # every episode's draws of this step, used or not: episode i's are its own
+        rng = np.random.default_rng([int(seed), step])
+        pick = rng.random(n)[alive]
+        fresh = rng.normal(0.0, 1.0, (n, N_FEATURES))[alive]
+        held = (rng.random((n, N_FEATURES)) < gap)[alive]
+        nxt = sepsis._sample(np.cumsum(t.mdp.P[s, a], axis=1), pick)
         ended = t.mdp.terminal[nxt]
         survived[alive[nxt == sepsis.STATE_SURVIVAL]] = True
-        new = _noisy(C[nxt], noise, rng)
+        new = (C[nxt] + fresh * noise if noise else C[nxt].copy()).astype(np.float32)
         if gap:
-            held = rng.random(new.shape) < gap
             new[held] = obs[held]
         alive, s, obs = alive[~ended], nxt[~ended], new[~ended]
-    value = float(survived.mean())
-    half = 1.96 * np.sqrt(value * (1 - value) / n)
-    return {"value": value, "low": float(value - half), "high": float(value + half),
-            "episodes": n}
+    return survived
+
+
+def paired_difference(a: np.ndarray, b: np.ndarray) -> dict:
+    """The mean difference in survival of two policies rolled out on the same episodes
+    (``survived`` (n,) bool each, the same seed: :func:`rollout_value`), with its 95% normal
+    interval from the per-episode differences: ``{"difference", "low", "high", "differ"}``,
+    ``differ`` the share of episodes whose outcome differs."""
+    d = np.asarray(a, np.float64) - np.asarray(b, np.float64)
+    if d.ndim != 1 or len(d) < 2:
+        raise AocError("paired_difference: two (n,) outcome arrays of the same episodes")
+    half = 1.96 * float(d.std(ddof=1)) / np.sqrt(len(d))
+    m = float(d.mean())
+    return {"difference": m, "low": m - half, "high": m + half,
+            "differ": float(np.mean(d != 0))}
 
 
 def nearest_state(obs: np.ndarray, strategy: str = "mean") -> np.ndarray:

@@ -35,10 +35,11 @@ unless its own flag is given.
    decay by cross-validation over episodes: the lowest mean held-out log-loss among the
    candidates whose mean held-out ABC AUC is within 0.01 of the best
    (:mod:`aoc_cli.training.tuning`).
-7. **do no harm** (value mode, discrete actions, no finite state: rule 2 cannot run): the
-   controller keeps the clinicians' likely action unless another action's lower bound over
-   the log's nearest rows beats its value (:mod:`aoc_cli.index.search.neighbourhood`); off
-   where rule 2 runs.
+7. **do no harm** (value mode, discrete actions, no finite state: rule 2 cannot run): rule
+   2 over the log's nearest rows in place of the state: each row valued by FQE over the
+   neighbourhoods (saved with the model), each action ranked by its lower bound over the
+   rows near the step that took it, the clinicians' likely action kept unless another's
+   bound beats its own (:mod:`aoc_cli.index.search.neighbourhood`); off where rule 2 runs.
 
 >>> ev = Evidence(rows=10_000, episodes=50, discrete=False, n_actions=None, rewards=True,
 ...               length_median=200.0, length_max=200, at_limit=0.98, repeats=0.2)
@@ -169,10 +170,11 @@ def decide(ev: Evidence, given: dict) -> tuple[dict, list[dict]]:
                                   "episodes")
     elif ev.discrete:
         take("do_no_harm", "on", f"observations recur at {ev.repeats:.0%} of the rows, too "
-                                 "few for rule 2's exact repeats: each action is ranked by "
-                                 "its lower bound over the log's nearest rows, and the "
-                                 "clinicians' likely action is kept unless another's bound "
-                                 "beats its value (rule 7)")
+                                 "few for rule 2's exact repeats: each row is valued by FQE "
+                                 "over the log's 100 nearest rows, each action ranked by its "
+                                 "lower bound over the rows near the step that took it, and "
+                                 "the clinicians' likely action is kept unless another's "
+                                 "bound beats its own (rule 7)")
     if ev.time_limit and value_belief:
         take("gamma", horizon_gamma(ev.length_max),
              f"{ev.at_limit:.0%} of the episodes stop at {ev.length_max} steps (a time limit): "

@@ -156,6 +156,9 @@ def _train(corpus, config: BeliefConfig, model: str, record: TrainingRecord, *,
             record = record.with_controller(support_penalty=z)
         record = record.deciding(reason).with_settings(
             support_penalty={k: v for k, v in reason.items() if k not in ("setting", "why")})
+    if (config.mode == "value" and corpus.discrete and prepared.values is not None
+            and record.controller.get("do_no_harm") == "on"):
+        prepared, record = _neighbourhood(corpus, config, prepared, record, progress)
 
     total = config.max_epochs
     if config.belief == "critic":  # counted in gradient steps, not epochs
@@ -179,6 +182,19 @@ def _train(corpus, config: BeliefConfig, model: str, record: TrainingRecord, *,
                                                       recording, progress)
     return trainer.train_model(corpus, config, model, overwrite=overwrite, progress=progress,
                                prepared=prepared, extra=recording, inspect=inspect)
+
+
+def _neighbourhood(corpus, config: BeliefConfig, prepared, record: TrainingRecord, progress):
+    """Rule 7's values of the rows (FQE over the log's neighbourhoods,
+    :func:`aoc_cli.index.search.neighbourhood.neighbourhood_values`), into the prepared data
+    (saved with the model) and what it measured into the record (``settings.do_no_harm``)."""
+    from aoc_cli.index.search.neighbourhood import neighbourhood_values
+    values, info = neighbourhood_values(corpus.observations, corpus.rewards,
+                                        corpus.episode_starts, config.gamma,
+                                        censoring_of(corpus), progress=progress)
+    if record.settings is not None:
+        record = record.with_settings(do_no_harm={**info, "value_mean": float(values.mean())})
+    return replace(prepared, neighbourhood=values), record
 
 
 def duration(seconds: float) -> str:

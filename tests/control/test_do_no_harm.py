@@ -67,10 +67,9 @@ def test_kept_decisions_are_the_likely_action_and_their_record_says_so(cohort):
             assert rec["rule"] == "kept the clinicians' dose: no better-supported alternative"
         else:
             moved_any = True
-            bound = ctl.neighbourhood.lower(d.candidate_values[None],
-                                            near.episodes[i:i + 1])[0, int(d.action)]
-            assert bound > d.candidate_values[int(near.likely[i])]
-            assert ctl.neighbourhood.backed(near)[i, int(d.action)]   # the rows back it too
+            bounds = ctl.neighbourhood.bounds(near)[i]
+            assert bounds[int(d.action)] > bounds[int(near.likely[i])]
+            assert bounds[int(d.action)] == bounds.max()
     assert kept_any
     off = open_session("c", store=cohort, controller={"do_no_harm": "off"}).controller
     assert not off.do_no_harm

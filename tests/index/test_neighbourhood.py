@@ -75,25 +75,25 @@ def test_the_lower_bound_is_the_bonferroni_bound_and_none_without_an_episode():
     assert lower[0, 3] == pytest.approx(0.8 - z * near.noise, rel=1e-12)
 
 
-def test_rule_7_keeps_the_likely_action_unless_a_bound_beats_its_value():
+def test_rule_7_keeps_the_likely_action_unless_a_bound_beats_its_own_bound():
     cfg = ControllerConfig()
-    residual = np.zeros((3, 4))
-    value = np.array([[0.5, 0.9, 0.6, 0.4],       # 1's bound 0.7 beats kept 0's value 0.5
-                      [0.5, 0.9, 0.6, 0.4],       # 1's bound 0.45 does not: keep 0
-                      [0.5, 0.9, 0.6, 0.4]])      # the kept action is the best bound itself
-    lower = np.array([[0.3, 0.7, 0.5, 0.1],
-                      [0.3, 0.45, 0.2, 0.1],
-                      [0.3, 0.2, 0.2, 0.1]])
-    kept = np.array([0, 0, 0])
-    _, _, chosen = choose(residual, value, cfg, lower=lower, kept=kept)
-    assert chosen.tolist() == [1, 0, 0]
+    residual = np.zeros((4, 4))
+    value = np.array([[0.5, 0.9, 0.6, 0.4]] * 4)
+    lower = np.array([[0.3, 0.7, 0.5, 0.1],       # 1's bound 0.7 beats kept 0's 0.3: move
+                      [0.3, 0.25, 0.2, 0.1],      # none beats 0.3: keep 0
+                      [0.3, 0.3, 0.2, 0.1],       # a tie does not move
+                      [0.3, -np.inf, 0.35, 0.1]])  # 1 unbounded (no episode): 2 beats 0.3
+    kept = np.array([0, 0, 0, 0])
+    _, passed, chosen = choose(residual, value, cfg, lower=lower, kept=kept)
+    assert chosen.tolist() == [1, 0, 0, 2]
+    assert not passed[3, 1] and passed[0].all()   # the bound, not the residual, filters
     # without the rule: the argmax of v_hat
-    assert choose(residual, value, cfg)[2].tolist() == [1, 1, 1]
+    assert choose(residual, value, cfg)[2].tolist() == [1, 1, 1, 1]
 
 
 @settings(max_examples=60, deadline=None)
 @given(st.integers(0, 2**32 - 1), st.integers(2, 8))
-def test_rule_7_never_takes_an_action_whose_bound_does_not_beat_the_kept_value(seed, k):
+def test_rule_7_moves_exactly_where_a_bound_beats_the_kept_actions_bound(seed, k):
     rng = np.random.default_rng(seed)
     s = 20
     value = rng.normal(size=(s, k))
@@ -105,15 +105,16 @@ def test_rule_7_never_takes_an_action_whose_bound_does_not_beat_the_kept_value(s
                                kept=kept)
     rows = np.arange(s)
     moved = chosen != kept
-    assert (lower[rows, chosen][moved] > value[rows, kept][moved]).all()
-    assert passed[rows, chosen][moved].all()
-    # where some passing bound beats the kept value, the rule moves to the best such bound
-    best = np.where(passed, lower, -np.inf).max(1)
-    # (the kept action's own bound never beats its value: lower <= v_hat)
-    assert (moved == (best > value[rows, kept])).all()
+    assert (lower[rows, chosen][moved] > lower[rows, kept][moved]).all()
+    assert np.isfinite(lower[rows, chosen][moved]).all()
+    assert (passed == np.isfinite(lower)).all()
+    # the move is to the best bound, and happens exactly where it beats the kept one's
+    best = lower.max(1)
+    assert (lower[rows, chosen][moved] == best[moved]).all()
+    assert (moved == (best > lower[rows, kept])).all()
 
 
-def test_the_rows_back_a_move_only_where_their_own_bound_beats_the_likely_actions_mean():
+def test_the_bounds_are_over_the_neighbourhoods_own_rows():
     obs, action, episode, values, state, centres, modal = _noisy_log()
     near = Neighbourhood(obs, action, episode, 4, values=values, nearest=50)
     got = near.at(centres)
@@ -125,13 +126,79 @@ def test_the_rows_back_a_move_only_where_their_own_bound_beats_the_likely_action
                                                        rel=1e-12)
             else:
                 assert np.isnan(got.mean[q, a])
-    backed = near.backed(got)
-    low = near.lower(np.nan_to_num(got.mean, nan=-np.inf), got.episodes)
-    base = got.mean[np.arange(len(centres)), got.likely]
-    assert (backed == (low > base[:, None])).all()
-    assert not backed[np.arange(len(centres)), got.likely].any()   # never the likely itself
-    # values that favour action 3 by far more than the noise: its move is backed
+    bounds = near.bounds(got)
+    z = lower_bound_z(4)
+    want = np.where(got.episodes > 0, np.nan_to_num(got.mean, nan=0.0)
+                    - z * near.noise / np.sqrt(np.maximum(got.episodes, 1)), -np.inf)
+    assert np.allclose(bounds[np.isfinite(want)], want[np.isfinite(want)], rtol=1e-12)
+    assert (np.isinf(bounds) == np.isinf(want)).all()
+    # values that favour action 3 by far more than the noise: rule 7 moves to it everywhere
     better = values + np.where(action == 3, 5.0, 0.0)
     strong = Neighbourhood(obs, action, episode, 4, values=better, nearest=50)
-    moved = strong.backed(strong.at(centres))
-    assert moved[:, 3][np.arange(6) % 4 != 3].all()
+    at = strong.at(centres)
+    _, _, chosen = choose(np.zeros((6, 4)), np.zeros((6, 4)), ControllerConfig(),
+                          lower=strong.bounds(at), kept=at.likely)
+    assert (chosen == 3).all()
+    # values that favour the clinicians' modal action by more than the noise: no move
+    worse = values + np.where(action == modal, 1.0, 0.0)
+    weak = Neighbourhood(obs, action, episode, 4, values=worse, nearest=50)
+    at = weak.at(centres)
+    _, _, stay = choose(np.zeros((6, 4)), np.zeros((6, 4)), ControllerConfig(),
+                        lower=weak.bounds(at), kept=at.likely)
+    assert (stay == at.likely).all() and (at.likely == np.arange(6) % 4).all()
+
+
+def _two_step_log(episodes=40, cut=(3, 11, 20), gamma=0.9, seed=0):
+    """Each episode visits state A then state B (two well-separated points seen through
+    noise), rewards drawn per row; the episodes in ``cut`` are censored after A."""
+    rng = np.random.default_rng(seed)
+    obs, rew, starts = [], [], [0]
+    for e in range(episodes):
+        steps = 1 if e in cut else 2
+        for t in range(steps):
+            obs.append(np.full(3, 10.0 * t) + rng.normal(0, 0.1, 3))
+            rew.append(rng.normal(1.0 + t, 0.5))
+        starts.append(starts[-1] + steps)
+    censored = np.array([e in cut for e in range(episodes)])
+    return np.array(obs), np.array(rew), np.array(starts), censored, gamma
+
+
+def test_neighbourhood_values_are_the_tabular_fqe_where_each_neighbourhood_is_its_state():
+    """nearest = the rows of a state (A has one row per episode): the iteration's fixed point
+    is the behaviour's value table, a censored cut bootstrapping from its own state."""
+    from aoc_cli.index.search.neighbourhood import neighbourhood_values
+    obs, rew, starts, censored, gamma = _two_step_log()
+    first = starts[:-1]
+    a_rows = first
+    b_rows = np.setdiff1d(np.arange(len(rew)), a_rows)
+    values, info = neighbourhood_values(obs, rew, starts, gamma, censored,
+                                        nearest=len(a_rows), tol=1e-12)
+    assert info["converged"] and info["nearest"] == len(a_rows)
+    # B: the last row of every uncensored episode, 37 rows: its neighbourhood is B's 37 rows
+    # plus 3 rows of A; solve the two-state fixed point by hand instead
+    n_a, n_b = len(a_rows), len(b_rows)
+    cut = a_rows[censored]
+    go = a_rows[~censored]
+    # V_B = mean over B's neighbourhood (B's rows and the nearest A rows): read which
+    from aoc_cli.index.search.neighbourhood import Neighbourhood
+    hood = Neighbourhood(obs, np.zeros(len(rew), np.int64), np.zeros(len(rew), np.int64), 1,
+                         nearest=len(a_rows))
+    rows_b = hood.rows(obs[b_rows[:1]])[0]
+    extra_a = np.setdiff1d(rows_b, b_rows)
+    assert len(extra_a) == n_a - n_b and set(np.setdiff1d(rows_b, extra_a)) == set(b_rows)
+    assert set(hood.rows(obs[a_rows[:1]])[0]) == set(a_rows)
+    # unknowns V_A, V_B: y_a = r + g V_B (going on), r + g V_A (cut); y_b = r
+    # V_A = mean_A y;  V_B = (sum_B r + sum_{extra A} y) / n_a
+    m = np.zeros((2, 2))
+    c = np.zeros(2)
+    m[0, 0] = 1 - gamma * len(cut) / n_a
+    m[0, 1] = -gamma * len(go) / n_a
+    c[0] = rew[a_rows].sum() / n_a
+    extra_go = np.isin(extra_a, go)
+    m[1, 0] = -gamma * np.sum(~extra_go) / n_a
+    m[1, 1] = 1 - gamma * np.sum(extra_go) / n_a
+    c[1] = (rew[b_rows].sum() + rew[extra_a].sum()) / n_a
+    v_a, v_b = np.linalg.solve(m, c)
+    assert values[b_rows] == pytest.approx(rew[b_rows], abs=1e-9)
+    assert values[go] == pytest.approx(rew[go] + gamma * v_b, abs=1e-8)
+    assert values[cut] == pytest.approx(rew[cut] + gamma * v_a, abs=1e-8)

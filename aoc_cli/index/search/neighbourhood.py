@@ -19,14 +19,20 @@ the same neighbourhood and action (pooled over a sample of :data:`NOISE_QUERIES`
 neighbourhoods, each (neighbourhood, action) group with two rows or more), the spread of one
 patient's value where the log cannot tell states apart.
 
-The rule (:func:`aoc_cli.control.rule.choose`, ``lower``, ``kept``): each candidate's lower
-bound is v_hat(a) - z_K noise / sqrt(episodes[a]) (z_K the simultaneous one-sided 95% bound
-over the step's K actions, Bonferroni; no episode: no bound, -inf); the action of the highest
-bound is taken only when that bound beats the clinicians' likely action's own v_hat, and the
-log's rows near the step back the move too (:meth:`Neighbourhood.backed`: the same bound on
-the mean value of the rows that took it beats the likely action's rows' mean); otherwise the
-clinicians' likely action is kept (Pi_b-SPIBB's principle: leave the behaviour where the log
-cannot show better).
+The **values** the rule reads are the behaviour's Q by fitted Q evaluation over the
+neighbourhoods (:func:`neighbourhood_values`, computed once by ``aoc train``): a row's value
+is its reward plus gamma times the mean value of the rows nearest its next observation, to
+convergence. A network's Q learns little from noisy features (validation R^2 0.01 with
+returns, 0.10 with FQE on the 10k cohort at noise 0.3); the mean over the rows of a
+neighbourhood is what the log itself says there.
+
+The rule (:func:`aoc_cli.control.rule.choose`, ``lower``, ``kept``): each action's lower
+bound is mean(a) - z_K noise / sqrt(episodes[a]), mean(a) the mean value of the
+neighbourhood's rows that took a (z_K the simultaneous one-sided 95% bound over the step's K
+actions, Bonferroni; no episode: no bound, -inf); the action of the highest bound is taken
+only where it beats the clinicians' likely action's own bound; otherwise the likely action is
+kept (Pi_b-SPIBB's principle: leave the behaviour where the log cannot show better). Rule 2
+of the exact-repeat log, with the neighbourhood in place of the state.
 
 Shapes: observations (N, d_o), actions (N,) int, row_episode (N,) int, values (N,) float64;
 ``at(obs (S, d_o))`` -> :class:`Near` with episodes (S, n) int64, likely (S,) int64,
@@ -35,6 +41,7 @@ rows (S, m) int64.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from statistics import NormalDist
 
@@ -73,7 +80,7 @@ class Neighbourhood:
 
     def __init__(self, observations: np.ndarray, actions: np.ndarray, row_episode: np.ndarray,
                  n_actions: int, values: np.ndarray | None = None, nearest: int = NEAREST,
-                 seed: int = 0):
+                 seed: int = 0, noise: float | None = None):
         import faiss  # lazy: FAISS only where a controller decides with the rule
 
         obs = np.asarray(observations, np.float64).reshape(len(observations), -1)
@@ -88,7 +95,8 @@ class Neighbourhood:
         self.index.add(self._standard(obs))
         self.z = lower_bound_z(self.n_actions)
         self.values = None if values is None else np.asarray(values, np.float64)
-        self.noise = (float("nan") if values is None else self._noise(obs, self.values, seed))
+        self.noise = (float(noise) if noise is not None else float("nan") if values is None
+                      else self._noise(obs, self.values, seed))
 
     def _standard(self, obs: np.ndarray) -> np.ndarray:
         return np.ascontiguousarray((np.asarray(obs, np.float64) - self.mean) / self.scale,
@@ -150,16 +158,60 @@ class Neighbourhood:
             half = self.z * self.noise / np.sqrt(episodes.astype(np.float64))
         return np.where(episodes > 0, np.asarray(value, np.float64) - half, -np.inf)
 
-    def backed(self, near: Near) -> np.ndarray:
-        """(S, n) bool: the log's own rows near the step back a move to each action: the
-        mean value of the rows that took it, less z_K noise / sqrt(its episodes), beats the
-        mean value of the rows that took the likely action (the second test of rule 7: the
-        decomposition's v_hat alone may be biased where the belief learns little)."""
-        low = self.lower(np.nan_to_num(near.mean, nan=-np.inf), near.episodes)
-        base = near.mean[np.arange(len(near.likely)), near.likely]
-        return low > base[:, None]
+    def bounds(self, near: Near) -> np.ndarray:
+        """(S, n) each action's lower bound over the neighbourhood's own rows: the mean value
+        of the rows that took it less z_K noise / sqrt(its episodes); -inf where none did."""
+        return self.lower(np.nan_to_num(near.mean, nan=-np.inf), near.episodes)
 
     def describe(self) -> dict:
         """What the rule measured, for the record."""
         return {"nearest": self.nearest, "noise": self.noise, "z": self.z, "level": LEVEL,
                 "queries": NOISE_QUERIES}
+
+
+def neighbourhood_values(observations: np.ndarray, rewards: np.ndarray,
+                         episode_starts: np.ndarray, gamma: float,
+                         censored: np.ndarray | None = None, nearest: int = NEAREST,
+                         tol: float = 1e-4, max_iterations: int = 1000, progress=None
+                         ) -> tuple[np.ndarray, dict]:
+    """(values (N,), info): each row's value of the behaviour, by fitted Q evaluation over the
+    log's neighbourhoods, the regressor the mean over the ``nearest`` rows (standardised,
+    exact search; a k-nearest-neighbour FQE): y_i = r_i + gamma V(o_{i+1}), V(o) the mean y of
+    the rows nearest o; y_i = r_i at an episode's last row, and at the cut of a ``censored``
+    (E,) stay r_i + gamma V(o_i) (the stay goes on: its own neighbourhood stands for the next
+    observation). Iterated from zero until no value moves by more than ``tol``
+    times the rewards' range. observations (N, d_o), rewards (N,), episode_starts (E + 1,).
+    ``info``: nearest, iterations, converged, seconds. ``progress(done, total, text)`` follows
+    the search."""
+    started = time.perf_counter()
+    obs = np.asarray(observations, np.float64).reshape(len(observations), -1)
+    n = len(obs)
+    r = np.asarray(rewards, np.float64).reshape(-1)
+    starts = np.asarray(episode_starts, np.int64)
+    hood = Neighbourhood(obs, np.zeros(n, np.int64), np.zeros(n, np.int64), 1, nearest=nearest)
+    rows = np.empty((n, hood.nearest), np.int64)
+    for a in range(0, n, _BLOCK):
+        rows[a:a + _BLOCK] = hood.rows(obs[a:a + _BLOCK])
+        if progress is not None:
+            progress(min(a + _BLOCK, n), n, "the log's neighbourhoods")
+    last = np.zeros(n, bool)
+    last[starts[1:] - 1] = True
+    nxt = np.minimum(np.arange(1, n + 1), n - 1)
+    going = ~last                                   # rows whose next observation counts
+    if censored is not None:
+        cut = (starts[1:] - 1)[np.asarray(censored, bool)]
+        nxt[cut] = cut
+        going[cut] = True
+    y = np.zeros(n)
+    scale = max(float(np.ptp(r)), 1e-12) * tol
+    done, it = False, 0
+    for it in range(1, max_iterations + 1):
+        new = r + np.where(going, gamma * y[rows].mean(1)[nxt], 0.0)
+        moved = float(np.abs(new - y).max()) if n else 0.0
+        y = new
+        if moved <= scale:
+            done = True
+            break
+    return y, {"nearest": hood.nearest, "iterations": it, "converged": done,
+               "seconds": round(time.perf_counter() - started, 3)}
+
