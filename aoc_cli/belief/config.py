@@ -33,7 +33,7 @@ CRITIC_STEPS_MIN = 500
 #: ``aoc train`` shows the estimate up front.
 CRITIC_STEP_SECONDS = 0.08
 #: Value targets computed from the rewards; any other name is a numeric corpus column.
-REWARD_TARGETS = ("return", "mean-return", "reward", "fqe")
+REWARD_TARGETS = ("return", "mean-return", "reward", "fqe", "neighbours")
 
 
 @dataclass(frozen=True)
@@ -75,10 +75,12 @@ class BeliefConfig(Settings):
     #: ``return`` (discounted return-to-go), ``mean-return``, ``reward`` or a column name.
     value: str = setting("return", help="Value target: return (discounted return-to-go), "
                                         "mean-return, reward, fqe (the behaviour's Q by fitted "
-                                        "Q evaluation, bootstrapped through the log), or a "
-                                        "numeric corpus column.")
+                                        "Q evaluation, bootstrapped through the log), "
+                                        "neighbours (the same with the mean of the log's 100 "
+                                        "nearest rows as the regressor), or a numeric corpus "
+                                        "column.")
     gamma: float = setting(0.99, bounds="[0, 1]",
-                           help="Discount of the value targets return and fqe.")
+                           help="Discount of the value targets return, fqe and neighbours.")
     history_length: int = setting(4, bounds=">= 0",
                                   help="Previous transitions of the episode the GRU reads "
                                        "(0: no history).")

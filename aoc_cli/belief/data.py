@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from aoc_cli.belief.config import BeliefConfig
-from aoc_cli.belief.targets import value_targets
+from aoc_cli.belief.targets import neighbourhood_targets, value_targets
 from aoc_cli.errors import AocError, ModelExists
 from aoc_cli.store import model_dir
 
@@ -72,12 +72,16 @@ def prepare(corpus, config: BeliefConfig, model_id: str, overwrite: bool,
     ``progress`` follows a target that takes a while (``fqe``'s backups)."""
     if model_dir(corpus.path, model_id).exists() and not overwrite:
         raise ModelExists(corpus.name, model_id)
-    values = (value_targets(corpus, config.value, config.gamma, progress=progress)
-              if config.mode == "value" else None)
+    values = hood = None
+    if config.mode == "value" and config.value == "neighbours" and corpus.has_rewards:
+        # the belief's targets and rule 7's one-step values, from one FQE
+        values, hood = neighbourhood_targets(corpus, config.gamma, progress=progress)
+    elif config.mode == "value":
+        values = value_targets(corpus, config.value, config.gamma, progress=progress)
     train_eps, val_eps = split_episodes(corpus.n_episodes, config.val_fraction, config.seed)
     starts = corpus.episode_starts
     return TrainingData(values, train_eps, val_eps, episode_rows(starts, train_eps),
-                        episode_rows(starts, val_eps))
+                        episode_rows(starts, val_eps), hood)
 
 
 class EarlyStopping:

@@ -9,6 +9,10 @@
 * ``fqe``: the logged behaviour's action value ``Q(o_t, a_t)`` by fitted Q evaluation with
   expected SARSA targets ``r_t + gamma V(o_{t+1})``, V(o) the mean of Q(o, a) over the log's
   rows at o (bootstrapped through the log's own next steps; :mod:`aoc_cli.belief.fqe`).
+* ``neighbours``: the same with the mean of the log's 100 rows nearest an observation as the
+  regressor in place of a network (a k-nearest-neighbour FQE, rule 7's values:
+  :func:`aoc_cli.index.search.neighbourhood.neighbourhood_values`): what the log itself says
+  near a noisy observation, a smooth target where the return of one stay is mostly noise.
 * any other name: a numeric per-row column of the corpus, used as is.
 """
 
@@ -95,6 +99,10 @@ def value_targets(corpus, value: str, gamma: float, progress=None) -> np.ndarray
                                 corpus.episode_starts, gamma,
                                 n_actions=corpus.n_actions if corpus.discrete else None,
                                 progress=progress, censored=censoring_of(corpus))
+        elif value == "neighbours":
+            from aoc_cli.index.search.neighbourhood import neighbourhood_values  # lazy: FAISS
+
+            v = neighbourhood_targets(corpus, gamma, progress)[0]
         elif value == "mean-return":
             v = mean_remaining_reward(rewards, corpus.episode_starts)
         else:
@@ -108,8 +116,8 @@ def value_targets(corpus, value: str, gamma: float, progress=None) -> np.ndarray
             known = ", ".join(columns) or "none"
             raise BadSetting(
                 "value", value,
-                f"unknown {param('value')} {value!r}: use return, mean-return, reward, fqe or a "
-                f"numeric column of corpus {corpus.name!r} (columns: {known})")
+                f"unknown {param('value')} {value!r}: use return, mean-return, reward, fqe, "
+                f"neighbours or a numeric column of corpus {corpus.name!r} (columns: {known})")
         v = np.asarray(corpus.column(value), dtype=np.float64).copy()
     bad = ~np.isfinite(v)
     if bad.any():
@@ -186,6 +194,18 @@ def _read_kept(npy, meta, record: dict) -> np.ndarray | None:
     return v
 
 
+def neighbourhood_targets(corpus, gamma: float, progress=None) -> tuple[np.ndarray, np.ndarray]:
+    """(fitted (N,), one-step (N,)): the ``neighbours`` targets of ``corpus``, FQE over the
+    log's neighbourhoods: the fitted values, the belief's target, and the one-step values
+    rule 7 reads (:func:`aoc_cli.index.search.neighbourhood.neighbourhood_values`)."""
+    from aoc_cli.index.search.neighbourhood import fitted_values, neighbourhood_values
+
+    step, info = neighbourhood_values(corpus.observations, corpus.rewards,
+                                      corpus.episode_starts, gamma, censoring_of(corpus),
+                                      progress=progress)
+    return fitted_values(step, corpus.actions, info["rows"]), step
+
+
 def value_spec(value: str, gamma: float) -> dict:
     """How v was computed, as recorded in the model's config.json."""
     spec: dict = {"target": value}
@@ -195,6 +215,11 @@ def value_spec(value: str, gamma: float) -> dict:
                               "(expected SARSA targets through the log's next "
                               "observations)")
         spec["fqe"] = FQEConfig().to_dict()
+    elif value == "neighbours":
+        spec["gamma"] = gamma
+        spec["definition"] = ("the logged behaviour's Q(o, a) by fitted Q evaluation over "
+                              "the log's neighbourhoods (the regressor the mean over the "
+                              "100 nearest rows that took the action)")
     elif value == "return":
         spec["gamma"] = gamma
         spec["definition"] = ("discounted return-to-go within the logged episode, "

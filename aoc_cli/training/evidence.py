@@ -37,7 +37,8 @@ unless its own flag is given.
    (:mod:`aoc_cli.training.tuning`).
 7. **do no harm** (value mode, discrete actions, no finite state: rule 2 cannot run): rule
    2 over the log's nearest rows in place of the state: each row valued by FQE over the
-   neighbourhoods (saved with the model), each action ranked by its lower bound over the
+   neighbourhoods (``value`` neighbours, the belief's target too, ``history_length`` 0,
+   undiscounted where episodes end by themselves), each action ranked by its lower bound over the
    rows near the step that took it, the clinicians' likely action kept unless another's
    bound beats its own (:mod:`aoc_cli.index.search.neighbourhood`); off where rule 2 runs.
 
@@ -164,6 +165,16 @@ def decide(ev: Evidence, given: dict) -> tuple[dict, list[dict]]:
         take("residual_cap", STATE_CAP, "a finite state the log revisits: an action is "
                                         "trusted only where the log took it in (nearly) that "
                                         "state")
+    if ev.discrete and not ev.finite_states and value_belief:
+        hood = (f"observations recur at {ev.repeats:.0%} of the rows, with discrete actions: "
+                "no finite state, rule 7's neighbourhoods")
+        take("value", "neighbours", hood + ": each row's value is the behaviour's Q by fitted "
+                                           "Q evaluation over the log's 100 nearest rows")
+        take("history_length", 0, hood + ": the values are the observation's and the action's "
+                                         "alone, and so is the belief")
+        if not ev.time_limit:
+            take("gamma", 1.0, "the episodes end by themselves (lengths from "
+                               f"{ev.length_median:g} median to {ev.length_max}): undiscounted")
     if ev.discrete and ev.finite_states:
         take("do_no_harm", "off", "a finite state the log revisits: rule 2's exact-repeat "
                                   "bound ranks the actions and rule 6 chooses on held-out "

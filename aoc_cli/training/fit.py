@@ -157,7 +157,7 @@ def _train(corpus, config: BeliefConfig, model: str, record: TrainingRecord, *,
         record = record.deciding(reason).with_settings(
             support_penalty={k: v for k, v in reason.items() if k not in ("setting", "why")})
     if (config.mode == "value" and corpus.discrete and prepared.values is not None
-            and record.controller.get("do_no_harm") == "on"):
+            and record.controller.get("do_no_harm") == "on" and prepared.neighbourhood is None):
         prepared, record = _neighbourhood(corpus, config, prepared, record, progress)
 
     total = config.max_epochs
@@ -186,8 +186,9 @@ def _train(corpus, config: BeliefConfig, model: str, record: TrainingRecord, *,
 
 def _neighbourhood(corpus, config: BeliefConfig, prepared, record: TrainingRecord, progress):
     """Rule 7's values of the rows (FQE over the log's neighbourhoods,
-    :func:`aoc_cli.index.search.neighbourhood.neighbourhood_values`), into the prepared data
-    (saved with the model) and what it measured into the record (``settings.do_no_harm``)."""
+    :func:`aoc_cli.index.search.neighbourhood.neighbourhood_values`) where the belief's own
+    target is another (``--value return``, say): into the prepared data (saved with the
+    model) and what it measured into the record (``settings.do_no_harm``)."""
     from aoc_cli.index.search.neighbourhood import neighbourhood_values
     values, info = neighbourhood_values(corpus.observations, corpus.rewards,
                                         corpus.episode_starts, config.gamma,

@@ -1,11 +1,12 @@
 """AOC on the cohort test bed (aoc_cli/envs/icu_cohort.py): a cohort CSV written from the
 ICU-Sepsis MDP with noisy features, gaps and censored stays, ingested, trained and indexed
 with no flag beyond the ingest's own (as docs/guide/clinical.md does), and AOC's true survival
-measured by rolling it out in the same MDP through the same noise (2,000 episodes), beside
-the clinicians' exact value and the nearest-centre references. One JSON line per run.
+measured by rolling it out in the same MDP through the same noise (20,000 episodes), beside
+the clinicians' exact value, the clinicians' likely dose as rule 7 reads it (the same
+patients: the paired difference) and the nearest-centre references. One JSON line per run.
 
     python benchmarks/notes/cohort_grid.py --stays 10000 --noise 0.3 --store /tmp/c \\
-        [--seed 0] [--episodes 2000] [--threads 1] [--controller '{"do_no_harm": "off"}']
+        [--seed 0] [--episodes 20000] [--threads 1] [--controller '{"do_no_harm": "off"}']
 
 Each (stays, noise) cell of docs/results/icu-cohort.md is one run of this command.
 """
@@ -62,7 +63,7 @@ def main() -> None:
     ap.add_argument("--stays", type=int, default=10_000)
     ap.add_argument("--noise", type=float, default=0.3)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--episodes", type=int, default=2000)
+    ap.add_argument("--episodes", type=int, default=20_000)
     ap.add_argument("--store", required=True)
     ap.add_argument("--threads", type=int, default=None)
     ap.add_argument("--reuse", action="store_true", help="decide with the model already there")
@@ -73,42 +74,52 @@ def main() -> None:
     info = {} if args.reuse else prepare(args.stays, args.noise, args.seed, store,
                                                   args.threads, args.train_args.split())
     session = aoc_cli.open_session("c", store=store, controller=json.loads(args.controller))
+    ctl = session.controller
     started = time.perf_counter()
     kept = []
-    policy = BatchPolicy(session.controller)
+    policy = BatchPolicy(ctl)
 
     class Decide:
         reset = staticmethod(policy.reset)
 
         def __call__(self, obs, alive):
             acts = policy(obs, alive)
-            kept.append(np.mean(acts == session.controller.neighbourhood.at(obs).likely)
-                        if session.controller.do_no_harm else np.nan)
+            kept.append(np.mean(acts == ctl.neighbourhood.at(obs).likely)
+                        if ctl.do_no_harm else np.nan)
             return acts
 
-    decide = Decide()
-    aoc_value = cohort.rollout_value(decide, args.episodes, noise=args.noise, seed=args.seed + 1)
+    seed = args.seed + 1      # the same patients for every policy (common random numbers)
+    aoc_value = cohort.rollout_value(Decide(), args.episodes, noise=args.noise, seed=seed)
+    rolled = time.perf_counter() - started
+    likely = cohort.rollout_value(lambda obs: ctl.neighbourhood.at(obs).likely, args.episodes,
+                                  noise=args.noise, seed=seed)
+    paired = cohort.paired_difference(aoc_value["survived"], likely["survived"])
     t = cohort.sepsis.tables("mean")
     near = {name: cohort.rollout_value(cohort.nearest_centre_policy(pol), args.episodes,
-                                       noise=args.noise, seed=args.seed + 1)["value"]
+                                       noise=args.noise, seed=seed)["value"]
             for name, pol in (("clinicians_nearest", t.clinicians),
                               ("modal_nearest", t.modal()))}
     settings = (info.get("trained") or {}).get("metrics", {}).get("settings", {})
     print(json.dumps({
         "stays": args.stays, "noise": args.noise, "seed": args.seed,
+        "episodes": args.episodes,
         "aoc": round(aoc_value["value"], 4), "low": round(aoc_value["low"], 4),
         "high": round(aoc_value["high"], 4), "clinicians": round(cohort.clinicians_value(), 4),
+        "likely": round(likely["value"], 4),
+        "aoc_minus_likely": [round(paired[k], 4) for k in ("difference", "low", "high")],
         **{k: round(v, 4) for k, v in near.items()},
         "kept_share": round(float(np.nanmean(kept)), 3) if kept else None,
-        "do_no_harm": session.controller.do_no_harm,
-        "noise_measured": (round(session.controller.neighbourhood.noise, 4)
-                           if session.controller.do_no_harm else None),
-        "controller": dict(session.controller.config.to_dict()),
+        "do_no_harm": ctl.do_no_harm,
+        "noise_measured": round(ctl.neighbourhood.noise, 4) if ctl.do_no_harm else None,
+        "controller": {k: v for k, v in ctl.config.to_dict().items()
+                       if k in ("epsilon", "residual_cap", "support_penalty", "do_no_harm",
+                                "k")},
         "decided": [(r["setting"], r["value"]) for r in settings.get("decided", [])],
-        "val_r2": (info.get("trained") or {}).get("metrics", {}).get("val_r2"),
-        "best_epoch": (info.get("trained") or {}).get("metrics", {}).get("best_epoch"),
+        "val_r2": ctl.model.meta["metrics"].get("val_r2"),
+        "best_epoch": ctl.model.meta["metrics"].get("best_epoch"),
+        "rule7_values": ctl.model.meta["metrics"].get("settings", {}).get("do_no_harm"),
         "train_seconds": info.get("train_seconds"),
-        "rollout_seconds": round(time.perf_counter() - started, 1)}))
+        "rollout_seconds": round(rolled, 1)}))
 
 
 if __name__ == "__main__":

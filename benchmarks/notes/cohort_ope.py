@@ -20,9 +20,9 @@ import subprocess
 import sys
 from pathlib import Path
 
-import numpy as np
-
 import os
+
+import numpy as np
 
 import aoc_cli
 # internal: the test bed's vectorised rollout and the controller over many episodes at once
@@ -64,14 +64,14 @@ def main() -> None:
             store=store)
         out = json.loads(aoc("evaluate", "c", "--data", f"h{i}", "--baselines", "none",
                              "-f", "json", store=store))
-        rec = out["ope"]["policies"]["aoc"] if "policies" in out.get("ope", {}) else \
-            out["policies"]["aoc"]
+        rec = out
         fqe = rec["policy_value"].get("fqe") or {}
         verdict = rec["verdict"]
         shown = verdict.endswith(": shown")
         wrong = shown and ((verdict.startswith("better") and diff[1] < 0)
                            or (verdict.startswith("worse") and diff[0] > 0))
         row = {"log": i, "verdict": verdict, "wrong": bool(wrong),
+               "behaviour": rec.get("behaviour_value", {}).get("estimate"),
                "fqe": fqe.get("estimate"), "low": fqe.get("low"), "high": fqe.get("high"),
                "reason": fqe.get("reason"),
                "hardly_held": rec.get("support", {}).get("hardly_held"),
@@ -84,7 +84,8 @@ def main() -> None:
     shown_fqe = [r for r in rows if r["fqe"] is not None]
     print(json.dumps({
         "noise": args.noise, "logs": args.logs, "stays": args.stays,
-        "truth": truth, "clinicians": clinicians,
+        "truth": {k: v for k, v in truth.items() if k != "survived"},
+        "clinicians": clinicians,
         "wrong_verdicts": sum(r["wrong"] for r in rows),
         "shown_verdicts": sum(r["verdict"].endswith(": shown") for r in rows),
         "fqe_shown": len(shown_fqe),

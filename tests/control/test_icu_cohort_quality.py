@@ -4,10 +4,12 @@ of the stays cut short, ingested with the clinical guide's command, ``aoc train`
 index`` with no flag, and AOC rolled out in the same MDP through the same noise: its true
 survival.
 
-Guards the cohort's promise as far as 2,000 rollouts can: on noisy features, where no
-observation repeats, AOC is not shown worse than the clinicians it learned from (rule 7, do no
-harm: docs/design.md, "Settings from the log's evidence"); measured 0.774 [0.756, 0.792], the
-clinicians 0.7818 exact (docs/results/icu-cohort.md).
+Guards the cohort's promise: on noisy features, where no observation repeats, AOC (rule 7:
+rule 2 over the log's nearest rows, do no harm; docs/design.md, "Settings from the log's
+evidence") is never below the clinicians it learned from by more than 0.005, and here shown
+above them: measured 0.7989 [0.7933, 0.8045] over 20,000 episodes, the clinicians 0.7818
+exact, their likely dose (what rule 7 keeps) on the same patients 0.7874
+(docs/results/icu-cohort.md).
 """
 
 import os
@@ -25,7 +27,7 @@ from aoc_cli.envs import icu_cohort
 pytestmark = pytest.mark.quality
 
 ROOT = Path(__file__).resolve().parents[2]
-STAYS, NOISE, EPISODES = 10_000, 0.3, 2000
+STAYS, NOISE, EPISODES = 10_000, 0.3, 20_000
 #: "Never below the clinicians by more than 0.005" (their exact survival).
 MARGIN = 0.005
 
@@ -51,25 +53,23 @@ def cohort(tmp_path_factory):
 def test_aoc_on_a_noisy_cohort_is_never_worse_than_the_clinicians(cohort):
     ctl = cohort.controller
     assert ctl.do_no_harm and ctl.config.support_penalty is None   # no exact repeats here
-    kept = []
-    policy = BatchPolicy(ctl)
-
-    class Decide:
-        reset = staticmethod(policy.reset)
-
-        def __call__(self, obs, alive):
-            acts = policy(obs, alive)
-            kept.append(np.mean(acts == ctl.neighbourhood.at(obs).likely))
-            return acts
-
-    result = icu_cohort.rollout_value(Decide(), EPISODES, noise=NOISE, seed=1)
+    assert ctl.model.config.value == "neighbours"                  # rule 7's values
+    result = icu_cohort.rollout_value(BatchPolicy(ctl), EPISODES, noise=NOISE, seed=1)
     clinicians = icu_cohort.clinicians_value()
-    # not shown worse than the clinicians by more than the margin: 2,000 episodes measure a
-    # survival to +- 0.018 (measured 0.774 [0.756, 0.792]; 1,000 episodes 0.783 [0.757,
-    # 0.809]: docs/results/icu-cohort.md)
-    assert result["high"] >= clinicians - MARGIN, (result, clinicians)
-    assert result["value"] >= clinicians - MARGIN - 0.02, (result, clinicians)
-    # it keeps the clinicians' likely dose nearly everywhere: on these features no other
-    # dose's bound, on v_hat and on the nearby rows' outcomes, beats it (measured 99.97%)
-    share = float(np.mean(kept))
-    assert share > 0.9, share
+    # 20,000 episodes measure a survival to +- 0.006: never below the clinicians by more than
+    # the margin, and above them (measured 0.7989 [0.7933, 0.8045] against 0.7818)
+    assert result["low"] >= clinicians - MARGIN, (result, clinicians)
+    assert result["low"] > clinicians, (result, clinicians)
+    # on the same patients (common random numbers), against the clinicians' likely dose that
+    # rule 7 keeps where no other dose is better supported: not shown worse by the margin
+    likely = icu_cohort.rollout_value(lambda obs: ctl.neighbourhood.at(obs).likely, EPISODES,
+                                      noise=NOISE, seed=1)
+    paired = icu_cohort.paired_difference(result["survived"], likely["survived"])
+    assert paired["low"] > -MARGIN, paired
+
+
+def test_the_value_belief_learns_on_noisy_features(cohort):
+    """Its targets, FQE over the log's neighbourhoods, are what the log says near an
+    observation: the belief fits them where it fitted one stay's return at R^2 0.01."""
+    metrics = cohort.controller.model.meta["metrics"]
+    assert metrics["val_r2"] > 0.5, metrics["val_r2"]

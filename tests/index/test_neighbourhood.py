@@ -202,3 +202,17 @@ def test_neighbourhood_values_are_the_tabular_fqe_where_each_neighbourhood_is_it
     assert values[b_rows] == pytest.approx(rew[b_rows], abs=1e-9)
     assert values[go] == pytest.approx(rew[go] + gamma * v_b, abs=1e-8)
     assert values[cut] == pytest.approx(rew[cut] + gamma * v_a, abs=1e-8)
+
+
+def test_fitted_values_average_the_neighbourhood_rows_of_the_rows_own_action():
+    from aoc_cli.index.search.neighbourhood import fitted_values
+    obs, action, episode, values, *_ = _noisy_log()
+    near = Neighbourhood(obs, action, episode, 4, nearest=30)
+    rows = near.rows(obs)
+    got = fitted_values(values, action, rows)
+    for i in range(0, len(obs), 37):
+        same = rows[i][action[rows[i]] == action[i]]
+        assert i in same                                  # the row itself, at distance 0
+        assert got[i] == pytest.approx(values[same].mean(), rel=1e-12)
+    # smoother than the values: they average over the state's rows of one action
+    assert got.std() < values.std()

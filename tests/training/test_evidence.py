@@ -86,11 +86,17 @@ def test_rule_2_a_finite_state_revisited():
     out, _ = decide(ev, {"gamma": 0.9, "support_penalty": 1.0})
     assert "gamma" not in out and "support_penalty" not in out and out["value"] == "fqe"
     assert "value" not in decide(ev, {"belief": "critic"})[0]
-    # observations that do not recur: none of it, and rule 7 keeps the clinicians' likely
-    # action unless a bound beats it
+    # observations that do not recur: rule 7 instead, rule 2 over the log's nearest rows
+    # (the values by FQE over them, a state belief, undiscounted), and the clinicians' likely
+    # action kept unless a bound beats its own
     out, why = decide(_ev(discrete=True, n_actions=25), {})
-    assert out == {"mode": "value", "do_no_harm": "on"}
+    assert out == {"mode": "value", "value": "neighbours", "history_length": 0, "gamma": 1.0,
+                   "do_no_harm": "on"}
     assert "rule 7" in why[-1]["why"] and why[-1]["setting"] == "do_no_harm"
+    # a time limit keeps rule 3's discount; a critic keeps its own targets
+    limited = decide(_ev(discrete=True, n_actions=25, at_limit=0.98), {})[0]
+    assert limited["value"] == "neighbours" and limited["gamma"] < 1.0
+    assert "value" not in decide(_ev(discrete=True, n_actions=25), {"belief": "critic"})[0]
     # continuous actions: no rule 7
     assert "do_no_harm" not in decide(_ev(discrete=False), {})[0]
 

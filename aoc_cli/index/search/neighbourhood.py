@@ -181,8 +181,9 @@ def neighbourhood_values(observations: np.ndarray, rewards: np.ndarray,
     (E,) stay r_i + gamma V(o_i) (the stay goes on: its own neighbourhood stands for the next
     observation). Iterated from zero until no value moves by more than ``tol``
     times the rewards' range. observations (N, d_o), rewards (N,), episode_starts (E + 1,).
-    ``info``: nearest, iterations, converged, seconds. ``progress(done, total, text)`` follows
-    the search."""
+    ``info``: nearest, iterations, converged, seconds, and ``rows`` (N, nearest) each row's
+    neighbourhood (for :func:`fitted_values`). ``progress(done, total, text)`` follows the
+    search."""
     started = time.perf_counter()
     obs = np.asarray(observations, np.float64).reshape(len(observations), -1)
     n = len(obs)
@@ -213,5 +214,19 @@ def neighbourhood_values(observations: np.ndarray, rewards: np.ndarray,
             done = True
             break
     return y, {"nearest": hood.nearest, "iterations": it, "converged": done,
-               "seconds": round(time.perf_counter() - started, 3)}
+               "seconds": round(time.perf_counter() - started, 3), "rows": rows}
+
+
+def fitted_values(values: np.ndarray, actions: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """(N,) the regressor's value at each row's own (observation, action): the mean of
+    ``values`` (N,) over the rows of its neighbourhood ``rows`` (N, m) that took its action
+    ``actions`` (N,) (the row itself among them, at distance 0). The one-step values
+    :func:`neighbourhood_values` returns carry the noise of one next step (rule 7's bound
+    needs it); these are what FQE fits, a smooth function of the observation and action that
+    a belief can learn."""
+    actions = np.asarray(actions).reshape(-1)
+    same = actions[rows] == actions[:, None]                          # (N, m)
+    same[:, 0] |= ~same.any(1)                   # a row missing from its own (ties): the nearest
+    vals = np.asarray(values, np.float64)[rows]
+    return (vals * same).sum(1) / same.sum(1)
 
