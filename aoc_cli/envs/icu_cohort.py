@@ -24,26 +24,20 @@ The table (:func:`cohort_table`, written by ``scripts/icu_cohort.py``), one row 
   share of the stays is cut at a uniformly random step before its end (and a stay still under
   treatment after 500 steps has no outcome either).
 
-Not written: ``state`` (the true state of each row) and ``propensity`` (the clinicians'
-probability of the logged dose in it), for tests and references (:data:`HIDDEN`).
+Not written: ``state`` and ``propensity`` (of the logged dose), the truth (:data:`HIDDEN`).
 
 Ingested with ``aoc ingest cohort.csv --name c --discrete-actions --impute hold --outcome
-died_in_hosp --outcome-reward 1=0,0=1`` its reward is 1 on the last step of a stay that
-survived, as the MDP's (the step into survival). ``aoc collect icu-cohort`` logs the same
-(observations the hold-forward-filled noisy features, the cut stays truncated, columns
-``state`` and ``propensity``), so the Python path and the CSV path give the same kind of log:
-with the same seed, the same arrays.
+died_in_hosp --outcome-reward 1=0,0=1`` its reward is 1 on a surviving stay's last step, as the
+MDP's. ``aoc collect icu-cohort`` logs the same arrays (with columns ``state`` and
+``propensity``) for the same seed.
 
 The environment (``make_env("icu-cohort")``, ``make_env("icu-cohort:noise=1.0,gap=0.15")``):
-observation the 47 features of the current state with fresh noise every step, a cell missing
-at rate ``gap`` held from the last observed value in the episode (the first step fully
-measured); 25 discrete actions; reward 1 on the step into survival; terminal at death or
-survival, truncated after 500 steps; ``info["state"]`` the true state. Its noise and
-transitions come from the env's ``np_random``: ``reset(seed=)`` reproduces an episode.
-
-References on the same noisy features: :func:`clinicians_value` (exact),
-:func:`nearest_centre_policy` (a state policy applied to the state whose cluster centre is
-nearest the observation), :func:`optimal_state_policy`.
+the 47 features of the current state with fresh noise every step, a cell missing at rate
+``gap`` held from the episode's last value (the first step fully measured); 25 actions; reward
+1 on the step into survival; terminal at death or survival, truncated after 500 steps;
+``info["state"]`` the true state; ``reset(seed=)`` reproduces an episode. References:
+:func:`clinicians_value` (exact), :func:`nearest_centre_policy` (a state policy in the state
+whose centre is nearest the observation), :func:`optimal_state_policy`.
 """
 
 from __future__ import annotations
@@ -295,42 +289,22 @@ class CohortEnv(gymnasium.Env):
 def rollout_value(decide_batch: DecideBatch, n_episodes: int, noise: float = NOISE,
                   gap: float = GAP, seed: int = 0, strategy: str = "mean") -> dict:
     """Survival of a policy that decides from the observations alone, by ``n_episodes``
-    episodes run at once in the MDP through the environment's noise, gap and hold model:
-    ``decide_batch(obs (n, 47) float32) -> actions (n,) int`` is called once a step on all
-    the episodes still alive; a policy with a ``reset(n)`` method (one that keeps each
-    episode's history, :class:`aoc_cli.control.batch.BatchPolicy`) is reset first and called
-    as ``decide_batch(obs, alive)``, ``alive`` the running episodes' indices. Returns
-    ``{"value", "low", "high", "episodes", "survived"}``, the interval the 95% normal
-    approximation, ``survived`` (n,) bool per episode (an episode still alive after 500 steps
-    counts as not surviving).
-
-    The draws are common random numbers: episode i's first state, its noise, its gaps and the
-    uniform that picks its next state at step t come from a stream of (seed, t) alone, never
-    from what other episodes did. Two policies rolled out with the same seed therefore meet
-    the same patients, and where they choose the same doses, the same courses:
-    :func:`paired_difference` compares them episode by episode, far more tightly than two
-    independent values."""
-    survived = rollouts(decide_batch, n_episodes, noise, gap, seed, strategy)
-    n = len(survived)
-    value = float(survived.mean())
-    half = 1.96 * np.sqrt(value * (1 - value) / n)
-    return {"value": value, "low": float(value - half), "high": float(value + half),
-            "episodes": n, "survived": survived}
-
-
-def rollouts(decide_batch: DecideBatch, n_episodes: int, noise: float = NOISE,
-             gap: float = GAP, seed: int = 0, strategy: str = "mean") -> np.ndarray:
-    """(n,) bool: whether each of ``n_episodes`` episodes survived (:func:`rollout_value`)."""
+    episodes run at once in the MDP through the environment's noise, gaps and hold:
+    ``decide_batch(obs (n, 47) float32) -> actions (n,) int`` is called once a step on the
+    episodes still alive (with a ``reset(n)`` method, e.g.
+    :class:`aoc_cli.control.batch.BatchPolicy`, it is reset first and called as
+    ``decide_batch(obs, alive)``, ``alive`` their indices). Returns ``{"value", "low", "high",
+    "episodes", "survived"}``: the 95% normal interval, ``survived`` (n,) bool (alive after
+    500 steps: not survived). The draws are **common random numbers**: episode i's first
+    state, noise, gaps and next-state uniforms at step t come from a stream of (seed, t)
+    alone, so two policies rolled out with one seed meet the same patients and, where they
+    choose alike, the same courses (:func:`paired_difference`)."""
     _check(noise, gap)
-    t = sepsis.tables(strategy)
-    C = centres(strategy)
-    n = int(n_episodes)
+    t, C, n = sepsis.tables(strategy), centres(strategy), int(n_episodes)
     rng = np.random.default_rng([int(seed), 0])
     s = sepsis._sample(np.broadcast_to(np.cumsum(t.mdp.d0)[None], (n, len(t.mdp.d0))),
                        rng.random(n))
-    obs = _noisy(C[s], noise, rng)
-    alive = np.arange(n)
-    survived = np.zeros(n, dtype=bool)
+    obs, alive, survived = _noisy(C[s], noise, rng), np.arange(n), np.zeros(n, dtype=bool)
     stateful = hasattr(decide_batch, "reset")
     if stateful:
         decide_batch.reset(n)
@@ -343,10 +317,8 @@ def rollouts(decide_batch: DecideBatch, n_episodes: int, noise: float = NOISE,
             raise AocError(f"decide_batch gave {len(a)} actions in "
                            f"{a.min() if len(a) else '-'}..{a.max() if len(a) else '-'} for "
                            f"{len(alive)} observations: expected one in 0..24 each")
-        # every episode's draws of this step, used or not: episode i's are its own
-        rng = np.random.default_rng([int(seed), step])
-        pick = rng.random(n)[alive]
-        fresh = rng.normal(0.0, 1.0, (n, N_FEATURES))[alive]
+        rng = np.random.default_rng([int(seed), step])    # every episode's draws of the step
+        pick, fresh = rng.random(n)[alive], rng.normal(0.0, 1.0, (n, N_FEATURES))[alive]
         held = (rng.random((n, N_FEATURES)) < gap)[alive]
         nxt = sepsis._sample(np.cumsum(t.mdp.P[s, a], axis=1), pick)
         ended = t.mdp.terminal[nxt]
@@ -355,19 +327,20 @@ def rollouts(decide_batch: DecideBatch, n_episodes: int, noise: float = NOISE,
         if gap:
             new[held] = obs[held]
         alive, s, obs = alive[~ended], nxt[~ended], new[~ended]
-    return survived
+    value = float(survived.mean())
+    half = 1.96 * np.sqrt(value * (1 - value) / n)
+    return {"value": value, "low": float(value - half), "high": float(value + half),
+            "episodes": n, "survived": survived}
 
 
 def paired_difference(a: np.ndarray, b: np.ndarray) -> dict:
     """The mean difference in survival of two policies rolled out on the same episodes
-    (``survived`` (n,) bool each, the same seed: :func:`rollout_value`), with its 95% normal
-    interval from the per-episode differences: ``{"difference", "low", "high", "differ"}``,
-    ``differ`` the share of episodes whose outcome differs."""
+    (``survived`` (n,) each, one seed), with its 95% normal interval from the per-episode
+    differences: ``{"difference", "low", "high", "differ"}`` (the share that differ)."""
     d = np.asarray(a, np.float64) - np.asarray(b, np.float64)
     if d.ndim != 1 or len(d) < 2:
         raise AocError("paired_difference: two (n,) outcome arrays of the same episodes")
-    half = 1.96 * float(d.std(ddof=1)) / np.sqrt(len(d))
-    m = float(d.mean())
+    half, m = 1.96 * float(d.std(ddof=1)) / np.sqrt(len(d)), float(d.mean())
     return {"difference": m, "low": m - half, "high": m + half,
             "differ": float(np.mean(d != 0))}
 
@@ -396,8 +369,7 @@ def nearest_centre_policy(state_policy: np.ndarray, seed: int = 0,
 
 def clinicians_value(strategy: str = "mean") -> float:
     """The clinicians' exact survival: ``tables().mdp.value(tables().clinicians)``."""
-    t = sepsis.tables(strategy)
-    return t.mdp.value(t.clinicians)
+    return sepsis.tables(strategy).mdp.value(sepsis.tables(strategy).clinicians)
 
 
 def optimal_state_policy(strategy: str = "mean") -> np.ndarray:
