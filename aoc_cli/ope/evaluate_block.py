@@ -298,15 +298,24 @@ def off_policy_values(data, logged: np.ndarray, policies: dict, settings: OPESet
 
 
 def truncated(data) -> np.ndarray:
-    """(E,) whether each episode of ``data`` was cut short (its last row a truncation, not a
-    terminal): censored by the estimators."""
+    """(E,) whether each episode of ``data`` (a stored corpus or its arrays) was cut short (its
+    last row a truncation, not a terminal): censored by the estimators."""
     last = np.asarray(data.episode_starts, np.int64)[1:] - 1
-    trunc = getattr(data, "truncations", None)
+    trunc, term = _flags(data, "truncations"), _flags(data, "terminals")
     if trunc is None:
         return np.zeros(len(last), bool)
-    term = getattr(data, "terminals", None)
     out = np.asarray(trunc, bool)[last]
     return out & ~np.asarray(term, bool)[last] if term is not None else out
+
+
+def _flags(data, name: str) -> np.ndarray | None:
+    """A stored corpus's column ``name`` (read), or the attribute of in-memory arrays."""
+    if hasattr(data, "read"):
+        try:
+            return data.read(name)
+        except AocError:
+            return None
+    return getattr(data, name, None)
 
 
 def wanted(settings: OPESettings | None, mode: str, data) -> bool:
