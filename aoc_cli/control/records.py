@@ -71,7 +71,7 @@ def decision_record(decision: Decision, corpus, index, step: int | None = None,
     if decision.kept is not None:   # rule 7, do no harm
         record["rule"] = (KEPT if decision.kept else
                           "a better-supported alternative: its lower bound beat the "
-                          "clinicians' likely dose's value")
+                          "clinicians' likely dose's own")
     if len(decision.scores):  # discrete imitation: sum over the rows of weight x label
         record["scores"] = decision.scores.tolist()
     if typical_residual and decision.residual > 3 * typical_residual:
