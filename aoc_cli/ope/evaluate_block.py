@@ -15,7 +15,8 @@ Output (JSON-ready), per policy: ``policy_value`` {estimator: {estimate, low, hi
 ``improvement`` {estimator: V(policy) - V(logged behaviour), its interval paired (the same
 resamples for both)}, ``verdict`` (one line: better than the logged behaviour, shown or not),
 ``support`` (ESS, per-step ESS, the share reached, the mean first-step weight, the undefined
-replicates); ``behaviour_value`` (the log's mean return with its interval), ``ope``
+replicates); ``behaviour_value`` (the log's mean return, Kaplan-Meier's under censoring,
+with its interval), ``ope``
 (settings, the propensities' source and model, notes) and ``ope_warnings``.
 """
 
@@ -242,8 +243,10 @@ def off_policy_values(data, logged: np.ndarray, policies: dict, settings: OPESet
     log = ope.Log(data.episode_starts, data.rewards, settings.gamma, truncated(data))
     propensity, source, model = behaviour_propensities(data, logged, settings, history_length)
     ope.ratios(np.ones(len(logged)), propensity)       # refuses a zero propensity up front
-    mean = ope.bootstrap(log, {"mean": ("mean", log.returns())}, n_boot=settings.n_boot,
-                         seed=settings.seed)["mean"]
+    # the behaviour's own value: the mean return, or under censoring Kaplan-Meier's (PDWIS
+    # with every ratio 1: a cut stay counts while it was seen, not as a return of 0)
+    own = ("pdwis", np.ones(data.n_rows)) if log.truncated.any() else ("mean", log.returns())
+    mean = ope.bootstrap(log, {"mean": own}, n_boot=settings.n_boot, seed=settings.seed)["mean"]
     out = {"ope": {"estimators": list(settings.estimators), "gamma": settings.gamma,
                    "propensity": source, "propensity_model": model,
                    "truncated_episodes": int(log.truncated.sum()),
