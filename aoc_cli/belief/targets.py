@@ -26,6 +26,7 @@ import numpy as np
 from aoc_cli.belief.censoring import censored_return_to_go, censoring_of
 from aoc_cli.belief.config import REWARD_TARGETS, FQEConfig
 from aoc_cli.errors import BadSetting, NoRewards, param
+from aoc_cli.index.search.neighbourhood import fitted_values, neighbourhood_values
 from aoc_cli.store import hash_arrays, targets_dir, write_json, write_npy
 
 #: Padded cells allowed per group of episodes of similar length (beyond 4x the real rows).
@@ -100,8 +101,6 @@ def value_targets(corpus, value: str, gamma: float, progress=None) -> np.ndarray
                                 n_actions=corpus.n_actions if corpus.discrete else None,
                                 progress=progress, censored=censoring_of(corpus))
         elif value == "neighbours":
-            from aoc_cli.index.search.neighbourhood import neighbourhood_values  # lazy: FAISS
-
             v = neighbourhood_targets(corpus, gamma, progress)[0]
         elif value == "mean-return":
             v = mean_remaining_reward(rewards, corpus.episode_starts)
@@ -198,8 +197,6 @@ def neighbourhood_targets(corpus, gamma: float, progress=None) -> tuple[np.ndarr
     """(fitted (N,), one-step (N,)): the ``neighbours`` targets of ``corpus``, FQE over the
     log's neighbourhoods: the fitted values, the belief's target, and the one-step values
     rule 7 reads (:func:`aoc_cli.index.search.neighbourhood.neighbourhood_values`)."""
-    from aoc_cli.index.search.neighbourhood import fitted_values, neighbourhood_values
-
     step, info = neighbourhood_values(corpus.observations, corpus.rewards,
                                       corpus.episode_starts, gamma, censoring_of(corpus),
                                       progress=progress)

@@ -23,6 +23,7 @@ from aoc_cli.belief.censoring import censoring_of
 from aoc_cli.belief.config import CRITIC_STEP_SECONDS, BeliefConfig
 from aoc_cli.belief.data import prepare
 from aoc_cli.decompose.k_rule import index_k
+from aoc_cli.index.search.neighbourhood import neighbourhood_values
 from aoc_cli.progress import Progress
 from aoc_cli.store import DEFAULT_MODEL, Corpus, check_name, writing_model
 from aoc_cli.training import evidence, tuning
@@ -189,7 +190,6 @@ def _neighbourhood(corpus, config: BeliefConfig, prepared, record: TrainingRecor
     :func:`aoc_cli.index.search.neighbourhood.neighbourhood_values`) where the belief's own
     target is another (``--value return``, say): into the prepared data (saved with the
     model) and what it measured into the record (``settings.do_no_harm``)."""
-    from aoc_cli.index.search.neighbourhood import neighbourhood_values
     values, info = neighbourhood_values(corpus.observations, corpus.rewards,
                                         corpus.episode_starts, config.gamma,
                                         censoring_of(corpus), progress=progress)
