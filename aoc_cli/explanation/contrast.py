@@ -49,8 +49,30 @@ def contrast_record(controller: Controller, observation: np.ndarray, history: Hi
     rec["value"], rec["residual"] = float(value[j]), float(residual[j])
     rec["candidate"] = j
     rec["passed"] = bool(decision.passed[j])
-    rec["why"] = _why_value(decision, j, controller)
+    rec["why"] = (_why_bound(decision, j, controller, observation) if decision.kept is not None
+                  else _why_value(decision, j, controller))
     return rec
+
+
+def _why_bound(d: Decision, j: int, controller: Controller, observation: np.ndarray) -> dict:
+    """Why candidate ``j`` lost under rule 7: its lower bound over the log's rows near the
+    step (none: no stay there received it) against the chosen action's."""
+    near = controller.neighbourhood.at(observation[None])
+    bounds = controller.neighbourhood.bounds(near)[0]
+    mine, chosen = float(bounds[j]), float(bounds[d.chosen])
+    out = {"value_gap": float(d.candidate_values[d.chosen] - d.candidate_values[j]),
+           "threshold": d.threshold, "bound": mine, "chosen_bound": chosen,
+           "episodes": int(near.episodes[0, j])}
+    if not np.isfinite(mine):
+        out["reason"] = "no nearby stay received it"
+        out["text"] = (f"none of the log's {controller.neighbourhood.nearest} rows nearest "
+                       "this step received it: rule 7 gives it no bound")
+    else:
+        out["reason"] = "lower bound"
+        out["text"] = (f"its lower bound over the {int(near.episodes[0, j])} nearby stays that "
+                       f"received it is {mine:.4g}, not above the chosen action's {chosen:.4g} "
+                       "(rule 7)")
+    return out
 
 
 def _why_value(d: Decision, j: int, controller: Controller) -> dict:

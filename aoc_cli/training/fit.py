@@ -194,7 +194,8 @@ def _neighbourhood(corpus, config: BeliefConfig, prepared, record: TrainingRecor
                                         corpus.episode_starts, config.gamma,
                                         censoring_of(corpus), progress=progress)
     if record.settings is not None:
-        record = record.with_settings(do_no_harm={**info, "value_mean": float(values.mean())})
+        kept = {k: v for k, v in info.items() if k != "rows"}    # the (N, 100) neighbours
+        record = record.with_settings(do_no_harm={**kept, "value_mean": float(values.mean())})
     return replace(prepared, neighbourhood=values), record
 
 

@@ -77,3 +77,23 @@ def test_kept_decisions_are_the_likely_action_and_their_record_says_so(cohort):
     assert d.kept is None and int(d.action) == int(np.argmax(
         np.where(d.passed, d.candidate_values, -np.inf)))
     del moved_any
+
+
+def test_the_contrast_of_a_rule_7_decision_reads_the_bounds(cohort):
+    from aoc_cli.explanation.contrast import contrast_record
+
+    session = open_session("c", store=cohort)
+    ctl = session.controller
+    data = cohort.corpus("c")
+    obs = np.asarray(data.observations)[10]
+    history = HistoryBuffer(2, data.observation_dim, 1, True).history()
+    d = ctl.decide(obs, history)
+    rec = contrast_record(ctl, obs, history, d, data, session.index)
+    why = rec["why"]
+    bounds = ctl.neighbourhood.bounds(ctl.neighbourhood.at(obs[None]))[0]
+    assert why["reason"] in ("lower bound", "no nearby stay received it")
+    assert why["chosen_bound"] == bounds[d.chosen]
+    if why["reason"] == "lower bound":
+        assert why["bound"] == bounds[rec["candidate"]] <= bounds[d.chosen]
+    else:
+        assert not np.isfinite(bounds[rec["candidate"]])
