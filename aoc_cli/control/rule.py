@@ -66,11 +66,11 @@ def choose(residual: np.ndarray, value: np.ndarray, config: ControllerConfig, *,
     candidate's support (needed when :func:`reads_support`); ``value_std``: sigma_v of the
     penalty. Rule 7, do no harm (discrete actions, the candidates every action):
     ``lower`` (S, K) each candidate's lower bound (the rank key in place of v_hat, or of the
-    penalised v_hat; the candidates it bounds, finite, are those that pass) and ``kept`` (S,) the clinicians' likely action
-    (:mod:`aoc_cli.index.search.neighbourhood`): the best-ranked candidate is taken only where its
-    key beats the kept action's own bound (its v_hat where no ``lower`` is given: rule 2's
-    key ranks), else the kept action is; the residual plays no part in it (the first of
-    equal bounds). Returns (threshold (S, 1),
+    penalised v_hat; the candidates it bounds, finite, are those that pass) and ``kept`` (S,)
+    the clinicians' likely action (:mod:`aoc_cli.index.search.neighbourhood`): the
+    best-ranked candidate is taken only where its key beats the kept action's own bound (its
+    v_hat where no ``lower`` is given: rule 2's key ranks), else the kept action is; the
+    residual plays no part in it (the first of equal bounds). Returns (threshold (S, 1),
     passed (S, K) bool, chosen (S,) int64)."""
     residual = np.asarray(residual, np.float64)
     value = np.asarray(value, np.float64)
