@@ -121,6 +121,19 @@ def check_field(item: Field, value) -> None:
                              f"{param(name)} must be {bounds_text(bounds)}, got {value}")
 
 
+def given_fields(cls, given, what: str) -> dict:
+    """The settings a mapping ``given`` gives a Settings class ``cls``: {field: value} of
+    those not None. A key that is no field of ``cls`` is a BadSetting naming it and the
+    known ones (``what``: "belief", "controller")."""
+    known = {item.name for item in fields(cls)}
+    unknown = sorted(set(given) - known)
+    if unknown:
+        raise BadSetting(unknown[0], given[unknown[0]],
+                         f"unknown {what} setting {param(unknown[0])}: the settings are "
+                         f"{', '.join(sorted(known))}")
+    return {k: v for k, v in given.items() if v is not None}
+
+
 class Settings:
     """The base of every settings dataclass (the convention above). Subclasses are
     ``@dataclass(frozen=True)``; a check across fields goes in :meth:`check` (call

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Mapping
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 from aoc_cli.api.common import Log, StoreLike, open_store
 from aoc_cli.belief.config import BeliefConfig
@@ -15,6 +15,7 @@ from aoc_cli.index import CorpusIndex
 from aoc_cli.index import build_index as _build_index
 from aoc_cli.errors import BadSetting, param
 from aoc_cli.progress import Progress
+from aoc_cli.settings import given_fields
 from aoc_cli.store import DEFAULT_INDEX, DEFAULT_MODEL
 
 #: train()'s flat keyword arguments of BeliefConfig's fields, kept for a release: give them
@@ -91,13 +92,7 @@ def belief_given(belief: BeliefLike, flat: dict | None = None) -> dict:
     if isinstance(belief, BeliefConfig):
         given = belief.to_dict()
     elif isinstance(belief, Mapping):
-        known = {f.name for f in fields(BeliefConfig)}
-        unknown = sorted(set(belief) - known)
-        if unknown:
-            raise BadSetting(unknown[0], belief[unknown[0]],
-                             f"unknown belief setting {param(unknown[0])}: the settings are "
-                             f"{', '.join(sorted(known))}")
-        given = {k: v for k, v in belief.items() if v is not None}
+        given = given_fields(BeliefConfig, belief, "belief")
     else:
         raise BadSetting("belief", belief, f"{param('belief')} must be a BeliefConfig, a "
                          f"mapping of its settings or the belief's kind, got "

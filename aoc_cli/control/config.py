@@ -4,10 +4,10 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 from aoc_cli.errors import BadSetting, param
-from aoc_cli.settings import Settings, setting
+from aoc_cli.settings import Settings, given_fields, setting
 
 
 @dataclass(frozen=True)
@@ -141,10 +141,4 @@ def given_settings(controller: ControllerLike) -> dict:
         raise BadSetting("controller", controller,
                          f"{param('controller')} must be a ControllerConfig or a mapping of its "
                          f"settings, got {type(controller).__name__}")
-    known = {item.name for item in fields(ControllerConfig)}
-    unknown = sorted(set(controller) - known)
-    if unknown:
-        raise BadSetting(unknown[0], controller[unknown[0]],
-                         f"unknown controller setting {param(unknown[0])}: the settings are "
-                         f"{', '.join(sorted(known))}")
-    return {k: v for k, v in controller.items() if v is not None}
+    return given_fields(ControllerConfig, controller, "controller")
