@@ -1,0 +1,167 @@
+"""What rule 7's neighbourhoods cost against the state itself, on the cohort test bed: the same
+rule (the lower bound of each dose's mean neighbourhood value, the clinicians' likely dose kept
+unless another's bound beats its own) over different sets of rows, every policy rolled out on
+the same patients (common random numbers), paired against the likely dose.
+
+    python benchmarks/notes/cohort_neighbourhoods.py --stays 10000 --noise 0.3 \\
+        [--episodes 20000] [--variants rule7,state,state100,m300,denoised]
+
+Variants (the rows a decision reads; each row valued by FQE over its own sets of rows):
+
+* ``rule7``: the 100 logged rows nearest the observation (what ``aoc train`` decides);
+* ``m300``: the 300 nearest;
+* ``denoised``: the 100 nearest after each observation, the log's and the query's, is
+  replaced by the mean of its 10 nearest logged rows (a local average of the features);
+* ``state``: every logged row of the true state (the hidden ``state`` column), the step's state
+  read through the nearest cluster centre: rule 2 told the state, an upper reference;
+* ``state100``: 100 rows of the true state drawn at random: the state's purity at rule 7's size.
+
+One JSON line per variant: the neighbourhoods' purity (the share of a row's set that shares its
+true state), true survival and the paired difference from the likely dose. Reads the table in
+memory (``cohort_table``) with its hidden state; the store and the CLI play no part.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+import numpy as np
+
+import aoc_cli.envs.icu_cohort as cohort
+from aoc_cli.index.search.neighbourhood import (Neighbourhood, lower_bound_z,
+                                                neighbourhood_values)
+from aoc_cli.threads import one_thread
+
+N_ACTIONS = 25
+N_STATES = 716
+
+
+def table(stays: int, noise: float, seed: int) -> dict:
+    """The cohort's rows with the gaps held forward, one-step rewards and the hidden state."""
+    cols = cohort.cohort_table(stays, noise, seed=seed)
+    ids = cols["id"]
+    n = len(ids)
+    starts = np.r_[0, np.nonzero(np.diff(ids))[0] + 1, n]
+    x = np.stack([cols[c] for c in cohort.OBS_COLUMNS], 1).astype(np.float64)
+    last = starts[1:] - 1
+    died = cols["died_in_hosp"][last]
+    reward = np.zeros(n)
+    reward[last] = np.where(np.isnan(died), 0.0, 1.0 - np.nan_to_num(died))
+    return {"x": cohort.hold_forward(x, starts), "a": cols["act_dose"].astype(np.int64),
+            "state": cols["state"].astype(np.int64), "r": reward, "starts": starts,
+            "censored": np.isnan(died), "episode": np.repeat(np.arange(len(last)),
+                                                             np.diff(starts))}
+
+
+def kept_or_best(low: np.ndarray, likely: np.ndarray) -> np.ndarray:
+    """Rule 7's choice from the bounds (S, K) and the likely dose (S,)."""
+    best = low.argmax(1)
+    s = np.arange(len(low))
+    return np.where(low[s, best] > low[s, likely], best, likely)
+
+
+def near_rule(t: dict, nearest: int, smooth: int | None):
+    """(policy, purity) of rule 7 over ``nearest`` rows, the observations first averaged over
+    their ``smooth`` nearest logged rows where given."""
+    x = t["x"]
+    denoise = None
+    if smooth:
+        raw = Neighbourhood(x, t["a"], t["episode"], N_ACTIONS, nearest=smooth)
+
+        def denoise(obs):
+            return x[raw.rows(np.asarray(obs, np.float64).reshape(len(obs), -1))].mean(1)
+        x = denoise(x)
+    y, info = neighbourhood_values(x, t["r"], t["starts"], 1.0, censored=t["censored"],
+                                   nearest=nearest)
+    purity = float((t["state"][info["rows"]] == t["state"][:, None]).mean())
+    hood = Neighbourhood(x, t["a"], t["episode"], N_ACTIONS, values=y, nearest=nearest)
+
+    def policy(obs):
+        near = hood.at(denoise(obs) if denoise else obs)
+        return kept_or_best(hood.bounds(near), near.likely)
+    return policy, purity
+
+
+def state_rule(t: dict, cap: int | None, seed: int = 0):
+    """(policy, purity 1) of the same rule over the rows of the true state (``cap`` of them
+    at random where given), each valued by FQE over the states."""
+    s, a, ep, r = t["state"], t["a"], t["episode"], t["r"]
+    n = len(s)
+    going = np.ones(n, bool)
+    last = t["starts"][1:] - 1
+    going[last] = False
+    nxt = np.minimum(np.arange(1, n + 1), n - 1)
+    cut = last[t["censored"]]
+    nxt[cut], going[cut] = cut, True
+    y = np.zeros(n)
+    count = np.maximum(np.bincount(s, minlength=N_STATES), 1)
+    for _ in range(2000):
+        v = np.bincount(s, weights=y, minlength=N_STATES) / count
+        new = r + np.where(going, v[s[nxt]], 0.0)
+        done = np.abs(new - y).max() < 1e-6
+        y = new
+        if done:
+            break
+    keep = np.ones(n, bool)
+    if cap:
+        order = np.lexsort((np.random.default_rng(seed).random(n), s))
+        first = np.r_[0, np.cumsum(np.bincount(s, minlength=N_STATES))[:-1]]
+        rank = np.empty(n, np.int64)
+        rank[order] = np.arange(n) - first[s[order]]
+        keep = rank < cap
+    g = (s * N_ACTIONS + a)[keep]
+    size = N_STATES * N_ACTIONS
+    rows = np.bincount(g, minlength=size)
+    mean = np.divide(np.bincount(g, weights=y[keep], minlength=size), rows,
+                     out=np.full(size, -np.inf), where=rows > 0)
+    sigma = np.sqrt(((y[keep] - mean[g]) ** 2).sum() / np.maximum(rows - 1, 0).sum())
+    pairs = np.unique(g * (ep.max() + 1) + ep[keep])
+    episodes = np.bincount(pairs // (ep.max() + 1), minlength=size)
+    with np.errstate(divide="ignore"):
+        low = np.where(episodes > 0, mean - lower_bound_z(N_ACTIONS) * sigma /
+                       np.sqrt(episodes), -np.inf).reshape(N_STATES, N_ACTIONS)
+    likely = rows.reshape(N_STATES, N_ACTIONS).argmax(1)
+
+    def policy(obs):
+        st = cohort.nearest_state(obs)
+        return kept_or_best(low[st], likely[st])
+    return policy, 1.0
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--stays", type=int, default=10_000)
+    ap.add_argument("--noise", type=float, default=0.3)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--episodes", type=int, default=20_000)
+    ap.add_argument("--variants", default="rule7,state,state100,m300,denoised")
+    args = ap.parse_args()
+    t = table(args.stays, args.noise, args.seed)
+    build = {"rule7": lambda: near_rule(t, 100, None), "m300": lambda: near_rule(t, 300, None),
+             "denoised": lambda: near_rule(t, 100, 10), "state": lambda: state_rule(t, None),
+             "state100": lambda: state_rule(t, 100)}
+    hood = Neighbourhood(t["x"], t["a"], t["episode"], N_ACTIONS)
+    seed = args.seed + 1
+    with one_thread():
+        likely = cohort.rollout_value(lambda obs: hood.at(obs).likely, args.episodes,
+                                      noise=args.noise, seed=seed)
+        for name in args.variants.split(","):
+            if name not in build:
+                raise SystemExit(f"unknown variant {name!r}: one of {', '.join(build)}")
+            started = time.perf_counter()
+            policy, purity = build[name]()
+            out = cohort.rollout_value(policy, args.episodes, noise=args.noise, seed=seed)
+            d = cohort.paired_difference(out["survived"], likely["survived"])
+            print(json.dumps({
+                "stays": args.stays, "noise": args.noise, "variant": name,
+                "purity": round(purity, 3), "value": round(out["value"], 4),
+                "low": round(out["low"], 4), "high": round(out["high"], 4),
+                "likely": round(likely["value"], 4),
+                "minus_likely": [round(d[k], 4) for k in ("difference", "low", "high")],
+                "seconds": round(time.perf_counter() - started, 1)}), flush=True)
+
+
+if __name__ == "__main__":
+    main()
