@@ -57,7 +57,7 @@ from aoc_cli.training.fit import train_corpus
 TASK = "icu-cohort"
 SCALES = {
     "full": {"sizes": (1000, 10000, 50000), "noises": (0.0, 0.3, 1.0), "cql_steps": 20_000,
-             "bc_steps": 10_000, "episodes": 2000},
+             "bc_steps": 10_000, "episodes": 20_000},
     "quick": {"sizes": (1000, 5000), "noises": (0.3,), "cql_steps": 5000, "bc_steps": 3000,
               "episodes": 500},
     "tiny": {"sizes": (200,), "noises": (0.3,), "cql_steps": 200, "bc_steps": 200,
