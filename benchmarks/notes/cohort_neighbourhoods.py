@@ -29,9 +29,10 @@ import time
 
 import numpy as np
 
+# internal: the table's hidden state, the vectorised rollout, rule 7's neighbourhoods and FQE
 import aoc_cli.envs.icu_cohort as cohort
-from aoc_cli.index.search.neighbourhood import (Neighbourhood, lower_bound_z,
-                                                neighbourhood_values)
+from aoc_cli.index.search.neighbourhood import Neighbourhood, lower_bound_z
+from aoc_cli.index.search.neighbourhood import neighbourhood_values
 from aoc_cli.threads import one_thread
 
 N_ACTIONS = 25
