@@ -9,7 +9,7 @@ the same patients (common random numbers), paired against the likely dose.
 Variants (the rows a decision reads; each row valued by FQE over its own sets of rows):
 
 * ``rule7``: the 100 logged rows nearest the observation (what ``aoc train`` decides);
-* ``m300``: the 300 nearest;
+* ``m300``: the 300 nearest (``m<k>``: the k nearest);
 * ``denoised``: the 100 nearest after each observation, the log's and the query's, is
   replaced by the mean of its 10 nearest logged rows (a local average of the features);
 * ``state``: every logged row of the true state (the hidden ``state`` column), the step's state
@@ -149,8 +149,11 @@ def main() -> None:
         likely = cohort.rollout_value(lambda obs: hood.at(obs).likely, args.episodes,
                                       noise=args.noise, seed=seed)
         for name in args.variants.split(","):
+            if name not in build and name[:1] == "m" and name[1:].isdigit():
+                build[name] = lambda k=int(name[1:]): near_rule(t, k, None)
             if name not in build:
-                raise SystemExit(f"unknown variant {name!r}: one of {', '.join(build)}")
+                raise SystemExit(f"unknown variant {name!r}: one of {', '.join(build)}, "
+                                 "m<k> (the k nearest)")
             started = time.perf_counter()
             policy, purity = build[name]()
             out = cohort.rollout_value(policy, args.episodes, noise=args.noise, seed=seed)
