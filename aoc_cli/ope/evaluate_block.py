@@ -16,8 +16,8 @@ Output (JSON-ready), per policy: ``policy_value`` {estimator: {estimate, low, hi
 resamples for both)}, ``verdict`` (one line: better than the logged behaviour, shown or not),
 ``support`` (ESS, per-step ESS, the share reached, the mean first-step weight, the undefined
 replicates); ``behaviour_value`` (the log's mean return, Kaplan-Meier's under censoring,
-with its interval), ``ope``
-(settings, the propensities' source and model, notes) and ``ope_warnings``.
+with its interval), ``ope`` (settings, the propensities' source and model, notes) and
+``ope_warnings``.
 """
 
 from __future__ import annotations

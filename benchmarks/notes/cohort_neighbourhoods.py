@@ -143,17 +143,19 @@ def main() -> None:
     build = {"rule7": lambda: near_rule(t, 100, None), "m300": lambda: near_rule(t, 300, None),
              "denoised": lambda: near_rule(t, 100, 10), "state": lambda: state_rule(t, None),
              "state100": lambda: state_rule(t, 100)}
+    names = args.variants.split(",")
+    for name in names:            # checked before any work
+        if name not in build and name[:1] == "m" and name[1:].isdigit():
+            build[name] = lambda k=int(name[1:]): near_rule(t, k, None)
+        if name not in build:
+            raise SystemExit(f"unknown variant {name!r}: one of {', '.join(build)}, "
+                             "m<k> (the k nearest)")
     hood = Neighbourhood(t["x"], t["a"], t["episode"], N_ACTIONS)
     seed = args.seed + 1
     with one_thread():
         likely = cohort.rollout_value(lambda obs: hood.at(obs).likely, args.episodes,
                                       noise=args.noise, seed=seed)
-        for name in args.variants.split(","):
-            if name not in build and name[:1] == "m" and name[1:].isdigit():
-                build[name] = lambda k=int(name[1:]): near_rule(t, k, None)
-            if name not in build:
-                raise SystemExit(f"unknown variant {name!r}: one of {', '.join(build)}, "
-                                 "m<k> (the k nearest)")
+        for name in names:
             started = time.perf_counter()
             policy, purity = build[name]()
             out = cohort.rollout_value(policy, args.episodes, noise=args.noise, seed=seed)
