@@ -1,7 +1,8 @@
 """`aoc train NAME`: learn the belief model of a corpus (value mode: AOC; imitation: ABC).
 Parses and prints only; the work is in :func:`aoc_cli.api.train`. Every option but
-``--model``, ``--paper``, ``--no-select``, ``--overwrite`` and the four controller settings
-saved with the model (``--epsilon``, ``--residual-cap``, ``--support-penalty``, ``--k``:
+``--model``, ``--paper``, ``--no-select``, ``--overwrite`` and the five controller settings
+saved with the model (``--epsilon``, ``--residual-cap``, ``--support-penalty``, ``--k``,
+``--do-no-harm``:
 :class:`~aoc_cli.control.config.ControllerConfig`'s) is a :class:`~aoc_cli.belief.config.BeliefConfig`
 setting: its help, range, choices and default come from the field (:mod:`aoc_cli.cli.fields`).
 """
@@ -17,7 +18,7 @@ from aoc_cli.training import tuning
 from aoc_cli.belief.config import BeliefConfig
 from aoc_cli.control.config import ControllerConfig
 from aoc_cli.cli.common import (BeliefKind, BeliefMode, ClassWeight, CorpusArgument, Device,
-                                FormatOption, choice, state)
+                                DoNoHarm, FormatOption, choice, state)
 from aoc_cli.cli.fields import EVIDENCE, from_field
 from aoc_cli.cli import train_view
 from aoc_cli.cli.output import ProgressBar, message, resolve_format, write_object
@@ -39,8 +40,8 @@ def _option(name: str, *flags: str, given: str | None = None):
 
 
 #: The controller settings saved with the model: decided, chosen on held-out episodes, or given.
-_SAVED = ("saved with the model; given, it is not decided (residual cap or support penalty "
-          "given: no controller chosen on held-out episodes)")
+_SAVED = ("saved with the model; given, it is not decided (residual cap, support penalty or "
+          "do no harm given: no controller chosen on held-out episodes)")
 
 
 def _controller(name: str):
@@ -76,6 +77,7 @@ def train(
     residual_cap: Optional[float] = _controller("residual_cap"),
     support_penalty: Optional[float] = _controller("support_penalty"),
     k: Optional[int] = _controller("k"),
+    do_no_harm: Optional[DoNoHarm] = _controller("do_no_harm"),
     paper: bool = typer.Option(False, "--paper", help=f"The paper's settings for everything "
                                                       f"not given ({_PAPER}): no selection, "
                                                       "no rules of the log's evidence."),
@@ -107,7 +109,8 @@ def train(
                 device=choice(device), dropout=dropout, class_weight=choice(class_weight)),
             paper=paper, no_select=no_select, overwrite=overwrite, progress=bar, log=message,
             controller={"epsilon": epsilon, "residual_cap": residual_cap,
-                        "support_penalty": support_penalty, "k": k})
+                        "support_penalty": support_penalty, "k": k,
+                        "do_no_harm": choice(do_no_harm)})
     for line in train_view.notes(trained):
         message(line)
     write_object(train_view.shown(trained, fmt), fmt, title=f"aoc train {name} --model {model}")

@@ -54,8 +54,10 @@ def notes(trained: Trained) -> list[str]:
             out.append(f"  {evidence.describe([r])[0]}{cost}")
         chosen = settings.get("controller_selection")
         if chosen:
-            out.append(f"  the controllers on {chosen['episodes']:,} held-out episodes (FQE, "
-                       f"{chosen['interval']}; {chosen['seconds']:.1f} s):")
+            fitted = any(e.get("estimate") is not None for e in chosen["candidates"])
+            out.append(f"  the controllers on {chosen['episodes']:,} held-out episodes ("
+                       + (f"FQE, {chosen['interval']}; " if fitted else "")
+                       + f"{chosen['seconds']:.1f} s):")
             out.extend(f"    {line}" for line in evidence.selection_lines(chosen))
     chosen = _chosen(metrics)
     if chosen:

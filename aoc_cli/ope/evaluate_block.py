@@ -39,7 +39,7 @@ from aoc_cli.ope.fqe import (
     behaviour_fqe,
     default_steps,
 )
-from aoc_cli.index.search.neighbourhood import Neighbourhood
+from aoc_cli.index.search.neighbourhood import episodes_near
 from aoc_cli.ope.parts import MAX_PARTS
 from aoc_cli.ope.propensity import features, fit_propensities
 from aoc_cli.ope.support import fqe_refusal
@@ -282,10 +282,8 @@ def off_policy_values(data, logged: np.ndarray, policies: dict, settings: OPESet
                     rec["withheld"] = off
     held = None
     if "fqe" in settings.estimators and any(f is not None for f in fqes):
-        near = Neighbourhood(data.observations, logged,
-                             np.repeat(np.arange(data.n_episodes), np.diff(data.episode_starts)),
-                             data.n_actions)
-        held = near.at(data.observations).episodes                       # (N, n)
+        held = episodes_near(data.observations, logged, data.episode_starts,
+                             data.n_actions)                              # (N, n)
     for i, ((name, policy), fqe) in enumerate(zip(probs.items(), fqes)):
         try:
             rec = policy_value(log, inputs, logged, propensity, policy,

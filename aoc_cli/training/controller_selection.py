@@ -1,6 +1,10 @@
 """The controller chosen on held-out episodes of the user's own log (value mode, discrete
-actions, a finite state the log revisits: rule 2 of :mod:`aoc_cli.training.evidence`), by a rule
-stated in advance (docs/design.md, "Settings from the log's evidence").
+actions: rule 6 of :mod:`aoc_cli.training.evidence`), by a rule stated in advance
+(docs/design.md, "Settings from the log's evidence"). With a finite state the log revisits
+(rule 2) the candidates are :func:`candidates`; without one (rule 7, :data:`HARM`) rule 7's
+controller and the paper's, "in that state" read in the held-out rows nearest the step
+(:func:`~aoc_cli.index.search.neighbourhood.episodes_near`) and the paper's first screened at
+:data:`SCREEN` steps (:func:`harm_candidates`).
 
 ``aoc train`` holds out the validation episodes (``val_fraction``, 20% by default) from the
 belief's fit; they only stop its training early. After training, at every step of those
@@ -48,11 +52,12 @@ from aoc_cli.control.rule import choose, residual_cap
 from aoc_cli.control.support import row_episodes, support_episodes
 from aoc_cli.decompose import decompose
 from aoc_cli.index.search import BeliefIndex
+from aoc_cli.index.search.neighbourhood import NEAREST, Neighbourhood, episodes_near
 from aoc_cli.ope.evaluate_block import truncated
 from aoc_cli.ope.fqe import REFITS, fqe_policies, student_quantile
 from aoc_cli.rows import distinct_rows
 from aoc_cli.threads import one_thread
-from aoc_cli.training.evidence import SELECTED, STATE_CAP
+from aoc_cli.training.evidence import STATE_CAP
 from aoc_cli.training.record import Recording
 
 #: Training rows sampled for their typical residual (leave-those-rows-out), as the index does.
@@ -62,6 +67,9 @@ TYPICAL_SAMPLE = 500
 FQE_STEPS, FQE_REFITS = None, REFITS
 #: Held-out steps x actions whose beliefs are computed at once.
 BLOCK = 65536
+#: Rule 7's premise: the held-out steps at which the paper's controller is first decided (its
+#: median decision's count read there; every action decomposed at each step).
+SCREEN = 500
 #: The held-out transitions of a (state, action) pair below which FQE's Q of it is the
 #: network's extrapolation: a candidate whose median decision has fewer is not valued.
 MIN_PAIRS = 3
@@ -71,6 +79,11 @@ RULE = ("the highest lower bound of the 95% interval of FQE on the held-out epis
         "equal bounds the more conservative; an estimate outside the episodes' returns, or "
         f"of a candidate whose median decision the held-out episodes took fewer than "
         f"{MIN_PAIRS} times in that state, is none (rule 2's kept when it has none)")
+
+
+#: How rule 7's premise reads "in that state".
+NEAR = (f"; without a finite state, \"in that state\" is among the {NEAREST} held-out rows "
+        "nearest the step, counted in episodes")
 
 
 def candidates(penalty: float | None, cap: float = STATE_CAP) -> tuple[dict, ...]:
@@ -86,6 +99,62 @@ def candidates(penalty: float | None, cap: float = STATE_CAP) -> tuple[dict, ...
                       {"residual_cap": None, "support_penalty": None})
 
 
+#: Rule 7's premise (no finite state): rule 7's controller, then the paper's.
+HARM = ({"do_no_harm": "on"}, {"do_no_harm": "off"})
+
+
+def harm_decisions(corpus, data, rows: np.ndarray, config: ControllerConfig) -> np.ndarray:
+    """(R,) rule 7's action at the held-out steps ``rows``: the same rule as the controller
+    (:func:`choose` with the neighbourhood's bounds and likely action), its neighbourhoods
+    the *training* rows' (never the step's own episode), each row valued by rule 7's values
+    (``data.neighbourhood``, else the belief's targets)."""
+    train = np.asarray(data.train_rows, np.int64)
+    values = data.neighbourhood if data.neighbourhood is not None else data.values
+    hood = Neighbourhood(np.asarray(corpus.observations)[train],
+                         np.asarray(corpus.actions, np.int64)[train],
+                         row_episodes(corpus.episode_starts)[train], int(corpus.n_actions),
+                         values=np.asarray(values, np.float64)[train])
+    near = hood.at(np.asarray(corpus.observations)[rows])
+    lower = hood.bounds(near)
+    zeros = np.zeros_like(lower)
+    return choose(zeros, zeros, ControllerConfig(do_no_harm="on"), lower=lower,
+                  kept=near.likely)[2].astype(np.int64)
+
+
+def harm_candidates(net, inputs, data, norm, corpus, config, k: int, rows, starts,
+                    controllers) -> tuple[list, list, list]:
+    """Rule 7's premise: (chosen, held, screened) per candidate of :data:`HARM`: its action
+    (R,) at every held-out step, the held-out count of each
+    (:func:`~aoc_cli.index.search.neighbourhood.episodes_near`), and None;
+    the paper's is first decided at :data:`SCREEN` held-out steps drawn at random (every
+    action decomposed: its cost), and where its median decision there is held fewer than
+    :data:`MIN_PAIRS` times it is not fitted (chosen None, held the sample's counts,
+    screened the sample's size): the rule gives it no estimate whatever FQE says."""
+    obs = np.asarray(corpus.observations)[rows]
+    logged = np.asarray(corpus.actions, np.int64)[rows]
+    counts = episodes_near(obs, logged, starts, int(corpus.n_actions))
+    chosen, held, screened = [], [], []
+    for c in controllers:
+        at = np.arange(len(rows))
+        if c.get("do_no_harm") == "on":
+            act = harm_decisions(corpus, data, rows, ControllerConfig(**c))
+        else:
+            at = np.sort(np.random.default_rng(config.seed).choice(
+                len(rows), size=min(SCREEN, len(rows)), replace=False))
+            parts = decompositions(net, inputs, data, norm, corpus, k, config.seed,
+                                   rows=rows[at])
+            act = decisions(parts, (c,))[0]
+            if np.median(counts[at, act]) >= MIN_PAIRS and len(at) < len(rows):
+                at = np.arange(len(rows))
+                act = decisions(decompositions(net, inputs, data, norm, corpus, k,
+                                               config.seed), (c,))[0]
+        full = len(at) == len(rows)
+        chosen.append(act if full else None)
+        held.append(counts[at, act])
+        screened.append(None if full else len(at))
+    return chosen, held, screened
+
+
 def held_out_steps(corpus, data) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(rows (R,), starts (E_v + 1,), truncated (E_v,)) of the validation episodes, in the
     order of ``data.val_rows``."""
@@ -96,15 +165,17 @@ def held_out_steps(corpus, data) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return rows, np.concatenate([[0], np.cumsum(lengths)]), truncated(corpus)[eps]
 
 
-def decompositions(net, inputs, data, norm, corpus, k: int, seed: int = 0) -> dict:
-    """Every action at every held-out step decomposed over the training rows: residual,
-    value, support (R, n), sigma_v, the training rows' typical p90 residual, and how many
-    distinct beliefs were decomposed."""
+def decompositions(net, inputs, data, norm, corpus, k: int, seed: int = 0,
+                   rows: np.ndarray | None = None) -> dict:
+    """Every action at every held-out step (or at the corpus rows ``rows`` (R,)) decomposed
+    over the training rows: residual, value, support (R, n), sigma_v, the training rows'
+    typical p90 residual, and how many distinct beliefs were decomposed."""
     device = inputs.obs.device
     n = int(corpus.n_actions)
     encoder = Encoder(norm, True, n, device)
     tr = torch.as_tensor(data.train_rows, device=device)
-    rows, _, _ = held_out_steps(corpus, data)
+    if rows is None:
+        rows, _, _ = held_out_steps(corpus, data)
     with torch.no_grad():
         b_tr = torch.cat([net(*inputs.batch(tr[i:i + BLOCK]))[0]
                           for i in range(0, len(tr), BLOCK)]).cpu().numpy()
@@ -161,7 +232,12 @@ def valued(estimates: list[dict], span: tuple[float, float] | None = None) -> li
     out = []
     slack = None if span is None else 0.1 * max(span[1] - span[0], 1e-12)
     for e in estimates:
-        if not np.isfinite(e["low"]):
+        if e.get("screened"):
+            out.append(f"fewer than {MIN_PAIRS} at {e['screened']:,} held-out steps drawn "
+                       "at random: FQE's Q there would extrapolate (not fitted)")
+        elif e.get("alone"):
+            out.append("no other candidate has an estimate to weigh against it: not fitted")
+        elif e["low"] is None or not np.isfinite(e["low"]):
             out.append("no interval")
         elif span is not None and not span[0] - slack <= e["estimate"] <= span[1] + slack:
             out.append("outside the held-out returns: FQE diverged")
@@ -188,7 +264,8 @@ def bounds(estimates: list[dict], span: tuple[float, float] | None = None) -> np
     decisions the held-out log hardly holds; 0 where not given) times the width of ``span``
     (the held-out returns' lowest and highest; none: 0)."""
     width = 0.0 if span is None else float(span[1] - span[0])
-    return np.array([e["low"] - e.get("rare", 0.0) * width for e in estimates], np.float64)
+    return np.array([-np.inf if e["low"] is None else e["low"] - e.get("rare", 0.0) * width
+                     for e in estimates], np.float64)
 
 
 def pair_counts(observations: np.ndarray, logged: np.ndarray, n: int,
@@ -224,39 +301,56 @@ def _select(net, inputs, data, norm, corpus, config, k, progress, controllers) -
     if progress is not None:
         progress(0, None, f"choosing the controller: {len(controllers)} candidates decide "
                           f"{len(rows):,} held-out steps")
-    parts = decompositions(net, inputs, data, norm, corpus, k, config.seed)
-    chosen = decisions(parts, controllers)
+    harm = "do_no_harm" in controllers[0]    # rule 7's premise: no finite state
     n = int(corpus.n_actions)
     logged = np.asarray(corpus.actions, np.int64)[rows]
-    policies = [np.eye(n)[c] for c in chosen]
-    text = (f"choosing the controller: FQE of {len(controllers)} candidates on {n_eps:,} "
+    obs = np.asarray(corpus.observations)[rows]
+    distinct = None
+    if harm:
+        chosen, held, screened = harm_candidates(net, inputs, data, norm, corpus, config, k,
+                                                 rows, starts, controllers)
+    else:
+        parts = decompositions(net, inputs, data, norm, corpus, k, config.seed)
+        chosen, distinct = decisions(parts, controllers), parts["distinct"]
+        held, screened = pair_counts(obs, logged, n, chosen), [None] * len(chosen)
+    fitted = [c for c in chosen if c is not None]
+    if harm and len(fitted) == 1:     # nothing to weigh rule 7's against: kept unfitted
+        fitted = []
+    text = (f"choosing the controller: FQE of {len(fitted)} candidates on {n_eps:,} "
             "held-out episodes")
     tick = None if progress is None else (lambda done, total: progress(done, total, text))
-    obs = np.asarray(corpus.observations)[rows]
-    fits = fqe_policies(obs, logged,
-                        np.asarray(corpus.rewards, np.float64)[rows], starts, policies,
-                        float(config.gamma), FQE_STEPS, FQE_REFITS, seed=config.seed,
-                        progress=tick, truncated=cut)
-    held = pair_counts(obs, logged, n, chosen)
-    estimates = [{"settings": dict(s), "estimate": float(f["estimate"]),
-                  "low": float(f["low"]), "high": float(f["high"]),
-                  "agrees": float(np.mean(c == logged)), "pairs": float(np.median(h)),
-                  "rare": float(np.mean(h < MIN_PAIRS))}
-                 for s, f, c, h in zip(controllers, fits, chosen, held)]
+    fits = iter(fqe_policies(obs, logged, np.asarray(corpus.rewards, np.float64)[rows],
+                             starts, [np.eye(n)[c] for c in fitted], float(config.gamma),
+                             FQE_STEPS, FQE_REFITS, seed=config.seed, progress=tick,
+                             truncated=cut) if fitted else [])
+    estimates, fqe_steps = [], 0
+    for s, c, h, m in zip(controllers, chosen, held, screened):
+        f = next(fits) if c is not None and fitted else {"estimate": None, "low": None,
+                                                          "high": None}
+        estimates.append({"settings": dict(s),
+                          **{key: None if f[key] is None else float(f[key])
+                             for key in ("estimate", "low", "high")},
+                          "pairs": float(np.median(h)), "rare": float(np.mean(h < MIN_PAIRS)),
+                          **({"agrees": float(np.mean(c == logged))} if m is None else
+                             {"screened": m}),
+                          **({"alone": True} if c is not None and not fitted else {})})
+        if "steps" in f:
+            fqe_steps = int(f["steps"])
     returns = np.add.reduceat(np.asarray(corpus.rewards, np.float64)[rows]
                               * float(config.gamma) ** _steps_in(starts), starts[:-1])
     span = (float(returns.min()), float(returns.max()))
     for e, why, bound in zip(estimates, valued(estimates, span), bounds(estimates, span)):
-        e["bound"] = float(bound)
+        e["bound"] = float(bound) if np.isfinite(bound) else None
         e["valued"] = not why
         if why:
             e["not_valued"] = why
     best = pick(estimates, span)
     return {"chosen": dict(controllers[best]), "candidates": estimates, "episodes": n_eps,
-            "steps": int(len(rows)), "distinct": parts["distinct"], "rule": RULE,
+            "steps": int(len(rows)), **({} if distinct is None else {"distinct": distinct}),
+            "rule": RULE + (NEAR if harm else ""),
             "min_pairs": MIN_PAIRS, "returns": list(span),
             "interval": f"+- {student_quantile(FQE_REFITS - 1):.3g} sd of {FQE_REFITS} refits",
-            "fqe_steps": int(fits[0]["steps"]), "seconds": time.perf_counter() - started}
+            "fqe_steps": fqe_steps, "seconds": time.perf_counter() - started}
 
 
 def recording_hook(corpus, config, k: int, recording: Recording, progress=None):
@@ -267,13 +361,16 @@ def recording_hook(corpus, config, k: int, recording: Recording, progress=None):
     def inspect(net, inputs, data, norm) -> dict:
         # rule 2's penalty, measured on the row values before training (aoc_cli.training.fit)
         record = recording.record
+        harm = record.controller.get("do_no_harm") == "on"
         out = select_controller(net, inputs, data, norm, corpus, config, k,
+                                HARM if harm else
                                 candidates(record.controller.get("support_penalty")),
                                 progress)
         record = record.with_controller(**out["chosen"])
         prior = {r["setting"]: r for r in record.settings["decided"]}
-        decided = [r for r in record.settings["decided"] if r["setting"] not in SELECTED]
-        for i, name in enumerate(SELECTED):
+        names = tuple(out["chosen"])
+        decided = [r for r in record.settings["decided"] if r["setting"] not in names]
+        for i, name in enumerate(names):
             value = out["chosen"][name]
             measured = prior.get(name, {})
             # the penalty chosen is rule 2's bound: its measure stays in the record
@@ -285,8 +382,9 @@ def recording_hook(corpus, config, k: int, recording: Recording, progress=None):
                 "why": (f"chosen among {len(out['candidates'])} controllers by {RULE} "
                         f"({out['episodes']:,} episodes, {out['steps']:,} steps; each "
                         "candidate's value below)" if i == 0 else
-                        f"chosen with {SELECTED[0]}, by the same rule")
-                       + (f"; the penalty: {measured['why']}" if kept else ""),
+                        f"chosen with {names[0]}, by the same rule")
+                       + (f"; the {'rule' if harm else 'penalty'}: {measured['why']}"
+                          if kept else ""),
                 "seconds": out["seconds"], **kept})
         recording.record = record.with_settings(decided=decided, controller_selection=out)
         return {}

@@ -206,12 +206,14 @@ SELECTED = ("residual_cap", "support_penalty")
 
 
 def selects_controller(ev: Evidence, config, given: dict) -> bool:
-    """Whether ``aoc train`` chooses rule 2's controller on the validation episodes for a
-    model of ``config`` (a BeliefConfig): value mode with the value belief trained in memory,
-    a finite state the log revisits (discrete actions), rewards, and none of
-    :data:`SELECTED` ``given``."""
-    return (config.mode == "value" and config.belief == "value" and ev.finite_states
-            and ev.rewards and not any(given.get(k) is not None for k in SELECTED))
+    """Whether ``aoc train`` chooses the controller on the validation episodes for a model of
+    ``config`` (a BeliefConfig): value mode with the value belief trained in memory, discrete
+    actions, rewards, and none of :data:`SELECTED` nor ``do_no_harm`` ``given``: with a
+    finite state the log revisits among rule 2's controllers, without one among rule 7's and
+    the paper's."""
+    return (config.mode == "value" and config.belief == "value" and ev.discrete
+            and ev.rewards and not any(given.get(k) is not None
+                                       for k in (*SELECTED, "do_no_harm")))
 
 
 def penalises(ev: Evidence, config, given: dict) -> bool:
@@ -316,14 +318,24 @@ def selection_lines(out: dict) -> list[str]:
                 + (f": bound {e['bound']:.4f}" if e.get("valued", True) and "bound" in e
                    else f" ({e.get('not_valued', 'no estimate')})"))
 
-    return [f"{label(e['settings']):<{width}}  FQE {e['estimate']:.4f} [{e['low']:.4f}, "
-            f"{e['high']:.4f}], the logged action at {e['agrees']:.0%} of the steps"
+    def fqe(e: dict) -> str:
+        if e.get("screened"):
+            return f"FQE not fitted, decided at {e['screened']:,} steps"
+        if e.get("estimate") is None:
+            return f"FQE not fitted, the logged action at {e['agrees']:.0%} of the steps"
+        return (f"FQE {e['estimate']:.4f} [{e['low']:.4f}, {e['high']:.4f}], the logged "
+                f"action at {e['agrees']:.0%} of the steps")
+
+    return [f"{label(e['settings']):<{width}}  " + fqe(e)
             + pairs(e) + ("  <- chosen" if e["settings"] == out["chosen"] else "")
             for e in out["candidates"]]
 
 
 def label(settings: dict) -> str:
-    """``cap 0.01, penalty 5``; ``no cap, no penalty``."""
+    """``cap 0.01, penalty 5``; ``no cap, no penalty``; ``rule 7 (do no harm)``."""
+    if "do_no_harm" in settings:
+        return ("rule 7 (do no harm)" if settings["do_no_harm"] == "on"
+                else "the paper's (no do no harm)")
     cap, pen = settings.get("residual_cap"), settings.get("support_penalty")
     return (("no cap" if cap is None else f"cap {cap:g}") + ", "
             + ("no penalty" if pen is None else f"penalty {pen:g}"))

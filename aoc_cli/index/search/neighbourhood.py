@@ -169,6 +169,18 @@ class Neighbourhood:
                 "queries": NOISE_QUERIES}
 
 
+def episodes_near(observations: np.ndarray, actions: np.ndarray, episode_starts: np.ndarray,
+                  n_actions: int) -> np.ndarray:
+    """(N, n) the log's support near each of its own rows, in episodes: how many of its
+    episodes among the :data:`NEAREST` rows nearest the row (itself among them) took each
+    action (``aoc evaluate``'s hardly-held measure; rule 6's "held out fewer than 3 times in
+    that state" where no state repeats). observations (N, d_o), actions (N,),
+    episode_starts (E + 1,)."""
+    starts = np.asarray(episode_starts, np.int64)
+    episode = np.repeat(np.arange(len(starts) - 1), np.diff(starts))
+    return Neighbourhood(observations, actions, episode, n_actions).at(observations).episodes
+
+
 def neighbourhood_values(observations: np.ndarray, rewards: np.ndarray,
                          episode_starts: np.ndarray, gamma: float,
                          censored: np.ndarray | None = None, nearest: int = NEAREST,
