@@ -103,7 +103,7 @@ def candidates(penalty: float | None, cap: float = STATE_CAP) -> tuple[dict, ...
 HARM = ({"do_no_harm": "on"}, {"do_no_harm": "off"})
 
 
-def harm_decisions(corpus, data, rows: np.ndarray, config: ControllerConfig) -> np.ndarray:
+def harm_decisions(corpus, data, rows: np.ndarray) -> np.ndarray:
     """(R,) rule 7's action at the held-out steps ``rows``: the same rule as the controller
     (:func:`choose` with the neighbourhood's bounds and likely action), its neighbourhoods
     the *training* rows' (never the step's own episode), each row valued by rule 7's values
@@ -137,7 +137,7 @@ def harm_candidates(net, inputs, data, norm, corpus, config, k: int, rows, start
     for c in controllers:
         at = np.arange(len(rows))
         if c.get("do_no_harm") == "on":
-            act = harm_decisions(corpus, data, rows, ControllerConfig(**c))
+            act = harm_decisions(corpus, data, rows)
         else:
             at = np.sort(np.random.default_rng(config.seed).choice(
                 len(rows), size=min(SCREEN, len(rows)), replace=False))
