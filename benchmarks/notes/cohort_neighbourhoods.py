@@ -14,7 +14,12 @@ Variants (the rows a decision reads; each row valued by FQE over its own sets of
   replaced by the mean of its 10 nearest logged rows (a local average of the features);
 * ``state``: every logged row of the true state (the hidden ``state`` column), the step's state
   read through the nearest cluster centre: rule 2 told the state, an upper reference;
-* ``state100``: 100 rows of the true state drawn at random: the state's purity at rule 7's size.
+* ``state100``: 100 rows of the true state drawn at random: the state's purity at rule 7's size;
+* ``nearsv``: rule 7's 100 nearest rows, each valued by FQE over the true states;
+* ``statenv``: every row of the true state, each valued by FQE over the neighbourhoods (with
+  ``nearsv``: which of the two, the values or the sets, rule 7 loses against the state);
+* ``kmeans<k>``: the rows of the observation's group, k groups by k-means of the standardised
+  features (FAISS), rows valued by FQE over the neighbourhoods.
 
 One JSON line per variant: the neighbourhoods' purity (the share of a row's set that shares its
 true state), true survival and the paired difference from the likely dose. Reads the table in
@@ -85,10 +90,9 @@ def near_rule(t: dict, nearest: int, smooth: int | None):
     return policy, purity
 
 
-def state_rule(t: dict, cap: int | None, seed: int = 0):
-    """(policy, purity 1) of the same rule over the rows of the true state (``cap`` of them
-    at random where given), each valued by FQE over the states."""
-    s, a, ep, r = t["state"], t["a"], t["episode"], t["r"]
+def state_values(t: dict) -> np.ndarray:
+    """(N,) each row's value by FQE over the true states (the mean over a state's rows)."""
+    s, r = t["state"], t["r"]
     n = len(s)
     going = np.ones(n, bool)
     last = t["starts"][1:] - 1
@@ -105,15 +109,69 @@ def state_rule(t: dict, cap: int | None, seed: int = 0):
         y = new
         if done:
             break
+    return y
+
+
+def mixed_rule(t: dict, sets: str):
+    """(policy, purity) of the rule with one part from the state: ``sets`` "near" reads rule
+    7's 100 nearest rows valued by FQE over the states; "state" reads the state's rows valued
+    by FQE over the neighbourhoods."""
+    x = t["x"]
+    if sets == "near":
+        y = state_values(t)
+        hood = Neighbourhood(x, t["a"], t["episode"], N_ACTIONS, values=y)
+
+        def policy(obs):
+            near = hood.at(obs)
+            return kept_or_best(hood.bounds(near), near.likely)
+        return policy, float("nan")
+    y, _ = neighbourhood_values(x, t["r"], t["starts"], 1.0, censored=t["censored"])
+    return state_rule(t, None, values=y)
+
+
+def kmeans_rule(t: dict, k: int, seed: int = 0):
+    """(policy, purity) of the rule over k-means groups of the standardised features (faiss,
+    k groups): a row's set is its group, an observation's the group of its nearest centroid;
+    rows valued by FQE over the neighbourhoods."""
+    import faiss
+    x = t["x"]
+    mu, sd = x.mean(0), x.std(0)
+    z = np.ascontiguousarray((x - mu) / np.where(sd > 1e-12, sd, 1.0), dtype=np.float32)
+    km = faiss.Kmeans(z.shape[1], k, niter=25, seed=seed, max_points_per_centroid=10_000)
+    km.train(z)
+    _, label = km.index.search(z, 1)
+    label = label[:, 0].astype(np.int64)
+    # purity: the share of a row's group that shares its true state
+    pair = label * N_STATES + t["state"]
+    per = np.bincount(pair, minlength=k * N_STATES)[pair]
+    purity = float(np.mean(per / np.bincount(label, minlength=k)[label]))
+    y, _ = neighbourhood_values(x, t["r"], t["starts"], 1.0, censored=t["censored"])
+    groups = {**t, "state": label}
+
+    def assign(obs):
+        q = np.ascontiguousarray((np.asarray(obs, np.float64) - mu) / np.where(
+            sd > 1e-12, sd, 1.0), dtype=np.float32)
+        return km.index.search(q, 1)[1][:, 0].astype(np.int64)
+    policy, _ = state_rule(groups, None, values=y, n_groups=k, assign=assign)
+    return policy, purity
+
+
+def state_rule(t: dict, cap: int | None, seed: int = 0, values: np.ndarray | None = None,
+               n_groups: int = N_STATES, assign=None):
+    """(policy, purity 1) of the same rule over the rows of the true state (``cap`` of them
+    at random where given), each valued by FQE over the states (or by ``values``)."""
+    s, a, ep = t["state"], t["a"], t["episode"]
+    n = len(s)
+    y = state_values(t) if values is None else values
     keep = np.ones(n, bool)
     if cap:
         order = np.lexsort((np.random.default_rng(seed).random(n), s))
-        first = np.r_[0, np.cumsum(np.bincount(s, minlength=N_STATES))[:-1]]
+        first = np.r_[0, np.cumsum(np.bincount(s, minlength=n_groups))[:-1]]
         rank = np.empty(n, np.int64)
         rank[order] = np.arange(n) - first[s[order]]
         keep = rank < cap
     g = (s * N_ACTIONS + a)[keep]
-    size = N_STATES * N_ACTIONS
+    size = n_groups * N_ACTIONS
     rows = np.bincount(g, minlength=size)
     mean = np.divide(np.bincount(g, weights=y[keep], minlength=size), rows,
                      out=np.full(size, -np.inf), where=rows > 0)
@@ -122,11 +180,11 @@ def state_rule(t: dict, cap: int | None, seed: int = 0):
     episodes = np.bincount(pairs // (ep.max() + 1), minlength=size)
     with np.errstate(divide="ignore"):
         low = np.where(episodes > 0, mean - lower_bound_z(N_ACTIONS) * sigma /
-                       np.sqrt(episodes), -np.inf).reshape(N_STATES, N_ACTIONS)
-    likely = rows.reshape(N_STATES, N_ACTIONS).argmax(1)
+                       np.sqrt(episodes), -np.inf).reshape(n_groups, N_ACTIONS)
+    likely = rows.reshape(n_groups, N_ACTIONS).argmax(1)
 
     def policy(obs):
-        st = cohort.nearest_state(obs)
+        st = cohort.nearest_state(obs) if assign is None else assign(obs)
         return kept_or_best(low[st], likely[st])
     return policy, 1.0
 
@@ -142,14 +200,17 @@ def main() -> None:
     t = table(args.stays, args.noise, args.seed)
     build = {"rule7": lambda: near_rule(t, 100, None), "m300": lambda: near_rule(t, 300, None),
              "denoised": lambda: near_rule(t, 100, 10), "state": lambda: state_rule(t, None),
-             "state100": lambda: state_rule(t, 100)}
+             "state100": lambda: state_rule(t, 100),
+             "nearsv": lambda: mixed_rule(t, "near"), "statenv": lambda: mixed_rule(t, "state")}
     names = args.variants.split(",")
     for name in names:            # checked before any work
+        if name not in build and name[:6] == "kmeans" and name[6:].isdigit():
+            build[name] = lambda k=int(name[6:]): kmeans_rule(t, k)
         if name not in build and name[:1] == "m" and name[1:].isdigit():
             build[name] = lambda k=int(name[1:]): near_rule(t, k, None)
         if name not in build:
             raise SystemExit(f"unknown variant {name!r}: one of {', '.join(build)}, "
-                             "m<k> (the k nearest)")
+                             "m<k> (the k nearest), kmeans<k> (k groups)")
     hood = Neighbourhood(t["x"], t["a"], t["episode"], N_ACTIONS)
     seed = args.seed + 1
     with one_thread():
