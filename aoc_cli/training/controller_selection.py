@@ -81,9 +81,9 @@ RULE = ("the highest lower bound of the 95% interval of FQE on the held-out epis
         f"{MIN_PAIRS} times in that state, is none (rule 2's kept when it has none)")
 
 
-#: How rule 7's premise reads "in that state".
+#: How rule 7's premise reads the rule: "in that state" and the candidate kept.
 NEAR = (f"; without a finite state, \"in that state\" is among the {NEAREST} held-out rows "
-        "nearest the step, counted in episodes")
+        "nearest the step, counted in episodes, and rule 7's is kept when it has none")
 
 
 def candidates(penalty: float | None, cap: float = STATE_CAP) -> tuple[dict, ...]:
@@ -374,17 +374,18 @@ def recording_hook(corpus, config, k: int, recording: Recording, progress=None):
             value = out["chosen"][name]
             measured = prior.get(name, {})
             # the penalty chosen is rule 2's bound: its measure stays in the record
+            same = value is not None and measured.get("value") == value
             kept = {key: v for key, v in measured.items()
-                    if key not in ("setting", "value", "why", "seconds")} \
-                if value is not None and measured.get("value") == value else {}
+                    if key not in ("setting", "value", "why", "seconds")} if same else {}
+            # rule 7 kept: why it decides stays beside why it was chosen
+            said = (f"; the penalty: {measured['why']}" if kept else "") if not harm else \
+                (f"; {measured['why']}" if same and "why" in measured else "")
             decided.append({
                 "setting": name, "value": value,
-                "why": (f"chosen among {len(out['candidates'])} controllers by {RULE} "
+                "why": (f"chosen among {len(out['candidates'])} controllers by {out['rule']} "
                         f"({out['episodes']:,} episodes, {out['steps']:,} steps; each "
                         "candidate's value below)" if i == 0 else
-                        f"chosen with {names[0]}, by the same rule")
-                       + (f"; the {'rule' if harm else 'penalty'}: {measured['why']}"
-                          if kept else ""),
+                        f"chosen with {names[0]}, by the same rule") + said,
                 "seconds": out["seconds"], **kept})
         recording.record = record.with_settings(decided=decided, controller_selection=out)
         return {}

@@ -94,6 +94,8 @@ def test_train_weighs_rule_7_against_the_papers_on_held_out_episodes(cohort):
     assert "in that state\" is among the 100 held-out rows nearest the step" in out["rule"]
     why = {r["setting"]: r["why"] for r in metrics["settings"]["decided"]}
     assert why["do_no_harm"].startswith("chosen among 2 controllers by the highest lower")
+    assert "rule 7's is kept when it has none" in why["do_no_harm"]
+    assert why["do_no_harm"].endswith("another's bound beats its own (rule 7)")  # why it decides
     # aoc train's table says which rule decided and why the other was not weighed
     flat = " ".join(printed.split())
     assert "rule 7 (do no harm)" in flat and "<- chosen" in flat
