@@ -256,6 +256,23 @@ def _evaluate(p: _Parts, discount: np.ndarray, counts: np.ndarray) -> np.ndarray
     return total
 
 
+def behaviour(log: Log) -> tuple:
+    """The logged behaviour's own value as a :func:`bootstrap` spec: the mean return, or
+    under censoring Kaplan-Meier's (PDWIS with every ratio 1: a cut stay counts while it was
+    seen, not as a return of 0). Every difference from the behaviour is taken from it."""
+    if log.truncated.any():
+        return ("pdwis", np.ones(int(log.starts[-1])))
+    return ("mean", log.returns())
+
+
+def behaviour_values(log: Log, counts: np.ndarray) -> np.ndarray:
+    """(B,) the behaviour's own value (:func:`behaviour`) over each row of episode counts
+    ``counts`` (B, E) (a resample of the episodes, as a refit of FQE draws)."""
+    kind, arg = behaviour(log)
+    parts = _parts_pdwis(log, arg) if kind == "pdwis" else _parts_mean(arg)
+    return _evaluate(parts, log.discount, np.asarray(counts, np.float64))
+
+
 def pdwis(log: Log, rho: np.ndarray) -> float:
     """Per-decision weighted importance sampling (module docstring); NaN if undefined."""
     return float(_evaluate(_parts_pdwis(log, rho), log.discount,

@@ -243,10 +243,9 @@ def off_policy_values(data, logged: np.ndarray, policies: dict, settings: OPESet
     log = ope.Log(data.episode_starts, data.rewards, settings.gamma, truncated(data))
     propensity, source, model = behaviour_propensities(data, logged, settings, history_length)
     ope.ratios(np.ones(len(logged)), propensity)       # refuses a zero propensity up front
-    # the behaviour's own value: the mean return, or under censoring Kaplan-Meier's (PDWIS
-    # with every ratio 1: a cut stay counts while it was seen, not as a return of 0)
-    own = ("pdwis", np.ones(data.n_rows)) if log.truncated.any() else ("mean", log.returns())
-    mean = ope.bootstrap(log, {"mean": own}, n_boot=settings.n_boot, seed=settings.seed)["mean"]
+    # the behaviour's own value: the mean return, or under censoring Kaplan-Meier's
+    mean = ope.bootstrap(log, {"mean": ope.behaviour(log)}, n_boot=settings.n_boot,
+                         seed=settings.seed)["mean"]
     out = {"ope": {"estimators": list(settings.estimators), "gamma": settings.gamma,
                    "propensity": source, "propensity_model": model,
                    "truncated_episodes": int(log.truncated.sum()),

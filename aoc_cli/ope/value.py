@@ -38,7 +38,9 @@ def policy_value(log: ope.Log, observations, logged, propensity, policy, n_actio
     diag = ope.diagnostics(log, rho)
     out: dict = {"ess": diag["ess"], "notes": []}
     returns = log.returns()
-    specs: dict = {"behaviour": ("mean", returns)}      # paired: every estimator's same draws
+    # paired: every estimator's same draws; the behaviour's value Kaplan-Meier's under
+    # censoring (a cut stay is not a return of 0: the difference would gain its share)
+    specs: dict = {"behaviour": ope.behaviour(log)}
     if "pdwis" in settings.estimators:
         specs["pdwis"] = ("pdwis", rho)
     if isinstance(fqe, str):
@@ -68,7 +70,7 @@ def policy_value(log: ope.Log, observations, logged, propensity, policy, n_actio
     if "fqe" in settings.estimators and q is not None:
         if refitted:
             value["fqe"] = {k: fqe[k] for k in ("estimate", "low", "high")}
-            gain["fqe"] = _fqe_gain(fqe, returns)
+            gain["fqe"] = _fqe_gain(fqe, log)
             b, k, n = len(fqe["replicates"]), fqe["refit_steps"], fqe["steps"]
             out["notes"].append(
                 f"fqe: the estimate is the mean of {b} refits' start values (bagged; one "
@@ -146,13 +148,14 @@ def widen(value: dict, gain: dict, share: float, lo: float, hi: float) -> str | 
     return None
 
 
-def _fqe_gain(fqe: dict, returns: np.ndarray) -> dict:
-    """V(policy) - V(behaviour) by FQE: each refit's estimate less the log's mean return over
-    the same resampled episodes (the refit's ``counts``), +- Student's t sd of those paired
-    differences, around the bagged estimate less the log's mean return."""
+def _fqe_gain(fqe: dict, log: ope.Log) -> dict:
+    """V(policy) - V(behaviour) by FQE: each refit's estimate less the behaviour's own value
+    (:func:`aoc_cli.ope.estimators.behaviour`: the mean return, Kaplan-Meier's under
+    censoring) over the same resampled episodes (the refit's ``counts``), +- Student's t sd
+    of those paired differences, around the bagged estimate less the behaviour's value."""
     counts = np.asarray(fqe["counts"], np.float64)                    # (refits, E)
-    diffs = np.asarray(fqe["replicates"]) - counts @ returns / counts.sum(1)
-    point = fqe["estimate"] - float(np.mean(returns))
+    diffs = np.asarray(fqe["replicates"]) - ope.behaviour_values(log, counts)
+    point = fqe["estimate"] - float(ope.behaviour_values(log, np.ones((1, log.n_episodes)))[0])
     half = student_quantile(len(diffs) - 1) * float(np.std(diffs, ddof=1))
     return {"estimate": point, "low": point - half, "high": point + half}
 
