@@ -61,7 +61,7 @@ def test_a_screened_or_lone_candidate_has_no_estimate_and_rule_7_is_kept():
 @pytest.fixture(scope="module")
 def cohort(tmp_path_factory):
     """A 300-stay cohort at noise 0.3 (no observation repeats) trained as ``aoc train``
-    trains it, with what it printed."""
+    trains it, with the notes it printed."""
     from tests.conftest import run_aoc
 
     store = Store(tmp_path_factory.mktemp("cohort-select"))
@@ -70,10 +70,7 @@ def cohort(tmp_path_factory):
     code, out, err = run_aoc("--store", str(store.root), "train", "c", "--threads", "1",
                              "--epochs", "2", "--hidden", "8", "--format", "json")
     assert code == 0, err
-    code, table, err2 = run_aoc("--store", str(store.root), "train", "c", "--model", "t",
-                                "--threads", "1", "--epochs", "2", "--hidden", "8")
-    assert code == 0, err2
-    return store, json.loads(out), table + err2
+    return store, json.loads(out), err          # aoc train's notes: on stderr, in any format
 
 
 def test_train_weighs_rule_7_against_the_papers_on_held_out_episodes(cohort):
