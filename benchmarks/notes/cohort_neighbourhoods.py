@@ -68,9 +68,10 @@ def kept_or_best(low: np.ndarray, likely: np.ndarray) -> np.ndarray:
     return np.where(low[s, best] > low[s, likely], best, likely)
 
 
-def near_rule(t: dict, nearest: int, smooth: int | None):
+def near_rule(t: dict, nearest: int, smooth: int | None, state_valued: bool = False):
     """(policy, purity) of rule 7 over ``nearest`` rows, the observations first averaged over
-    their ``smooth`` nearest logged rows where given."""
+    their ``smooth`` nearest logged rows where given; with ``state_valued`` each row valued by
+    FQE over the true states instead of over the neighbourhoods."""
     x = t["x"]
     denoise = None
     if smooth:
@@ -82,6 +83,8 @@ def near_rule(t: dict, nearest: int, smooth: int | None):
     y, info = neighbourhood_values(x, t["r"], t["starts"], 1.0, censored=t["censored"],
                                    nearest=nearest)
     purity = float((t["state"][info["rows"]] == t["state"][:, None]).mean())
+    if state_valued:
+        y = state_values(t)
     hood = Neighbourhood(x, t["a"], t["episode"], N_ACTIONS, values=y, nearest=nearest)
 
     def policy(obs):
@@ -110,23 +113,6 @@ def state_values(t: dict) -> np.ndarray:
         if done:
             break
     return y
-
-
-def mixed_rule(t: dict, sets: str):
-    """(policy, purity) of the rule with one part from the state: ``sets`` "near" reads rule
-    7's 100 nearest rows valued by FQE over the states; "state" reads the state's rows valued
-    by FQE over the neighbourhoods."""
-    x = t["x"]
-    if sets == "near":
-        y = state_values(t)
-        hood = Neighbourhood(x, t["a"], t["episode"], N_ACTIONS, values=y)
-
-        def policy(obs):
-            near = hood.at(obs)
-            return kept_or_best(hood.bounds(near), near.likely)
-        return policy, float("nan")
-    y, _ = neighbourhood_values(x, t["r"], t["starts"], 1.0, censored=t["censored"])
-    return state_rule(t, None, values=y)
 
 
 def kmeans_rule(t: dict, k: int, seed: int = 0):
@@ -201,7 +187,9 @@ def main() -> None:
     build = {"rule7": lambda: near_rule(t, 100, None), "m300": lambda: near_rule(t, 300, None),
              "denoised": lambda: near_rule(t, 100, 10), "state": lambda: state_rule(t, None),
              "state100": lambda: state_rule(t, 100),
-             "nearsv": lambda: mixed_rule(t, "near"), "statenv": lambda: mixed_rule(t, "state")}
+             "nearsv": lambda: near_rule(t, 100, None, state_valued=True),
+             "statenv": lambda: state_rule(t, None, values=neighbourhood_values(
+                 t["x"], t["r"], t["starts"], 1.0, censored=t["censored"])[0])}
     names = args.variants.split(",")
     for name in names:            # checked before any work
         if name not in build and name[:6] == "kmeans" and name[6:].isdigit():
