@@ -19,7 +19,14 @@ Variants (the rows a decision reads; each row valued by FQE over its own sets of
 * ``statenv``: every row of the true state, each valued by FQE over the neighbourhoods (with
   ``nearsv``: which of the two, the values or the sets, rule 7 loses against the state);
 * ``kmeans<k>``: the rows of the observation's group, k groups by k-means of the standardised
-  features (FAISS), rows valued by FQE over the neighbourhoods.
+  features (FAISS), rows valued by FQE over the neighbourhoods;
+* ``masked<c>``: every logged row within a radius (at least 30, at most 1,000 rows), the
+  distance the mean squared difference over the cells both rows measured (a held cell is not
+  a measurement: the log's from the table's gaps, the query's where the environment repeated
+  the previous step's value), in the table's own units, not rescaled by the log's spread; the
+  radius c times the log's median distance to its 10th nearest row; rows valued by FQE over
+  these sets (``c`` like ``1.6``); ``maskedsd<c>`` the same over the features standardised
+  by the log's spread, as rule 7's.
 
 One JSON line per variant: the neighbourhoods' purity (the share of a row's set that shares its
 true state), true survival and the paired difference from the likely dose. Reads the table in
@@ -51,14 +58,15 @@ def table(stays: int, noise: float, seed: int) -> dict:
     n = len(ids)
     starts = np.r_[0, np.nonzero(np.diff(ids))[0] + 1, n]
     x = np.stack([cols[c] for c in cohort.OBS_COLUMNS], 1).astype(np.float64)
+    measured = ~np.isnan(x)
     last = starts[1:] - 1
     died = cols["died_in_hosp"][last]
     reward = np.zeros(n)
     reward[last] = np.where(np.isnan(died), 0.0, 1.0 - np.nan_to_num(died))
     return {"x": cohort.hold_forward(x, starts), "a": cols["act_dose"].astype(np.int64),
             "state": cols["state"].astype(np.int64), "r": reward, "starts": starts,
-            "censored": np.isnan(died), "episode": np.repeat(np.arange(len(last)),
-                                                             np.diff(starts))}
+            "censored": np.isnan(died), "measured": measured,
+            "episode": np.repeat(np.arange(len(last)), np.diff(starts))}
 
 
 def kept_or_best(low: np.ndarray, likely: np.ndarray) -> np.ndarray:
@@ -93,16 +101,24 @@ def near_rule(t: dict, nearest: int, smooth: int | None, state_valued: bool = Fa
     return policy, purity
 
 
-def state_values(t: dict) -> np.ndarray:
-    """(N,) each row's value by FQE over the true states (the mean over a state's rows)."""
-    s, r = t["state"], t["r"]
-    n = len(s)
+def successor(t: dict) -> tuple[np.ndarray, np.ndarray]:
+    """((N,) each row's next row, (N,) whether its value counts): none after a stay's last
+    row; a cut stay's last row its own successor (the stay goes on)."""
+    n = len(t["r"])
     going = np.ones(n, bool)
     last = t["starts"][1:] - 1
     going[last] = False
     nxt = np.minimum(np.arange(1, n + 1), n - 1)
     cut = last[t["censored"]]
     nxt[cut], going[cut] = cut, True
+    return nxt, going
+
+
+def state_values(t: dict) -> np.ndarray:
+    """(N,) each row's value by FQE over the true states (the mean over a state's rows)."""
+    s, r = t["state"], t["r"]
+    n = len(s)
+    nxt, going = successor(t)
     y = np.zeros(n)
     count = np.maximum(np.bincount(s, minlength=N_STATES), 1)
     for _ in range(2000):
@@ -140,6 +156,97 @@ def kmeans_rule(t: dict, k: int, seed: int = 0):
         return km.index.search(q, 1)[1][:, 0].astype(np.int64)
     policy, _ = state_rule(groups, None, values=y, n_groups=k, assign=assign)
     return policy, purity
+
+
+class MaskedSearch:
+    """The logged rows nearest each query by the mean squared difference over the cells both
+    measured (torch: FAISS has no masked distance), the ``cap`` nearest with their distances."""
+
+    def __init__(self, x: np.ndarray, measured: np.ndarray, cap: int = 1000):
+        import torch
+        self.torch, self.cap = torch, min(cap, len(x))
+        self.z = torch.tensor(x, dtype=torch.float32)
+        self.m = torch.tensor(measured, dtype=torch.float32)
+        self.zm, self.z2m = self.z * self.m, self.z * self.z * self.m
+
+    def __call__(self, q: np.ndarray, qm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """((S, cap) squared distances, (S, cap) rows), nearest first."""
+        torch = self.torch
+        dist = np.empty((len(q), self.cap), np.float32)
+        rows = np.empty((len(q), self.cap), np.int64)
+        for a in range(0, len(q), 1024):
+            zq = torch.tensor(q[a:a + 1024], dtype=torch.float32)
+            mq = torch.tensor(qm[a:a + 1024], dtype=torch.float32)
+            num = (mq * zq * zq) @ self.m.T + mq @ self.z2m.T - 2 * (mq * zq) @ self.zm.T
+            d, i = torch.topk(num / (mq @ self.m.T).clamp_min(1), self.cap, dim=1,
+                              largest=False)
+            dist[a:a + 1024], rows[a:a + 1024] = d.numpy(), i.numpy()
+        return dist, rows
+
+
+def masked_rule(t: dict, c: float, standardise: bool = False, least: int = 30,
+                cap: int = 1000):
+    """(policy, purity) of the rule over the rows within the masked radius (``masked<c>``,
+    ``maskedsd<c>`` with ``standardise``); the policy is stateful (a held cell of the query is
+    one equal to the previous step's)."""
+    x, a, ep, n = t["x"], t["a"], t["episode"], len(t["x"])
+    scale = x.std(0) if standardise else np.ones(x.shape[1])
+    scale = np.where(scale > 1e-12, scale, 1.0)
+    search = MaskedSearch(x / scale, t["measured"], cap)
+    dist, rows = search(x / scale, t["measured"])
+    radius = c * float(np.median(dist[:, min(9, search.cap - 1)]))
+
+    def inside(d):
+        ok = d <= radius
+        ok[:, :least] = True
+        return ok
+    ok = inside(dist)
+    purity = float(((t["state"][rows] == t["state"][:, None]) & ok).sum() / ok.sum())
+    nxt, going = successor(t)
+    y, size = np.zeros(n), ok.sum(1)
+    for _ in range(1000):
+        new = t["r"] + np.where(going, ((y[rows] * ok).sum(1) / size)[nxt], 0.0)
+        done = np.abs(new - y).max() < 1e-4
+        y = new
+        if done:
+            break
+    span = int(ep.max()) + 1
+
+    def groups(r, keep):
+        """(rows, episodes, mean value) per action (S, K) over the kept rows."""
+        s, acts = len(r), a[r]
+        at = (np.repeat(np.arange(s), r.shape[1]), acts.ravel())
+        count, total = np.zeros((s, N_ACTIONS)), np.zeros((s, N_ACTIONS))
+        np.add.at(count, at, keep.ravel())
+        np.add.at(total, at, (y[r] * keep).ravel())
+        key = np.sort(np.where(keep, acts * span + ep[r], -1), axis=1)
+        first = key >= 0
+        first[:, 1:] &= key[:, 1:] != key[:, :-1]
+        episodes = np.zeros((s, N_ACTIONS))
+        q, j = np.nonzero(first)
+        np.add.at(episodes, (q, key[q, j] // span), 1)
+        mean = np.divide(total, count, out=np.zeros((s, N_ACTIONS)), where=count > 0)
+        return count, episodes, mean
+    pick = np.sort(np.random.default_rng(0).choice(n, min(2000, n), replace=False))
+    count, _, mean = groups(rows[pick], ok[pick])
+    dev = np.where(ok[pick], (y[rows[pick]] - mean[np.arange(len(pick))[:, None],
+                                                   a[rows[pick]]]) ** 2, 0.0)
+    sigma = float(np.sqrt(dev.sum() / np.maximum(count - 1, 0).sum()))
+    z = lower_bound_z(N_ACTIONS)
+
+    class Policy:
+        def reset(self, episodes):
+            self.previous = np.full((episodes, x.shape[1]), np.nan, np.float32)
+
+        def __call__(self, obs, alive):
+            held = obs == self.previous[alive]
+            self.previous[alive] = obs
+            d, r = search(np.asarray(obs, np.float64) / scale, ~held)
+            count, episodes, mean = groups(r, inside(d))
+            with np.errstate(divide="ignore"):
+                low = np.where(episodes > 0, mean - z * sigma / np.sqrt(episodes), -np.inf)
+            return kept_or_best(low, count.argmax(1))
+    return Policy(), purity
 
 
 def state_rule(t: dict, cap: int | None, seed: int = 0, values: np.ndarray | None = None,
@@ -194,11 +301,16 @@ def main() -> None:
     for name in names:            # checked before any work
         if name not in build and name[:6] == "kmeans" and name[6:].isdigit():
             build[name] = lambda k=int(name[6:]): kmeans_rule(t, k)
+        sd = name.startswith("maskedsd")
+        c = name[8:] if sd else name[6:] if name.startswith("masked") else ""
+        if name not in build and c.replace(".", "", 1).isdigit():
+            build[name] = lambda c=float(c), sd=sd: masked_rule(t, c, standardise=sd)
         if name not in build and name[:1] == "m" and name[1:].isdigit():
             build[name] = lambda k=int(name[1:]): near_rule(t, k, None)
         if name not in build:
             raise SystemExit(f"unknown variant {name!r}: one of {', '.join(build)}, "
-                             "m<k> (the k nearest), kmeans<k> (k groups)")
+                             "m<k> (the k nearest), kmeans<k> (k groups), "
+                             "masked<c>, maskedsd<c> (the masked radius)")
     hood = Neighbourhood(t["x"], t["a"], t["episode"], N_ACTIONS)
     seed = args.seed + 1
     with one_thread():
