@@ -378,8 +378,8 @@ def recording_hook(corpus, config, k: int, recording: Recording, progress=None):
             kept = {key: v for key, v in measured.items()
                     if key not in ("setting", "value", "why", "seconds")} if same else {}
             # rule 7 kept: why it decides stays beside why it was chosen
-            said = (f"; the penalty: {measured['why']}" if kept else "") if not harm else \
-                (f"; {measured['why']}" if same and "why" in measured else "")
+            show = same and "why" in measured and (harm or bool(kept))
+            said = f"; {'' if harm else 'the penalty: '}{measured['why']}" if show else ""
             decided.append({
                 "setting": name, "value": value,
                 "why": (f"chosen among {len(out['candidates'])} controllers by {out['rule']} "
