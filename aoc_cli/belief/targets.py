@@ -26,7 +26,8 @@ import numpy as np
 from aoc_cli.belief.censoring import censored_return_to_go, censoring_of
 from aoc_cli.belief.config import REWARD_TARGETS, FQEConfig
 from aoc_cli.errors import BadSetting, NoRewards, param
-from aoc_cli.index.search.neighbourhood import fitted_values, neighbourhood_values
+from aoc_cli.index.search.neighbourhood import (fitted_values, measured_cells,
+                                                neighbourhood_values)
 from aoc_cli.store import hash_arrays, targets_dir, write_json, write_npy
 
 #: Padded cells allowed per group of episodes of similar length (beyond 4x the real rows).
@@ -199,7 +200,7 @@ def neighbourhood_targets(corpus, gamma: float, progress=None) -> tuple[np.ndarr
     rule 7 reads (:func:`aoc_cli.index.search.neighbourhood.neighbourhood_values`)."""
     step, info = neighbourhood_values(corpus.observations, corpus.rewards,
                                       corpus.episode_starts, gamma, censoring_of(corpus),
-                                      progress=progress)
+                                      progress=progress, measured=measured_cells(corpus))
     return fitted_values(step, corpus.actions, info["rows"]), step
 
 

@@ -8,7 +8,8 @@ per step t < T: ``observations`` (T, d_o), ``rewards``, ``ood``, the history
 (``history_observations``, ``history_actions``, ``history_rewards``, ``history_mask``), and
 where a controller decided: ``support_rows`` / ``support_weights`` / ``support_distances``
 (T, m; -1 / 0 / NaN padded), ``support_episode_ids``, ``actions``, ``values``, ``residuals``,
-``candidates`` (T, K[, d_a]) and ``warnings`` (JSON). The inputs of each decision are kept, so
+``candidates`` (T, K[, d_a]) and ``warnings`` (JSON); ``measured`` (T, d_o) bool where the
+environment said which cells it measured (rule 7 reads them). The inputs of each decision are kept, so
 any recorded decision can be re-run and explained again (:func:`read_audit_step`).
 """
 
@@ -57,6 +58,8 @@ def write_audit(path, episodes: list, meta: dict, corpus=None,
                 g["observations"] = np.stack(ep.observations[:T]).astype(np.float32)
                 g["rewards"] = np.asarray(ep.rewards, np.float64)
                 g["ood"] = np.asarray(ep.ood, bool)
+                if len(ep.measured) == T and T:         # the cells the environment measured
+                    g["measured"] = np.stack(ep.measured)
                 for key, idx in (("history_observations", 0), ("history_actions", 1),
                                  ("history_rewards", 2), ("history_mask", 3)):
                     g[key] = np.concatenate([h[idx] for h in ep.histories])
@@ -113,6 +116,7 @@ def read_audit_step(path, episode: int, step: int) -> dict:
             "support_weights": g["support_weights"][step],
             "candidates": g["candidates"][step] if "candidates" in g else None,
             "selection": _selection(f, meta),
+            "measured": g["measured"][step] if "measured" in g else None,
         }
     return out
 

@@ -27,7 +27,7 @@ import numpy as np
 
 from aoc_cli.belief.row_labels import default_row_smoothing, row_labels
 from aoc_cli.control.config import ControllerConfig
-from aoc_cli.index.search.neighbourhood import Neighbourhood
+from aoc_cli.index.search.neighbourhood import Neighbourhood, measured_cells
 from aoc_cli.control.rule import choose as _choose
 from aoc_cli.control.rule import reads_support, residual_cap
 from aoc_cli.control.support import row_episodes, support_episodes
@@ -73,6 +73,8 @@ class Decision:
     #: Rule 7 (do no harm): the clinicians' likely action was kept, no alternative's lower
     #: bound beating its value (aoc_cli.index.search.neighbourhood); None where the rule is off.
     kept: bool | None = None
+    #: the observation's measured cells (d_o,) bool that rule 7 read; None: all
+    measured: np.ndarray | None = None
 
     def __repr__(self) -> str:
         """One line: the action, v_hat, residual and supporting rows (never the candidates'
@@ -209,17 +211,20 @@ class Controller:
             saved = getattr(self.model, "neighbourhood_values", None)
             self._neighbourhood = Neighbourhood(
                 self.corpus.observations, self.corpus_actions, self.row_episode,
-                self.corpus.n_actions, values=self.index.values if saved is None else saved)
+                self.corpus.n_actions, values=self.index.values if saved is None else saved,
+                measured=measured_cells(self.corpus))
         return self._neighbourhood
 
     def harm_inputs(self, observations: np.ndarray, value: np.ndarray,
-                    support: np.ndarray | None) -> tuple[np.ndarray | None, np.ndarray | None]:
+                    support: np.ndarray | None, measured: np.ndarray | None = None
+                    ) -> tuple[np.ndarray | None, np.ndarray | None]:
         """Rule 7's (lower (S, K), kept (S,)) at observations (S, d_o), v_hat ``value``
-        (S, K) of the discrete actions; (None, None) where it is off. Rule 2's bound stays
-        the key where it ranks; elsewhere each action's bound over the neighbourhood."""
+        (S, K) of the discrete actions, ``measured`` (S, d_o) bool their measured cells (None:
+        all); (None, None) where it is off. Rule 2's bound stays the key where it ranks;
+        elsewhere each action's bound over the neighbourhood."""
         if not self.do_no_harm:
             return None, None
-        near = self.neighbourhood.at(observations)
+        near = self.neighbourhood.at(observations, measured)
         lower = None
         if not reads_support(self.config):
             lower = self.neighbourhood.bounds(near)[:, :value.shape[1]]
@@ -228,10 +233,13 @@ class Controller:
     # -- one step --------------------------------------------------------------------------
     def decide(self, observation: np.ndarray, history: History,
                candidates: np.ndarray | None = None,
-               selection: np.ndarray | None = None) -> Decision:
+               selection: np.ndarray | None = None,
+               measured: np.ndarray | None = None) -> Decision:
         """Decide at one step; ``history`` is a one-row History (1, L, ...). ``selection``:
-        an (N,) bool row mask for this decision instead of the controller's own. Runs with one
-        thread in torch, FAISS and BLAS (:func:`aoc_cli.threads.one_thread`)."""
+        an (N,) bool row mask for this decision instead of the controller's own; ``measured``
+        (d_o,) bool the observation's measured cells (None: all; rule 7 reads them on a log
+        with gaps). Runs with one thread in torch, FAISS and BLAS
+        (:func:`aoc_cli.threads.one_thread`)."""
         observation = np.asarray(observation, dtype=np.float32).reshape(-1)
         with one_thread():
             if self.model.mode == "imitation":
@@ -239,16 +247,17 @@ class Controller:
             if candidates is None:
                 candidates = self.sample_candidates(observation, history)
             return self.decompose_candidates(observation, history, candidates, choose=True,
-                                             selection=selection)
+                                             selection=selection, measured=measured)
 
     def decompose_candidates(self, observation: np.ndarray, history: History,
                              candidates: np.ndarray, choose: bool = True,
-                             selection: np.ndarray | None = None) -> Decision:
+                             selection: np.ndarray | None = None,
+                             measured: np.ndarray | None = None) -> Decision:
         """Decompose every candidate; with ``choose``, the decision rule (the epsilon filter
         and the argmax: :func:`aoc_cli.control.rule.choose`).
 
         Without ``choose`` the first candidate is reported (used to explain a given action).
-        ``selection``: as in :meth:`decide`.
+        ``selection``, ``measured``: as in :meth:`decide`.
         """
         n = len(candidates)
         # one observation and one history broadcast to the n candidates (the GRU runs once)
@@ -261,7 +270,9 @@ class Controller:
         support = self.support(dec)[0] if reads_support(self.config) else np.empty(0)
         kept = None
         if choose:  # steps 4 and 5: the decision rule (aoc_cli.control.rule.choose)
-            lower, likely = self.harm_inputs(observation[None], value[None], support[None])
+            lower, likely = self.harm_inputs(observation[None], value[None], support[None],
+                                             None if measured is None else
+                                             np.asarray(measured, bool).reshape(1, -1))
             threshold, passed, chosen = _choose(
                 residual[None], value[None], self.config, cap=self.residual_cap,
                 support=support[None], value_std=self.value_std, lower=lower, kept=likely)
@@ -288,6 +299,7 @@ class Controller:
             candidate_support=support,
             support_counts=_trim(counts[0], dec.rows[chosen]),
             kept=kept,
+            measured=None if measured is None else np.asarray(measured, bool).reshape(-1),
         )
         decision.warnings = self.heterogeneity(decision)
         return decision

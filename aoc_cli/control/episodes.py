@@ -6,6 +6,7 @@ The history at control time is built exactly as in the corpus: the previous L tr
 
 from __future__ import annotations
 
+import inspect
 import time
 from collections import deque
 from dataclasses import dataclass, field
@@ -128,6 +129,8 @@ class EpisodeResult:
     ood: list = field(default_factory=list)
     decisions: list = field(default_factory=list)
     histories: list = field(default_factory=list)
+    #: each decided step's measured cells (d_o,) bool, where the environment says
+    measured: list = field(default_factory=list)
     seconds: float = 0.0
     monitor: OODMonitor | None = None
     """The OOD monitor that flagged the steps (its running band), when one was given."""
@@ -155,7 +158,9 @@ class EpisodeResult:
 def run_episode(env: gym.Env, policy: Policy, history_length: int, corpus, episode: int, seed: int,
                 monitor: OODMonitor | None = None, noise_after: int | None = None,
                 noise_std: float = 0.0, keep_decisions: bool = False) -> EpisodeResult:
-    """Run ``policy.decide(observation, history)`` until the episode ends.
+    """Run ``policy.decide(observation, history)`` until the episode ends; a policy whose
+    ``decide`` takes ``measured`` also gets the environment's ``info["measured"]`` (the cells
+    measured at the step, where the environment says).
 
     ``policy.decide`` returns a :class:`Decision` (residual tracked, OOD monitored) or a plain
     action. After step ``noise_after``, Gaussian noise of ``noise_std`` (a fraction of the
@@ -169,11 +174,14 @@ def run_episode(env: gym.Env, policy: Policy, history_length: int, corpus, episo
         policy.reset()
     obs, info = env.reset(seed=seed)
     obs = flatten_observation(env, obs)
+    reads = "measured" in inspect.signature(policy.decide).parameters
     start = time.perf_counter()
     done = False
     while not done:
         history = buffer.history()
-        out = policy.decide(obs, history)
+        measured = info.get("measured") if reads else None
+        out = (policy.decide(obs, history, measured=measured) if reads
+               else policy.decide(obs, history))
         decision = out if isinstance(out, Decision) else None
         action = np.asarray(out.action if decision is not None else out)
         applied = action
@@ -194,6 +202,8 @@ def run_episode(env: gym.Env, policy: Policy, history_length: int, corpus, episo
         if keep_decisions:
             result.decisions.append(decision)
             result.histories.append(history)
+            if measured is not None:
+                result.measured.append(np.asarray(measured, bool))
         buffer.push(obs, applied, float(reward))
         result.total_return += float(reward)
         result.length += 1

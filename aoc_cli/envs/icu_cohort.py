@@ -35,7 +35,8 @@ The environment (``make_env("icu-cohort")``, ``make_env("icu-cohort:noise=1.0,ga
 the 47 features of the current state with fresh noise every step, a cell missing at rate
 ``gap`` held from the episode's last value (the first step fully measured); 25 actions; reward
 1 on the step into survival; terminal at death or survival, truncated after 500 steps;
-``info["state"]`` the true state; ``reset(seed=)`` reproduces an episode. References:
+``info["state"]`` the true state, ``info["measured"]`` (47,) bool the cells measured (false:
+held); ``reset(seed=)`` reproduces an episode. References:
 :func:`clinicians_value` (exact), :func:`nearest_centre_policy` (a state policy in the state
 whose centre is nearest the observation), :func:`optimal_state_policy`.
 """
@@ -161,14 +162,17 @@ def table_corpus(cols: dict[str, np.ndarray], source: dict | None = None) -> Cor
     """The corpus of a :func:`cohort_table` as ``aoc ingest --impute hold --outcome
     died_in_hosp --outcome-reward 1=0,0=1 --discrete-actions`` reads it: observations the
     features held forward within the stay, reward 1 on the last step of a stay that survived,
-    a stay without outcome truncated; columns ``state`` and ``propensity``; tag ``policy``."""
+    a stay without outcome truncated, the empty cells kept as the imputed mask; columns
+    ``state`` and ``propensity``; tag ``policy``."""
     ids = cols[ID]
     n = len(ids)
     new = np.ones(n, dtype=bool)
     new[1:] = ids[1:] != ids[:-1]
     starts = np.append(np.flatnonzero(new), n).astype(np.int64)
     last = starts[1:] - 1
-    obs = hold_forward(np.stack([cols[c] for c in OBS_COLUMNS], axis=1), starts)
+    raw = np.stack([cols[c] for c in OBS_COLUMNS], axis=1)
+    empty = np.isnan(raw)
+    obs = hold_forward(raw, starts)
     outcome = cols[OUTCOME][last]
     known = ~np.isnan(outcome)
     rewards = np.zeros(n)
@@ -180,6 +184,7 @@ def table_corpus(cols: dict[str, np.ndarray], source: dict | None = None) -> Cor
     return CorpusData(
         observations=obs.astype(np.float32), actions=cols[ACTION].astype(np.int64),
         rewards=rewards, terminals=terminals, truncations=truncations, episode_starts=starts,
+        imputed=empty if empty.any() else None,
         observation_space=box_space(N_FEATURES, names=list(OBS_COLUMNS)),
         action_space=discrete_space(len(sepsis.ACTION_NAMES), names=list(sepsis.ACTION_NAMES)),
         tags={"policy": (np.zeros(n, dtype=np.int32), list(POLICIES))},
@@ -231,6 +236,7 @@ def _first_rows(data: CorpusData, steps: int) -> CorpusData:
     return CorpusData(
         observations=data.observations[:steps], actions=data.actions[:steps], rewards=rewards,
         terminals=terminals, truncations=truncations, episode_starts=new_starts,
+        imputed=None if data.imputed is None else data.imputed[:steps],
         observation_space=data.observation_space, action_space=data.action_space,
         tags={k: (v[0][:steps], v[1]) for k, v in data.tags.items()},
         columns={k: v[:steps] for k, v in data.columns.items()},
@@ -261,16 +267,19 @@ class CohortEnv(gymnasium.Env):
 
     def _observe(self, first: bool) -> np.ndarray:
         fresh = _noisy(self._centres[self._state][None], self.noise, self.np_random)[0]
+        self._measured = np.ones(N_FEATURES, bool)
         if not first and self.gap:
             held = self.np_random.random(N_FEATURES) < self.gap
             fresh[held] = self._obs[held]
+            self._measured = ~held
         self._obs = fresh
         return fresh.copy()
 
     def reset(self, *, seed=None, options=None):
         super().reset(seed=seed)
         self._state = int(self.np_random.choice(len(self._d0), p=self._d0))
-        return self._observe(True), {"state": self._state}
+        obs = self._observe(True)
+        return obs, {"state": self._state, "measured": self._measured.copy()}
 
     def step(self, action):
         if self._state is None or self._terminal[self._state]:
@@ -280,8 +289,9 @@ class CohortEnv(gymnasium.Env):
             raise AocError(f"icu-cohort: action {action} outside 0..{self.action_space.n - 1}")
         self._state = int(self.np_random.choice(len(self._d0), p=self._P[self._state, a]))
         reward = float(self._state == sepsis.STATE_SURVIVAL)
-        return self._observe(False), reward, bool(self._terminal[self._state]), False, \
-            {"state": self._state}
+        obs = self._observe(False)
+        return obs, reward, bool(self._terminal[self._state]), False, \
+            {"state": self._state, "measured": self._measured.copy()}
 
 
 # -- true survival by Monte Carlo, and the references -------------------------------------------
@@ -293,7 +303,8 @@ def rollout_value(decide_batch: DecideBatch, n_episodes: int, noise: float = NOI
     ``decide_batch(obs (n, 47) float32) -> actions (n,) int`` is called once a step on the
     episodes still alive (with a ``reset(n)`` method, e.g.
     :class:`aoc_cli.control.batch.BatchPolicy`, it is reset first and called as
-    ``decide_batch(obs, alive)``, ``alive`` their indices). Returns ``{"value", "low", "high",
+    ``decide_batch(obs, alive, measured)``, ``alive`` their indices, ``measured`` (n, 47)
+    bool the cells measured at the step, false where the environment held the last value). Returns ``{"value", "low", "high",
     "episodes", "survived"}``: the 95% normal interval, ``survived`` (n,) bool (alive after
     500 steps: not survived). The draws are **common random numbers**: episode i's first
     state, noise, gaps and next-state uniforms at step t come from a stream of (seed, t)
@@ -305,13 +316,14 @@ def rollout_value(decide_batch: DecideBatch, n_episodes: int, noise: float = NOI
     s = sepsis._sample(np.broadcast_to(np.cumsum(t.mdp.d0)[None], (n, len(t.mdp.d0))),
                        rng.random(n))
     obs, alive, survived = _noisy(C[s], noise, rng), np.arange(n), np.zeros(n, dtype=bool)
+    measured = np.ones(obs.shape, bool)                   # the first step fully measured
     stateful = hasattr(decide_batch, "reset")
     if stateful:
         decide_batch.reset(n)
     for step in range(1, MAX_STEPS + 1):
         if len(alive) == 0:
             break
-        a = np.asarray(decide_batch(obs, alive) if stateful else decide_batch(obs),
+        a = np.asarray(decide_batch(obs, alive, measured) if stateful else decide_batch(obs),
                        dtype=np.int64).reshape(-1)
         if len(a) != len(alive) or a.min() < 0 or a.max() >= t.mdp.P.shape[1]:
             raise AocError(f"decide_batch gave {len(a)} actions in "
@@ -326,7 +338,7 @@ def rollout_value(decide_batch: DecideBatch, n_episodes: int, noise: float = NOI
         new = (C[nxt] + fresh * noise if noise else C[nxt].copy()).astype(np.float32)
         if gap:
             new[held] = obs[held]
-        alive, s, obs = alive[~ended], nxt[~ended], new[~ended]
+        alive, s, obs, measured = alive[~ended], nxt[~ended], new[~ended], ~held[~ended]
     value = float(survived.mean())
     half = 1.96 * np.sqrt(value * (1 - value) / n)
     return {"value": value, "low": float(value - half), "high": float(value + half),

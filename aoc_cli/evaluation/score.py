@@ -44,6 +44,7 @@ from aoc_cli.evaluation.context import (
     heterogeneity,
 )
 from aoc_cli.evaluation.step_scores import StepScores
+from aoc_cli.index.search.neighbourhood import measured_cells
 from aoc_cli.index.search.strata import PerAction
 from aoc_cli.ope.evaluate_block import ope_block, put_ope, wanted
 from aoc_cli.rows import distinct_rows
@@ -182,7 +183,9 @@ def _candidates_decided(ctx, rows, ep, obs, hist):
     if reads_support(cfg):  # the episodes behind each value (control/support.py)
         support = support_episodes(ctx.index.beliefs, dec.rows, dec.weights, dec.neighbours,
                                    ctx.corpus_episode)[0].reshape(s, kk)
-    lower, likely = ctx.session.controller.harm_inputs(obs, val, support)
+    measured = measured_cells(ctx.data)          # the held-out log's own gaps (rule 7)
+    lower, likely = ctx.session.controller.harm_inputs(
+        obs, val, support, None if measured is None else measured[rows])
     _thr, _passed, chosen = choose(res, val, cfg, support=support, value_std=ctx.value_std,
                                    cap=residual_cap(cfg.residual_cap, ctx.index.typical.p90),
                                    lower=lower, kept=likely)

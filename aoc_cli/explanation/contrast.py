@@ -57,7 +57,8 @@ def contrast_record(controller: Controller, observation: np.ndarray, history: Hi
 def _why_bound(d: Decision, j: int, controller: Controller, observation: np.ndarray) -> dict:
     """Why candidate ``j`` lost under rule 7: its lower bound over the log's rows near the
     step (none: no stay there received it) against the chosen action's."""
-    near = controller.neighbourhood.at(observation[None])
+    near = controller.neighbourhood.at(observation[None],
+                                       None if d.measured is None else d.measured[None])
     bounds = controller.neighbourhood.bounds(near)[0]
     mine, chosen = float(bounds[j]), float(bounds[d.chosen])
     out = {"value_gap": float(d.candidate_values[d.chosen] - d.candidate_values[j]),

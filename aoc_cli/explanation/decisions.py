@@ -43,11 +43,13 @@ if TYPE_CHECKING:
 # -- the sources -------------------------------------------------------------------------------
 def explain_query(session: Session, observation, history, action=None,
                   compare: list | None = None,
-                  selection: np.ndarray | None = None, removal=None) -> list[dict]:
+                  selection: np.ndarray | None = None, removal=None,
+                  measured: np.ndarray | None = None) -> list[dict]:
     """Records for a query: the controller's own choice (no action), one given action, or
     several actions side by side (``compare``); ``selection`` an (N,) bool row mask instead
     of the controller's own; ``removal`` (:func:`aoc_cli.explanation.whatif.removal`): each also
-    re-decided without those rows (the record's ``what_if``)."""
+    re-decided without those rows (the record's ``what_if``); ``measured`` (d_o,) bool the
+    observation's measured cells (None: all; rule 7 reads them)."""
     ctl = session.controller
     if compare:
         decisions = [ctl.decompose_candidates(observation, history,
@@ -61,7 +63,7 @@ def explain_query(session: Session, observation, history, action=None,
                                               _as_candidates(session.corpus, [action]),
                                               choose=False, selection=selection)]
     else:
-        decisions = [ctl.decide(observation, history, selection=selection)]
+        decisions = [ctl.decide(observation, history, selection=selection, measured=measured)]
     return explain_decisions(session, observation, history, decisions, selection=selection,
                              removal=removal)
 
@@ -98,8 +100,9 @@ def explain_logged_step(session: Session, data, episode: int, step: int,
     if same and leave_episode_out:
         selection = np.ones(corpus.n_rows, bool) if own is None else own.copy()
         selection[start:end] = False
+    gaps = data.imputed_mask                 # the step's filled cells are not measurements
     records = explain_query(session, observation, history, selection=selection,
-                            removal=removal)
+                            removal=removal, measured=None if gaps is None else ~gaps[row])
     if session.model.mode == "value":
         records += explain_query(session, observation, history, action=logged,
                                  selection=selection, removal=removal)
@@ -145,12 +148,13 @@ def explain_queries(session: Session, source, compare: list | None = None,
     for lineno, line in lines:
         obs, hist, action, q_compare = parse_query(line, lineno, corpus,
                                                    session.model.history_length)
+        nulls = null_cells(line, corpus, session.model.history_length) if imputes else None
         for rec in explain_query(session, obs, hist, action, compare=compare or q_compare,
-                                 removal=removal):
+                                 removal=removal,
+                                 measured=None if nulls is None else ~np.asarray(nulls[0])):
             rec["query"] = lineno
             if imputes:  # which cells held null (the decision page marks them imputed)
-                rec["query_imputed"], rec["query_history_imputed"] = null_cells(
-                    line, corpus, session.model.history_length)
+                rec["query_imputed"], rec["query_history_imputed"] = nulls
             records.append(rec)
     return records
 
@@ -294,7 +298,7 @@ def replay_decision(session: Session, recorded: dict) -> Decision:
                        "model: it cannot be replayed against this one")
     cand = recorded["candidates"]
     return session.controller.decide(recorded["observation"], recorded["history"],
-                                     candidates=cand)
+                                     candidates=cand, measured=recorded.get("measured"))
 
 
 def _numbers(value, what: str, nulls: bool = False) -> np.ndarray:

@@ -39,7 +39,7 @@ from aoc_cli.ope.fqe import (
     behaviour_fqe,
     default_steps,
 )
-from aoc_cli.index.search.neighbourhood import episodes_near
+from aoc_cli.index.search.neighbourhood import episodes_near, measured_cells
 from aoc_cli.ope.parts import MAX_PARTS
 from aoc_cli.ope.propensity import features, fit_propensities
 from aoc_cli.ope.support import fqe_refusal
@@ -282,7 +282,7 @@ def off_policy_values(data, logged: np.ndarray, policies: dict, settings: OPESet
     held = None
     if "fqe" in settings.estimators and any(f is not None for f in fqes):
         held = episodes_near(data.observations, logged, data.episode_starts,
-                             data.n_actions)                              # (N, n)
+                             data.n_actions, measured_cells(data))        # (N, n)
     for i, ((name, policy), fqe) in enumerate(zip(probs.items(), fqes)):
         try:
             rec = policy_value(log, inputs, logged, propensity, policy,

@@ -52,7 +52,8 @@ from aoc_cli.control.rule import choose, residual_cap
 from aoc_cli.control.support import row_episodes, support_episodes
 from aoc_cli.decompose import decompose
 from aoc_cli.index.search import BeliefIndex
-from aoc_cli.index.search.neighbourhood import NEAREST, Neighbourhood, episodes_near
+from aoc_cli.index.search.neighbourhood import (NEAREST, Neighbourhood, episodes_near,
+                                                measured_cells)
 from aoc_cli.ope.evaluate_block import truncated
 from aoc_cli.ope.fqe import REFITS, fqe_policies, student_quantile
 from aoc_cli.rows import distinct_rows
@@ -110,11 +111,14 @@ def harm_decisions(corpus, data, rows: np.ndarray) -> np.ndarray:
     (``data.neighbourhood``, else the belief's targets)."""
     train = np.asarray(data.train_rows, np.int64)
     values = data.neighbourhood if data.neighbourhood is not None else data.values
+    measured = measured_cells(corpus)
     hood = Neighbourhood(np.asarray(corpus.observations)[train],
                          np.asarray(corpus.actions, np.int64)[train],
                          row_episodes(corpus.episode_starts)[train], int(corpus.n_actions),
-                         values=np.asarray(values, np.float64)[train])
-    near = hood.at(np.asarray(corpus.observations)[rows])
+                         values=np.asarray(values, np.float64)[train],
+                         measured=None if measured is None else measured[train])
+    near = hood.at(np.asarray(corpus.observations)[rows],
+                   None if measured is None else measured[rows])
     lower = hood.bounds(near)
     zeros = np.zeros_like(lower)
     return choose(zeros, zeros, ControllerConfig(do_no_harm="on"), lower=lower,
@@ -132,7 +136,9 @@ def harm_candidates(net, inputs, data, norm, corpus, config, k: int, rows, start
     screened the sample's size): the rule gives it no estimate whatever FQE says."""
     obs = np.asarray(corpus.observations)[rows]
     logged = np.asarray(corpus.actions, np.int64)[rows]
-    counts = episodes_near(obs, logged, starts, int(corpus.n_actions))
+    measured = measured_cells(corpus)
+    counts = episodes_near(obs, logged, starts, int(corpus.n_actions),
+                           None if measured is None else measured[rows])
     chosen, held, screened = [], [], []
     for c in controllers:
         at = np.arange(len(rows))

@@ -23,7 +23,7 @@ from aoc_cli.belief.censoring import censoring_of
 from aoc_cli.belief.config import CRITIC_STEP_SECONDS, BeliefConfig
 from aoc_cli.belief.data import prepare
 from aoc_cli.decompose.k_rule import index_k
-from aoc_cli.index.search.neighbourhood import neighbourhood_values
+from aoc_cli.index.search.neighbourhood import measured_cells, neighbourhood_values
 from aoc_cli.progress import Progress
 from aoc_cli.store import DEFAULT_MODEL, Corpus, check_name, writing_model
 from aoc_cli.training import evidence, tuning
@@ -192,7 +192,8 @@ def _neighbourhood(corpus, config: BeliefConfig, prepared, record: TrainingRecor
     model) and what it measured into the record (``settings.do_no_harm``)."""
     values, info = neighbourhood_values(corpus.observations, corpus.rewards,
                                         corpus.episode_starts, config.gamma,
-                                        censoring_of(corpus), progress=progress)
+                                        censoring_of(corpus), progress=progress,
+                                        measured=measured_cells(corpus))
     if record.settings is not None:
         kept = {k: v for k, v in info.items() if k != "rows"}    # the (N, 100) neighbours
         record = record.with_settings(do_no_harm={**kept, "value_mean": float(values.mean())})

@@ -25,7 +25,7 @@ import numpy as np
 
 import aoc_cli
 # internal: the test bed's vectorised rollout and the controller over many episodes at once
-from aoc_cli.control.batch import BatchPolicy
+from aoc_cli.control.batch import BatchPolicy, LikelyPolicy
 import aoc_cli.envs.icu_cohort as cohort
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -82,17 +82,16 @@ def main() -> None:
     class Decide:
         reset = staticmethod(policy.reset)
 
-        def __call__(self, obs, alive):
-            acts = policy(obs, alive)
-            kept.append(np.mean(acts == ctl.neighbourhood.at(obs).likely)
+        def __call__(self, obs, alive, measured):
+            acts = policy(obs, alive, measured)
+            kept.append(np.mean(acts == ctl.neighbourhood.at(obs, measured).likely)
                         if ctl.do_no_harm else np.nan)
             return acts
 
     seed = args.seed + 1      # the same patients for every policy (common random numbers)
     aoc_value = cohort.rollout_value(Decide(), args.episodes, noise=args.noise, seed=seed)
     rolled = time.perf_counter() - started
-    likely = cohort.rollout_value(lambda obs: ctl.neighbourhood.at(obs).likely, args.episodes,
-                                  noise=args.noise, seed=seed)
+    likely = cohort.rollout_value(LikelyPolicy(ctl), args.episodes, noise=args.noise, seed=seed)
     paired = cohort.paired_difference(aoc_value["survived"], likely["survived"])
     t = cohort.sepsis.tables("mean")
     near = {name: cohort.rollout_value(cohort.nearest_centre_policy(pol), args.episodes,

@@ -1,15 +1,18 @@
 """What rule 7's neighbourhoods cost against the state itself, on the cohort test bed: the same
 rule (the lower bound of each dose's mean neighbourhood value, the clinicians' likely dose kept
 unless another's bound beats its own) over different sets of rows, every policy rolled out on
-the same patients (common random numbers), paired against the likely dose.
+the same patients (common random numbers), paired against the likely dose of the 100 rows
+nearest over every cell (rule 7's before its distance left the held cells out).
 
     python benchmarks/notes/cohort_neighbourhoods.py --stays 10000 --noise 0.3 \\
         [--episodes 20000] [--variants rule7,state,state100,m300,denoised]
 
 Variants (the rows a decision reads; each row valued by FQE over its own sets of rows):
 
-* ``rule7``: the 100 logged rows nearest the observation (what ``aoc train`` decides);
-* ``m300``: the 300 nearest (``m<k>``: the k nearest);
+* ``rule7``: the 100 logged rows nearest the observation over the cells both measured (what
+  ``aoc train`` decides; ``aoc_cli.index.search.masked``);
+* ``plain``: the 100 nearest over every cell, held or measured (rule 7 before);
+* ``m300``: the 300 nearest over every cell (``m<k>``: the k nearest);
 * ``denoised``: the 100 nearest after each observation, the log's and the query's, is
   replaced by the mean of its 10 nearest logged rows (a local average of the features);
 * ``state``: every logged row of the true state (the hidden ``state`` column), the step's state
@@ -22,8 +25,8 @@ Variants (the rows a decision reads; each row valued by FQE over its own sets of
   features (FAISS), rows valued by FQE over the neighbourhoods;
 * ``masked<c>``: every logged row within a radius (at least 30, at most 1,000 rows), the
   distance the mean squared difference over the cells both rows measured (a held cell is not
-  a measurement: the log's from the table's gaps, the query's where the environment repeated
-  the previous step's value), in the table's own units, not rescaled by the log's spread; the
+  a measurement: the log's from the table's gaps, the query's those the environment held),
+  in the table's own units, not rescaled by the log's spread; the
   radius c times the log's median distance to its 10th nearest row; rows valued by FQE over
   these sets (``c`` like ``1.6``); ``maskedsd<c>`` the same over the features standardised
   by the log's spread, as rule 7's.
@@ -43,6 +46,7 @@ import numpy as np
 
 # internal: the table's hidden state, the vectorised rollout, rule 7's neighbourhoods and FQE
 import aoc_cli.envs.icu_cohort as cohort
+from aoc_cli.index.search.masked import MaskedIndex
 from aoc_cli.index.search.neighbourhood import Neighbourhood, lower_bound_z
 from aoc_cli.index.search.neighbourhood import neighbourhood_values
 from aoc_cli.threads import one_thread
@@ -76,11 +80,14 @@ def kept_or_best(low: np.ndarray, likely: np.ndarray) -> np.ndarray:
     return np.where(low[s, best] > low[s, likely], best, likely)
 
 
-def near_rule(t: dict, nearest: int, smooth: int | None, state_valued: bool = False):
+def near_rule(t: dict, nearest: int, smooth: int | None, state_valued: bool = False,
+              masked: bool = False):
     """(policy, purity) of rule 7 over ``nearest`` rows, the observations first averaged over
     their ``smooth`` nearest logged rows where given; with ``state_valued`` each row valued by
-    FQE over the true states instead of over the neighbourhoods."""
+    FQE over the true states instead of over the neighbourhoods; with ``masked`` the distance
+    over the cells both rows measured (the policy reads the step's measured cells)."""
     x = t["x"]
+    own = t["measured"] if masked else None
     denoise = None
     if smooth:
         raw = Neighbourhood(x, t["a"], t["episode"], N_ACTIONS, nearest=smooth)
@@ -89,11 +96,21 @@ def near_rule(t: dict, nearest: int, smooth: int | None, state_valued: bool = Fa
             return x[raw.rows(np.asarray(obs, np.float64).reshape(len(obs), -1))].mean(1)
         x = denoise(x)
     y, info = neighbourhood_values(x, t["r"], t["starts"], 1.0, censored=t["censored"],
-                                   nearest=nearest)
+                                   nearest=nearest, measured=own)
     purity = float((t["state"][info["rows"]] == t["state"][:, None]).mean())
     if state_valued:
         y = state_values(t)
-    hood = Neighbourhood(x, t["a"], t["episode"], N_ACTIONS, values=y, nearest=nearest)
+    hood = Neighbourhood(x, t["a"], t["episode"], N_ACTIONS, values=y, nearest=nearest,
+                         measured=own)
+    if masked:
+        class Policy:
+            def reset(self, episodes):
+                pass
+
+            def __call__(self, obs, alive, measured):
+                near = hood.at(obs, measured)
+                return kept_or_best(hood.bounds(near), near.likely)
+        return Policy(), purity
 
     def policy(obs):
         near = hood.at(denoise(obs) if denoise else obs)
@@ -158,43 +175,21 @@ def kmeans_rule(t: dict, k: int, seed: int = 0):
     return policy, purity
 
 
-class MaskedSearch:
-    """The logged rows nearest each query by the mean squared difference over the cells both
-    measured (torch: FAISS has no masked distance), the ``cap`` nearest with their distances."""
-
-    def __init__(self, x: np.ndarray, measured: np.ndarray, cap: int = 1000):
-        import torch
-        self.torch, self.cap = torch, min(cap, len(x))
-        self.z = torch.tensor(x, dtype=torch.float32)
-        self.m = torch.tensor(measured, dtype=torch.float32)
-        self.zm, self.z2m = self.z * self.m, self.z * self.z * self.m
-
-    def __call__(self, q: np.ndarray, qm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """((S, cap) squared distances, (S, cap) rows), nearest first."""
-        torch = self.torch
-        dist = np.empty((len(q), self.cap), np.float32)
-        rows = np.empty((len(q), self.cap), np.int64)
-        for a in range(0, len(q), 1024):
-            zq = torch.tensor(q[a:a + 1024], dtype=torch.float32)
-            mq = torch.tensor(qm[a:a + 1024], dtype=torch.float32)
-            num = (mq * zq * zq) @ self.m.T + mq @ self.z2m.T - 2 * (mq * zq) @ self.zm.T
-            d, i = torch.topk(num / (mq @ self.m.T).clamp_min(1), self.cap, dim=1,
-                              largest=False)
-            dist[a:a + 1024], rows[a:a + 1024] = d.numpy(), i.numpy()
-        return dist, rows
-
-
 def masked_rule(t: dict, c: float, standardise: bool = False, least: int = 30,
                 cap: int = 1000):
     """(policy, purity) of the rule over the rows within the masked radius (``masked<c>``,
-    ``maskedsd<c>`` with ``standardise``); the policy is stateful (a held cell of the query is
-    one equal to the previous step's)."""
+    ``maskedsd<c>`` with ``standardise``); the policy reads the cells the environment measured
+    at the step."""
     x, a, ep, n = t["x"], t["a"], t["episode"], len(t["x"])
     scale = x.std(0) if standardise else np.ones(x.shape[1])
     scale = np.where(scale > 1e-12, scale, 1.0)
-    search = MaskedSearch(x / scale, t["measured"], cap)
+    index = MaskedIndex(x / scale, t["measured"], candidates=2 * cap)
+    cap = min(cap, n)
+
+    def search(q, qm):
+        return index.search(q, qm, cap)
     dist, rows = search(x / scale, t["measured"])
-    radius = c * float(np.median(dist[:, min(9, search.cap - 1)]))
+    radius = c * float(np.median(dist[:, min(9, cap - 1)]))
 
     def inside(d):
         ok = d <= radius
@@ -236,12 +231,10 @@ def masked_rule(t: dict, c: float, standardise: bool = False, least: int = 30,
 
     class Policy:
         def reset(self, episodes):
-            self.previous = np.full((episodes, x.shape[1]), np.nan, np.float32)
+            pass
 
-        def __call__(self, obs, alive):
-            held = obs == self.previous[alive]
-            self.previous[alive] = obs
-            d, r = search(np.asarray(obs, np.float64) / scale, ~held)
+        def __call__(self, obs, alive, measured):
+            d, r = search(np.asarray(obs, np.float64) / scale, measured)
             count, episodes, mean = groups(r, inside(d))
             with np.errstate(divide="ignore"):
                 low = np.where(episodes > 0, mean - z * sigma / np.sqrt(episodes), -np.inf)
@@ -291,7 +284,8 @@ def main() -> None:
     ap.add_argument("--variants", default="rule7,state,state100,m300,denoised")
     args = ap.parse_args()
     t = table(args.stays, args.noise, args.seed)
-    build = {"rule7": lambda: near_rule(t, 100, None), "m300": lambda: near_rule(t, 300, None),
+    build = {"rule7": lambda: near_rule(t, 100, None, masked=True),
+             "plain": lambda: near_rule(t, 100, None), "m300": lambda: near_rule(t, 300, None),
              "denoised": lambda: near_rule(t, 100, 10), "state": lambda: state_rule(t, None),
              "state100": lambda: state_rule(t, 100),
              "nearsv": lambda: near_rule(t, 100, None, state_valued=True),

@@ -31,7 +31,9 @@ def test_the_batch_policy_decides_as_the_controller_does_step_by_step(cohort):
     session = open_session("c", store=cohort)
     ctl = session.controller
     assert ctl.do_no_harm                      # value mode, discrete, no support penalty
+    assert ctl.neighbourhood.masked is not None   # the log's gaps: the measured cells' distance
     data = cohort.corpus("c")
+    measured = ~data.imputed_mask
     starts = np.asarray(data.episode_starts)
     episodes = [0, 3, 7]
     length = min(int(starts[e + 1] - starts[e]) for e in episodes)
@@ -41,10 +43,11 @@ def test_the_batch_policy_decides_as_the_controller_does_step_by_step(cohort):
     buffers = [HistoryBuffer(2, data.observation_dim, 1, True) for _ in episodes]
     alive = np.arange(len(episodes))
     for t in range(length):
-        step = obs[[starts[e] + t for e in episodes]]
-        batch = policy(step, alive)
+        rows = [starts[e] + t for e in episodes]
+        step = obs[rows]
+        batch = policy(step, alive, measured[rows])
         for j, buf in enumerate(buffers):
-            one = ctl.decide(step[j], buf.history())
+            one = ctl.decide(step[j], buf.history(), measured=measured[rows[j]])
             if int(one.action) != int(batch[j]):     # only where two paths' rounding ties
                 v = one.candidate_values
                 assert abs(v[int(one.action)] - v[int(batch[j])]) < 1e-6, (t, j)
@@ -97,3 +100,32 @@ def test_the_contrast_of_a_rule_7_decision_reads_the_bounds(cohort):
         assert why["bound"] == bounds[rec["candidate"]] <= bounds[d.chosen]
     else:
         assert not np.isfinite(bounds[rec["candidate"]])
+
+
+def test_a_rollout_reads_the_cells_the_environment_held_and_its_audit_replays_them(
+        cohort, tmp_path):
+    """``aoc rollout --env icu-cohort``: each decision reads the environment's measured cells
+    (``info["measured"]``), the audit log keeps them, and a replay decides the same; the same
+    step read as fully measured finds other rows."""
+    from aoc_cli.control import rollout
+    from aoc_cli.control.audit import read_audit_step
+    from aoc_cli.envs import make_env
+    from aoc_cli.explanation.decisions import replay_decision
+
+    session = open_session("c", store=cohort)
+    path = tmp_path / "a.h5"
+    results, _ = rollout(session, make_env("icu-cohort"), 3, seed=2, audit=str(path))
+    held = [(e, t) for e, res in enumerate(results) for t, m in enumerate(res.measured)
+            if not m.all()]
+    assert held and all(len(r.measured) == len(r.decisions) for r in results)
+    differs = False
+    for e, t in held[:6]:
+        step = read_audit_step(path, e, t)
+        assert (step["measured"] == results[e].measured[t]).all()
+        again = replay_decision(session, step)
+        assert int(again.action) == int(step["action"])
+        ctl = session.controller
+        rows = ctl.neighbourhood.at(step["observation"][None], step["measured"][None]).rows
+        every = ctl.neighbourhood.at(step["observation"][None]).rows
+        differs |= set(rows[0].tolist()) != set(every[0].tolist())
+    assert differs                      # the held cells change which rows are nearest

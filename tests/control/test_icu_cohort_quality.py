@@ -5,11 +5,11 @@ index`` with no flag, and AOC rolled out in the same MDP through the same noise:
 survival.
 
 Guards the cohort's promise: on noisy features, where no observation repeats, AOC (rule 7:
-rule 2 over the log's nearest rows, do no harm; docs/design.md, "Settings from the log's
-evidence") is never below the clinicians it learned from by more than 0.005, and here shown
-above them: measured 0.7989 [0.7933, 0.8045] over 20,000 episodes, the clinicians 0.7818
-exact, their likely dose (what rule 7 keeps) on the same patients 0.7874
-(docs/results/icu-cohort.md).
+rule 2 over the log's nearest rows by the cells both measured, do no harm; docs/design.md,
+"Settings from the log's evidence") is never below the clinicians it learned from by more
+than 0.005, and here shown above them: measured 0.8022 [0.7966, 0.8077] over 20,000
+episodes, the clinicians 0.7818 exact, their likely dose (what rule 7 keeps) on the same
+patients 0.7847 (docs/results/icu-cohort.md).
 """
 
 import os
@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from aoc_cli import open_session
-from aoc_cli.control.batch import BatchPolicy
+from aoc_cli.control.batch import BatchPolicy, LikelyPolicy
 from aoc_cli.envs import icu_cohort
 
 pytestmark = pytest.mark.quality
@@ -54,22 +54,24 @@ def test_aoc_on_a_noisy_cohort_is_never_worse_than_the_clinicians(cohort):
     ctl = cohort.controller
     assert ctl.do_no_harm and ctl.config.support_penalty is None   # no exact repeats here
     assert ctl.model.config.value == "neighbours"                  # rule 7's values
+    assert ctl.neighbourhood.masked is not None          # the held cells left out (the gaps)
     result = icu_cohort.rollout_value(BatchPolicy(ctl), EPISODES, noise=NOISE, seed=1)
     clinicians = icu_cohort.clinicians_value()
     # 20,000 episodes measure a survival to +- 0.006: never below the clinicians by more than
-    # the margin, and above them (measured 0.7989 [0.7933, 0.8045] against 0.7818)
+    # the margin, and above them (measured 0.8022 [0.7966, 0.8077] against 0.7818)
     assert result["low"] >= clinicians - MARGIN, (result, clinicians)
     assert result["low"] > clinicians, (result, clinicians)
     # on the same patients (common random numbers), against the clinicians' likely dose that
     # rule 7 keeps where no other dose is better supported: not shown worse by the margin
-    likely = icu_cohort.rollout_value(lambda obs: ctl.neighbourhood.at(obs).likely, EPISODES,
-                                      noise=NOISE, seed=1)
+    # (measured +0.0175 [0.0116, 0.0233])
+    likely = icu_cohort.rollout_value(LikelyPolicy(ctl), EPISODES, noise=NOISE, seed=1)
     paired = icu_cohort.paired_difference(result["survived"], likely["survived"])
     assert paired["low"] > -MARGIN, paired
+    assert paired["low"] > 0, paired          # and shown better than the dose it would keep
 
 
 def test_the_value_belief_learns_on_noisy_features(cohort):
     """Its targets, FQE over the log's neighbourhoods, are what the log says near an
     observation: the belief fits them where it fitted one stay's return at R^2 0.01."""
     metrics = cohort.controller.model.meta["metrics"]
-    assert metrics["val_r2"] > 0.4, metrics["val_r2"]       # measured 0.588 (best epoch 8)
+    assert metrics["val_r2"] > 0.4, metrics["val_r2"]       # measured 0.499 (best epoch 8)

@@ -190,11 +190,13 @@ def test_the_env_noise_and_holds():
     for seed in range(40):
         obs, info = env.reset(seed=seed)
         resid.append(obs - C[info["state"]])  # the first step: every cell fresh
+        assert info["measured"].all()
         done = False
         while not done:
             nxt, _, term, trunc, info = env.step(int(modal[info["state"]]))
             done = term or trunc
             same = nxt == obs
+            assert (info["measured"] == ~same).all()      # what it says it held, it held
             held += same.sum()
             fresh += (~same).sum()
             obs = nxt

@@ -5,8 +5,10 @@ from the log's evidence").
 A cohort's rows are noisy measurements: no two rows repeat, so "the (state, action) the log
 took n times" has no meaning. Its continuous form is the **neighbourhood** of an observation
 o: the :data:`NEAREST` logged rows nearest to o, the observations standardised by the log's
-own spread (each column less its mean, over its sd), searched exactly (FAISS, flat L2). From
-them, for every discrete action a:
+own spread (each column less its mean, over its sd), searched exactly (FAISS, flat L2); on a
+log with filled gaps (``measured``: the cells that are not the corpus's imputed ones) by the
+mean squared difference over the cells both rows measured (:mod:`.masked`; a query's measured
+cells given with it, else all of them). From them, for every discrete action a:
 
 * ``episodes[a]``: the distinct episodes among those rows that took a, the number of patients
   behind a's value at o (on a log whose states repeat, the rows at distance 0 are the state's
@@ -34,9 +36,9 @@ only where it beats the clinicians' likely action's own bound; otherwise the lik
 kept (Pi_b-SPIBB's principle: leave the behaviour where the log cannot show better). Rule 2
 of the exact-repeat log, with the neighbourhood in place of the state.
 
-Shapes: observations (N, d_o), actions (N,) int, row_episode (N,) int, values (N,) float64;
-``at(obs (S, d_o))`` -> :class:`Near` with episodes (S, n) int64, likely (S,) int64,
-rows (S, m) int64.
+Shapes: observations (N, d_o), actions (N,) int, row_episode (N,) int, values (N,) float64,
+measured (N, d_o) bool or None; ``at(obs (S, d_o), measured (S, d_o) or None)`` ->
+:class:`Near` with episodes (S, n) int64, likely (S,) int64, rows (S, m) int64.
 """
 
 from __future__ import annotations
@@ -46,6 +48,8 @@ from dataclasses import dataclass
 from statistics import NormalDist
 
 import numpy as np
+
+from aoc_cli.index.search.masked import MaskedIndex
 
 #: Rows in an observation's neighbourhood.
 NEAREST = 100
@@ -80,7 +84,8 @@ class Neighbourhood:
 
     def __init__(self, observations: np.ndarray, actions: np.ndarray, row_episode: np.ndarray,
                  n_actions: int, values: np.ndarray | None = None, nearest: int = NEAREST,
-                 seed: int = 0, noise: float | None = None):
+                 seed: int = 0, noise: float | None = None,
+                 measured: np.ndarray | None = None):
         import faiss  # lazy: FAISS only where a controller decides with the rule
 
         obs = np.asarray(observations, np.float64).reshape(len(observations), -1)
@@ -91,29 +96,45 @@ class Neighbourhood:
         self.row_episode = np.asarray(row_episode, np.int64)
         self.n_actions = int(n_actions)
         self.nearest = int(min(nearest, len(obs)))
-        self.index = faiss.IndexFlatL2(obs.shape[1])
-        self.index.add(self._standard(obs))
+        #: the masked index where the log has filled cells (:mod:`.masked`), else None
+        self.masked = None
+        self.index = None
+        if measured is not None and not np.all(measured):
+            self.masked = MaskedIndex(self._standard(obs), measured, seed=seed)
+        else:
+            self.index = faiss.IndexFlatL2(obs.shape[1])
+            self.index.add(self._standard(obs))
         self.z = lower_bound_z(self.n_actions)
         self.values = None if values is None else np.asarray(values, np.float64)
+        own = None if self.masked is None else np.asarray(measured, bool)
         self.noise = (float(noise) if noise is not None else float("nan") if values is None
-                      else self._noise(obs, self.values, seed))
+                      else self._noise(obs, self.values, seed, own))
 
     def _standard(self, obs: np.ndarray) -> np.ndarray:
         return np.ascontiguousarray((np.asarray(obs, np.float64) - self.mean) / self.scale,
                                     dtype=np.float32)
 
-    def rows(self, obs: np.ndarray) -> np.ndarray:
-        """(S, m) the m nearest logged rows of each observation (S, d_o), nearest first."""
+    def rows(self, obs: np.ndarray, measured: np.ndarray | None = None) -> np.ndarray:
+        """(S, m) the m nearest logged rows of each observation (S, d_o), nearest first;
+        ``measured`` (S, d_o) bool its measured cells (None: all), read on a log with gaps."""
         obs = np.asarray(obs).reshape(len(obs), -1)
         out = np.empty((len(obs), self.nearest), np.int64)
+        if self.masked is not None:
+            qm = (np.ones(obs.shape, bool) if measured is None
+                  else np.asarray(measured, bool).reshape(obs.shape))
+            for a in range(0, len(obs), _BLOCK):
+                out[a:a + _BLOCK] = self.masked.search(
+                    self._standard(obs[a:a + _BLOCK]), qm[a:a + _BLOCK], self.nearest)[1]
+            return out
         for a in range(0, len(obs), _BLOCK):
             _d, idx = self.index.search(self._standard(obs[a:a + _BLOCK]), self.nearest)
             out[a:a + _BLOCK] = idx
         return out
 
-    def at(self, obs: np.ndarray) -> Near:
-        """The neighbourhoods of observations (S, d_o) (module docstring)."""
-        rows = self.rows(obs)
+    def at(self, obs: np.ndarray, measured: np.ndarray | None = None) -> Near:
+        """The neighbourhoods of observations (S, d_o), their measured cells ``measured``
+        (S, d_o) bool or None (module docstring)."""
+        rows = self.rows(obs, measured)
         acts = self.actions[rows]                                         # (S, m)
         s = len(rows)
         at = (np.repeat(np.arange(s), rows.shape[1]), acts.ravel())      # (query, action)
@@ -135,12 +156,14 @@ class Neighbourhood:
                 mean = np.where(rowcount > 0, total / rowcount, np.nan)
         return Near(episodes, rowcount.argmax(1).astype(np.int64), rows, mean)
 
-    def _noise(self, obs: np.ndarray, values: np.ndarray, seed: int) -> float:
+    def _noise(self, obs: np.ndarray, values: np.ndarray, seed: int,
+               measured: np.ndarray | None) -> float:
         """The pooled sd of a row's value about its (neighbourhood, action) mean (module
         docstring); NaN where no group has two rows."""
         n = len(obs)
-        pick = np.random.default_rng(seed).choice(n, size=min(NOISE_QUERIES, n), replace=False)
-        rows = self.rows(obs[np.sort(pick)])                              # (Q, m)
+        pick = np.sort(np.random.default_rng(seed).choice(n, size=min(NOISE_QUERIES, n),
+                                                          replace=False))
+        rows = self.rows(obs[pick], None if measured is None else measured[pick])  # (Q, m)
         acts, vals = self.actions[rows], values[rows]
         q = np.repeat(np.arange(len(rows)), rows.shape[1])
         group = q * self.n_actions + acts.ravel()
@@ -166,33 +189,48 @@ class Neighbourhood:
     def describe(self) -> dict:
         """What the rule measured, for the record."""
         return {"nearest": self.nearest, "noise": self.noise, "z": self.z, "level": LEVEL,
-                "queries": NOISE_QUERIES}
+                "queries": NOISE_QUERIES,
+                "distance": "measured cells" if self.masked is not None else "l2"}
+
+
+def measured_cells(corpus) -> np.ndarray | None:
+    """(N, d_o) bool: the cells of a corpus (a store's ``Corpus`` or a ``CorpusData``) that
+    were measured, not filled at ingest; None where none was filled."""
+    mask = getattr(corpus, "imputed_mask", None)
+    if mask is None:
+        mask = getattr(corpus, "imputed", None)
+    if mask is None:
+        return None
+    mask = np.asarray(mask, bool)
+    return ~mask if mask.any() else None
 
 
 def episodes_near(observations: np.ndarray, actions: np.ndarray, episode_starts: np.ndarray,
-                  n_actions: int) -> np.ndarray:
+                  n_actions: int, measured: np.ndarray | None = None) -> np.ndarray:
     """(N, n) the log's support near each of its own rows, in episodes: how many of its
     episodes among the :data:`NEAREST` rows nearest the row (itself among them) took each
     action (``aoc evaluate``'s hardly-held measure; rule 6's "held out fewer than 3 times in
     that state" where no state repeats). observations (N, d_o), actions (N,),
-    episode_starts (E + 1,)."""
+    episode_starts (E + 1,), measured (N, d_o) bool or None (the cells not filled)."""
     starts = np.asarray(episode_starts, np.int64)
     episode = np.repeat(np.arange(len(starts) - 1), np.diff(starts))
-    return Neighbourhood(observations, actions, episode, n_actions).at(observations).episodes
+    hood = Neighbourhood(observations, actions, episode, n_actions, measured=measured)
+    return hood.at(observations, measured).episodes
 
 
 def neighbourhood_values(observations: np.ndarray, rewards: np.ndarray,
                          episode_starts: np.ndarray, gamma: float,
                          censored: np.ndarray | None = None, nearest: int = NEAREST,
-                         tol: float = 1e-4, max_iterations: int = 1000, progress=None
-                         ) -> tuple[np.ndarray, dict]:
+                         tol: float = 1e-4, max_iterations: int = 1000, progress=None,
+                         measured: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
     """(values (N,), info): each row's value of the behaviour, by fitted Q evaluation over the
     log's neighbourhoods, the regressor the mean over the ``nearest`` rows (standardised,
     exact search; a k-nearest-neighbour FQE): y_i = r_i + gamma V(o_{i+1}), V(o) the mean y of
     the rows nearest o; y_i = r_i at an episode's last row, and at the cut of a ``censored``
     (E,) stay r_i + gamma V(o_i) (the stay goes on: its own neighbourhood stands for the next
     observation). Iterated from zero until no value moves by more than ``tol``
-    times the rewards' range. observations (N, d_o), rewards (N,), episode_starts (E + 1,).
+    times the rewards' range. observations (N, d_o), rewards (N,), episode_starts (E + 1,),
+    measured (N, d_o) bool or None (the cells not filled: the masked distance).
     ``info``: nearest, iterations, converged, seconds, and ``rows`` (N, nearest) each row's
     neighbourhood (for :func:`fitted_values`). ``progress(done, total, text)`` follows the
     search."""
@@ -201,10 +239,13 @@ def neighbourhood_values(observations: np.ndarray, rewards: np.ndarray,
     n = len(obs)
     r = np.asarray(rewards, np.float64).reshape(-1)
     starts = np.asarray(episode_starts, np.int64)
-    hood = Neighbourhood(obs, np.zeros(n, np.int64), np.zeros(n, np.int64), 1, nearest=nearest)
+    hood = Neighbourhood(obs, np.zeros(n, np.int64), np.zeros(n, np.int64), 1, nearest=nearest,
+                         measured=measured)
+    own = None if hood.masked is None else np.asarray(measured, bool)
     rows = np.empty((n, hood.nearest), np.int64)
     for a in range(0, n, _BLOCK):
-        rows[a:a + _BLOCK] = hood.rows(obs[a:a + _BLOCK])
+        rows[a:a + _BLOCK] = hood.rows(obs[a:a + _BLOCK],
+                                       None if own is None else own[a:a + _BLOCK])
         if progress is not None:
             progress(min(a + _BLOCK, n), n, "the log's neighbourhoods")
     last = np.zeros(n, bool)
@@ -226,6 +267,7 @@ def neighbourhood_values(observations: np.ndarray, rewards: np.ndarray,
             done = True
             break
     return y, {"nearest": hood.nearest, "iterations": it, "converged": done,
+               "distance": hood.describe()["distance"],
                "seconds": round(time.perf_counter() - started, 3), "rows": rows}
 
 
