@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from aoc_cli.control.controller import action_bounds, candidate_actions
+from aoc_cli.control.rule import action_bounds, candidate_actions
 from aoc_cli.errors import AocError, call
 
 

@@ -28,10 +28,11 @@ import numpy as np
 from aoc_cli.belief.row_labels import default_row_smoothing, row_labels
 from aoc_cli.control.config import ControllerConfig
 from aoc_cli.index.search.neighbourhood import Neighbourhood, measured_cells
+from aoc_cli.control.rule import action_bounds, candidate_actions
 from aoc_cli.control.rule import choose as _choose
 from aoc_cli.control.rule import reads_support, residual_cap
 from aoc_cli.control.support import row_episodes, support_episodes
-from aoc_cli.errors import AocError, ModelMissing, param
+from aoc_cli.errors import ModelMissing, param
 from aoc_cli.store import History
 from aoc_cli.threads import one_thread
 
@@ -108,27 +109,6 @@ class Decision:
         warn = "".join(f"<p>warning: {html.escape(w)}</p>" for w in self.warnings)
         return (f"<p><b>{html.escape(repr(self))}</b></p>{warn}<table><tr><th>row</th>"
                 f"<th>weight</th><th>distance</th></tr>{rows}</table>")
-
-
-def action_bounds(action_space: dict, actions: np.ndarray | None = None):
-    """(low (d_a,), high (d_a,)) of a box action space; from the data when not recorded."""
-    if "low" in action_space and "high" in action_space:
-        low = np.asarray(action_space["low"], dtype=np.float64)
-        high = np.asarray(action_space["high"], dtype=np.float64)
-        if np.all(np.isfinite(low)) and np.all(np.isfinite(high)):
-            return low, high
-    if actions is None:
-        raise AocError("the action space has no bounds: cannot sample candidates")
-    return actions.min(axis=0).astype(np.float64), actions.max(axis=0).astype(np.float64)
-
-
-def candidate_actions(rng: np.random.Generator, count: int, low: np.ndarray | None = None,
-                      high: np.ndarray | None = None, n_actions: int | None = None) -> np.ndarray:
-    """The K candidates of a step: every action of a discrete space, (n,) int, when
-    ``n_actions`` is given; else ``count`` uniform in the box [low, high], (count, d_a)."""
-    if n_actions is not None:
-        return np.arange(int(n_actions), dtype=np.int64)
-    return rng.uniform(low, high, size=(count, len(low)))
 
 
 class Controller:

@@ -1,5 +1,6 @@
 """The decision rule of value mode, steps 4 and 5 of a control step (docs/design.md, "The
-method, precisely"), written once and batched: the controller calls it for one step
+method, precisely"), and the candidates it chooses among (:func:`candidate_actions`), written
+once and batched: the controller calls it for one step
 (:meth:`aoc_cli.control.Controller.decompose_candidates`, S = 1) and ``aoc evaluate`` for
 every held-out step at once (:mod:`aoc_cli.evaluation.score`). Over the K candidates of each of S steps:
 
@@ -19,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from aoc_cli.control.config import ControllerConfig
+from aoc_cli.errors import AocError
 from aoc_cli.control.support import penalised, support_filter
 
 
@@ -94,3 +96,26 @@ def choose(residual: np.ndarray, value: np.ndarray, config: ControllerConfig, *,
         base = (value if lower is None else np.asarray(lower, np.float64))[s, kept]
         chosen = np.where(key[s, chosen] > base, chosen, kept)
     return threshold, passed, chosen
+
+
+# -- the candidates of a step (steps 1-2) ------------------------------------------------
+
+def action_bounds(action_space: dict, actions: np.ndarray | None = None):
+    """(low (d_a,), high (d_a,)) of a box action space; from the data when not recorded."""
+    if "low" in action_space and "high" in action_space:
+        low = np.asarray(action_space["low"], dtype=np.float64)
+        high = np.asarray(action_space["high"], dtype=np.float64)
+        if np.all(np.isfinite(low)) and np.all(np.isfinite(high)):
+            return low, high
+    if actions is None:
+        raise AocError("the action space has no bounds: cannot sample candidates")
+    return actions.min(axis=0).astype(np.float64), actions.max(axis=0).astype(np.float64)
+
+
+def candidate_actions(rng: np.random.Generator, count: int, low: np.ndarray | None = None,
+                      high: np.ndarray | None = None, n_actions: int | None = None) -> np.ndarray:
+    """The K candidates of a step: every action of a discrete space, (n,) int, when
+    ``n_actions`` is given; else ``count`` uniform in the box [low, high], (count, d_a)."""
+    if n_actions is not None:
+        return np.arange(int(n_actions), dtype=np.int64)
+    return rng.uniform(low, high, size=(count, len(low)))

@@ -1,23 +1,19 @@
 """icu-cohort: a clinical cohort table drawn from the ICU-Sepsis MDP, with a known truth.
 
-A test bed for the cohort path (``aoc ingest`` of a table with gaps, an outcome per stay and
-censored stays, then ``aoc train``, ``aoc index``): the patients are those of
-:mod:`aoc_cli.envs.icu_sepsis` (the package's 716-state MDP, treated by the clinicians'
-estimated policy), but what a row shows is not the state: it is the 47 AI-Clinician features
-of the state's cluster centre plus Gaussian noise (sd ``noise``, in the package's normalised
-units), with ``gap`` of the cells empty. The environment replays the same MDP through the same
-noisy features, so ``aoc rollout --env icu-cohort`` measures a policy's true survival, and
-:func:`rollout_value` does the same for thousands of episodes at once.
+A test bed for the cohort path (``aoc ingest`` of a table with gaps, outcomes and censored
+stays): the patients of :mod:`aoc_cli.envs.icu_sepsis` (its 716-state MDP, the clinicians'
+policy), but a row shows the 47 AI-Clinician features of the state's cluster centre plus
+Gaussian noise (sd ``noise``, the package's units), ``gap`` of the cells empty. The
+environment replays the MDP through the same noise: ``aoc rollout --env icu-cohort`` measures
+a policy's true survival, :func:`rollout_value` for thousands of episodes at once.
 
 The table (:func:`cohort_table`, written by ``scripts/icu_cohort.py``), one row per stay per
 4-hour step, in stay order, columns named so that ``aoc ingest`` finds their roles by itself:
 
 * ``id`` the stay, ``time`` its step (1-based, the AI Clinician's ``bloc``);
 * ``obs_<FEATURE>`` for the 47 :data:`~aoc_cli.envs.icu_sepsis.FEATURES`: the true state's
-  cluster centre + N(0, noise^2) per cell, stored as float32; a cell is empty (NaN) at rate
-  ``gap``, except on the stay's first step, which is always fully measured (the admission
-  panel: ``--impute hold`` never falls back to a median, and the environment reproduces the
-  filled values exactly);
+  centre + N(0, noise^2) per cell, float32; empty (NaN) at rate ``gap``, never on a stay's
+  first step (``--impute hold`` never falls back to a median);
 * ``act_dose`` the clinicians' dose level, ``5 * fluids + vaso`` (0-24, as icu-sepsis's
   actions), sampled from their policy in the true state;
 * ``died_in_hosp`` 0/1 on every row of the stay; empty for a stay cut short: a ``censored``
@@ -25,11 +21,10 @@ The table (:func:`cohort_table`, written by ``scripts/icu_cohort.py``), one row 
   treatment after 500 steps has no outcome either).
 
 Not written: ``state`` and ``propensity`` (of the logged dose), the truth (:data:`HIDDEN`).
-
 Ingested with ``aoc ingest cohort.csv --name c --discrete-actions --impute hold --outcome
-died_in_hosp --outcome-reward 1=0,0=1`` its reward is 1 on a surviving stay's last step, as the
-MDP's. ``aoc collect icu-cohort`` logs the same arrays (with columns ``state`` and
-``propensity``) for the same seed.
+died_in_hosp --outcome-reward 1=0,0=1`` its reward is 1 on a surviving stay's last step.
+``aoc collect icu-cohort`` logs the same arrays (and ``state``, ``propensity``, the gaps as
+the imputed mask) for the same seed.
 
 The environment (``make_env("icu-cohort")``, ``make_env("icu-cohort:noise=1.0,gap=0.15")``):
 the 47 features of the current state with fresh noise every step, a cell missing at rate
@@ -92,8 +87,8 @@ def _check(noise: float, gap: float, censored: float = 0.0) -> None:
 
 def _noisy(centre: np.ndarray, noise: float, rng: np.random.Generator) -> np.ndarray:
     """(n, 47) float32: centres plus N(0, noise^2) per cell."""
-    out = centre + rng.normal(0.0, 1.0, centre.shape) * noise if noise else centre
-    return np.asarray(out, dtype=np.float32)
+    return np.asarray(centre + rng.normal(0.0, 1.0, centre.shape) * noise if noise else centre,
+                      dtype=np.float32)
 
 
 def hold_forward(values: np.ndarray, starts: np.ndarray) -> np.ndarray:
@@ -162,8 +157,8 @@ def table_corpus(cols: dict[str, np.ndarray], source: dict | None = None) -> Cor
     """The corpus of a :func:`cohort_table` as ``aoc ingest --impute hold --outcome
     died_in_hosp --outcome-reward 1=0,0=1 --discrete-actions`` reads it: observations the
     features held forward within the stay, reward 1 on the last step of a stay that survived,
-    a stay without outcome truncated, the empty cells kept as the imputed mask; columns
-    ``state`` and ``propensity``; tag ``policy``."""
+    a stay without outcome truncated, the empty cells the imputed mask; columns ``state``,
+    ``propensity``; tag ``policy``."""
     ids = cols[ID]
     n = len(ids)
     new = np.ones(n, dtype=bool)
@@ -265,21 +260,19 @@ class CohortEnv(gymnasium.Env):
         self._state: int | None = None
         self._obs: np.ndarray | None = None
 
-    def _observe(self, first: bool) -> np.ndarray:
+    def _observe(self, first: bool) -> tuple[np.ndarray, dict]:   # (observation, info)
         fresh = _noisy(self._centres[self._state][None], self.noise, self.np_random)[0]
-        self._measured = np.ones(N_FEATURES, bool)
+        held = np.zeros(N_FEATURES, bool)
         if not first and self.gap:
             held = self.np_random.random(N_FEATURES) < self.gap
             fresh[held] = self._obs[held]
-            self._measured = ~held
         self._obs = fresh
-        return fresh.copy()
+        return fresh.copy(), {"state": self._state, "measured": ~held}
 
     def reset(self, *, seed=None, options=None):
         super().reset(seed=seed)
         self._state = int(self.np_random.choice(len(self._d0), p=self._d0))
-        obs = self._observe(True)
-        return obs, {"state": self._state, "measured": self._measured.copy()}
+        return self._observe(True)
 
     def step(self, action):
         if self._state is None or self._terminal[self._state]:
@@ -288,35 +281,33 @@ class CohortEnv(gymnasium.Env):
         if not 0 <= a < self.action_space.n:
             raise AocError(f"icu-cohort: action {action} outside 0..{self.action_space.n - 1}")
         self._state = int(self.np_random.choice(len(self._d0), p=self._P[self._state, a]))
-        reward = float(self._state == sepsis.STATE_SURVIVAL)
-        obs = self._observe(False)
-        return obs, reward, bool(self._terminal[self._state]), False, \
-            {"state": self._state, "measured": self._measured.copy()}
+        obs, info = self._observe(False)
+        return obs, float(self._state == sepsis.STATE_SURVIVAL), \
+            bool(self._terminal[self._state]), False, info
 
 
 # -- true survival by Monte Carlo, and the references -------------------------------------------
 
 def rollout_value(decide_batch: DecideBatch, n_episodes: int, noise: float = NOISE,
                   gap: float = GAP, seed: int = 0, strategy: str = "mean") -> dict:
-    """Survival of a policy that decides from the observations alone, by ``n_episodes``
-    episodes run at once in the MDP through the environment's noise, gaps and hold:
-    ``decide_batch(obs (n, 47) float32) -> actions (n,) int`` is called once a step on the
-    episodes still alive (with a ``reset(n)`` method, e.g.
-    :class:`aoc_cli.control.batch.BatchPolicy`, it is reset first and called as
-    ``decide_batch(obs, alive, measured)``, ``alive`` their indices, ``measured`` (n, 47)
-    bool the cells measured at the step, false where the environment held the last value). Returns ``{"value", "low", "high",
-    "episodes", "survived"}``: the 95% normal interval, ``survived`` (n,) bool (alive after
-    500 steps: not survived). The draws are **common random numbers**: episode i's first
-    state, noise, gaps and next-state uniforms at step t come from a stream of (seed, t)
-    alone, so two policies rolled out with one seed meet the same patients and, where they
-    choose alike, the same courses (:func:`paired_difference`)."""
+    """Survival of a policy deciding from the observations alone, ``n_episodes`` episodes run
+    at once in the MDP through the environment's noise, gaps and hold: ``decide_batch(obs (n,
+    47) float32) -> actions (n,) int`` once a step on the episodes alive (one with a
+    ``reset(n)`` method, e.g. :class:`aoc_cli.control.batch.BatchPolicy`, is reset first and
+    called as ``decide_batch(obs, alive, measured)``: ``alive`` their indices, ``measured``
+    (n, 47) bool the cells not held). Returns ``{"value", "low", "high", "episodes",
+    "survived"}``: the 95% normal interval, ``survived`` (n,) bool (alive after 500 steps: not
+    survived). The draws are **common random numbers**: episode i's first state, noise, gaps
+    and next-state uniforms at step t come from a stream of (seed, t) alone, so two policies
+    rolled out with one seed meet the same patients and, where they choose alike, the same
+    courses (:func:`paired_difference`)."""
     _check(noise, gap)
     t, C, n = sepsis.tables(strategy), centres(strategy), int(n_episodes)
     rng = np.random.default_rng([int(seed), 0])
     s = sepsis._sample(np.broadcast_to(np.cumsum(t.mdp.d0)[None], (n, len(t.mdp.d0))),
                        rng.random(n))
     obs, alive, survived = _noisy(C[s], noise, rng), np.arange(n), np.zeros(n, dtype=bool)
-    measured = np.ones(obs.shape, bool)                   # the first step fully measured
+    measured = np.ones(obs.shape, bool)
     stateful = hasattr(decide_batch, "reset")
     if stateful:
         decide_batch.reset(n)
@@ -341,8 +332,8 @@ def rollout_value(decide_batch: DecideBatch, n_episodes: int, noise: float = NOI
         alive, s, obs, measured = alive[~ended], nxt[~ended], new[~ended], ~held[~ended]
     value = float(survived.mean())
     half = 1.96 * np.sqrt(value * (1 - value) / n)
-    return {"value": value, "low": float(value - half), "high": float(value + half),
-            "episodes": n, "survived": survived}
+    return {"value": value, "low": value - half, "high": value + half, "episodes": n,
+            "survived": survived}
 
 
 def paired_difference(a: np.ndarray, b: np.ndarray) -> dict:
@@ -353,16 +344,13 @@ def paired_difference(a: np.ndarray, b: np.ndarray) -> dict:
     if d.ndim != 1 or len(d) < 2:
         raise AocError("paired_difference: two (n,) outcome arrays of the same episodes")
     half, m = 1.96 * float(d.std(ddof=1)) / np.sqrt(len(d)), float(d.mean())
-    return {"difference": m, "low": m - half, "high": m + half,
-            "differ": float(np.mean(d != 0))}
+    return {"difference": m, "low": m - half, "high": m + half, "differ": float(np.mean(d != 0))}
 
 
 def nearest_state(obs: np.ndarray, strategy: str = "mean") -> np.ndarray:
-    """(n,) int64 the non-terminal state whose cluster centre is nearest each observation
-    (n, 47) (Euclidean)."""
+    """(n,) int64 the non-terminal state whose centre is nearest each observation (n, 47)."""
     C = centres(strategy)[:sepsis.STATE_DEATH]
-    x = np.asarray(obs, dtype=np.float64)
-    d = (C * C).sum(1)[None, :] - 2.0 * x @ C.T
+    d = (C * C).sum(1)[None, :] - 2.0 * np.asarray(obs, dtype=np.float64) @ C.T
     return np.argmin(d, axis=1).astype(np.int64)
 
 
@@ -380,7 +368,7 @@ def nearest_centre_policy(state_policy: np.ndarray, seed: int = 0,
 
 
 def clinicians_value(strategy: str = "mean") -> float:
-    """The clinicians' exact survival: ``tables().mdp.value(tables().clinicians)``."""
+    """The clinicians' exact survival."""
     return sepsis.tables(strategy).mdp.value(sepsis.tables(strategy).clinicians)
 
 

@@ -9,7 +9,8 @@ import numpy as np
 
 from aoc_cli.belief.config import REWARD_TARGETS
 from aoc_cli.belief.targets import held_out_targets, value_spec
-from aoc_cli.control.controller import action_bounds, support_disagreement
+from aoc_cli.control.controller import support_disagreement
+from aoc_cli.control.rule import action_bounds
 from aoc_cli.control.episodes import check_same_spaces
 from aoc_cli.decompose import subset_size
 from aoc_cli.errors import AocError, NoRewards, call

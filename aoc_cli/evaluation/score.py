@@ -183,9 +183,8 @@ def _candidates_decided(ctx, rows, ep, obs, hist):
     if reads_support(cfg):  # the episodes behind each value (control/support.py)
         support = support_episodes(ctx.index.beliefs, dec.rows, dec.weights, dec.neighbours,
                                    ctx.corpus_episode)[0].reshape(s, kk)
-    measured = measured_cells(ctx.data)          # the held-out log's own gaps (rule 7)
-    lower, likely = ctx.session.controller.harm_inputs(
-        obs, val, support, None if measured is None else measured[rows])
+    lower, likely = ctx.session.controller.harm_inputs(  # the held-out log's own gaps
+        obs, val, support, measured_cells(ctx.data, rows))
     _thr, _passed, chosen = choose(res, val, cfg, support=support, value_std=ctx.value_std,
                                    cap=residual_cap(cfg.residual_cap, ctx.index.typical.p90),
                                    lower=lower, kept=likely)

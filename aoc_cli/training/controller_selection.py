@@ -31,12 +31,9 @@ by Student's t). The rule:
     widening, the penalty without the cap, a third of its decisions rare, was valued 0.940
     [0.895, 0.986] on a 10k log where its exact survival is 0.810, and chosen.)
 
-The final model is the one trained: the selection changes no weight and no value, only the
-controller's settings saved with it (``metrics.controller``), so the model keeps its quality
-and the index holds every row. The value targets were computed on the whole log (the
-behaviour's Q by FQE, :mod:`aoc_cli.belief.fqe`), so a held-out episode's transitions are in
-the training rows' values too; what the held-out episodes give the selection is states and
-outcomes that neither the belief's weights nor the decompositions' rows hold.
+The selection changes only the controller's settings saved with the model
+(``metrics.controller``); what the held-out episodes give it is states and outcomes that
+neither the belief's weights nor the decompositions' rows hold.
 """
 
 from __future__ import annotations
@@ -111,14 +108,12 @@ def harm_decisions(corpus, data, rows: np.ndarray) -> np.ndarray:
     (``data.neighbourhood``, else the belief's targets)."""
     train = np.asarray(data.train_rows, np.int64)
     values = data.neighbourhood if data.neighbourhood is not None else data.values
-    measured = measured_cells(corpus)
     hood = Neighbourhood(np.asarray(corpus.observations)[train],
                          np.asarray(corpus.actions, np.int64)[train],
                          row_episodes(corpus.episode_starts)[train], int(corpus.n_actions),
                          values=np.asarray(values, np.float64)[train],
-                         measured=None if measured is None else measured[train])
-    near = hood.at(np.asarray(corpus.observations)[rows],
-                   None if measured is None else measured[rows])
+                         measured=measured_cells(corpus, train))
+    near = hood.at(np.asarray(corpus.observations)[rows], measured_cells(corpus, rows))
     lower = hood.bounds(near)
     zeros = np.zeros_like(lower)
     return choose(zeros, zeros, ControllerConfig(do_no_harm="on"), lower=lower,
@@ -136,9 +131,8 @@ def harm_candidates(net, inputs, data, norm, corpus, config, k: int, rows, start
     screened the sample's size): the rule gives it no estimate whatever FQE says."""
     obs = np.asarray(corpus.observations)[rows]
     logged = np.asarray(corpus.actions, np.int64)[rows]
-    measured = measured_cells(corpus)
     counts = episodes_near(obs, logged, starts, int(corpus.n_actions),
-                           None if measured is None else measured[rows])
+                           measured_cells(corpus, rows))
     chosen, held, screened = [], [], []
     for c in controllers:
         at = np.arange(len(rows))

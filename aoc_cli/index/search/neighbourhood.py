@@ -193,16 +193,17 @@ class Neighbourhood:
                 "distance": "measured cells" if self.masked is not None else "l2"}
 
 
-def measured_cells(corpus) -> np.ndarray | None:
+def measured_cells(corpus, rows: np.ndarray | None = None) -> np.ndarray | None:
     """(N, d_o) bool: the cells of a corpus (a store's ``Corpus`` or a ``CorpusData``) that
-    were measured, not filled at ingest; None where none was filled."""
+    were measured, not filled at ingest (of its ``rows`` (R,) where given: (R, d_o)); None
+    where none was filled."""
     mask = getattr(corpus, "imputed_mask", None)
     if mask is None:
         mask = getattr(corpus, "imputed", None)
-    if mask is None:
+    if mask is None or not np.any(mask):
         return None
     mask = np.asarray(mask, bool)
-    return ~mask if mask.any() else None
+    return ~(mask if rows is None else mask[np.asarray(rows)])
 
 
 def episodes_near(observations: np.ndarray, actions: np.ndarray, episode_starts: np.ndarray,
