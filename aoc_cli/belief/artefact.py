@@ -8,7 +8,8 @@ Files (the folder is written in a temporary folder beside it and renamed into pl
 * ``metrics.csv``: one line per epoch (train/validation loss, R^2 or accuracy, seconds);
 * ``values.npy``: (N,) float64 the value target v of every corpus row (value mode only);
 * ``neighbourhood.npy``: (N,) float64 rule 7's values of the rows, FQE over the log's
-  neighbourhoods (only where ``aoc train`` decided rule 7).
+  neighbourhoods (only where ``aoc train`` decided rule 7; ``config.json`` ``neighbourhood``
+  says by which distance: ``l2``, or ``measured cells`` on a corpus with filled gaps).
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from aoc_cli.belief.config import BeliefConfig
 from aoc_cli.belief.inputs import build_net, encode_corpus, pick_device
 from aoc_cli.belief.model import BeliefNet, Encoder, Normalisation
 from aoc_cli.errors import AocError, ModelMissing, ModelStale, call, param
+from aoc_cli.index.search.neighbourhood import measured_cells
 from aoc_cli.store import (DEFAULT_MODEL, History, atomic_dir, file_record, model_dir, seal,
                            write_json, write_npy)
 from aoc_cli.store.verify import check_files, read_json
@@ -72,6 +74,9 @@ def save_model(corpus, model_id: str, *, net: BeliefNet, config: BeliefConfig, d
     if dynamics_target is not None:
         meta["dynamics_target"] = {k: np.asarray(v, dtype=float).tolist()
                                    for k, v in dynamics_target.items()}
+    if neighbourhood is not None:   # the distance rule 7's rows were found by
+        meta["neighbourhood"] = {"distance": "l2" if measured_cells(corpus) is None
+                                 else "measured cells"}
     meta.update(extra or {})
     with atomic_dir(path) as tmp:
         torch.save({k: v.detach().cpu() for k, v in net.state_dict().items()},

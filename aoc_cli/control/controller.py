@@ -32,7 +32,7 @@ from aoc_cli.control.rule import action_bounds, candidate_actions
 from aoc_cli.control.rule import choose as _choose
 from aoc_cli.control.rule import reads_support, residual_cap
 from aoc_cli.control.support import row_episodes, support_episodes
-from aoc_cli.errors import ModelMissing, param
+from aoc_cli.errors import AocError, ModelMissing, param
 from aoc_cli.store import History
 from aoc_cli.threads import one_thread
 
@@ -189,10 +189,17 @@ class Controller:
         (``aoc train``, rule 7), else by its row values (built on first use)."""
         if self._neighbourhood is None:
             saved = getattr(self.model, "neighbourhood_values", None)
+            measured = measured_cells(self.corpus)
+            made = (self.model.meta.get("neighbourhood") or {}).get("distance")
+            if saved is not None and measured is not None and made != "measured cells":
+                raise AocError(f"model {self.model.id!r} holds rule 7's values over every "
+                               "cell, from before its neighbourhoods left the corpus's filled "
+                               f"cells out: retrain it (aoc train {self.corpus.name} "
+                               "--overwrite)")
             self._neighbourhood = Neighbourhood(
                 self.corpus.observations, self.corpus_actions, self.row_episode,
                 self.corpus.n_actions, values=self.index.values if saved is None else saved,
-                measured=measured_cells(self.corpus))
+                measured=measured)
         return self._neighbourhood
 
     def harm_inputs(self, observations: np.ndarray, value: np.ndarray,

@@ -5,7 +5,7 @@ the same patients (common random numbers), paired against the likely dose of the
 nearest over every cell (rule 7's before its distance left the held cells out).
 
     python benchmarks/notes/cohort_neighbourhoods.py --stays 10000 --noise 0.3 \\
-        [--episodes 20000] [--variants rule7,state,state100,m300,denoised]
+        [--episodes 20000] [--variants rule7,state,state100,m300,denoised] [--z 1.645]
 
 Variants (the rows a decision reads; each row valued by FQE over its own sets of rows):
 
@@ -31,6 +31,8 @@ Variants (the rows a decision reads; each row valued by FQE over its own sets of
   these sets (``c`` like ``1.6``); ``maskedsd<c>`` the same over the features standardised
   by the log's spread, as rule 7's.
 
+``--z``: the bound's z in place of z_K (2.878 for 25 doses), every variant's.
+
 One JSON line per variant: the neighbourhoods' purity (the share of a row's set that shares its
 true state), true survival and the paired difference from the likely dose. Reads the table in
 memory (``cohort_table``) with its hidden state; the store and the CLI play no part.
@@ -53,6 +55,12 @@ from aoc_cli.threads import one_thread
 
 N_ACTIONS = 25
 N_STATES = 716
+#: The bound's z (``--z``; None: z_K of the 25 doses).
+Z = None
+
+
+def bound_z() -> float:
+    return lower_bound_z(N_ACTIONS) if Z is None else Z
 
 
 def table(stays: int, noise: float, seed: int) -> dict:
@@ -102,6 +110,7 @@ def near_rule(t: dict, nearest: int, smooth: int | None, state_valued: bool = Fa
         y = state_values(t)
     hood = Neighbourhood(x, t["a"], t["episode"], N_ACTIONS, values=y, nearest=nearest,
                          measured=own)
+    hood.z = bound_z()
     if masked:
         class Policy:
             def reset(self, episodes):
@@ -227,7 +236,7 @@ def masked_rule(t: dict, c: float, standardise: bool = False, least: int = 30,
     dev = np.where(ok[pick], (y[rows[pick]] - mean[np.arange(len(pick))[:, None],
                                                    a[rows[pick]]]) ** 2, 0.0)
     sigma = float(np.sqrt(dev.sum() / np.maximum(count - 1, 0).sum()))
-    z = lower_bound_z(N_ACTIONS)
+    z = bound_z()
 
     class Policy:
         def reset(self, episodes):
@@ -265,7 +274,7 @@ def state_rule(t: dict, cap: int | None, seed: int = 0, values: np.ndarray | Non
     pairs = np.unique(g * (ep.max() + 1) + ep[keep])
     episodes = np.bincount(pairs // (ep.max() + 1), minlength=size)
     with np.errstate(divide="ignore"):
-        low = np.where(episodes > 0, mean - lower_bound_z(N_ACTIONS) * sigma /
+        low = np.where(episodes > 0, mean - bound_z() * sigma /
                        np.sqrt(episodes), -np.inf).reshape(n_groups, N_ACTIONS)
     likely = rows.reshape(n_groups, N_ACTIONS).argmax(1)
 
@@ -282,7 +291,10 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--episodes", type=int, default=20_000)
     ap.add_argument("--variants", default="rule7,state,state100,m300,denoised")
+    ap.add_argument("--z", type=float, default=None, help="the bound's z (default z_K)")
     args = ap.parse_args()
+    global Z
+    Z = args.z
     t = table(args.stays, args.noise, args.seed)
     build = {"rule7": lambda: near_rule(t, 100, None, masked=True),
              "plain": lambda: near_rule(t, 100, None), "m300": lambda: near_rule(t, 300, None),
@@ -317,6 +329,7 @@ def main() -> None:
             d = cohort.paired_difference(out["survived"], likely["survived"])
             print(json.dumps({
                 "stays": args.stays, "noise": args.noise, "variant": name,
+                "z": round(bound_z(), 3),
                 "purity": round(purity, 3), "value": round(out["value"], 4),
                 "low": round(out["low"], 4), "high": round(out["high"], 4),
                 "likely": round(likely["value"], 4),

@@ -129,3 +129,24 @@ def test_a_rollout_reads_the_cells_the_environment_held_and_its_audit_replays_th
         every = ctl.neighbourhood.at(step["observation"][None]).rows
         differs |= set(rows[0].tolist()) != set(every[0].tolist())
     assert differs                      # the held cells change which rows are nearest
+
+
+def test_a_model_with_rule_7_values_over_every_cell_is_refused_on_a_log_with_gaps(cohort):
+    """Rule 7's values record the distance their neighbourhoods were found by; a model whose
+    values were found over every cell (trained before the filled cells were left out) holds
+    values over other sets than the controller reads on a log with gaps: it says to retrain."""
+    from aoc_cli.belief import load_model
+    from aoc_cli.errors import AocError
+
+    corpus = cohort.corpus("c")
+    train_model(corpus, BeliefConfig(seed=0, threads=1, max_epochs=2, patience=1,
+                                     value="neighbours", history_length=0), "hood")
+    hood = load_model(corpus, "hood")
+    assert hood.neighbourhood_values is not None
+    assert hood.meta["neighbourhood"] == {"distance": "measured cells"}
+    ctl = open_session("c", store=cohort).controller
+    ctl.model.neighbourhood_values = hood.neighbourhood_values     # values, no record of how
+    with pytest.raises(AocError, match=r"retrain it \(aoc train c --overwrite\)"):
+        ctl.neighbourhood
+    ctl.model.meta["neighbourhood"] = hood.meta["neighbourhood"]
+    assert ctl.neighbourhood.masked is not None
