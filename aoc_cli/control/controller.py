@@ -32,7 +32,7 @@ from aoc_cli.control.rule import action_bounds, candidate_actions
 from aoc_cli.control.rule import choose as _choose
 from aoc_cli.control.rule import reads_support, residual_cap
 from aoc_cli.control.support import row_episodes, support_episodes
-from aoc_cli.errors import AocError, ModelMissing, param
+from aoc_cli.errors import AocError, ModelMissing, call, param
 from aoc_cli.store import History
 from aoc_cli.threads import one_thread
 
@@ -194,8 +194,8 @@ class Controller:
             if saved is not None and measured is not None and made != "measured cells":
                 raise AocError(f"model {self.model.id!r} holds rule 7's values over every "
                                "cell, from before its neighbourhoods left the corpus's filled "
-                               f"cells out: retrain it (aoc train {self.corpus.name} "
-                               "--overwrite)")
+                               "cells out: retrain it ("
+                               + call("train", self.corpus.name, overwrite=True) + ")")
             self._neighbourhood = Neighbourhood(
                 self.corpus.observations, self.corpus_actions, self.row_episode,
                 self.corpus.n_actions, values=self.index.values if saved is None else saved,

@@ -146,7 +146,7 @@ def test_a_model_with_rule_7_values_over_every_cell_is_refused_on_a_log_with_gap
     assert hood.meta["neighbourhood"] == {"distance": "measured cells"}
     ctl = open_session("c", store=cohort).controller
     ctl.model.neighbourhood_values = hood.neighbourhood_values     # values, no record of how
-    with pytest.raises(AocError, match=r"retrain it \(aoc train c --overwrite\)"):
+    with pytest.raises(AocError, match=r"retrain it \(train\('c', overwrite=True\)\)"):
         ctl.neighbourhood
     ctl.model.meta["neighbourhood"] = hood.meta["neighbourhood"]
     assert ctl.neighbourhood.masked is not None
