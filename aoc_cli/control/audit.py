@@ -6,11 +6,11 @@ optional dataset ``selection`` (the corpus rows decided from: packed bits, attri
 and one group ``episode_<e>`` per episode (attributes seed, return, length, success) holding,
 per step t < T: ``observations`` (T, d_o), ``rewards``, ``ood``, the history
 (``history_observations``, ``history_actions``, ``history_rewards``, ``history_mask``), and
-where a controller decided: ``support_rows`` / ``support_weights`` / ``support_distances``
-(T, m; -1 / 0 / NaN padded), ``support_episode_ids``, ``actions``, ``values``, ``residuals``,
+where a controller decided: ``support_rows`` / ``support_weights`` / ``support_distances`` (T,
+m; -1 / 0 / NaN padded), ``support_episode_ids``, ``actions``, ``values``, ``residuals``,
 ``candidates`` (T, K[, d_a]) and ``warnings`` (JSON); ``measured`` (T, d_o) bool where the
-environment said which cells it measured (rule 7 reads them). The inputs of each decision are kept, so
-any recorded decision can be re-run and explained again (:func:`read_audit_step`).
+environment said which cells it measured (rule 7 reads them). The inputs of each decision are
+kept, so any recorded decision can be re-run and explained again (:func:`read_audit_step`).
 """
 
 from __future__ import annotations

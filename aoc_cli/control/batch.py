@@ -4,10 +4,10 @@ rows of one :class:`aoc_cli.store.History`.
 
 ``policy.reset(n)`` starts n episodes; ``policy(obs (S, d_o), alive (S,), measured (S, d_o) bool
 or None)`` decides the S episodes still running (``alive`` their indices among the n;
-``measured`` the cells measured at the step, false where the value was held), pushes (observation, action) into
-each one's history and returns (S,) int64 actions. The reward pushed with a transition is 0:
-the vectorised rollouts this serves reward only a stay's last step, which no later decision
-reads.
+``measured`` the cells measured at the step, false where the value was held), pushes
+(observation, action) into each one's history and returns (S,) int64 actions. The reward pushed
+with a transition is 0: the vectorised rollouts this serves reward only a stay's last step,
+which no later decision reads.
 """
 
 from __future__ import annotations
