@@ -31,6 +31,11 @@ Variants (the rows a decision reads; each row valued by FQE over its own sets of
   these sets (``c`` like ``1.6``); ``maskedsd<c>`` the same over the features standardised
   by the log's spread, as rule 7's.
 
+* ``rule7raw``: rule 7's rows over the table's own units (each column's unit 1, not its sd);
+  ``rule7local``: over each column's spread among near rows (``local_spread``: what two near
+  rows differ by in that column, about the noise where the rows are a state's); ``local<k>``:
+  the k nearest so; ``radius<c>``: ``masked<c>`` over that spread.
+
 ``--z``: the bound's z in place of z_K (2.878 for 25 doses), every variant's.
 
 One JSON line per variant: the neighbourhoods' purity (the share of a row's set that shares its
@@ -50,7 +55,7 @@ import numpy as np
 import aoc_cli.envs.icu_cohort as cohort
 from aoc_cli.index.search.masked import MaskedIndex
 from aoc_cli.index.search.neighbourhood import Neighbourhood, lower_bound_z
-from aoc_cli.index.search.neighbourhood import neighbourhood_values
+from aoc_cli.index.search.neighbourhood import NOISE_QUERIES, neighbourhood_values
 from aoc_cli.threads import one_thread
 
 N_ACTIONS = 25
@@ -81,6 +86,33 @@ def table(stays: int, noise: float, seed: int) -> dict:
             "episode": np.repeat(np.arange(len(last)), np.diff(starts))}
 
 
+def local_spread(observations: np.ndarray, measured: np.ndarray | None = None, near: int = 10,
+                 rounds: int = 2, seed: int = 0) -> np.ndarray:
+    """(d_o,) each feature's spread among near rows: sqrt(mean (x_j - x'_j)^2 / 2) over a
+    sample's rows x and their ``near`` nearest x' (rows that differ from x; the cells both
+    measured), the search itself scaled by the previous round's spread (the first by the
+    log's sd). observations (N, d_o), measured (N, d_o) bool or None."""
+    obs = np.asarray(observations, np.float64).reshape(len(observations), -1)
+    n = len(obs)
+    m = np.ones(obs.shape, bool) if measured is None else np.asarray(measured, bool)
+    sd = obs.std(0)
+    sd = np.where(sd > 1e-12, sd, 1.0)
+    pick = np.sort(np.random.default_rng(seed).choice(n, size=min(NOISE_QUERIES, n),
+                                                      replace=False))
+    scale = sd
+    for _ in range(rounds):
+        hood = Neighbourhood(obs, np.zeros(n, np.int64), np.zeros(n, np.int64), 1,
+                             nearest=near + 1, measured=measured, scale=scale, seed=seed)
+        rows = hood.rows(obs[pick], None if measured is None else m[pick])   # (Q, near + 1)
+        diff = obs[rows] - obs[pick][:, None]                                # (Q, near + 1, d)
+        both = m[rows] & m[pick][:, None] & np.any(diff != 0, axis=2, keepdims=True)
+        count = both.sum((0, 1))
+        var = np.divide((diff ** 2 * both).sum((0, 1)), count, out=sd ** 2 * 2,
+                        where=count > 0)
+        scale = np.maximum(np.sqrt(var / 2.0), 0.05 * sd)
+    return scale
+
+
 def kept_or_best(low: np.ndarray, likely: np.ndarray) -> np.ndarray:
     """Rule 7's choice from the bounds (S, K) and the likely dose (S,)."""
     best = low.argmax(1)
@@ -89,7 +121,7 @@ def kept_or_best(low: np.ndarray, likely: np.ndarray) -> np.ndarray:
 
 
 def near_rule(t: dict, nearest: int, smooth: int | None, state_valued: bool = False,
-              masked: bool = False):
+              masked: bool = False, scale: np.ndarray | None = None):
     """(policy, purity) of rule 7 over ``nearest`` rows, the observations first averaged over
     their ``smooth`` nearest logged rows where given; with ``state_valued`` each row valued by
     FQE over the true states instead of over the neighbourhoods; with ``masked`` the distance
@@ -104,12 +136,12 @@ def near_rule(t: dict, nearest: int, smooth: int | None, state_valued: bool = Fa
             return x[raw.rows(np.asarray(obs, np.float64).reshape(len(obs), -1))].mean(1)
         x = denoise(x)
     y, info = neighbourhood_values(x, t["r"], t["starts"], 1.0, censored=t["censored"],
-                                   nearest=nearest, measured=own)
+                                   nearest=nearest, measured=own, scale=scale)
     purity = float((t["state"][info["rows"]] == t["state"][:, None]).mean())
     if state_valued:
         y = state_values(t)
     hood = Neighbourhood(x, t["a"], t["episode"], N_ACTIONS, values=y, nearest=nearest,
-                         measured=own)
+                         measured=own, scale=scale)
     hood.z = bound_z()
     if masked:
         class Policy:
@@ -185,12 +217,13 @@ def kmeans_rule(t: dict, k: int, seed: int = 0):
 
 
 def masked_rule(t: dict, c: float, standardise: bool = False, least: int = 30,
-                cap: int = 1000):
+                cap: int = 1000, local: bool = False):
     """(policy, purity) of the rule over the rows within the masked radius (``masked<c>``,
     ``maskedsd<c>`` with ``standardise``); the policy reads the cells the environment measured
     at the step."""
     x, a, ep, n = t["x"], t["a"], t["episode"], len(t["x"])
-    scale = x.std(0) if standardise else np.ones(x.shape[1])
+    scale = (x.std(0) if standardise else local_spread(x, t["measured"]) if local
+             else np.ones(x.shape[1]))
     scale = np.where(scale > 1e-12, scale, 1.0)
     index = MaskedIndex(x / scale, t["measured"], candidates=2 * cap)
     cap = min(cap, n)
@@ -297,6 +330,10 @@ def main() -> None:
     Z = args.z
     t = table(args.stays, args.noise, args.seed)
     build = {"rule7": lambda: near_rule(t, 100, None, masked=True),
+             "rule7raw": lambda: near_rule(t, 100, None, masked=True,
+                                           scale=np.ones(t["x"].shape[1])),
+             "rule7local": lambda: near_rule(t, 100, None, masked=True,
+                                             scale=local_spread(t["x"], t["measured"])),
              "plain": lambda: near_rule(t, 100, None), "m300": lambda: near_rule(t, 300, None),
              "denoised": lambda: near_rule(t, 100, 10), "state": lambda: state_rule(t, None),
              "state100": lambda: state_rule(t, 100),
@@ -311,12 +348,18 @@ def main() -> None:
         c = name[8:] if sd else name[6:] if name.startswith("masked") else ""
         if name not in build and c.replace(".", "", 1).isdigit():
             build[name] = lambda c=float(c), sd=sd: masked_rule(t, c, standardise=sd)
+        if name not in build and name[:6] == "radius":
+            build[name] = lambda c=float(name[6:]): masked_rule(t, c, local=True)
+        if name not in build and name[:5] == "local" and name[5:].isdigit():
+            build[name] = lambda k=int(name[5:]): near_rule(
+                t, k, None, masked=True, scale=local_spread(t["x"], t["measured"]))
         if name not in build and name[:1] == "m" and name[1:].isdigit():
             build[name] = lambda k=int(name[1:]): near_rule(t, k, None)
         if name not in build:
             raise SystemExit(f"unknown variant {name!r}: one of {', '.join(build)}, "
                              "m<k> (the k nearest), kmeans<k> (k groups), "
-                             "masked<c>, maskedsd<c> (the masked radius)")
+                             "masked<c>, maskedsd<c> (the masked radius), local<k>, "
+                             "radius<c> (over the near rows' spread)")
     hood = Neighbourhood(t["x"], t["a"], t["episode"], N_ACTIONS)
     seed = args.seed + 1
     with one_thread():

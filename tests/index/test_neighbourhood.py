@@ -216,3 +216,19 @@ def test_fitted_values_average_the_neighbourhood_rows_of_the_rows_own_action():
         assert got[i] == pytest.approx(values[same].mean(), rel=1e-12)
     # smoother than the values: they average over the state's rows of one action
     assert got.std() < values.std()
+
+
+def test_a_given_scale_replaces_the_logs_sd_as_each_columns_unit():
+    """With ``scale`` the log's sd, the rows are the default's; with a column's unit far above
+    its spread, that column no longer tells rows apart: the rows are those of the others."""
+    rng = np.random.default_rng(4)
+    x = rng.normal(size=(400, 3)) * np.array([1.0, 2.0, 50.0])
+    acts, eps = np.zeros(400, np.int64), np.arange(400)
+    q = rng.normal(size=(20, 3)) * np.array([1.0, 2.0, 50.0])
+    default = Neighbourhood(x, acts, eps, 1, nearest=10)
+    same = Neighbourhood(x, acts, eps, 1, nearest=10, scale=x.std(0))
+    np.testing.assert_array_equal(default.rows(q), same.rows(q))
+    blind = Neighbourhood(x, acts, eps, 1, nearest=10, scale=np.array([1.0, 2.0, 1e9]))
+    two = Neighbourhood(x[:, :2], acts, eps, 1, nearest=10, scale=np.array([1.0, 2.0]))
+    np.testing.assert_array_equal(np.sort(blind.rows(q), 1), np.sort(two.rows(q[:, :2]), 1))
+    assert not np.array_equal(np.sort(default.rows(q), 1), np.sort(blind.rows(q), 1))

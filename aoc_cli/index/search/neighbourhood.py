@@ -37,7 +37,8 @@ kept (Pi_b-SPIBB's principle: leave the behaviour where the log cannot show bett
 of the exact-repeat log, with the neighbourhood in place of the state.
 
 Shapes: observations (N, d_o), actions (N,) int, row_episode (N,) int, values (N,) float64,
-measured (N, d_o) bool or None; ``at(obs (S, d_o), measured (S, d_o) or None)`` ->
+measured (N, d_o) bool or None, scale (d_o,) float or None (each column's unit in place of its
+sd over the log); ``at(obs (S, d_o), measured (S, d_o) or None)`` ->
 :class:`Near` with episodes (S, n) int64, likely (S,) int64, rows (S, m) int64.
 """
 
@@ -85,12 +86,12 @@ class Neighbourhood:
     def __init__(self, observations: np.ndarray, actions: np.ndarray, row_episode: np.ndarray,
                  n_actions: int, values: np.ndarray | None = None, nearest: int = NEAREST,
                  seed: int = 0, noise: float | None = None,
-                 measured: np.ndarray | None = None):
+                 measured: np.ndarray | None = None, scale: np.ndarray | None = None):
         import faiss  # lazy: FAISS only where a controller decides with the rule
 
         obs = np.asarray(observations, np.float64).reshape(len(observations), -1)
         self.mean = obs.mean(0)
-        sd = obs.std(0)
+        sd = obs.std(0) if scale is None else np.asarray(scale, np.float64).reshape(-1)
         self.scale = np.where(sd > 1e-12, sd, 1.0)
         self.actions = np.asarray(actions, np.int64)
         self.row_episode = np.asarray(row_episode, np.int64)
@@ -223,7 +224,8 @@ def neighbourhood_values(observations: np.ndarray, rewards: np.ndarray,
                          episode_starts: np.ndarray, gamma: float,
                          censored: np.ndarray | None = None, nearest: int = NEAREST,
                          tol: float = 1e-4, max_iterations: int = 1000, progress=None,
-                         measured: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
+                         measured: np.ndarray | None = None, scale: np.ndarray | None = None
+                         ) -> tuple[np.ndarray, dict]:
     """(values (N,), info): each row's value of the behaviour, by fitted Q evaluation over the
     log's neighbourhoods, the regressor the mean over the ``nearest`` rows (standardised,
     exact search; a k-nearest-neighbour FQE): y_i = r_i + gamma V(o_{i+1}), V(o) the mean y of
@@ -241,7 +243,7 @@ def neighbourhood_values(observations: np.ndarray, rewards: np.ndarray,
     r = np.asarray(rewards, np.float64).reshape(-1)
     starts = np.asarray(episode_starts, np.int64)
     hood = Neighbourhood(obs, np.zeros(n, np.int64), np.zeros(n, np.int64), 1, nearest=nearest,
-                         measured=measured)
+                         measured=measured, scale=scale)
     own = None if hood.masked is None else np.asarray(measured, bool)
     rows = np.empty((n, hood.nearest), np.int64)
     for a in range(0, n, _BLOCK):
