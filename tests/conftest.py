@@ -89,21 +89,25 @@ def pytest_configure(config):
 
 def pytest_collection_modifyitems(session, config, items):
     """The ``long_setup`` modules first, then the ``quality`` tests placed evenly among the
-    others: pytest-xdist hands each worker runs of consecutive tests, and the slow ones side
-    by side would all go to one worker. Deterministic, so every worker collects the same
-    order."""
+    others, a module's together (its fixture built once, on one worker): pytest-xdist hands
+    each worker runs of consecutive tests, and the slow ones side by side would all go to one
+    worker. Deterministic, so every worker collects the same order."""
     first = [item for item in items if item.get_closest_marker("long_setup")]
     if first:  # their module's items stay together (one fixture), ahead of everything
         items[:] = first + [item for item in items if not item.get_closest_marker("long_setup")]
-    heavy = [item for item in items[len(first):] if item.get_closest_marker("quality")]
-    if not heavy or len(heavy) == len(items) - len(first):
-        return
+    heavy: dict = {}            # module -> its quality items, in collection order
+    for item in items[len(first):]:
+        if item.get_closest_marker("quality"):
+            heavy.setdefault(item.nodeid.split("::")[0], []).append(item)
+    groups = list(heavy.values())
     rest = [item for item in items[len(first):] if not item.get_closest_marker("quality")]
-    gap = len(rest) / len(heavy)
+    if not groups or not rest:
+        return
+    gap = len(rest) / len(groups)
     spread, j = [], 0
     for i, item in enumerate(rest):
-        while j < len(heavy) and int(gap * (j + 0.5)) <= i:
-            spread.append(heavy[j])
+        while j < len(groups) and int(gap * (j + 0.5)) <= i:
+            spread.extend(groups[j])
             j += 1
         spread.append(item)
-    items[:] = first + spread + heavy[j:]
+    items[:] = first + spread + [item for group in groups[j:] for item in group]
