@@ -136,5 +136,5 @@ def verdict(improvement: dict) -> str:
                 f"({name.upper()}): {shown}")
     reasons = sorted({str(d.get("reason")).split(" (")[0] for d in improvement.values()
                       if d is not None and d.get("reason")})
-    return ("better than the logged behaviour: not estimable from this log"
+    return ("better or worse than the logged behaviour: not estimable from this log"
             + (f" ({'; '.join(reasons)})" if reasons else ""))

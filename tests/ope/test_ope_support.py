@@ -128,7 +128,8 @@ def test_the_verdict_line():
         "worse than the logged behaviour by 0.280 [-0.008, 0.568] (FQE): not shown by this "
         "log")
     assert verdict({"pdwis": no, "wdr": no}) == (
-        "better than the logged behaviour: not estimable from this log (ESS 4.6 of 3,000)")
+        "better or worse than the logged behaviour: not estimable from this log (ESS 4.6 of "
+        "3,000)")
 
 
 def test_an_estimate_outside_the_returns_range_is_withheld_with_its_reason():
@@ -163,8 +164,8 @@ def test_an_fqe_value_above_every_return_is_withheld_and_the_verdict_reads_the_n
     assert rec["policy_value"]["fqe"]["estimate"] is None
     assert rec["policy_value"]["fqe"]["reason"].startswith("outside the range of the log's")
     assert rec["improvement"]["fqe"]["estimate"] is None
-    assert rec["verdict"].startswith("better than the logged behaviour: not estimable from "
-                                     "this log (outside the range of the log's returns")
+    assert rec["verdict"].startswith("better or worse than the logged behaviour: not estimable "
+                                     "from this log (outside the range of the log's returns")
     json.dumps(rec, default=lambda x: None, allow_nan=False)
 
 

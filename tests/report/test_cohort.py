@@ -86,7 +86,7 @@ def test_a_value_report_with_withheld_estimates(aoc_inproc, sepsis, tmp_path, br
     assert _sections(browser) == SECTIONS
     lede = browser.evaluate("document.querySelector('#verdict .lede').innerText")
     assert lede == doc["verdict"][0].upper() + doc["verdict"][1:] + "."
-    assert lede.startswith("Better than the logged behaviour: not estimable")
+    assert lede.startswith("Better or worse than the logged behaviour: not estimable")
     rows = browser.evaluate("[...document.querySelectorAll('svg.forest .forest-row')].map(g =>"
                             " [g.dataset.policy, g.dataset.estimator, g.dataset.withheld, "
                             "g.textContent])")
