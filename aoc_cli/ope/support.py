@@ -18,9 +18,9 @@ An importance-sampling estimate (PDWIS, WDR) is shown only when
 
 FQE needs no overlap and is kept when importance sampling is refused; it is shown only with
 its refits (``fqe_refits`` >= 2): one fit's interval leaves the model's own error out and
-covered the truth on 0 to 2 of 10 icu-sepsis logs (docs/notes/results-ope.md); and only where its value
-of the logged behaviour (fitted beside the policies) lies within the 95% interval of the
-log's mean return (:func:`fqe_refusal`): its interval does not hold its bias, and this is the
+covered the truth on 0 to 2 of 10 icu-sepsis logs (docs/notes/results-ope.md); and only where
+its value of the logged behaviour (fitted beside the policies) lies within the 95% interval of
+the log's mean return (:func:`fqe_refusal`): its interval does not hold its bias, and this is the
 one policy whose value the log gives directly.
 
 Whatever the estimator, an estimate or an interval end outside the range of the log's
