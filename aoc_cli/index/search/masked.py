@@ -43,6 +43,8 @@ LEAST_CANDIDATES = 400
 CELL_QUERIES = 200
 #: Queries searched at once.
 _BLOCK = 1024
+#: Cells of one (queries, rows) block of the reference distances that measure ``cell``.
+_BRUTE_CELLS = 4_000_000
 
 
 def pack(measured: np.ndarray) -> np.ndarray:
@@ -57,8 +59,14 @@ def brute_force(standard: np.ndarray, measured: np.ndarray, q: np.ndarray, qm: n
     """(S, N) the masked distance of every query to every row, in float64 (the reference;
     a few hundred queries at a time)."""
     x, m = np.asarray(standard, np.float64), np.asarray(measured, np.float64)
+    return _distances((m, m * x, m * x * x), q, qm)
+
+
+def _distances(rows: tuple, q: np.ndarray, qm: np.ndarray) -> np.ndarray:
+    """:func:`brute_force` from the rows' terms (m, m x, m x^2), each (N, d) float64."""
+    m, mx, mxx = rows
     q, qm = np.asarray(q, np.float64), np.asarray(qm, np.float64)
-    num = (qm * q * q) @ m.T + qm @ (m * x * x).T - 2.0 * (qm * q) @ (m * x).T
+    num = (qm * q * q) @ m.T + qm @ mxx.T - 2.0 * (qm * q) @ mx.T
     den = qm @ m.T
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(den > 0, np.maximum(num, 0.0) / np.maximum(den, 1.0), np.inf)
@@ -95,9 +103,12 @@ class MaskedIndex:
         pick = np.sort(np.random.default_rng(seed).choice(n, min(CELL_QUERIES, n),
                                                           replace=False))
         near = []
-        for a in range(0, len(pick), 100):
-            d = brute_force(x, m, x[pick[a:a + 100]], m[pick[a:a + 100]])
-            d[np.arange(len(d)), pick[a:a + 100]] = np.inf        # not the row itself
+        mf = m.astype(np.float64)
+        rows = (mf, mf * x, mf * x * x)             # brute_force's row terms, formed once
+        block = max(1, min(100, _BRUTE_CELLS // n))   # (block, N) float64 arrays stay small
+        for a in range(0, len(pick), block):
+            d = _distances(rows, x[pick[a:a + block]], m[pick[a:a + block]])
+            d[np.arange(len(d)), pick[a:a + block]] = np.inf      # not the row itself
             k = min(10, n - 1)
             part = np.partition(d, k - 1, axis=1)[:, :k]
             near.append(part[np.isfinite(part)])
