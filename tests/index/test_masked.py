@@ -55,7 +55,7 @@ def test_the_k_nearest_are_the_brute_force_search_s(seed, n, d, gap, dup):
     qm = rng.random(q.shape) >= gap
     k = min(10, n)
     dist, rows = MaskedIndex(x, m).search(q, qm, k)
-    ref = brute_force(x, m, q, qm)
+    ref = brute_force(x, m, q, qm | ~qm.any(1, keepdims=True))   # none measured: every cell
     want = np.sort(ref, axis=1)[:, :k]
     fin = np.isfinite(want)
     assert np.array_equal(np.isfinite(dist), fin)
@@ -65,6 +65,20 @@ def test_the_k_nearest_are_the_brute_force_search_s(seed, n, d, gap, dup):
     got = np.take_along_axis(ref, rows, 1)             # each returned row's true distance
     assert np.allclose(got[fin], dist[fin], atol=tol)
     assert (np.diff(dist, axis=1)[fin[:, 1:]] >= -tol).all()        # nearest first
+
+
+def test_a_query_that_measured_no_cell_is_read_over_every_cell():
+    """Every value filled (held from its history): over its measured cells every row would be
+    infinitely far, so its filled values are read, as a query that measured them all."""
+    rng = np.random.default_rng(5)
+    x = rng.normal(size=(200, 6))
+    m = rng.random(x.shape) >= 0.2
+    q = rng.normal(size=(3, 6))
+    index = MaskedIndex(x, m)
+    none, every = index.search(q, np.zeros(q.shape, bool), 10), index.search(q, np.ones(
+        q.shape, bool), 10)
+    assert np.isfinite(none[0]).all()
+    assert (none[1] == every[1]).all() and np.allclose(none[0], every[0], rtol=1e-12)
 
 
 def test_the_candidates_hold_the_exact_nearest_on_a_log_with_held_gaps():

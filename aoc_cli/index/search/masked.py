@@ -8,7 +8,10 @@ those of the state it left. The distance here reads only what both rows measured
 
     D(q, x) = sum_j m_qj m_xj (q_j - x_j)^2 / sum_j m_qj m_xj
 
-(q, x standardised observations, m the measured cells; no cell in common: infinitely far).
+(q, x standardised observations, m the measured cells; no cell in common: infinitely far). A
+query that measured no cell (every value filled, e.g. held from its history) is read over all
+its cells, filled values and all: they are the best it has, and over none every row would be
+infinitely far.
 
 FAISS has no such distance, and a brute-force search of every row against every row grows with
 the square of the log in memory as well as time. Its numerator, though, is an inner product,
@@ -120,6 +123,7 @@ class MaskedIndex:
         the inner-product order); q (S, d) standardised, qm (S, d) bool its measured cells."""
         q = np.asarray(q, np.float64).reshape(len(q), -1)
         qm = np.asarray(qm, bool).reshape(q.shape)
+        qm = qm | ~qm.any(1, keepdims=True)          # no cell measured: read every cell
         c = (max(CANDIDATES * int(k), LEAST_CANDIDATES) if self.candidates is None
              else int(self.candidates))
         c = min(c, self.n)
