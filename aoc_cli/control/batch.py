@@ -27,6 +27,8 @@ class BatchPolicy:
         self.controller = controller
         self.length = int(controller.model.history_length or 0)
         self.d_o = int(controller.corpus.observation_dim)
+        #: what the last call read: ``likely`` (S,) rule 7's likely actions where it ran
+        self.last: dict = {}
         self.reset(0)
 
     def reset(self, n: int) -> None:
@@ -43,7 +45,8 @@ class BatchPolicy:
         alive = np.asarray(alive, np.int64)
         history = (History(self.obs[alive], self.act[alive], self.rew[alive], self.mask[alive])
                    if self.length else None)
-        actions = decide_batch(self.controller, obs, history, measured)
+        self.last = {}
+        actions = decide_batch(self.controller, obs, history, measured, record=self.last)
         if self.length:
             for arr in (self.obs, self.act, self.rew, self.mask):
                 arr[alive] = np.roll(arr[alive], -1, axis=1)
@@ -69,12 +72,13 @@ class LikelyPolicy:
 
 
 def decide_batch(controller, observations: np.ndarray, history: History | None = None,
-                 measured: np.ndarray | None = None) -> np.ndarray:
+                 measured: np.ndarray | None = None, record: dict | None = None) -> np.ndarray:
     """(S,) int64 the discrete actions ``controller`` decides at S steps at once (observations
     (S, d_o), ``history`` S rows, or None: an empty one; ``measured`` (S, d_o) bool their
     measured cells, or None: all): what ``controller.decide`` decides at each, with every
     action a candidate, in one belief pass and one decomposition. Value mode, discrete
-    actions."""
+    actions. ``record``, where given, receives ``likely`` (S,): rule 7's likely actions,
+    where it ran."""
     ctl = controller
     if not ctl.discrete or ctl.model.mode != "value":
         raise AocError("decide_batch decides discrete actions in value mode")
@@ -84,6 +88,8 @@ def decide_batch(controller, observations: np.ndarray, history: History | None =
         # rule 7 decides from the log's rows near each step alone (control/rule.py): the
         # decomposition, which explains a decision, does not change it
         lower, likely = ctl.harm_inputs(obs, np.zeros((s, n)), None, measured)
+        if record is not None:
+            record["likely"] = likely
         return choose(np.zeros((s, n)), np.zeros((s, n)), ctl.config, lower=lower,
                       kept=likely)[2].astype(np.int64)
     if history is not None:
@@ -96,6 +102,8 @@ def decide_batch(controller, observations: np.ndarray, history: History | None =
     value = np.asarray(dec.value, np.float64).reshape(s, n)
     support = ctl.support(dec)[0].reshape(s, n) if reads_support(ctl.config) else None
     lower, likely = ctl.harm_inputs(obs, value, support, measured)
+    if record is not None and likely is not None:
+        record["likely"] = likely
     _t, _p, chosen = choose(residual, value, ctl.config, cap=ctl.residual_cap, support=support,
                             value_std=ctl.value_std, lower=lower, kept=likely)
     return chosen.astype(np.int64)

@@ -84,8 +84,8 @@ def main() -> None:
 
         def __call__(self, obs, alive, measured):
             acts = policy(obs, alive, measured)
-            kept.append(np.mean(acts == ctl.neighbourhood.at(obs, measured).likely)
-                        if ctl.do_no_harm else np.nan)
+            likely = policy.last.get("likely")      # rule 7's, read by the decision itself
+            kept.append(np.mean(acts == likely) if likely is not None else np.nan)
             return acts
 
     seed = args.seed + 1      # the same patients for every policy (common random numbers)

@@ -46,6 +46,9 @@ def test_the_batch_policy_decides_as_the_controller_does_step_by_step(cohort):
         rows = [starts[e] + t for e in episodes]
         step = obs[rows]
         batch = policy(step, alive, measured[rows])
+        # what the step read: rule 7's likely dose over the step's measured cells
+        assert np.array_equal(policy.last["likely"],
+                              ctl.neighbourhood.at(step, measured[rows]).likely)
         for j, buf in enumerate(buffers):
             one = ctl.decide(step[j], buf.history(), measured=measured[rows[j]])
             if int(one.action) != int(batch[j]):     # only where two paths' rounding ties
@@ -73,13 +76,12 @@ def test_kept_decisions_are_the_likely_action_and_their_record_says_so(cohort):
             bounds = ctl.neighbourhood.bounds(near)[i]
             assert bounds[int(d.action)] > bounds[int(near.likely[i])]
             assert bounds[int(d.action)] == bounds.max()
-    assert kept_any
+    assert kept_any and moved_any            # both branches checked above
     off = open_session("c", store=cohort, controller={"do_no_harm": "off"}).controller
     assert not off.do_no_harm
     d = off.decide(obs[0], HistoryBuffer(2, data.observation_dim, 1, True).history())
     assert d.kept is None and int(d.action) == int(np.argmax(
         np.where(d.passed, d.candidate_values, -np.inf)))
-    del moved_any
 
 
 def test_the_contrast_of_a_rule_7_decision_reads_the_bounds(cohort):
