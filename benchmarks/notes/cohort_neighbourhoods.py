@@ -5,41 +5,37 @@ the same patients (common random numbers), paired against the likely dose of the
 nearest over every cell (rule 7's before its distance left the held cells out).
 
     python benchmarks/notes/cohort_neighbourhoods.py --stays 10000 --noise 0.3 \\
-        [--episodes 20000] [--variants rule7,state,state100,m300,denoised] [--z 1.645]
+        [--episodes 20000] [--variants rule7,state,state100,m300,denoised] [--z 1.645] \\
+        [--prior 5] [--seed 0] [--rollout-seed 1]
 
 Variants (the rows a decision reads; each row valued by FQE over its own sets of rows):
 
-* ``rule7``: the 100 logged rows nearest the observation over the cells both measured (what
-  ``aoc train`` decides; ``aoc_cli.index.search.masked``);
-* ``plain``: the 100 nearest over every cell, held or measured (rule 7 before);
-* ``m300``: the 300 nearest over every cell (``m<k>``: the k nearest);
-* ``denoised``: the 100 nearest after each observation, the log's and the query's, is
-  replaced by the mean of its 10 nearest logged rows (a local average of the features);
-* ``state``: every logged row of the true state (the hidden ``state`` column), the step's state
-  read through the nearest cluster centre: rule 2 told the state, an upper reference;
-* ``state100``: 100 rows of the true state drawn at random: the state's purity at rule 7's size;
-* ``nearsv``: rule 7's 100 nearest rows, each valued by FQE over the true states;
-* ``statenv``: every row of the true state, each valued by FQE over the neighbourhoods (with
-  ``nearsv``: which of the two, the values or the sets, rule 7 loses against the state);
-* ``kmeans<k>``: the rows of the observation's group, k groups by k-means of the standardised
-  features (FAISS), rows valued by FQE over the neighbourhoods;
-* ``masked<c>``: every logged row within a radius (at least 30, at most 1,000 rows), the
-  distance the mean squared difference over the cells both rows measured (a held cell is not
-  a measurement: the log's from the table's gaps, the query's those the environment held),
-  in the table's own units, not rescaled by the log's spread; the
-  radius c times the log's median distance to its 10th nearest row; rows valued by FQE over
-  these sets (``c`` like ``1.6``); ``maskedsd<c>`` the same over the features standardised
-  by the log's spread, as rule 7's.
+* ``rule7``: the 100 rows nearest over the cells both measured (what ``aoc train`` decides);
+  ``plain``: over every cell, held or measured (rule 7 before); ``m<k>``: the k nearest so;
+* ``denoised``: the 100 nearest after every observation is replaced by the mean of its 10
+  nearest logged rows;
+* ``state``: every row of the true state (read through the nearest cluster centre): rule 2
+  told the state, an upper reference; ``state100``: 100 of them at random;
+* ``nearsv``: rule 7's rows, each valued by FQE over the true states; ``statenv``: the
+  state's rows, each valued by FQE over the neighbourhoods (which one rule 7 loses: values or
+  sets);
+* ``kmeans<k>``: the observation's group of k by k-means of the standardised features;
+* ``masked<c>``: every row (30 to 1,000) within c times the log's median distance to its 10th
+  nearest row, over the cells both measured, in the table's own units; ``maskedsd<c>``: over
+  the features standardised as rule 7's;
+* ``rule7raw``: rule 7's rows in the table's own units; ``rule7local``: in each column's
+  spread among near rows (``local_spread``, about the noise where the rows are a state's);
+  ``local<k>``: the k nearest so; ``radius<c>``: ``masked<c>`` so.
 
-* ``rule7raw``: rule 7's rows over the table's own units (each column's unit 1, not its sd);
-  ``rule7local``: over each column's spread among near rows (``local_spread``: what two near
-  rows differ by in that column, about the noise where the rows are a state's); ``local<k>``:
-  the k nearest so; ``radius<c>``: ``masked<c>`` over that spread.
-
-``--z``: the bound's z in place of z_K (2.878 for 25 doses), every variant's.
+``--z``: the bound's z in place of z_K (2.878 for 25 doses), every variant's. ``--prior P``:
+each dose's own spread in the bound in place of the log's pooled one, shrunk toward it with the
+weight of P rows (sqrt((D + P sigma^2) / (n - 1 + P)), D its rows' squared deviations about
+their mean value, n its rows), in the variants over the nearest rows and over the state.
 
 One JSON line per variant: the neighbourhoods' purity (the share of a row's set that shares its
-true state), true survival and the paired difference from the likely dose. Reads the table in
+true state), true survival and the paired difference from the likely dose; for the variants
+told the state (``state``, ``state100``, ``statenv``) also ``exact``, the policy's survival
+solved exactly in the MDP (it decides by state), free of the rollouts' error. Reads the table in
 memory (``cohort_table``) with its hidden state; the store and the CLI play no part.
 """
 
@@ -47,12 +43,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import time
 
 import numpy as np
 
 # internal: the table's hidden state, the vectorised rollout, rule 7's neighbourhoods and FQE
 import aoc_cli.envs.icu_cohort as cohort
+import aoc_cli.envs.icu_sepsis as sepsis
 from aoc_cli.index.search.masked import MaskedIndex
 from aoc_cli.index.search.neighbourhood import Neighbourhood, lower_bound_z
 from aoc_cli.index.search.neighbourhood import NOISE_QUERIES, neighbourhood_values
@@ -62,6 +60,8 @@ N_ACTIONS = 25
 N_STATES = 716
 #: The bound's z (``--z``; None: z_K of the 25 doses).
 Z = None
+#: The weight in rows of the pooled spread in each dose's own (``--prior``; None: pooled).
+PRIOR = None
 
 
 def bound_z() -> float:
@@ -113,6 +113,29 @@ def local_spread(observations: np.ndarray, measured: np.ndarray | None = None, n
     return scale
 
 
+def spread(dev: np.ndarray, rows: np.ndarray, sigma: float) -> np.ndarray | float:
+    """Each dose's sd in the bound: the pooled ``sigma``, or with ``--prior`` its own,
+    shrunk toward sigma; dev, rows (S, K) its squared deviations and rows."""
+    if PRIOR is None:
+        return sigma
+    return np.sqrt((dev + PRIOR * sigma ** 2) / (np.maximum(rows - 1, 0) + PRIOR))
+
+
+def near_bounds(hood: Neighbourhood, near) -> np.ndarray:
+    """(S, K) rule 7's bounds over a neighbourhood, each dose's spread as ``--prior`` says."""
+    if PRIOR is None:
+        return hood.bounds(near)
+    s, acts, vals = len(near.rows), hood.actions[near.rows], hood.values[near.rows]
+    at = (np.repeat(np.arange(s), near.rows.shape[1]), acts.ravel())
+    rows, dev = np.zeros((s, N_ACTIONS)), np.zeros((s, N_ACTIONS))
+    np.add.at(rows, at, 1)
+    centre = np.nan_to_num(near.mean)[np.arange(s)[:, None], acts]
+    np.add.at(dev, at, ((vals - centre) ** 2).ravel())
+    with np.errstate(divide="ignore"):
+        half = bound_z() * spread(dev, rows, hood.noise) / np.sqrt(near.episodes)
+    return np.where(near.episodes > 0, np.nan_to_num(near.mean, nan=-np.inf) - half, -np.inf)
+
+
 def kept_or_best(low: np.ndarray, likely: np.ndarray) -> np.ndarray:
     """Rule 7's choice from the bounds (S, K) and the likely dose (S,)."""
     best = low.argmax(1)
@@ -150,12 +173,12 @@ def near_rule(t: dict, nearest: int, smooth: int | None, state_valued: bool = Fa
 
             def __call__(self, obs, alive, measured):
                 near = hood.at(obs, measured)
-                return kept_or_best(hood.bounds(near), near.likely)
+                return kept_or_best(near_bounds(hood, near), near.likely)
         return Policy(), purity
 
     def policy(obs):
         near = hood.at(denoise(obs) if denoise else obs)
-        return kept_or_best(hood.bounds(near), near.likely)
+        return kept_or_best(near_bounds(hood, near), near.likely)
     return policy, purity
 
 
@@ -303,17 +326,21 @@ def state_rule(t: dict, cap: int | None, seed: int = 0, values: np.ndarray | Non
     rows = np.bincount(g, minlength=size)
     mean = np.divide(np.bincount(g, weights=y[keep], minlength=size), rows,
                      out=np.full(size, -np.inf), where=rows > 0)
-    sigma = np.sqrt(((y[keep] - mean[g]) ** 2).sum() / np.maximum(rows - 1, 0).sum())
+    dev = np.bincount(g, weights=(y[keep] - np.where(rows[g] > 0, mean[g], 0.0)) ** 2,
+                      minlength=size)
+    sigma = np.sqrt(dev.sum() / np.maximum(rows - 1, 0).sum())
     pairs = np.unique(g * (ep.max() + 1) + ep[keep])
     episodes = np.bincount(pairs // (ep.max() + 1), minlength=size)
-    with np.errstate(divide="ignore"):
-        low = np.where(episodes > 0, mean - bound_z() * sigma /
+    with np.errstate(divide="ignore", invalid="ignore"):
+        low = np.where(episodes > 0, mean - bound_z() * spread(dev, rows, sigma) /
                        np.sqrt(episodes), -np.inf).reshape(n_groups, N_ACTIONS)
     likely = rows.reshape(n_groups, N_ACTIONS).argmax(1)
 
     def policy(obs):
         st = cohort.nearest_state(obs) if assign is None else assign(obs)
         return kept_or_best(low[st], likely[st])
+    if assign is None:        # it decides by state: its survival solved exactly
+        policy.states = kept_or_best(low, likely)
     return policy, 1.0
 
 
@@ -325,43 +352,44 @@ def main() -> None:
     ap.add_argument("--episodes", type=int, default=20_000)
     ap.add_argument("--variants", default="rule7,state,state100,m300,denoised")
     ap.add_argument("--z", type=float, default=None, help="the bound's z (default z_K)")
+    ap.add_argument("--rollout-seed", type=int, default=None,
+                    help="the patients' seed (default: the log's seed + 1)")
+    ap.add_argument("--prior", type=float, default=None,
+                    help="each dose's own spread, shrunk toward the pooled (weight in rows)")
     args = ap.parse_args()
-    global Z
-    Z = args.z
+    global Z, PRIOR
+    Z, PRIOR = args.z, args.prior
     t = table(args.stays, args.noise, args.seed)
+    local = lambda: local_spread(t["x"], t["measured"])           # noqa: E731
     build = {"rule7": lambda: near_rule(t, 100, None, masked=True),
              "rule7raw": lambda: near_rule(t, 100, None, masked=True,
                                            scale=np.ones(t["x"].shape[1])),
-             "rule7local": lambda: near_rule(t, 100, None, masked=True,
-                                             scale=local_spread(t["x"], t["measured"])),
-             "plain": lambda: near_rule(t, 100, None), "m300": lambda: near_rule(t, 300, None),
-             "denoised": lambda: near_rule(t, 100, 10), "state": lambda: state_rule(t, None),
-             "state100": lambda: state_rule(t, 100),
+             "rule7local": lambda: near_rule(t, 100, None, masked=True, scale=local()),
+             "plain": lambda: near_rule(t, 100, None), "denoised": lambda: near_rule(t, 100, 10),
+             "state": lambda: state_rule(t, None), "state100": lambda: state_rule(t, 100),
              "nearsv": lambda: near_rule(t, 100, None, state_valued=True),
              "statenv": lambda: state_rule(t, None, values=neighbourhood_values(
                  t["x"], t["r"], t["starts"], 1.0, censored=t["censored"])[0])}
+    patterns = ((r"m(\d+)", lambda k: near_rule(t, int(k), None)),
+                (r"local(\d+)", lambda k: near_rule(t, int(k), None, masked=True,
+                                                    scale=local())),
+                (r"kmeans(\d+)", lambda k: kmeans_rule(t, int(k))),
+                (r"maskedsd([\d.]+)", lambda c: masked_rule(t, float(c), standardise=True)),
+                (r"masked([\d.]+)", lambda c: masked_rule(t, float(c))),
+                (r"radius([\d.]+)", lambda c: masked_rule(t, float(c), local=True)))
     names = args.variants.split(",")
     for name in names:            # checked before any work
-        if name not in build and name[:6] == "kmeans" and name[6:].isdigit():
-            build[name] = lambda k=int(name[6:]): kmeans_rule(t, k)
-        sd = name.startswith("maskedsd")
-        c = name[8:] if sd else name[6:] if name.startswith("masked") else ""
-        if name not in build and c.replace(".", "", 1).isdigit():
-            build[name] = lambda c=float(c), sd=sd: masked_rule(t, c, standardise=sd)
-        if name not in build and name[:6] == "radius":
-            build[name] = lambda c=float(name[6:]): masked_rule(t, c, local=True)
-        if name not in build and name[:5] == "local" and name[5:].isdigit():
-            build[name] = lambda k=int(name[5:]): near_rule(
-                t, k, None, masked=True, scale=local_spread(t["x"], t["measured"]))
-        if name not in build and name[:1] == "m" and name[1:].isdigit():
-            build[name] = lambda k=int(name[1:]): near_rule(t, k, None)
+        for pattern, make in patterns:
+            hit = name not in build and re.fullmatch(pattern, name)
+            if hit:
+                build[name] = lambda make=make, arg=hit.group(1): make(arg)
         if name not in build:
             raise SystemExit(f"unknown variant {name!r}: one of {', '.join(build)}, "
                              "m<k> (the k nearest), kmeans<k> (k groups), "
                              "masked<c>, maskedsd<c> (the masked radius), local<k>, "
                              "radius<c> (over the near rows' spread)")
     hood = Neighbourhood(t["x"], t["a"], t["episode"], N_ACTIONS)
-    seed = args.seed + 1
+    seed = args.seed + 1 if args.rollout_seed is None else args.rollout_seed
     with one_thread():
         likely = cohort.rollout_value(lambda obs: hood.at(obs).likely, args.episodes,
                                       noise=args.noise, seed=seed)
@@ -370,9 +398,12 @@ def main() -> None:
             policy, purity = build[name]()
             out = cohort.rollout_value(policy, args.episodes, noise=args.noise, seed=seed)
             d = cohort.paired_difference(out["survived"], likely["survived"])
+            exact = getattr(policy, "states", None)
             print(json.dumps({
-                "stays": args.stays, "noise": args.noise, "variant": name,
-                "z": round(bound_z(), 3),
+                "stays": args.stays, "noise": args.noise, "seed": args.seed, "variant": name,
+                "z": round(bound_z(), 3), "prior": PRIOR,
+                **({} if exact is None else {"exact": round(
+                    sepsis.tables().mdp.value(exact.astype(np.int64)), 4)}),
                 "purity": round(purity, 3), "value": round(out["value"], 4),
                 "low": round(out["low"], 4), "high": round(out["high"], 4),
                 "likely": round(likely["value"], 4),
