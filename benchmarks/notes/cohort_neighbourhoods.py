@@ -53,10 +53,11 @@ import aoc_cli.envs.icu_cohort as cohort
 import aoc_cli.envs.icu_sepsis as sepsis
 from aoc_cli.index.search.masked import MaskedIndex
 from aoc_cli.index.search.neighbourhood import Neighbourhood, lower_bound_z
-from aoc_cli.index.search.neighbourhood import NOISE_QUERIES, neighbourhood_values
+from aoc_cli.index.search.neighbourhood import neighbourhood_values
 from aoc_cli.threads import one_thread
+from _cohort_sets import N_ACTIONS, kept_or_best, local_spread, radius_rule  # this folder's
+from _cohort_sets import successor, table                                   # this folder's
 
-N_ACTIONS = 25
 N_STATES = 716
 #: The bound's z (``--z``; None: z_K of the 25 doses).
 Z = None
@@ -66,51 +67,6 @@ PRIOR = None
 
 def bound_z() -> float:
     return lower_bound_z(N_ACTIONS) if Z is None else Z
-
-
-def table(stays: int, noise: float, seed: int) -> dict:
-    """The cohort's rows with the gaps held forward, one-step rewards and the hidden state."""
-    cols = cohort.cohort_table(stays, noise, seed=seed)
-    ids = cols["id"]
-    n = len(ids)
-    starts = np.r_[0, np.nonzero(np.diff(ids))[0] + 1, n]
-    x = np.stack([cols[c] for c in cohort.OBS_COLUMNS], 1).astype(np.float64)
-    measured = ~np.isnan(x)
-    last = starts[1:] - 1
-    died = cols["died_in_hosp"][last]
-    reward = np.zeros(n)
-    reward[last] = np.where(np.isnan(died), 0.0, 1.0 - np.nan_to_num(died))
-    return {"x": cohort.hold_forward(x, starts), "a": cols["act_dose"].astype(np.int64),
-            "state": cols["state"].astype(np.int64), "r": reward, "starts": starts,
-            "censored": np.isnan(died), "measured": measured,
-            "episode": np.repeat(np.arange(len(last)), np.diff(starts))}
-
-
-def local_spread(observations: np.ndarray, measured: np.ndarray | None = None, near: int = 10,
-                 rounds: int = 2, seed: int = 0) -> np.ndarray:
-    """(d_o,) each feature's spread among near rows: sqrt(mean (x_j - x'_j)^2 / 2) over a
-    sample's rows x and their ``near`` nearest x' (rows that differ from x; the cells both
-    measured), the search itself scaled by the previous round's spread (the first by the
-    log's sd). observations (N, d_o), measured (N, d_o) bool or None."""
-    obs = np.asarray(observations, np.float64).reshape(len(observations), -1)
-    n = len(obs)
-    m = np.ones(obs.shape, bool) if measured is None else np.asarray(measured, bool)
-    sd = obs.std(0)
-    sd = np.where(sd > 1e-12, sd, 1.0)
-    pick = np.sort(np.random.default_rng(seed).choice(n, size=min(NOISE_QUERIES, n),
-                                                      replace=False))
-    scale = sd
-    for _ in range(rounds):
-        hood = Neighbourhood(obs, np.zeros(n, np.int64), np.zeros(n, np.int64), 1,
-                             nearest=near + 1, measured=measured, scale=scale, seed=seed)
-        rows = hood.rows(obs[pick], None if measured is None else m[pick])   # (Q, near + 1)
-        diff = obs[rows] - obs[pick][:, None]                                # (Q, near + 1, d)
-        both = m[rows] & m[pick][:, None] & np.any(diff != 0, axis=2, keepdims=True)
-        count = both.sum((0, 1))
-        var = np.divide((diff ** 2 * both).sum((0, 1)), count, out=sd ** 2 * 2,
-                        where=count > 0)
-        scale = np.maximum(np.sqrt(var / 2.0), 0.05 * sd)
-    return scale
 
 
 def spread(dev: np.ndarray, rows: np.ndarray, sigma: float) -> np.ndarray | float:
@@ -134,13 +90,6 @@ def near_bounds(hood: Neighbourhood, near) -> np.ndarray:
     with np.errstate(divide="ignore"):
         half = bound_z() * spread(dev, rows, hood.noise) / np.sqrt(near.episodes)
     return np.where(near.episodes > 0, np.nan_to_num(near.mean, nan=-np.inf) - half, -np.inf)
-
-
-def kept_or_best(low: np.ndarray, likely: np.ndarray) -> np.ndarray:
-    """Rule 7's choice from the bounds (S, K) and the likely dose (S,)."""
-    best = low.argmax(1)
-    s = np.arange(len(low))
-    return np.where(low[s, best] > low[s, likely], best, likely)
 
 
 def near_rule(t: dict, nearest: int, smooth: int | None, state_valued: bool = False,
@@ -180,19 +129,6 @@ def near_rule(t: dict, nearest: int, smooth: int | None, state_valued: bool = Fa
         near = hood.at(denoise(obs) if denoise else obs)
         return kept_or_best(near_bounds(hood, near), near.likely)
     return policy, purity
-
-
-def successor(t: dict) -> tuple[np.ndarray, np.ndarray]:
-    """((N,) each row's next row, (N,) whether its value counts): none after a stay's last
-    row; a cut stay's last row its own successor (the stay goes on)."""
-    n = len(t["r"])
-    going = np.ones(n, bool)
-    last = t["starts"][1:] - 1
-    going[last] = False
-    nxt = np.minimum(np.arange(1, n + 1), n - 1)
-    cut = last[t["censored"]]
-    nxt[cut], going[cut] = cut, True
-    return nxt, going
 
 
 def state_values(t: dict) -> np.ndarray:
@@ -244,67 +180,16 @@ def masked_rule(t: dict, c: float, standardise: bool = False, least: int = 30,
     """(policy, purity) of the rule over the rows within the masked radius (``masked<c>``,
     ``maskedsd<c>`` with ``standardise``); the policy reads the cells the environment measured
     at the step."""
-    x, a, ep, n = t["x"], t["a"], t["episode"], len(t["x"])
+    x = t["x"]
     scale = (x.std(0) if standardise else local_spread(x, t["measured"]) if local
              else np.ones(x.shape[1]))
     scale = np.where(scale > 1e-12, scale, 1.0)
     index = MaskedIndex(x / scale, t["measured"], candidates=2 * cap)
-    cap = min(cap, n)
+    cap = min(cap, len(x))
 
     def search(q, qm):
-        return index.search(q, qm, cap)
-    dist, rows = search(x / scale, t["measured"])
-    radius = c * float(np.median(dist[:, min(9, cap - 1)]))
-
-    def inside(d):
-        ok = d <= radius
-        ok[:, :least] = True
-        return ok
-    ok = inside(dist)
-    purity = float(((t["state"][rows] == t["state"][:, None]) & ok).sum() / ok.sum())
-    nxt, going = successor(t)
-    y, size = np.zeros(n), ok.sum(1)
-    for _ in range(1000):
-        new = t["r"] + np.where(going, ((y[rows] * ok).sum(1) / size)[nxt], 0.0)
-        done = np.abs(new - y).max() < 1e-4
-        y = new
-        if done:
-            break
-    span = int(ep.max()) + 1
-
-    def groups(r, keep):
-        """(rows, episodes, mean value) per action (S, K) over the kept rows."""
-        s, acts = len(r), a[r]
-        at = (np.repeat(np.arange(s), r.shape[1]), acts.ravel())
-        count, total = np.zeros((s, N_ACTIONS)), np.zeros((s, N_ACTIONS))
-        np.add.at(count, at, keep.ravel())
-        np.add.at(total, at, (y[r] * keep).ravel())
-        key = np.sort(np.where(keep, acts * span + ep[r], -1), axis=1)
-        first = key >= 0
-        first[:, 1:] &= key[:, 1:] != key[:, :-1]
-        episodes = np.zeros((s, N_ACTIONS))
-        q, j = np.nonzero(first)
-        np.add.at(episodes, (q, key[q, j] // span), 1)
-        mean = np.divide(total, count, out=np.zeros((s, N_ACTIONS)), where=count > 0)
-        return count, episodes, mean
-    pick = np.sort(np.random.default_rng(0).choice(n, min(2000, n), replace=False))
-    count, _, mean = groups(rows[pick], ok[pick])
-    dev = np.where(ok[pick], (y[rows[pick]] - mean[np.arange(len(pick))[:, None],
-                                                   a[rows[pick]]]) ** 2, 0.0)
-    sigma = float(np.sqrt(dev.sum() / np.maximum(count - 1, 0).sum()))
-    z = bound_z()
-
-    class Policy:
-        def reset(self, episodes):
-            pass
-
-        def __call__(self, obs, alive, measured):
-            d, r = search(np.asarray(obs, np.float64) / scale, measured)
-            count, episodes, mean = groups(r, inside(d))
-            with np.errstate(divide="ignore"):
-                low = np.where(episodes > 0, mean - z * sigma / np.sqrt(episodes), -np.inf)
-            return kept_or_best(low, count.argmax(1))
-    return Policy(), purity
+        return index.search(np.asarray(q, np.float64) / scale, qm, cap)
+    return radius_rule(t, search(x, t["measured"]), search, c, bound_z(), least)
 
 
 def state_rule(t: dict, cap: int | None, seed: int = 0, values: np.ndarray | None = None,
