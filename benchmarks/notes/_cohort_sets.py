@@ -79,10 +79,11 @@ def successor(t: dict) -> tuple[np.ndarray, np.ndarray]:
 
 
 def radius_rule(t: dict, near: tuple, search, c: float, z: float, least: int = 30):
-    """(policy, purity) of the rule over every row within c times the log's median distance to
-    its 10th nearest row (at least ``least`` rows): ``near`` (dist, rows) (N, cap) each logged
-    row's nearest, ``search(obs (S, d), measured (S, d)) -> (dist, rows)`` the step's; rows
-    valued by FQE over these sets; z the bound's. ``policy.size``: the sets' median size."""
+    """(policy, purity) of the rule over every row within c times the log's median squared
+    distance to its 10th nearest row (at least ``least`` rows; ``dist`` squared, as FAISS and
+    the masked index give it): ``near`` (dist, rows) (N, cap) each logged row's nearest,
+    ``search(obs (S, d), measured (S, d)) -> (dist, rows)`` the step's; rows valued by FQE over
+    these sets; z the bound's. ``policy.size``: the sets' median size."""
     a, ep, n = t["a"], t["episode"], len(t["x"])
     dist, rows = near
     radius = c * float(np.median(dist[:, min(9, dist.shape[1] - 1)]))

@@ -8,8 +8,8 @@ rows valued by FQE over the same sets, rolled out on the same patients as the li
     python benchmarks/notes/cohort_denoised.py --stays 10000 --noise 0.3 \\
         [--radius 1.5,2,3] [--smooth 20] [--episodes 20000] [--seed 0] [--rollout-seed 1]
 
-The radius is c times the log's median distance to its 10th nearest row in the denoised
-space; a set holds at least 30 rows and at most 1,000. One JSON line per radius: the sets'
+The radius is c times the log's median squared distance to its 10th nearest row in the
+denoised space; a set holds at least 30 rows and at most 1,000. One JSON line per radius: the sets'
 purity (the share of a row's set that shares its true state), their median size, true
 survival and the paired difference from the likely dose (the 100 rows nearest over every
 cell, as in ``cohort_neighbourhoods.py``). Reads the table in memory with its hidden state.

@@ -20,9 +20,9 @@ Variants (the rows a decision reads; each row valued by FQE over its own sets of
   state's rows, each valued by FQE over the neighbourhoods (which one rule 7 loses: values or
   sets);
 * ``kmeans<k>``: the observation's group of k by k-means of the standardised features;
-* ``masked<c>``: every row (30 to 1,000) within c times the log's median distance to its 10th
-  nearest row, over the cells both measured, in the table's own units; ``maskedsd<c>``: over
-  the features standardised as rule 7's;
+* ``masked<c>``: every row (30 to 1,000) within c times the log's median squared distance to
+  its 10th nearest row, over the cells both measured, in the table's own units;
+  ``maskedsd<c>``: over the features standardised as rule 7's;
 * ``rule7raw``: rule 7's rows in the table's own units; ``rule7local``: in each column's
   spread among near rows (``local_spread``, about the noise where the rows are a state's);
   ``local<k>``: the k nearest so; ``radius<c>``: ``masked<c>`` so.
