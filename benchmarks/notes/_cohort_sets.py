@@ -78,15 +78,18 @@ def successor(t: dict) -> tuple[np.ndarray, np.ndarray]:
     return nxt, going
 
 
-def radius_rule(t: dict, near: tuple, search, c: float, z: float, least: int = 30):
+def radius_rule(t: dict, near: tuple, search, c: float, z: float, least: int = 30,
+                radius: float | None = None):
     """(policy, purity) of the rule over every row within c times the log's median squared
     distance to its 10th nearest row (at least ``least`` rows; ``dist`` squared, as FAISS and
     the masked index give it): ``near`` (dist, rows) (N, cap) each logged row's nearest,
     ``search(obs (S, d), measured (S, d)) -> (dist, rows)`` the step's; rows valued by FQE over
-    these sets; z the bound's. ``policy.size``: the sets' median size."""
+    these sets; z the bound's; ``radius`` (squared) in place of c's where given.
+    ``policy.size``: the sets' median size."""
     a, ep, n = t["a"], t["episode"], len(t["x"])
     dist, rows = near
-    radius = c * float(np.median(dist[:, min(9, dist.shape[1] - 1)]))
+    if radius is None:
+        radius = c * float(np.median(dist[:, min(9, dist.shape[1] - 1)]))
 
     def inside(d):
         ok = d <= radius

@@ -6,10 +6,13 @@ The same rule as rule 7 (the likely dose kept unless another's lower bound beats
 rows valued by FQE over the same sets, rolled out on the same patients as the likely dose.
 
     python benchmarks/notes/cohort_denoised.py --stays 10000 --noise 0.3 \\
-        [--radius 1.5,2,3] [--smooth 20] [--episodes 20000] [--seed 0] [--rollout-seed 1]
+        [--radius 1.5,2,3,chi0.99] [--smooth 20] [--episodes 20000] [--seed 0] [--rollout-seed 1]
 
 The radius is c times the log's median squared distance to its 10th nearest row in the
-denoised space; a set holds at least 30 rows and at most 1,000. One JSON line per radius: the sets'
+denoised space; ``chi<q>`` (``chi0.99``) is what two denoised positions of one point differ
+by instead: every column in the denoised rows' own near-row spread, the squared distance at
+most 2 chi^2_d(q) (d the columns), read from the noise alone, not from how the rows gather.
+A set holds at least 30 rows and at most 1,000. One JSON line per radius: the sets'
 purity (the share of a row's set that shares its true state), their median size, true
 survival and the paired difference from the likely dose (the 100 rows nearest over every
 cell, as in ``cohort_neighbourhoods.py``). Reads the table in memory with its hidden state.
@@ -54,6 +57,7 @@ def denoiser(t: dict, smooth: int):
 
 def main() -> None:
     import faiss
+    from scipy.stats import chi2
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--stays", type=int, default=10_000)
     ap.add_argument("--noise", type=float, default=0.3)
@@ -70,23 +74,35 @@ def main() -> None:
         likely = cohort.rollout_value(lambda obs: hood.at(obs).likely, args.episodes,
                                       noise=args.noise, seed=seed)
         denoise, scale = denoiser(t, args.smooth)
-        index = faiss.IndexFlatL2(t["x"].shape[1])
-        index.add(np.ascontiguousarray(denoise(t["x"], t["measured"]) / scale, np.float32))
+        xd = denoise(t["x"], t["measured"])
+        spaces = {}
 
-        def search(q):
-            return index.search(np.ascontiguousarray(q / scale, np.float32),
-                                min(CAP, len(t["x"])))
-        near = search(denoise(t["x"], t["measured"]))
-        for c in (float(v) for v in args.radius.split(",")):
+        def space(units: str):
+            """(search(obs, measured), each logged row's nearest) in the denoised space, each
+            column in ``units``: the raw rows' near-row spread, or the denoised rows' own."""
+            if units not in spaces:
+                sc = scale if units == "raw" else local_spread(xd)
+                index = faiss.IndexFlatL2(xd.shape[1])
+                index.add(np.ascontiguousarray(xd / sc, np.float32))
+
+                def search(q, sc=sc, index=index):
+                    return index.search(np.ascontiguousarray(q / sc, np.float32),
+                                        min(CAP, len(xd)))
+                spaces[units] = (lambda obs, measured, search=search: search(
+                    denoise(np.asarray(obs, np.float64), measured)), search(xd))
+            return spaces[units]
+        for token in args.radius.split(","):
             started = time.perf_counter()
-            policy, purity = radius_rule(t, near, lambda obs, measured: search(
-                denoise(np.asarray(obs, np.float64), measured)), c,
-                lower_bound_z(N_ACTIONS), LEAST)
+            chi = token.startswith("chi")
+            search, near = space("own" if chi else "raw")
+            policy, purity = radius_rule(
+                t, near, search, 0.0 if chi else float(token), lower_bound_z(N_ACTIONS), LEAST,
+                radius=2.0 * chi2.ppf(float(token[3:]), xd.shape[1]) if chi else None)
             out = cohort.rollout_value(policy, args.episodes, noise=args.noise, seed=seed)
             d = cohort.paired_difference(out["survived"], likely["survived"])
             print(json.dumps({
                 "stays": args.stays, "noise": args.noise, "seed": args.seed,
-                "rollout_seed": seed, "smooth": args.smooth, "radius": c,
+                "rollout_seed": seed, "smooth": args.smooth, "radius": token,
                 "purity": round(purity, 3), "median_size": policy.size,
                 "value": round(out["value"], 4), "low": round(out["low"], 4),
                 "high": round(out["high"], 4), "likely": round(likely["value"], 4),
