@@ -6,16 +6,18 @@ The same rule as rule 7 (the likely dose kept unless another's lower bound beats
 rows valued by FQE over the same sets, rolled out on the same patients as the likely dose.
 
     python benchmarks/notes/cohort_denoised.py --stays 10000 --noise 0.3 \\
-        [--radius 1.5,2,3,chi0.99] [--smooth 20] [--episodes 20000] [--seed 0] [--rollout-seed 1]
+        [--radius 1.5,2,3,chi0.99,k150] [--smooth 20] [--episodes 20000] [--seed 0] \\
+        [--rollout-seed 1]
 
 The radius is c times the log's median squared distance to its 10th nearest row in the
 denoised space; ``chi<q>`` (``chi0.99``) is what two denoised positions of one point differ
 by instead: every column in the denoised rows' own near-row spread, the squared distance at
-most 2 chi^2_d(q) (d the columns), read from the noise alone, not from how the rows gather.
-A set holds at least 30 rows and at most 1,000. One JSON line per radius: the sets'
-purity (the share of a row's set that shares its true state), their median size, true
-survival and the paired difference from the likely dose (the 100 rows nearest over every
-cell, as in ``cohort_neighbourhoods.py``). Reads the table in memory with its hidden state.
+most 2 chi^2_d(q) (d the columns), read from the noise alone, not from how the rows gather;
+``k<n>`` (``k150``) the n nearest, no radius. A set holds at least 30 rows and at most 1,000.
+One JSON line per radius: the sets' purity (the share of a row's set that shares its true
+state), their median size, true survival and the paired difference from the likely dose (the
+100 rows nearest over every cell, as in ``cohort_neighbourhoods.py``). Reads the table in
+memory with its hidden state.
 """
 
 from __future__ import annotations
@@ -93,11 +95,13 @@ def main() -> None:
             return spaces[units]
         for token in args.radius.split(","):
             started = time.perf_counter()
-            chi = token.startswith("chi")
+            chi, k = token.startswith("chi"), token.startswith("k")
             search, near = space("own" if chi else "raw")
+            radius = (2.0 * chi2.ppf(float(token[3:]), xd.shape[1]) if chi
+                      else -1.0 if k else None)       # k<n>: the n nearest, no radius
             policy, purity = radius_rule(
-                t, near, search, 0.0 if chi else float(token), lower_bound_z(N_ACTIONS), LEAST,
-                radius=2.0 * chi2.ppf(float(token[3:]), xd.shape[1]) if chi else None)
+                t, near, search, 0.0 if chi or k else float(token), lower_bound_z(N_ACTIONS),
+                int(token[1:]) if k else LEAST, radius=radius)
             out = cohort.rollout_value(policy, args.episodes, noise=args.noise, seed=seed)
             d = cohort.paired_difference(out["survived"], likely["survived"])
             print(json.dumps({
