@@ -47,8 +47,8 @@ def test_the_batch_policy_decides_as_the_controller_does_step_by_step(cohort):
         step = obs[rows]
         batch = policy(step, alive, measured[rows])
         # what the step read: rule 7's likely dose over the step's measured cells
-        assert np.array_equal(policy.last["likely"],
-                              ctl.neighbourhood.at(step, measured[rows]).likely)
+        assert np.array_equal(policy.last["likely"], ctl.neighbourhood.at(
+            np.asarray(step, np.float32), measured[rows]).likely)   # as the batch reads it
         for j, buf in enumerate(buffers):
             one = ctl.decide(step[j], buf.history(), measured=measured[rows[j]])
             if int(one.action) != int(batch[j]):     # only where two paths' rounding ties
