@@ -9,7 +9,10 @@ Files (the folder is written in a temporary folder beside it and renamed into pl
 * ``values.npy``: (N,) float64 the value target v of every corpus row (value mode only);
 * ``neighbourhood.npy``: (N,) float64 rule 7's values of the rows, FQE over the log's
   neighbourhoods (only where ``aoc train`` decided rule 7; ``config.json`` ``neighbourhood``
-  says by which distance: ``l2``, or ``measured cells`` on a corpus with filled gaps).
+  says by which distance: ``l2``, or ``measured cells`` on a corpus with filled gaps);
+* ``neighbourhood_space.npy``: (N, d_o) float32 the log's rows denoised and standardised, the
+  space of rule 7's sets (``config.json`` ``neighbourhood``: ``scale``, ``centre``,
+  ``radius``), so that a controller builds them without denoising the log again.
 """
 
 from __future__ import annotations
@@ -28,7 +31,7 @@ from aoc_cli.belief.config import BeliefConfig
 from aoc_cli.belief.inputs import build_net, encode_corpus, pick_device
 from aoc_cli.belief.model import BeliefNet, Encoder, Normalisation
 from aoc_cli.errors import AocError, ModelMissing, ModelStale, call, param
-from aoc_cli.index.search.neighbourhood import measured_cells
+from aoc_cli.index.search.neighbourhood import SETS, measured_cells
 from aoc_cli.store import (DEFAULT_MODEL, History, atomic_dir, file_record, model_dir, seal,
                            write_json, write_npy)
 from aoc_cli.store.verify import check_files, read_json
@@ -58,11 +61,13 @@ def save_model(corpus, model_id: str, *, net: BeliefNet, config: BeliefConfig, d
                norm: Normalisation, value: dict | None, values: np.ndarray | None,
                metrics: dict, history: list[dict], split: dict,
                dynamics_target: dict | None = None, extra: dict | None = None,
-               neighbourhood: np.ndarray | None = None) -> Path:
+               neighbourhood: np.ndarray | None = None, space: dict | None = None) -> Path:
     """Write the model folder atomically (replacing any previous one of that id).
     ``dynamics_target``: the standardisation {"mean", "std"} (d_o,) of the auxiliary head's
     target o' - o, when the model has the head; ``extra``: more JSON entries of config.json
-    (e.g. the critic's Q head, ``--belief critic``); ``neighbourhood``: rule 7's row values."""
+    (e.g. the critic's Q head, ``--belief critic``); ``neighbourhood``: rule 7's row values; ``space``: what
+    their sets were built from (:meth:`~aoc_cli.index.search.neighbourhood.Neighbourhood.
+    space`)."""
     path = model_dir(corpus.path, model_id)
     meta = {
         "format": FORMAT, "format_version": FORMAT_VERSION,
@@ -76,7 +81,11 @@ def save_model(corpus, model_id: str, *, net: BeliefNet, config: BeliefConfig, d
                                    for k, v in dynamics_target.items()}
     if neighbourhood is not None:   # the distance rule 7's rows were found by
         meta["neighbourhood"] = {"distance": "l2" if measured_cells(corpus) is None
-                                 else "measured cells"}
+                                 else "measured cells", "sets": SETS}
+        if space is not None:
+            meta["neighbourhood"].update(
+                {k: np.asarray(space[k], float).tolist() for k in ("scale", "centre")},
+                radius=float(space["radius"]))
     meta.update(extra or {})
     with atomic_dir(path) as tmp:
         torch.save({k: v.detach().cpu() for k, v in net.state_dict().items()},
@@ -85,6 +94,9 @@ def save_model(corpus, model_id: str, *, net: BeliefNet, config: BeliefConfig, d
             write_npy(tmp / "values.npy", np.asarray(values, dtype=np.float64))
         if neighbourhood is not None:
             write_npy(tmp / "neighbourhood.npy", np.asarray(neighbourhood, dtype=np.float64))
+        if neighbourhood is not None and space is not None:
+            write_npy(tmp / "neighbourhood_space.npy",
+                      np.asarray(space["denoised"], dtype=np.float32))
         columns = list(dict.fromkeys(k for r in history for k in r))
         with open(tmp / "metrics.csv", "w", newline="") as f:
             writer = csv.DictWriter(f, fieldnames=columns, lineterminator="\n")
@@ -121,6 +133,9 @@ class BeliefModel:
         self.values = values
         #: (N,) rule 7's values of the rows (``neighbourhood.npy``), or None
         self.neighbourhood_values: np.ndarray | None = None
+        #: what rule 7's sets were built from (``neighbourhood_space.npy`` and config.json's
+        #: ``neighbourhood``), or None
+        self.neighbourhood_space: dict | None = None
         self.net = net.eval()
         self._hash: tuple | None = None  # (weights' versions, hash): see ``hash``
         self.device = device
@@ -302,7 +317,8 @@ def load_model(corpus, model_id: str | None = None, device: str | None = None) -
     if meta.get("format") != FORMAT or meta.get("format_version") != FORMAT_VERSION:
         raise AocError(f"model {model_id!r} of corpus {corpus.name!r} has an unknown format: "
                        f"{todo}")
-    check_files(path, meta, ("weights.pt", "values.npy", "neighbourhood.npy"), what, todo)
+    check_files(path, meta, ("weights.pt", "values.npy", "neighbourhood.npy",
+                             "neighbourhood_space.npy"), what, todo)
     try:
         dev = pick_device(device or "auto")
         net = build_net(meta["dims"], BeliefConfig.from_dict(meta["config"], strict=False))
@@ -313,6 +329,13 @@ def load_model(corpus, model_id: str | None = None, device: str | None = None) -
             values = np.load(path / "values.npy", allow_pickle=False)
         hood = (np.load(path / "neighbourhood.npy", allow_pickle=False)
                 if (path / "neighbourhood.npy").is_file() else None)
+        space = None
+        if hood is not None and (path / "neighbourhood_space.npy").is_file():
+            made = meta["neighbourhood"]
+            space = {"scale": np.asarray(made["scale"], np.float64),
+                     "centre": np.asarray(made["centre"], np.float64),
+                     "radius": float(made["radius"]),
+                     "denoised": np.load(path / "neighbourhood_space.npy", allow_pickle=False)}
     except AocError:
         raise
     except Exception as err:  # a truncated zip, a bad .npy header, keys or shapes that differ
@@ -321,5 +344,6 @@ def load_model(corpus, model_id: str | None = None, device: str | None = None) -
                        f"{todo}") from None
     model = BeliefModel(path, meta, net.to(dev), values, dev)
     model.neighbourhood_values = hood
+    model.neighbourhood_space = space
     check_corpus(model, corpus)
     return model

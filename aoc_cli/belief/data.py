@@ -56,7 +56,9 @@ def episode_rows(episode_starts: np.ndarray, episodes: np.ndarray) -> np.ndarray
 class TrainingData:
     """values (N,) float64 in value mode (else None); train/validation rows (R,) int64;
     ``neighbourhood`` (N,) float64 rule 7's values of the rows, saved with the model
-    (:func:`aoc_cli.index.search.neighbourhood.neighbourhood_values`), or None."""
+    (:func:`aoc_cli.index.search.neighbourhood.neighbourhood_values`), or None; ``space``
+    what its sets were built from (:meth:`~aoc_cli.index.search.neighbourhood.Neighbourhood.
+    space`), saved with them."""
 
     values: np.ndarray | None
     train_episodes: np.ndarray
@@ -64,6 +66,7 @@ class TrainingData:
     train_rows: np.ndarray
     val_rows: np.ndarray
     neighbourhood: np.ndarray | None = None
+    space: dict | None = None
 
 
 def prepare(corpus, config: BeliefConfig, model_id: str, overwrite: bool,
@@ -72,16 +75,16 @@ def prepare(corpus, config: BeliefConfig, model_id: str, overwrite: bool,
     ``progress`` follows a target that takes a while (``fqe``'s backups)."""
     if model_dir(corpus.path, model_id).exists() and not overwrite:
         raise ModelExists(corpus.name, model_id)
-    values = hood = None
+    values = hood = space = None
     if config.mode == "value" and config.value == "neighbours" and corpus.has_rewards:
         # the belief's targets and rule 7's one-step values, from one FQE
-        values, hood = neighbourhood_targets(corpus, config.gamma, progress=progress)
+        values, hood, space = neighbourhood_targets(corpus, config.gamma, progress=progress)
     elif config.mode == "value":
         values = value_targets(corpus, config.value, config.gamma, progress=progress)
     train_eps, val_eps = split_episodes(corpus.n_episodes, config.val_fraction, config.seed)
     starts = corpus.episode_starts
     return TrainingData(values, train_eps, val_eps, episode_rows(starts, train_eps),
-                        episode_rows(starts, val_eps), hood)
+                        episode_rows(starts, val_eps), hood, space)
 
 
 class EarlyStopping:

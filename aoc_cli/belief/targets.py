@@ -9,8 +9,8 @@
 * ``fqe``: the logged behaviour's action value ``Q(o_t, a_t)`` by fitted Q evaluation with
   expected SARSA targets ``r_t + gamma V(o_{t+1})``, V(o) the mean of Q(o, a) over the log's
   rows at o (bootstrapped through the log's own next steps; :mod:`aoc_cli.belief.fqe`).
-* ``neighbours``: the same with the mean of the log's 100 rows nearest an observation as the
-  regressor in place of a network (a k-nearest-neighbour FQE, rule 7's values:
+* ``neighbours``: the same with the mean of the log's rows near an observation (rule 7's sets)
+  as the regressor in place of a network (a nearest-neighbour FQE, rule 7's values:
   :func:`aoc_cli.index.search.neighbourhood.neighbourhood_values`): what the log itself says
   near a noisy observation, a smooth target where the return of one stay is mostly noise.
 * any other name: a numeric per-row column of the corpus, used as is.
@@ -194,14 +194,16 @@ def _read_kept(npy, meta, record: dict) -> np.ndarray | None:
     return v
 
 
-def neighbourhood_targets(corpus, gamma: float, progress=None) -> tuple[np.ndarray, np.ndarray]:
-    """(fitted (N,), one-step (N,)): the ``neighbours`` targets of ``corpus``, FQE over the
-    log's neighbourhoods: the fitted values, the belief's target, and the one-step values
-    rule 7 reads (:func:`aoc_cli.index.search.neighbourhood.neighbourhood_values`)."""
+def neighbourhood_targets(corpus, gamma: float, progress=None
+                          ) -> tuple[np.ndarray, np.ndarray, dict | None]:
+    """(fitted (N,), one-step (N,), space): the ``neighbours`` targets of ``corpus``, FQE over
+    the log's neighbourhoods: the fitted values, the belief's target, the one-step values
+    rule 7 reads, and what its sets were built from (saved with the model;
+    :func:`aoc_cli.index.search.neighbourhood.neighbourhood_values`)."""
     step, info = neighbourhood_values(corpus.observations, corpus.rewards,
                                       corpus.episode_starts, gamma, censoring_of(corpus),
                                       progress=progress, measured=measured_cells(corpus))
-    return fitted_values(step, corpus.actions, info["rows"]), step
+    return fitted_values(step, corpus.actions, info["rows"]), step, info["space"]
 
 
 def value_spec(value: str, gamma: float) -> dict:

@@ -132,7 +132,8 @@ def _train(corpus, config: BeliefConfig, model_id: str, data: TrainingData,
                values=data.values, metrics=metrics, history=stopping.history,
                split={"episodes": corpus.n_episodes, "val_episodes": len(data.val_episodes),
                       "train_rows": len(data.train_rows), "val_rows": len(data.val_rows)},
-               dynamics_target=problem.dynamics_standard, neighbourhood=data.neighbourhood)
+               dynamics_target=problem.dynamics_standard, neighbourhood=data.neighbourhood,
+               space=data.space)
     return metrics
 
 

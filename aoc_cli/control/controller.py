@@ -27,7 +27,7 @@ import numpy as np
 
 from aoc_cli.belief.row_labels import default_row_smoothing, row_labels
 from aoc_cli.control.config import ControllerConfig
-from aoc_cli.index.search.neighbourhood import Neighbourhood, measured_cells
+from aoc_cli.index.search.neighbourhood import SETS, Neighbourhood, measured_cells
 from aoc_cli.control.rule import action_bounds, candidate_actions
 from aoc_cli.control.rule import choose as _choose
 from aoc_cli.control.rule import reads_support, residual_cap
@@ -190,16 +190,23 @@ class Controller:
         if self._neighbourhood is None:
             saved = getattr(self.model, "neighbourhood_values", None)
             measured = measured_cells(self.corpus)
-            made = (self.model.meta.get("neighbourhood") or {}).get("distance")
-            if saved is not None and measured is not None and made != "measured cells":
+            made = self.model.meta.get("neighbourhood") or {}
+            if saved is not None and measured is not None and \
+                    made.get("distance") != "measured cells":
                 raise AocError(f"model {self.model.id!r} holds rule 7's values over every "
                                "cell, from before its neighbourhoods left the corpus's filled "
                                "cells out: retrain it ("
                                + call("train", self.corpus.name, overwrite=True) + ")")
+            if saved is not None and made.get("sets") != SETS:
+                raise AocError(f"model {self.model.id!r} holds rule 7's values over the 100 "
+                               "nearest rows, from before its neighbourhoods were the rows "
+                               "near the step's denoised observation: retrain it ("
+                               + call("train", self.corpus.name, overwrite=True) + ")")
             self._neighbourhood = Neighbourhood(
                 self.corpus.observations, self.corpus_actions, self.row_episode,
                 self.corpus.n_actions, values=self.index.values if saved is None else saved,
-                measured=measured)
+                measured=measured,
+                space=None if saved is None else getattr(self.model, "neighbourhood_space", None))
         return self._neighbourhood
 
     def harm_inputs(self, observations: np.ndarray, value: np.ndarray,

@@ -66,8 +66,8 @@ def _why_bound(d: Decision, j: int, controller: Controller, observation: np.ndar
            "episodes": int(near.episodes[0, j])}
     if not np.isfinite(mine):
         out["reason"] = "no nearby stay received it"
-        out["text"] = (f"none of the log's {controller.neighbourhood.nearest} rows nearest "
-                       "this step received it: rule 7 gives it no bound")
+        out["text"] = (f"none of the log's {near.rows.sizes[0]} rows near this step "
+                       "received it: rule 7 gives it no bound")
     else:
         out["reason"] = "lower bound"
         out["text"] = (f"its lower bound over the {int(near.episodes[0, j])} nearby stays that "

@@ -49,7 +49,7 @@ from aoc_cli.control.rule import choose, residual_cap
 from aoc_cli.control.support import row_episodes, support_episodes
 from aoc_cli.decompose import decompose
 from aoc_cli.index.search import BeliefIndex
-from aoc_cli.index.search.neighbourhood import (NEAREST, Neighbourhood, episodes_near,
+from aoc_cli.index.search.neighbourhood import (Neighbourhood, episodes_near,
                                                 measured_cells)
 from aoc_cli.ope.evaluate_block import truncated
 from aoc_cli.ope.fqe import REFITS, fqe_policies, student_quantile
@@ -80,8 +80,8 @@ RULE = ("the highest lower bound of the 95% interval of FQE on the held-out epis
 
 
 #: How rule 7's premise reads the rule: "in that state" and the candidate kept.
-NEAR = (f"; without a finite state, \"in that state\" is among the {NEAREST} held-out rows "
-        "nearest the step, counted in episodes, and rule 7's is kept when it has none")
+NEAR = ("; without a finite state, \"in that state\" is among the held-out rows near the "
+        "step (rule 7's sets), counted in episodes, and rule 7's is kept when it has none")
 
 
 def candidates(penalty: float | None, cap: float = STATE_CAP) -> tuple[dict, ...]:

@@ -36,7 +36,8 @@ unless its own flag is given.
    candidates whose mean held-out ABC AUC is within 0.01 of the best
    (:mod:`aoc_cli.training.tuning`).
 7. **do no harm** (value mode, discrete actions, no finite state: rule 2 cannot run): rule
-   2 over the log's nearest rows in place of the state: each row valued by FQE over the
+   2 over the log's rows near the step in place of the state (every row within a radius
+   of the step's denoised observation): each row valued by FQE over the
    neighbourhoods (``value`` neighbours, the belief's target too, ``history_length`` 0,
    undiscounted where episodes end by themselves), each action ranked by its lower bound over the
    rows near the step that took it, the clinicians' likely action kept unless another's
@@ -169,7 +170,8 @@ def decide(ev: Evidence, given: dict) -> tuple[dict, list[dict]]:
         hood = (f"observations recur at {ev.repeats:.0%} of the rows, with discrete actions: "
                 "no finite state, rule 7's neighbourhoods")
         take("value", "neighbours", hood + ": each row's value is the behaviour's Q by fitted "
-                                           "Q evaluation over the log's 100 nearest rows")
+                                           "Q evaluation over the log's rows near it (every row within "
+                                           "a radius of its denoised observation)")
         take("history_length", 0, hood + ": the values are the observation's and the action's "
                                          "alone, and so is the belief")
         if not ev.time_limit:
@@ -182,7 +184,7 @@ def decide(ev: Evidence, given: dict) -> tuple[dict, list[dict]]:
     elif ev.discrete:
         take("do_no_harm", "on", f"observations recur at {ev.repeats:.0%} of the rows, too "
                                  "few for rule 2's exact repeats: each row is valued by FQE "
-                                 "over the log's 100 nearest rows, each action ranked by its "
+                                 "over the log's rows near it, each action ranked by its "
                                  "lower bound over the rows near the step that took it, and "
                                  "the clinicians' likely action is kept unless another's "
                                  "bound beats its own (rule 7)")

@@ -195,9 +195,9 @@ def _neighbourhood(corpus, config: BeliefConfig, prepared, record: TrainingRecor
                                         censoring_of(corpus), progress=progress,
                                         measured=measured_cells(corpus))
     if record.settings is not None:
-        kept = {k: v for k, v in info.items() if k != "rows"}    # the (N, 100) neighbours
+        kept = {k: v for k, v in info.items() if k not in ("rows", "space")}   # (N, ...)
         record = record.with_settings(do_no_harm={**kept, "value_mean": float(values.mean())})
-    return replace(prepared, neighbourhood=values), record
+    return replace(prepared, neighbourhood=values, space=info["space"]), record
 
 
 def duration(seconds: float) -> str:

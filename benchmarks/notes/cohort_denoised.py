@@ -77,6 +77,8 @@ def main() -> None:
                                       noise=args.noise, seed=seed)
         denoise, scale = denoiser(t, args.smooth)
         xd = denoise(t["x"], t["measured"])
+        # each column's measured cells among a row's smooth nearest (the mean's count)
+        held = np.maximum(args.smooth * t["measured"].mean(0), 1.0)
         spaces = {}
 
         def space(units: str):
@@ -96,11 +98,14 @@ def main() -> None:
         for token in args.radius.split(","):
             started = time.perf_counter()
             chi, k = token.startswith("chi"), token.startswith("k")
+            mean_of = token.startswith("m")
             search, near = space("own" if chi else "raw")
             radius = (2.0 * chi2.ppf(float(token[3:]), xd.shape[1]) if chi
+                      else 2.0 * float(np.mean(1.0 / held)) * chi2.ppf(float(token[1:]),
+                                                                     xd.shape[1]) if mean_of
                       else -1.0 if k else None)       # k<n>: the n nearest, no radius
             policy, purity = radius_rule(
-                t, near, search, 0.0 if chi or k else float(token), lower_bound_z(N_ACTIONS),
+                t, near, search, 0.0 if chi or k or mean_of else float(token), lower_bound_z(N_ACTIONS),
                 int(token[1:]) if k else LEAST, radius=radius)
             out = cohort.rollout_value(policy, args.episodes, noise=args.noise, seed=seed)
             d = cohort.paired_difference(out["survived"], likely["survived"])

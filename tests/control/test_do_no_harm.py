@@ -14,6 +14,7 @@ from aoc_cli.control.records import decision_record
 from aoc_cli.index import build_index
 from aoc_cli.envs import collect
 from aoc_cli.store import Store
+from aoc_cli.index.search.neighbourhood import SETS, Neighbourhood
 
 
 @pytest.fixture(scope="module")
@@ -145,10 +146,28 @@ def test_a_model_with_rule_7_values_over_every_cell_is_refused_on_a_log_with_gap
                                      value="neighbours", history_length=0), "hood")
     hood = load_model(corpus, "hood")
     assert hood.neighbourhood_values is not None
-    assert hood.meta["neighbourhood"] == {"distance": "measured cells"}
+    made = hood.meta["neighbourhood"]
+    assert (made["distance"], made["sets"]) == ("measured cells", SETS)
+    assert set(made) == {"distance", "sets", "scale", "centre", "radius"}
     ctl = open_session("c", store=cohort).controller
     ctl.model.neighbourhood_values = hood.neighbourhood_values     # values, no record of how
-    with pytest.raises(AocError, match=r"retrain it \(train\('c', overwrite=True\)\)"):
+    with pytest.raises(AocError, match=r"over every cell.*retrain it \(train\('c', "
+                                       r"overwrite=True\)\)"):
+        ctl.neighbourhood
+    # values over the 100 nearest raw rows (before the denoised sets): refused too
+    ctl.model.meta["neighbourhood"] = {"distance": "measured cells"}
+    with pytest.raises(AocError, match=r"100 nearest rows.*retrain it"):
         ctl.neighbourhood
     ctl.model.meta["neighbourhood"] = hood.meta["neighbourhood"]
+    ctl.model.neighbourhood_space = hood.neighbourhood_space
     assert ctl.neighbourhood.masked is not None
+    # the saved space rebuilds the sets a fresh build finds, without denoising the log
+    obs = np.asarray(corpus.observations)
+    space = hood.neighbourhood_space
+    assert space["denoised"].shape == obs.shape and space["denoised"].dtype == np.float32
+    fresh = Neighbourhood(obs, corpus.actions, np.zeros(len(obs), np.int64),
+                          corpus.n_actions, measured=~corpus.imputed_mask)
+    assert ctl.neighbourhood.radius == pytest.approx(fresh.radius, rel=1e-12)
+    step = obs[::37]
+    a, b = ctl.neighbourhood.sets(step), fresh.sets(step)
+    assert [a[i].tolist() for i in range(len(a))] == [b[i].tolist() for i in range(len(b))]

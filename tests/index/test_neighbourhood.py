@@ -40,9 +40,10 @@ def test_the_neighbourhood_counts_distinct_episodes_per_action_and_finds_the_mod
     near = Neighbourhood(obs, action, episode, 4, values=values, nearest=50)
     queries = centres + np.random.default_rng(1).normal(0, 0.3, centres.shape)
     got = near.at(queries)
-    assert got.rows.shape == (6, 50) and got.episodes.shape == (6, 4)
-    assert (state[got.rows] == np.arange(6)[:, None]).all()     # noise 0.3: the same state
-    assert (got.episodes == _reference_episodes(got.rows, action, episode, 4)).all()
+    rows = got.rows.array()
+    assert rows.shape == (6, 50) and got.episodes.shape == (6, 4)
+    assert (state[rows] == np.arange(6)[:, None]).all()     # noise 0.3: the same state
+    assert (got.episodes == _reference_episodes(rows, action, episode, 4)).all()
     assert (got.likely == np.arange(6) % 4).all()               # the modal action, recovered
     # the noise of one value about its neighbourhood's mean: the 0.2 drawn
     assert near.noise == pytest.approx(0.2, rel=0.1)

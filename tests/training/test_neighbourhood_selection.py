@@ -13,32 +13,36 @@ import pytest
 import aoc_cli
 from aoc_cli.envs import collect
 from aoc_cli.store import Store
-from aoc_cli.index.search.neighbourhood import NEAREST, episodes_near
+from aoc_cli.index.search.denoise import CAP, LEAST
+from aoc_cli.index.search.neighbourhood import Neighbourhood, episodes_near
 from aoc_cli.training import controller_selection as cs
 
 
-def brute_counts(obs, logged, starts, n, nearest):
-    """(R, n) by hand: the distinct episodes among the ``nearest`` rows nearest each row (the
-    features standardised by their mean and sd), per action."""
-    z = (obs - obs.mean(0)) / obs.std(0)
+def brute_counts(logged, starts, n, sets):
+    """(R, n) by hand: the distinct episodes among the rows of each row's set, per action."""
     episode = np.repeat(np.arange(len(starts) - 1), np.diff(starts))
-    out = np.zeros((len(obs), n), np.int64)
-    for i in range(len(obs)):
-        near = np.argsort(((z - z[i]) ** 2).sum(1), kind="stable")[:nearest]
+    out = np.zeros((len(sets), n), np.int64)
+    for i in range(len(sets)):
+        near = sets[i]
         for a in range(n):
             out[i, a] = len(set(episode[near][logged[near] == a].tolist()))
     return out
 
 
-@pytest.mark.parametrize("rows", [40, 180])
-def test_the_support_near_a_step_is_the_distinct_episodes_of_its_nearest_rows(rows):
+@pytest.mark.parametrize("rows", [40, 180, 1500])
+def test_the_support_near_a_step_is_the_distinct_episodes_of_its_neighbourhood(rows):
+    """Rule 7's sets (every row near the row's denoised observation: tests/index/
+    test_denoise.py checks them against a brute-force search), each row's own among them."""
     rng = np.random.default_rng(rows)
     obs = rng.normal(size=(rows, 3)) * [1.0, 5.0, 0.2]    # columns on different scales
     logged = rng.integers(0, 4, rows)
     starts = np.r_[0, np.sort(rng.choice(np.arange(1, rows), 9, replace=False)), rows]
     got = episodes_near(obs, logged, starts, 4)
     assert got.shape == (rows, 4)
-    assert np.array_equal(got, brute_counts(obs, logged, starts, 4, min(NEAREST, rows)))
+    sets = Neighbourhood(obs, logged, np.zeros(rows, np.int64), 4).sets(obs)
+    assert all(i in sets[i] for i in range(rows))
+    assert sets.sizes.min() >= min(LEAST, rows) and sets.sizes.max() <= CAP
+    assert np.array_equal(got, brute_counts(logged, starts, 4, sets))
 
 
 def test_a_screened_or_lone_candidate_has_no_estimate_and_rule_7_is_kept():
@@ -88,7 +92,7 @@ def test_train_weighs_rule_7_against_the_papers_on_held_out_episodes(cohort):
     assert 0.0 < rule7["agrees"] <= 1.0
     assert out["chosen"] == {"do_no_harm": "on"}
     assert metrics["controller"]["do_no_harm"] == "on"
-    assert "in that state\" is among the 100 held-out rows nearest the step" in out["rule"]
+    assert "in that state\" is among the held-out rows near the step" in out["rule"]
     why = {r["setting"]: r["why"] for r in metrics["settings"]["decided"]}
     assert why["do_no_harm"].startswith("chosen among 2 controllers by the highest lower")
     assert "rule 7's is kept when it has none" in why["do_no_harm"]

@@ -4,15 +4,19 @@ from the log's evidence").
 
 A cohort's rows are noisy measurements: no two rows repeat, so "the (state, action) the log
 took n times" has no meaning. Its continuous form is the **neighbourhood** of an observation
-o: the :data:`NEAREST` logged rows nearest to o, the observations standardised by the log's
-own spread (each column less its mean, over its sd), searched exactly (FAISS, flat L2); on a
-log with filled gaps (``measured``: the cells that are not the corpus's imputed ones) by the
-mean squared difference over the cells both rows measured (:mod:`.masked`; a query's measured
-cells given with it, else all of them). From them, for every discrete action a:
+o: every logged row within a radius of o's denoised position (:mod:`.denoise`: o replaced by
+the mean of its 20 nearest logged rows, the rows' own denoised the same way; the radius 3
+times the log's median squared distance to a 10th nearest row; 30 rows at least, 1,000 at
+most; each column in its near-row spread), searched exactly (FAISS); on a log with filled
+gaps (``measured``: the cells that are not the corpus's imputed ones) the denoising search
+reads the cells both rows measured (:mod:`.masked`; a query's measured cells given with it,
+else all of them). With ``nearest`` given, the neighbourhood is instead that many nearest raw
+rows (each column in the log's sd): the rule before, kept for comparison. From the rows, for
+every discrete action a:
 
 * ``episodes[a]``: the distinct episodes among those rows that took a, the number of patients
   behind a's value at o (on a log whose states repeat, the rows at distance 0 are the state's
-  own: the count is the exact-repeat support, up to :data:`NEAREST`);
+  own and inside the radius: the count is the exact-repeat support, up to 1,000 rows);
 * ``likely``: the action most of those rows took, the clinicians' likely action at o (their
   modal action where states repeat);
 
@@ -23,7 +27,7 @@ patient's value where the log cannot tell states apart.
 
 The **values** the rule reads are the behaviour's Q by fitted Q evaluation over the
 neighbourhoods (:func:`neighbourhood_values`, computed once by ``aoc train``): a row's value
-is its reward plus gamma times the mean value of the rows nearest its next observation, to
+is its reward plus gamma times the mean value of the rows near its next observation, to
 convergence. A network's Q learns little from noisy features (validation R^2 0.01 with
 returns, 0.10 with FQE on the 10k cohort at noise 0.3); the mean over the rows of a
 neighbourhood is what the log itself says there.
@@ -38,8 +42,9 @@ of the exact-repeat log, with the neighbourhood in place of the state.
 
 Shapes: observations (N, d_o), actions (N,) int, row_episode (N,) int, values (N,) float64,
 measured (N, d_o) bool or None, scale (d_o,) float or None (each column's unit in place of its
-sd over the log); ``at(obs (S, d_o), measured (S, d_o) or None)`` ->
-:class:`Near` with episodes (S, n) int64, likely (S,) int64, rows (S, m) int64.
+near-row spread); ``at(obs (S, d_o), measured (S, d_o) or None)`` -> :class:`Near` with
+episodes (S, n) int64, likely (S,) int64, rows :class:`~aoc_cli.index.search.denoise.Sets`
+(S ragged sets).
 """
 
 from __future__ import annotations
@@ -50,10 +55,13 @@ from statistics import NormalDist
 
 import numpy as np
 
-from aoc_cli.index.search.masked import MaskedIndex
+from aoc_cli.index.search.denoise import (CAP, LEAST, RADIUS, SAMPLE, Denoiser, RowSearch,
+                                          Sets, near_row_spread)
 
-#: Rows in an observation's neighbourhood.
+#: Rows in an observation's neighbourhood, where its sets are of a fixed size.
 NEAREST = 100
+#: What the default sets are, as a model records them (``config.json`` ``neighbourhood``).
+SETS = "denoised radius"
 #: Rows whose neighbourhoods measure the noise (a seeded sample of the log).
 NOISE_QUERIES = 2000
 #: The bound's confidence, over the K actions of a step at once.
@@ -70,12 +78,12 @@ def lower_bound_z(n_actions: int, level: float = LEVEL) -> float:
 @dataclass(frozen=True)
 class Near:
     """The neighbourhoods of S observations: ``episodes`` (S, n) distinct episodes per
-    action, ``likely`` (S,) the action most rows took (ties: the lowest), ``rows`` (S, m)
-    the rows, nearest first, ``mean`` (S, n) their mean value per action."""
+    action, ``likely`` (S,) the action most rows took (ties: the lowest), ``rows`` the S
+    sets of rows, nearest first, ``mean`` (S, n) their mean value per action."""
 
     episodes: np.ndarray
     likely: np.ndarray
-    rows: np.ndarray
+    rows: Sets
     #: (S, n) the mean value of the rows that took each action (NaN: none; or no values)
     mean: np.ndarray | None = None
 
@@ -84,78 +92,142 @@ class Neighbourhood:
     """The logged rows near an observation (module docstring)."""
 
     def __init__(self, observations: np.ndarray, actions: np.ndarray, row_episode: np.ndarray,
-                 n_actions: int, values: np.ndarray | None = None, nearest: int = NEAREST,
+                 n_actions: int, values: np.ndarray | None = None, nearest: int | None = None,
                  seed: int = 0, noise: float | None = None,
-                 measured: np.ndarray | None = None, scale: np.ndarray | None = None):
-        import faiss  # lazy: FAISS only where a controller decides with the rule
-
+                 measured: np.ndarray | None = None, scale: np.ndarray | None = None,
+                 space: dict | None = None):
         obs = np.asarray(observations, np.float64).reshape(len(observations), -1)
-        self.mean = obs.mean(0)
-        sd = obs.std(0) if scale is None else np.asarray(scale, np.float64).reshape(-1)
-        self.scale = np.where(sd > 1e-12, sd, 1.0)
         self.actions = np.asarray(actions, np.int64)
         self.row_episode = np.asarray(row_episode, np.int64)
         self.n_actions = int(n_actions)
-        self.nearest = int(min(nearest, len(obs)))
-        #: the masked index where the log has filled cells (:mod:`.masked`), else None
-        self.masked = None
-        self.index = None
-        if measured is not None and not np.all(measured):
-            self.masked = MaskedIndex(self._standard(obs), measured, seed=seed)
+        own = None if measured is None or np.all(measured) else np.asarray(measured, bool)
+        #: None: the denoised radius sets; a number: that many nearest raw rows
+        self.nearest = None if nearest is None else int(min(nearest, len(obs)))
+        self.denoiser = self.radius = None
+        self._obs, self._own = obs, own
+        if self.nearest is None and space is not None:    # as :meth:`space` gave it
+            if np.shape(space["denoised"]) != obs.shape:
+                raise ValueError(f"the neighbourhoods' denoised rows "
+                                 f"{np.shape(space['denoised'])} are not of this log "
+                                 f"{obs.shape}")
+            self.denoiser = Denoiser(obs, own, space["scale"], seed=seed)
+            self.search = RowSearch.of_standard(space["denoised"], space["centre"],
+                                                space["scale"])
+            self.denoised = np.asarray(space["denoised"], np.float32)
+            self.radius = float(space["radius"])
+        elif self.nearest is None:
+            unit = near_row_spread(obs, own, seed=seed) if scale is None else scale
+            self.denoiser = Denoiser(obs, own, unit, seed=seed)
+            self.search = RowSearch(self.denoiser(obs, own), None, unit, seed=seed)
+            #: (N, d) float32 the log's denoised rows, standardised (the index's own)
+            self.denoised = self.search.index.reconstruct_n(0, len(obs))
+            self.radius = self._radius(seed)
         else:
-            self.index = faiss.IndexFlatL2(obs.shape[1])
-            self.index.add(self._standard(obs))
+            unit = obs.std(0) if scale is None else np.asarray(scale, np.float64).reshape(-1)
+            self.search = RowSearch(obs, own, unit, seed=seed)
+        self.scale = self.search.scale
+        #: the masked index over the raw rows where the log has filled cells, else None
+        self.masked = (self.denoiser.search if self.denoiser is not None
+                       else self.search).masked
         self.z = lower_bound_z(self.n_actions)
         self.values = None if values is None else np.asarray(values, np.float64)
-        own = None if self.masked is None else np.asarray(measured, bool)
         self.noise = (float(noise) if noise is not None else float("nan") if values is None
                       else self._noise(obs, self.values, seed, own))
 
-    def _standard(self, obs: np.ndarray) -> np.ndarray:
-        return np.ascontiguousarray((np.asarray(obs, np.float64) - self.mean) / self.scale,
-                                    dtype=np.float32)
+    def space(self) -> dict | None:
+        """What the denoised sets were built from, to build them again without denoising the
+        log: ``scale`` and ``centre`` (d_o,), ``radius``, ``denoised`` (N, d_o) float32 the
+        log's standardised denoised rows (None for fixed-size sets)."""
+        if self.denoiser is None:
+            return None
+        return {"scale": self.search.scale, "centre": self.search.centre,
+                "radius": self.radius, "denoised": self.denoised}
+
+    def _radius(self, seed: int) -> float:
+        """RADIUS times the median squared distance of a sample's denoised rows to their 10th
+        nearest (the row itself first), in the near-row spread's units; above 0, so that an
+        exact repeat's rows (distance 0) are inside."""
+        n = self.search.n
+        pick = np.sort(np.random.default_rng(seed).choice(n, size=min(SAMPLE, n),
+                                                          replace=False))
+        dist = self.search.index.search(self.denoised[pick], min(10, n))[0][:, -1]
+        return max(RADIUS * float(np.median(dist)), 1e-9)
+
+    def sets(self, obs: np.ndarray, measured: np.ndarray | None = None) -> Sets:
+        """The logged rows near each observation (S, d_o), nearest first: every row within
+        the radius of its denoised position (:mod:`.denoise`), else its ``nearest`` raw rows;
+        ``measured`` (S, d_o) bool its measured cells (None: all), read on a log with gaps."""
+        obs = np.asarray(obs, np.float64).reshape(len(obs), -1)
+        if self.nearest is not None:
+            return Sets.dense(self.rows(obs, measured))
+        parts = []
+        for a in range(0, len(obs), _BLOCK):
+            part = None if measured is None else measured[a:a + _BLOCK]
+            parts.append(self._within(self.search.standard(self.denoiser(obs[a:a + _BLOCK],
+                                                                         part))))
+        return Sets.join(parts)
+
+    def log_sets(self, rows: np.ndarray | None = None) -> Sets:
+        """The sets of the log's own rows (R,) (None: every row), from their denoised
+        positions as the index holds them (no second denoising)."""
+        rows = np.arange(len(self._obs)) if rows is None else np.asarray(rows, np.int64)
+        if self.nearest is not None:
+            return self.sets(self._obs[rows], None if self._own is None else self._own[rows])
+        return Sets.join([self._within(self.denoised[rows[a:a + _BLOCK]])
+                          for a in range(0, len(rows), _BLOCK)])
+
+    def _within(self, q: np.ndarray) -> Sets:
+        """The sets of standardised denoised queries q (S, d) float32: the rows within the
+        radius (FAISS range search), nearest first (ties: the lower row), at least LEAST and
+        at most CAP (those the LEAST or CAP nearest)."""
+        n = self.search.n
+        lims, dist, rows = self.search.index.range_search(q, self.radius)
+        lims = lims.astype(np.int64)
+        sizes = np.diff(lims)
+        least, cap = min(LEAST, n), min(CAP, n)
+        want = np.clip(sizes, least, cap)
+        indptr = np.concatenate([[0], np.cumsum(want)])
+        flat = np.empty(indptr[-1], np.int64)
+        owner = np.repeat(np.arange(len(q)), sizes)
+        order = np.lexsort((rows, dist, owner))
+        inside = (want == sizes)[owner[order]]
+        rank = np.arange(len(order)) - lims[owner[order]]
+        flat[indptr[owner[order]][inside] + rank[inside]] = rows[order][inside]
+        for k in np.unique(want[want != sizes]):
+            at = np.flatnonzero((want != sizes) & (want == k))
+            d, r = self.search.index.search(q[at], int(k))
+            flat[(indptr[at][:, None] + np.arange(k)).ravel()] = r.ravel()
+        return Sets(indptr, flat)
 
     def rows(self, obs: np.ndarray, measured: np.ndarray | None = None) -> np.ndarray:
-        """(S, m) the m nearest logged rows of each observation (S, d_o), nearest first;
-        ``measured`` (S, d_o) bool its measured cells (None: all), read on a log with gaps."""
-        obs = np.asarray(obs).reshape(len(obs), -1)
-        out = np.empty((len(obs), self.nearest), np.int64)
-        if self.masked is not None:
-            qm = (np.ones(obs.shape, bool) if measured is None
-                  else np.asarray(measured, bool).reshape(obs.shape))
-            for a in range(0, len(obs), _BLOCK):
-                out[a:a + _BLOCK] = self.masked.search(
-                    self._standard(obs[a:a + _BLOCK]), qm[a:a + _BLOCK], self.nearest)[1]
-            return out
-        for a in range(0, len(obs), _BLOCK):
-            _d, idx = self.index.search(self._standard(obs[a:a + _BLOCK]), self.nearest)
-            out[a:a + _BLOCK] = idx
-        return out
+        """(S, m) the ``nearest`` logged rows of each observation (S, d_o), nearest first
+        (the fixed-size sets); ``measured`` (S, d_o) bool its measured cells (None: all)."""
+        if self.nearest is None:
+            raise ValueError("rows() reads fixed-size sets; use sets() for the radius sets")
+        return self.search.search(obs, measured, self.nearest)[1]
 
     def at(self, obs: np.ndarray, measured: np.ndarray | None = None) -> Near:
         """The neighbourhoods of observations (S, d_o), their measured cells ``measured``
         (S, d_o) bool or None (module docstring)."""
-        rows = self.rows(obs, measured)
-        acts = self.actions[rows]                                         # (S, m)
-        s = len(rows)
-        at = (np.repeat(np.arange(s), rows.shape[1]), acts.ravel())      # (query, action)
-        rowcount = np.zeros((s, self.n_actions), np.int64)
-        np.add.at(rowcount, at, 1)
-        # distinct (action, episode) pairs per neighbourhood
-        span = int(self.row_episode.max()) + 1
-        key = np.sort(acts * span + self.row_episode[rows], axis=1)
-        first = np.ones(key.shape, bool)
-        first[:, 1:] = key[:, 1:] != key[:, :-1]
-        episodes = np.zeros((s, self.n_actions), np.int64)
-        q, j = np.nonzero(first)
-        np.add.at(episodes, (q, key[q, j] // span), 1)
+        return self.near(self.sets(obs, measured))
+
+    def near(self, sets: Sets) -> Near:
+        """The neighbourhoods made of ``sets`` (S sets): episodes, likely action, mean."""
+        s, k = len(sets), self.n_actions
+        owner, acts = sets.owner(), self.actions[sets.flat]
+        group = owner * k + acts                                      # (query, action)
+        rowcount = np.bincount(group, minlength=s * k).reshape(s, k)
+        # distinct (query, action, episode) triples
+        span = int(self.row_episode.max()) + 1 if len(self.row_episode) else 1
+        triple = np.unique(group * span + self.row_episode[sets.flat])
+        episodes = np.bincount(triple // span, minlength=s * k).reshape(s, k)
         mean = None
         if self.values is not None:
-            total = np.zeros((s, self.n_actions))
-            np.add.at(total, at, self.values[rows].ravel())
+            total = np.bincount(group, weights=self.values[sets.flat],
+                                minlength=s * k).reshape(s, k)
             with np.errstate(invalid="ignore", divide="ignore"):
                 mean = np.where(rowcount > 0, total / rowcount, np.nan)
-        return Near(episodes, rowcount.argmax(1).astype(np.int64), rows, mean)
+        return Near(episodes.astype(np.int64), rowcount.argmax(1).astype(np.int64), sets, mean)
 
     def _noise(self, obs: np.ndarray, values: np.ndarray, seed: int,
                measured: np.ndarray | None) -> float:
@@ -164,14 +236,13 @@ class Neighbourhood:
         n = len(obs)
         pick = np.sort(np.random.default_rng(seed).choice(n, size=min(NOISE_QUERIES, n),
                                                           replace=False))
-        rows = self.rows(obs[pick], None if measured is None else measured[pick])  # (Q, m)
-        acts, vals = self.actions[rows], values[rows]
-        q = np.repeat(np.arange(len(rows)), rows.shape[1])
-        group = q * self.n_actions + acts.ravel()
-        count = np.bincount(group, minlength=len(rows) * self.n_actions)
-        total = np.bincount(group, weights=vals.ravel(), minlength=len(count))
+        sets = self.log_sets(pick)
+        vals = values[sets.flat]
+        group = sets.owner() * self.n_actions + self.actions[sets.flat]
+        count = np.bincount(group, minlength=len(sets) * self.n_actions)
+        total = np.bincount(group, weights=vals, minlength=len(count))
         mean = np.divide(total, count, out=np.zeros(len(count)), where=count > 0)
-        dev = (vals.ravel() - mean[group]) ** 2
+        dev = (vals - mean[group]) ** 2
         dof = int(np.sum(np.maximum(count - 1, 0)))
         return float(np.sqrt(dev.sum() / dof)) if dof > 0 else float("nan")
 
@@ -189,9 +260,13 @@ class Neighbourhood:
 
     def describe(self) -> dict:
         """What the rule measured, for the record."""
-        return {"nearest": self.nearest, "noise": self.noise, "z": self.z, "level": LEVEL,
-                "queries": NOISE_QUERIES,
-                "distance": "measured cells" if self.masked is not None else "l2"}
+        out = {"nearest": self.nearest, "noise": self.noise, "z": self.z, "level": LEVEL,
+               "queries": NOISE_QUERIES,
+               "distance": "measured cells" if self.masked is not None else "l2"}
+        if self.denoiser is not None:
+            out.update(sets=SETS, smooth=self.denoiser.smooth,
+                       radius_multiple=RADIUS, radius=self.radius, least=LEAST, cap=CAP)
+        return out
 
 
 def measured_cells(corpus, rows: np.ndarray | None = None) -> np.ndarray | None:
@@ -210,33 +285,33 @@ def measured_cells(corpus, rows: np.ndarray | None = None) -> np.ndarray | None:
 def episodes_near(observations: np.ndarray, actions: np.ndarray, episode_starts: np.ndarray,
                   n_actions: int, measured: np.ndarray | None = None) -> np.ndarray:
     """(N, n) the log's support near each of its own rows, in episodes: how many of its
-    episodes among the :data:`NEAREST` rows nearest the row (itself among them) took each
+    episodes among the rows of the row's neighbourhood (itself among them) took each
     action (``aoc evaluate``'s hardly-held measure; rule 6's "held out fewer than 3 times in
     that state" where no state repeats). observations (N, d_o), actions (N,),
     episode_starts (E + 1,), measured (N, d_o) bool or None (the cells not filled)."""
     starts = np.asarray(episode_starts, np.int64)
     episode = np.repeat(np.arange(len(starts) - 1), np.diff(starts))
     hood = Neighbourhood(observations, actions, episode, n_actions, measured=measured)
-    return hood.at(observations, measured).episodes
+    return hood.near(hood.log_sets()).episodes
 
 
 def neighbourhood_values(observations: np.ndarray, rewards: np.ndarray,
                          episode_starts: np.ndarray, gamma: float,
-                         censored: np.ndarray | None = None, nearest: int = NEAREST,
+                         censored: np.ndarray | None = None, nearest: int | None = None,
                          tol: float = 1e-4, max_iterations: int = 1000, progress=None,
                          measured: np.ndarray | None = None, scale: np.ndarray | None = None
                          ) -> tuple[np.ndarray, dict]:
     """(values (N,), info): each row's value of the behaviour, by fitted Q evaluation over the
-    log's neighbourhoods, the regressor the mean over the ``nearest`` rows (standardised,
-    exact search; a k-nearest-neighbour FQE): y_i = r_i + gamma V(o_{i+1}), V(o) the mean y of
-    the rows nearest o; y_i = r_i at an episode's last row, and at the cut of a ``censored``
-    (E,) stay r_i + gamma V(o_i) (the stay goes on: its own neighbourhood stands for the next
-    observation). Iterated from zero until no value moves by more than ``tol``
-    times the rewards' range. observations (N, d_o), rewards (N,), episode_starts (E + 1,),
-    measured (N, d_o) bool or None (the cells not filled: the masked distance).
-    ``info``: nearest, iterations, converged, seconds, and ``rows`` (N, nearest) each row's
-    neighbourhood (for :func:`fitted_values`). ``progress(done, total, text)`` follows the
-    search."""
+    log's neighbourhoods, the regressor the mean over a row's set (:class:`Neighbourhood`'s
+    sets: the denoised radius sets, or the ``nearest`` raw rows; a nearest-neighbour FQE):
+    y_i = r_i + gamma V(o_{i+1}), V(o) the mean y of the rows of o's set; y_i = r_i at an
+    episode's last row, and at the cut of a ``censored`` (E,) stay r_i + gamma V(o_i) (the
+    stay goes on: its own set stands for the next observation). Iterated from zero until no
+    value moves by more than ``tol`` times the rewards' range. observations (N, d_o), rewards
+    (N,), episode_starts (E + 1,), measured (N, d_o) bool or None (the cells not filled: the
+    masked distance). ``info``: nearest, iterations, converged, seconds, the sets' sizes,
+    ``rows`` (:class:`~aoc_cli.index.search.denoise.Sets`, N sets) each row's set (for
+    :func:`fitted_values`) and ``space`` (:meth:`Neighbourhood.space`, saved with a model). ``progress(done, total, text)`` follows the search."""
     started = time.perf_counter()
     obs = np.asarray(observations, np.float64).reshape(len(observations), -1)
     n = len(obs)
@@ -244,13 +319,13 @@ def neighbourhood_values(observations: np.ndarray, rewards: np.ndarray,
     starts = np.asarray(episode_starts, np.int64)
     hood = Neighbourhood(obs, np.zeros(n, np.int64), np.zeros(n, np.int64), 1, nearest=nearest,
                          measured=measured, scale=scale)
-    own = None if hood.masked is None else np.asarray(measured, bool)
-    rows = np.empty((n, hood.nearest), np.int64)
+    parts = []
     for a in range(0, n, _BLOCK):
-        rows[a:a + _BLOCK] = hood.rows(obs[a:a + _BLOCK],
-                                       None if own is None else own[a:a + _BLOCK])
+        parts.append(hood.log_sets(np.arange(a, min(a + _BLOCK, n))))
         if progress is not None:
             progress(min(a + _BLOCK, n), n, "the log's neighbourhoods")
+    sets = Sets.join(parts)
+    average = sets.averaging(n)                     # (N, N) sparse: the mean over a set
     last = np.zeros(n, bool)
     last[starts[1:] - 1] = True
     nxt = np.minimum(np.arange(1, n + 1), n - 1)
@@ -263,27 +338,39 @@ def neighbourhood_values(observations: np.ndarray, rewards: np.ndarray,
     scale = max(float(np.ptp(r)), 1e-12) * tol
     done, it = False, 0
     for it in range(1, max_iterations + 1):
-        new = r + np.where(going, gamma * y[rows].mean(1)[nxt], 0.0)
+        new = r + np.where(going, gamma * (average @ y)[nxt], 0.0)
         moved = float(np.abs(new - y).max()) if n else 0.0
         y = new
         if moved <= scale:
             done = True
             break
-    return y, {"nearest": hood.nearest, "iterations": it, "converged": done,
-               "distance": hood.describe()["distance"],
-               "seconds": round(time.perf_counter() - started, 3), "rows": rows}
+    size = sets.sizes
+    made = {k: v for k, v in hood.describe().items() if k not in ("noise", "z", "level",
+                                                                   "queries")}
+    made["space"] = hood.space()
+    return y, {**made, "iterations": it, "converged": done,
+               "set_rows": {"median": float(np.median(size)) if n else 0.0,
+                            "least": int(size.min()) if n else 0,
+                            "most": int(size.max()) if n else 0},
+               "seconds": round(time.perf_counter() - started, 3), "rows": sets}
 
 
-def fitted_values(values: np.ndarray, actions: np.ndarray, rows: np.ndarray) -> np.ndarray:
+def fitted_values(values: np.ndarray, actions: np.ndarray, rows: Sets) -> np.ndarray:
     """(N,) the regressor's value at each row's own (observation, action): the mean of
-    ``values`` (N,) over the rows of its neighbourhood ``rows`` (N, m) that took its action
+    ``values`` (N,) over the rows of its set ``rows`` (N sets) that took its action
     ``actions`` (N,) (the row itself among them, at distance 0). The one-step values
     :func:`neighbourhood_values` returns carry the noise of one next step (rule 7's bound
     needs it); these are what FQE fits, a smooth function of the observation and action that
     a belief can learn."""
     actions = np.asarray(actions).reshape(-1)
-    same = actions[rows] == actions[:, None]                          # (N, m)
-    same[:, 0] |= ~same.any(1)                   # a row missing from its own (ties): the nearest
-    vals = np.asarray(values, np.float64)[rows]
-    return (vals * same).sum(1) / same.sum(1)
-
+    if not isinstance(rows, Sets):
+        rows = Sets.dense(rows)
+    owner = rows.owner()
+    same = (actions[rows.flat] == actions[owner]).astype(np.float64)
+    first = rows.indptr[:-1]
+    count = np.bincount(owner, weights=same, minlength=len(rows))
+    alone = count == 0                           # a row missing from its own set (ties)
+    same[first[alone]] = 1.0                     # ... reads the nearest row's value
+    vals = np.asarray(values, np.float64)[rows.flat]
+    total = np.bincount(owner, weights=vals * same, minlength=len(rows))
+    return total / np.maximum(np.bincount(owner, weights=same, minlength=len(rows)), 1.0)
