@@ -76,9 +76,9 @@ class BeliefConfig(Settings):
     value: str = setting("return", help="Value target: return (discounted return-to-go), "
                                         "mean-return, reward, fqe (the behaviour's Q by fitted "
                                         "Q evaluation, bootstrapped through the log), "
-                                        "neighbours (the same with the mean of the log's 100 "
-                                        "nearest rows as the regressor), or a numeric corpus "
-                                        "column.")
+                                        "neighbours (the same with the mean of the log's rows "
+                                        "near an observation as the regressor), or a numeric "
+                                        "corpus column.")
     gamma: float = setting(0.99, bounds="[0, 1]",
                            help="Discount of the value targets return, fqe and neighbours.")
     history_length: int = setting(4, bounds=">= 0",

@@ -219,7 +219,7 @@ def value_spec(value: str, gamma: float) -> dict:
         spec["gamma"] = gamma
         spec["definition"] = ("the logged behaviour's Q(o, a) by fitted Q evaluation over "
                               "the log's neighbourhoods (the regressor the mean over the "
-                              "100 nearest rows that took the action)")
+                              "rows near the observation that took the action)")
     elif value == "return":
         spec["gamma"] = gamma
         spec["definition"] = ("discounted return-to-go within the logged episode, "

@@ -67,8 +67,8 @@ class ControllerConfig(Settings):
         none="on (value mode, discrete actions), unless rule 2's exact-repeat bound ranks "
              "the actions (a support penalty)",
         help="Value mode, discrete actions: keep the clinicians' likely action unless another "
-             "action's lower bound over the log's nearest rows beats its own (on), or rank by "
-             "v_hat alone (off).")
+             "action's lower bound over the log's rows near the step beats its own (on), or "
+             "rank by v_hat alone (off).")
     #: The index's ``k``: ``index.json``, set by the k rule when it was built
     #: (aoc_cli.decompose.k_rule).
     k: int | None = setting(

@@ -13,7 +13,9 @@ The radius is c times the log's median squared distance to its 10th nearest row 
 denoised space; ``chi<q>`` (``chi0.99``) is what two denoised positions of one point differ
 by instead: every column in the denoised rows' own near-row spread, the squared distance at
 most 2 chi^2_d(q) (d the columns), read from the noise alone, not from how the rows gather;
-``k<n>`` (``k150``) the n nearest, no radius. A set holds at least 30 rows and at most 1,000.
+``k<n>`` (``k150``) the n nearest, no radius; ``m<q>`` (``m0.99``) the chi-square quantile q of
+two independent means of ``--smooth`` rows' noise, each column in the raw rows' near-row
+spread (it ignores that a row's nearest rows are chosen by its own noise). A set holds at least 30 rows and at most 1,000.
 One JSON line per radius: the sets' purity (the share of a row's set that shares its true
 state), their median size, true survival and the paired difference from the likely dose (the
 100 rows nearest over every cell, as in ``cohort_neighbourhoods.py``). Reads the table in
@@ -30,7 +32,7 @@ import numpy as np
 
 # internal: the table, the near-row spread and the rule's pieces of the neighbourhood notes
 import aoc_cli.envs.icu_cohort as cohort
-from aoc_cli.index.search.neighbourhood import Neighbourhood, lower_bound_z
+from aoc_cli.index.search.neighbourhood import NEAREST, Neighbourhood, lower_bound_z
 from aoc_cli.threads import one_thread
 from _cohort_sets import N_ACTIONS, local_spread, radius_rule, table    # this folder's
 
@@ -72,7 +74,7 @@ def main() -> None:
     t = table(args.stays, args.noise, args.seed)
     seed = args.seed + 1 if args.rollout_seed is None else args.rollout_seed
     with one_thread():
-        hood = Neighbourhood(t["x"], t["a"], t["episode"], N_ACTIONS)
+        hood = Neighbourhood(t["x"], t["a"], t["episode"], N_ACTIONS, nearest=NEAREST)
         likely = cohort.rollout_value(lambda obs: hood.at(obs).likely, args.episodes,
                                       noise=args.noise, seed=seed)
         denoise, scale = denoiser(t, args.smooth)

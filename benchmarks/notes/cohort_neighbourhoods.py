@@ -10,7 +10,8 @@ nearest over every cell (rule 7's before its distance left the held cells out).
 
 Variants (the rows a decision reads; each row valued by FQE over its own sets of rows):
 
-* ``rule7``: the 100 rows nearest over the cells both measured (what ``aoc train`` decides);
+* ``rule7``: the 100 rows nearest over the cells both measured (rule 7 before its sets were
+  the rows near the denoised observation, ``cohort_denoised.py``);
   ``plain``: over every cell, held or measured (rule 7 before); ``m<k>``: the k nearest so;
 * ``denoised``: the 100 nearest after every observation is replaced by the mean of its 10
   nearest logged rows;
@@ -52,7 +53,7 @@ import numpy as np
 import aoc_cli.envs.icu_cohort as cohort
 import aoc_cli.envs.icu_sepsis as sepsis
 from aoc_cli.index.search.masked import MaskedIndex
-from aoc_cli.index.search.neighbourhood import Neighbourhood, lower_bound_z
+from aoc_cli.index.search.neighbourhood import NEAREST, Neighbourhood, lower_bound_z
 from aoc_cli.index.search.neighbourhood import neighbourhood_values
 from aoc_cli.threads import one_thread
 from _cohort_sets import N_ACTIONS, kept_or_best, local_spread, radius_rule  # this folder's
@@ -109,7 +110,7 @@ def near_rule(t: dict, nearest: int, smooth: int | None, state_valued: bool = Fa
         x = denoise(x)
     y, info = neighbourhood_values(x, t["r"], t["starts"], 1.0, censored=t["censored"],
                                    nearest=nearest, measured=own, scale=scale)
-    purity = float((t["state"][info["rows"]] == t["state"][:, None]).mean())
+    purity = float((t["state"][info["rows"].array()] == t["state"][:, None]).mean())
     if state_valued:
         y = state_values(t)
     hood = Neighbourhood(x, t["a"], t["episode"], N_ACTIONS, values=y, nearest=nearest,
@@ -273,7 +274,7 @@ def main() -> None:
                              "m<k> (the k nearest), kmeans<k> (k groups), "
                              "masked<c>, maskedsd<c> (the masked radius), local<k>, "
                              "radius<c> (over the near rows' spread)")
-    hood = Neighbourhood(t["x"], t["a"], t["episode"], N_ACTIONS)
+    hood = Neighbourhood(t["x"], t["a"], t["episode"], N_ACTIONS, nearest=NEAREST)
     seed = args.seed + 1 if args.rollout_seed is None else args.rollout_seed
     with one_thread():
         likely = cohort.rollout_value(lambda obs: hood.at(obs).likely, args.episodes,

@@ -4,12 +4,12 @@ of the stays cut short, ingested with the clinical guide's command, ``aoc train`
 index`` with no flag, and AOC rolled out in the same MDP through the same noise: its true
 survival.
 
-Guards the cohort's promise: on noisy features, where no observation repeats, AOC (rule 7:
-rule 2 over the log's nearest rows by the cells both measured, do no harm; docs/design.md,
-"Settings from the log's evidence") is never below the clinicians it learned from by more
-than 0.005, and here shown above them: measured 0.8022 [0.7966, 0.8077] over 20,000
-episodes, the clinicians 0.7818 exact, their likely dose (what rule 7 keeps) on the same
-patients 0.7847 (docs/results/icu-cohort.md).
+Guards the cohort's promise and its goal: on noisy features, where no observation repeats,
+AOC (rule 7: rule 2 over the log's rows near the step's denoised observation, do no harm;
+docs/design.md, "Settings from the log's evidence") is never below the clinicians it learned
+from by more than 0.005, shown above them, and at least 0.81, as on exact states: measured
+0.8126 [0.8072, 0.8181] over 20,000 episodes, the clinicians 0.7818 exact, their likely dose
+(what rule 7 keeps) on the same patients 0.7897 (docs/results/icu-cohort.md).
 """
 
 import os
@@ -30,6 +30,8 @@ ROOT = Path(__file__).resolve().parents[2]
 STAYS, NOISE, EPISODES = 10_000, 0.3, 20_000
 #: "Never below the clinicians by more than 0.005" (their exact survival).
 MARGIN = 0.005
+#: The goal at noise 0.3 and 10k stays: as on exact states.
+GOAL = 0.81
 
 
 @pytest.fixture(scope="module")
@@ -58,12 +60,13 @@ def test_aoc_on_a_noisy_cohort_is_never_worse_than_the_clinicians(cohort):
     result = icu_cohort.rollout_value(BatchPolicy(ctl), EPISODES, noise=NOISE, seed=1)
     clinicians = icu_cohort.clinicians_value()
     # 20,000 episodes measure a survival to +- 0.006: never below the clinicians by more than
-    # the margin, and above them (measured 0.8022 [0.7966, 0.8077] against 0.7818)
+    # the margin, and above them (measured 0.8126 [0.8072, 0.8181] against 0.7818)
     assert result["low"] >= clinicians - MARGIN, (result, clinicians)
     assert result["low"] > clinicians, (result, clinicians)
+    assert result["value"] >= GOAL, result          # the goal at noise 0.3, 10k stays
     # on the same patients (common random numbers), against the clinicians' likely dose that
     # rule 7 keeps where no other dose is better supported: not shown worse by the margin
-    # (measured +0.0175 [0.0116, 0.0233])
+    # (measured +0.0229 [0.0170, 0.0288])
     likely = icu_cohort.rollout_value(LikelyPolicy(ctl), EPISODES, noise=NOISE, seed=1)
     paired = icu_cohort.paired_difference(result["survived"], likely["survived"])
     assert paired["low"] > -MARGIN, paired
@@ -74,4 +77,4 @@ def test_the_value_belief_learns_on_noisy_features(cohort):
     """Its targets, FQE over the log's neighbourhoods, are what the log says near an
     observation: the belief fits them where it fitted one stay's return at R^2 0.01."""
     metrics = cohort.controller.model.meta["metrics"]
-    assert metrics["val_r2"] > 0.4, metrics["val_r2"]       # measured 0.499 (best epoch 8)
+    assert metrics["val_r2"] > 0.5, metrics["val_r2"]       # measured 0.710 (best epoch 13)

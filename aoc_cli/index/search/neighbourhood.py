@@ -311,7 +311,8 @@ def neighbourhood_values(observations: np.ndarray, rewards: np.ndarray,
     (N,), episode_starts (E + 1,), measured (N, d_o) bool or None (the cells not filled: the
     masked distance). ``info``: nearest, iterations, converged, seconds, the sets' sizes,
     ``rows`` (:class:`~aoc_cli.index.search.denoise.Sets`, N sets) each row's set (for
-    :func:`fitted_values`) and ``space`` (:meth:`Neighbourhood.space`, saved with a model). ``progress(done, total, text)`` follows the search."""
+    :func:`fitted_values`) and ``space`` (:meth:`Neighbourhood.space`, saved with a model).
+    ``progress(done, total, text)`` follows the search."""
     started = time.perf_counter()
     obs = np.asarray(observations, np.float64).reshape(len(observations), -1)
     n = len(obs)
