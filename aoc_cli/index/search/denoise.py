@@ -50,7 +50,7 @@ _BLOCK = 4096
 @dataclass(frozen=True)
 class Sets:
     """S sets of logged rows, ragged: set i is ``flat[indptr[i]:indptr[i + 1]]``, nearest
-    first. ``indptr`` (S + 1,) int64, ``flat`` (nnz,) int64."""
+    first. ``indptr`` (S + 1,) int64, ``flat`` (nnz,) int32 or int64."""
 
     indptr: np.ndarray
     flat: np.ndarray
@@ -101,7 +101,7 @@ class Sets:
     def join(parts: list["Sets"]) -> "Sets":
         """The sets of ``parts`` one after another."""
         if not parts:
-            return Sets(np.zeros(1, np.int64), np.zeros(0, np.int64))
+            return Sets(np.zeros(1, np.int64), np.zeros(0, np.int32))
         ends = np.cumsum([0] + [p.indptr[-1] for p in parts[:-1]])
         indptr = np.concatenate([parts[0].indptr[:1]]
                                 + [p.indptr[1:] + e for p, e in zip(parts, ends)])

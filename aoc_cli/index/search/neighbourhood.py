@@ -187,7 +187,7 @@ class Neighbourhood:
         least, cap = min(LEAST, n), min(CAP, n)
         want = np.clip(sizes, least, cap)
         indptr = np.concatenate([[0], np.cumsum(want)])
-        flat = np.empty(indptr[-1], np.int64)
+        flat = np.empty(indptr[-1], np.int32)          # rows: below 2^31 in any log
         owner = np.repeat(np.arange(len(q)), sizes)
         order = np.lexsort((rows, dist, owner))
         inside = (want == sizes)[owner[order]]
