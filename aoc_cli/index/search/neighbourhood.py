@@ -68,6 +68,8 @@ NOISE_QUERIES = 2000
 LEVEL = 0.95
 #: Queries searched at once.
 _BLOCK = 4096
+#: The nearest rows read first for a set (more only where the last is inside the radius).
+FIRST = 256
 
 
 def lower_bound_z(n_actions: int, level: float = LEVEL) -> float:
@@ -178,25 +180,25 @@ class Neighbourhood:
 
     def _within(self, q: np.ndarray) -> Sets:
         """The sets of standardised denoised queries q (S, d) float32: the rows within the
-        radius (FAISS range search), nearest first (ties: the lower row), at least LEAST and
-        at most CAP (those the LEAST or CAP nearest)."""
+        radius, nearest first, at least LEAST and at most CAP (those the LEAST or CAP
+        nearest). FAISS's k nearest, k = :data:`FIRST` and, for the queries whose k-th is
+        still inside, CAP: a range search returns every row inside, thousands where the
+        rows do not gather, to keep at most CAP."""
         n = self.search.n
-        lims, dist, rows = self.search.index.range_search(q, self.radius)
-        lims = lims.astype(np.int64)
-        sizes = np.diff(lims)
         least, cap = min(LEAST, n), min(CAP, n)
-        want = np.clip(sizes, least, cap)
+        groups = [(np.arange(len(q)), *self.search.index.search(q, min(max(least, FIRST), cap)))]
+        wide = groups[0][1][:, -1] < self.radius                # the k-th nearest inside
+        if groups[0][1].shape[1] < cap and wide.any():
+            groups.append((np.flatnonzero(wide), *self.search.index.search(q[wide], cap)))
+            groups[0] = tuple(x[~wide] for x in groups[0])
+        want = np.empty(len(q), np.int64)
+        for at, d, _r in groups:
+            want[at] = np.clip((d < self.radius).sum(1), least, cap)
         indptr = np.concatenate([[0], np.cumsum(want)])
         flat = np.empty(indptr[-1], np.int32)          # rows: below 2^31 in any log
-        owner = np.repeat(np.arange(len(q)), sizes)
-        order = np.lexsort((rows, dist, owner))
-        inside = (want == sizes)[owner[order]]
-        rank = np.arange(len(order)) - lims[owner[order]]
-        flat[indptr[owner[order]][inside] + rank[inside]] = rows[order][inside]
-        for k in np.unique(want[want != sizes]):
-            at = np.flatnonzero((want != sizes) & (want == k))
-            d, r = self.search.index.search(q[at], int(k))
-            flat[(indptr[at][:, None] + np.arange(k)).ravel()] = r.ravel()
+        for at, _d, r in groups:
+            keep = np.arange(r.shape[1]) < want[at][:, None]
+            flat[(indptr[at][:, None] + np.arange(r.shape[1]))[keep]] = r[keep]
         return Sets(indptr, flat)
 
     def rows(self, obs: np.ndarray, measured: np.ndarray | None = None) -> np.ndarray:
@@ -326,6 +328,7 @@ def neighbourhood_values(observations: np.ndarray, rewards: np.ndarray,
         if progress is not None:
             progress(min(a + _BLOCK, n), n, "the log's neighbourhoods")
     sets = Sets.join(parts)
+    del parts
     average = sets.averaging(n)                     # (N, N) sparse: the mean over a set
     last = np.zeros(n, bool)
     last[starts[1:] - 1] = True
@@ -364,14 +367,19 @@ def fitted_values(values: np.ndarray, actions: np.ndarray, rows: Sets) -> np.nda
     needs it); these are what FQE fits, a smooth function of the observation and action that
     a belief can learn."""
     actions = np.asarray(actions).reshape(-1)
+    values = np.asarray(values, np.float64)
     if not isinstance(rows, Sets):
         rows = Sets.dense(rows)
-    owner = rows.owner()
-    same = (actions[rows.flat] == actions[owner]).astype(np.float64)
-    first = rows.indptr[:-1]
-    count = np.bincount(owner, weights=same, minlength=len(rows))
-    alone = count == 0                           # a row missing from its own set (ties)
-    same[first[alone]] = 1.0                     # ... reads the nearest row's value
-    vals = np.asarray(values, np.float64)[rows.flat]
-    total = np.bincount(owner, weights=vals * same, minlength=len(rows))
-    return total / np.maximum(np.bincount(owner, weights=same, minlength=len(rows)), 1.0)
+    out = np.empty(len(rows))
+    for a in range(0, len(rows), _BLOCK * 16):          # blocks: (nnz,) arrays stay small
+        b = min(a + _BLOCK * 16, len(rows))
+        lo, hi = rows.indptr[a], rows.indptr[b]
+        part = Sets(rows.indptr[a:b + 1] - lo, rows.flat[lo:hi])
+        owner = part.owner()
+        same = (actions[part.flat] == actions[a + owner]).astype(np.float64)
+        alone = np.bincount(owner, weights=same, minlength=b - a) == 0
+        # a row missing from its own set (ties) reads its nearest row's value
+        same[part.indptr[:-1][alone]] = 1.0
+        total = np.bincount(owner, weights=values[part.flat] * same, minlength=b - a)
+        out[a:b] = total / np.bincount(owner, weights=same, minlength=b - a)
+    return out
