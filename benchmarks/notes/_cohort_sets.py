@@ -8,7 +8,7 @@ import numpy as np
 
 # internal: the table's hidden state and rule 7's neighbourhoods
 import aoc_cli.envs.icu_cohort as cohort
-from aoc_cli.index.search.neighbourhood import NOISE_QUERIES, Neighbourhood
+from aoc_cli.index.search.denoise import near_row_spread
 
 N_ACTIONS = 25
 
@@ -31,31 +31,8 @@ def table(stays: int, noise: float, seed: int) -> dict:
             "episode": np.repeat(np.arange(len(last)), np.diff(starts))}
 
 
-def local_spread(observations: np.ndarray, measured: np.ndarray | None = None, near: int = 10,
-                 rounds: int = 2, seed: int = 0) -> np.ndarray:
-    """(d_o,) each feature's spread among near rows: sqrt(mean (x_j - x'_j)^2 / 2) over a
-    sample's rows x and their ``near`` nearest x' (rows that differ from x; the cells both
-    measured), the search itself scaled by the previous round's spread (the first by the
-    log's sd). observations (N, d_o), measured (N, d_o) bool or None."""
-    obs = np.asarray(observations, np.float64).reshape(len(observations), -1)
-    n = len(obs)
-    m = np.ones(obs.shape, bool) if measured is None else np.asarray(measured, bool)
-    sd = obs.std(0)
-    sd = np.where(sd > 1e-12, sd, 1.0)
-    pick = np.sort(np.random.default_rng(seed).choice(n, size=min(NOISE_QUERIES, n),
-                                                      replace=False))
-    scale = sd
-    for _ in range(rounds):
-        hood = Neighbourhood(obs, np.zeros(n, np.int64), np.zeros(n, np.int64), 1,
-                             nearest=near + 1, measured=measured, scale=scale, seed=seed)
-        rows = hood.rows(obs[pick], None if measured is None else m[pick])   # (Q, near + 1)
-        diff = obs[rows] - obs[pick][:, None]                                # (Q, near + 1, d)
-        both = m[rows] & m[pick][:, None] & np.any(diff != 0, axis=2, keepdims=True)
-        count = both.sum((0, 1))
-        var = np.divide((diff ** 2 * both).sum((0, 1)), count, out=sd ** 2 * 2,
-                        where=count > 0)
-        scale = np.maximum(np.sqrt(var / 2.0), 0.05 * sd)
-    return scale
+#: each feature's spread among near rows (rule 7's unit; the notes' name for it)
+local_spread = near_row_spread
 
 
 def kept_or_best(low: np.ndarray, likely: np.ndarray) -> np.ndarray:
