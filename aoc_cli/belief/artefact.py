@@ -12,7 +12,7 @@ Files (the folder is written in a temporary folder beside it and renamed into pl
   says by which distance: ``l2``, or ``measured cells`` on a corpus with filled gaps);
 * ``neighbourhood_space.npy``: (N, d_o) float32 the log's rows denoised and standardised, the
   space of rule 7's sets (``config.json`` ``neighbourhood``: ``scale``, ``centre``,
-  ``radius``), so that a controller builds them without denoising the log again.
+  ``radius``, and the sets' sizes ``set_rows``), so that a controller builds them without denoising the log again.
 """
 
 from __future__ import annotations
@@ -65,9 +65,9 @@ def save_model(corpus, model_id: str, *, net: BeliefNet, config: BeliefConfig, d
     """Write the model folder atomically (replacing any previous one of that id).
     ``dynamics_target``: the standardisation {"mean", "std"} (d_o,) of the auxiliary head's
     target o' - o, when the model has the head; ``extra``: more JSON entries of config.json
-    (e.g. the critic's Q head, ``--belief critic``); ``neighbourhood``: rule 7's row values; ``space``: what
-    their sets were built from (:meth:`~aoc_cli.index.search.neighbourhood.Neighbourhood.
-    space`)."""
+    (e.g. the critic's Q head, ``--belief critic``); ``neighbourhood``: rule 7's row values;
+    ``space``: what their sets were built from (:meth:`~aoc_cli.index.search.neighbourhood.
+    Neighbourhood.space`) and their sizes (``set_rows``)."""
     path = model_dir(corpus.path, model_id)
     meta = {
         "format": FORMAT, "format_version": FORMAT_VERSION,
@@ -85,7 +85,7 @@ def save_model(corpus, model_id: str, *, net: BeliefNet, config: BeliefConfig, d
         if space is not None:
             meta["neighbourhood"].update(
                 {k: np.asarray(space[k], float).tolist() for k in ("scale", "centre")},
-                radius=float(space["radius"]))
+                radius=float(space["radius"]), set_rows=space.get("set_rows"))
     meta.update(extra or {})
     with atomic_dir(path) as tmp:
         torch.save({k: v.detach().cpu() for k, v in net.state_dict().items()},

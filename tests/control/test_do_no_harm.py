@@ -148,7 +148,9 @@ def test_a_model_with_rule_7_values_over_every_cell_is_refused_on_a_log_with_gap
     assert hood.neighbourhood_values is not None
     made = hood.meta["neighbourhood"]
     assert (made["distance"], made["sets"]) == ("measured cells", SETS)
-    assert set(made) == {"distance", "sets", "scale", "centre", "radius"}
+    assert set(made) == {"distance", "sets", "scale", "centre", "radius", "set_rows"}
+    assert 30 <= made["set_rows"]["least"] <= made["set_rows"]["median"] \
+        <= made["set_rows"]["most"] <= 1000
     ctl = open_session("c", store=cohort).controller
     ctl.model.neighbourhood_values = hood.neighbourhood_values     # values, no record of how
     with pytest.raises(AocError, match=r"over every cell.*retrain it \(train\('c', "

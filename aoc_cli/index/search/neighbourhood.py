@@ -351,11 +351,12 @@ def neighbourhood_values(observations: np.ndarray, rewards: np.ndarray,
     size = sets.sizes
     made = {k: v for k, v in hood.describe().items() if k not in ("noise", "z", "level",
                                                                    "queries")}
-    made["space"] = hood.space()
+    made["set_rows"] = {"median": float(np.median(size)) if n else 0.0,
+                        "least": int(size.min()) if n else 0,
+                        "most": int(size.max()) if n else 0}
+    space = hood.space()
+    made["space"] = None if space is None else {**space, "set_rows": made["set_rows"]}
     return y, {**made, "iterations": it, "converged": done,
-               "set_rows": {"median": float(np.median(size)) if n else 0.0,
-                            "least": int(size.min()) if n else 0,
-                            "most": int(size.max()) if n else 0},
                "seconds": round(time.perf_counter() - started, 3), "rows": sets}
 
 
