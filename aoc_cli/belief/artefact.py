@@ -12,7 +12,8 @@ Files (the folder is written in a temporary folder beside it and renamed into pl
   says by which distance: ``l2``, or ``measured cells`` on a corpus with filled gaps);
 * ``neighbourhood_space.npy``: (N, d_o) float32 the log's rows denoised and standardised, the
   space of rule 7's sets (``config.json`` ``neighbourhood``: ``scale``, ``centre``,
-  ``radius``, and the sets' sizes ``set_rows``), so that a controller builds them without denoising the log again.
+  ``radius``, and the sets' sizes ``set_rows``), so that a controller builds them without
+  denoising the log again.
 """
 
 from __future__ import annotations
