@@ -95,7 +95,10 @@ class Sets:
         averages a value over every set at once)."""
         from scipy.sparse import csr_matrix
         weight = np.repeat(1.0 / np.maximum(self.sizes, 1), self.sizes)
-        return csr_matrix((weight, self.flat, self.indptr), shape=(len(self), n))
+        small = self.indptr[-1] < np.iinfo(np.int32).max and n < np.iinfo(np.int32).max
+        index = np.int32 if small else np.int64        # int32: scipy keeps the rows uncopied
+        return csr_matrix((weight, self.flat.astype(index, copy=False),
+                           self.indptr.astype(index, copy=False)), shape=(len(self), n))
 
     @staticmethod
     def join(parts: list["Sets"]) -> "Sets":
