@@ -185,28 +185,23 @@ class Controller:
 
     @property
     def neighbourhood(self) -> Neighbourhood:
-        """The log's rows near an observation, valued by the model's neighbourhood values
-        (``aoc train``, rule 7), else by its row values (built on first use)."""
+        """The log's rows near an observation, valued by rule 7's values, else the index's."""
         if self._neighbourhood is None:
             saved = getattr(self.model, "neighbourhood_values", None)
-            measured = measured_cells(self.corpus)
             made = self.model.meta.get("neighbourhood") or {}
-            if saved is not None and measured is not None and \
-                    made.get("distance") != "measured cells":
-                raise AocError(f"model {self.model.id!r} holds rule 7's values over every "
-                               "cell, from before its neighbourhoods left the corpus's filled "
-                               "cells out: retrain it ("
-                               + call("train", self.corpus.name, overwrite=True) + ")")
-            if saved is not None and made.get("sets") != SETS:
-                raise AocError(f"model {self.model.id!r} holds rule 7's values over the 100 "
-                               "nearest rows, from before its neighbourhoods were the rows "
-                               "near the step's denoised observation: retrain it ("
-                               + call("train", self.corpus.name, overwrite=True) + ")")
+            measured = measured_cells(self.corpus)     # the cells not filled at ingest
+            old = ("over every cell, from before its neighbourhoods left the filled cells out"
+                   if measured is not None and made.get("distance") != "measured cells" else
+                   "over the 100 nearest rows, from before its denoised sets"
+                   if made.get("sets") != SETS else None)
+            if saved is not None and old is not None:
+                raise AocError(f"model {self.model.id!r} holds rule 7's values {old}: retrain "
+                               f"it ({call('train', self.corpus.name, overwrite=True)})")
+            space = None if saved is None else getattr(self.model, "neighbourhood_space", None)
             self._neighbourhood = Neighbourhood(
                 self.corpus.observations, self.corpus_actions, self.row_episode,
                 self.corpus.n_actions, values=self.index.values if saved is None else saved,
-                measured=measured,
-                space=None if saved is None else getattr(self.model, "neighbourhood_space", None))
+                measured=measured, space=space)
         return self._neighbourhood
 
     def harm_inputs(self, observations: np.ndarray, value: np.ndarray,
