@@ -27,13 +27,10 @@ by Student's t). The rule:
     one whose median decision the held-out log holds fewer than :data:`MIN_PAIRS` times
     (seen on icu-sepsis's 50k log, the cap alone 0.888 [0.852, 0.923] by FQE, 0.788
     exact). A candidate without an estimate is not chosen, and when rule 2's own candidate
-    has none the log cannot weigh the others against it, so it is kept. (Without the
-    widening, the penalty without the cap, a third of its decisions rare, was valued 0.940
-    [0.895, 0.986] on a 10k log where its exact survival is 0.810, and chosen.)
+    has none the log cannot weigh the others against it, so it is kept.
 
-The selection changes only the controller's settings saved with the model
-(``metrics.controller``); what the held-out episodes give it is states and outcomes that
-neither the belief's weights nor the decompositions' rows hold.
+The selection changes only the controller's settings saved with the model; the held-out
+episodes give it states and outcomes that neither the belief nor the decompositions hold.
 """
 
 from __future__ import annotations
@@ -63,8 +60,9 @@ TYPICAL_SAMPLE = 500
 #: FQE's gradient steps (None: :func:`aoc_cli.ope.fqe.default_steps`, from the held-out
 #: episodes' horizon) and bootstrap refits.
 FQE_STEPS, FQE_REFITS = None, REFITS
-#: Held-out steps x actions whose beliefs are computed at once.
-BLOCK = 65536
+#: Held-out steps x actions whose beliefs are computed at once; distinct beliefs decomposed
+#: at once (their (Q, k, d_b) float64 neighbours: 110 MB at k 42, d_b 20; the screen's one).
+BLOCK, QUERIES = 65536, 16384
 #: Rule 7's premise: the held-out steps at which the paper's controller is first decided (its
 #: median decision's count read there; every action decomposed at each step).
 SCREEN = 500
@@ -195,17 +193,21 @@ def decompositions(net, inputs, data, norm, corpus, k: int, seed: int = 0,
     first, of = distinct_rows(beliefs)
     values = np.asarray(data.values, np.float64)[data.train_rows]
     index = BeliefIndex.build(b_tr, kind="flat")
-    dec = decompose(b_tr, beliefs[first], k=k, values=values, index=index)
     episode = row_episodes(corpus.episode_starts)[data.train_rows]
-    support, _ = support_episodes(b_tr, dec.rows, dec.weights, dec.neighbours, episode)
+    parts = []
+    for i in range(0, max(len(first), 1), QUERIES):
+        dec = decompose(b_tr, beliefs[first[i:i + QUERIES]], k=k, values=values, index=index)
+        parts.append((dec.residual, dec.value, support_episodes(
+            b_tr, dec.rows, dec.weights, dec.neighbours, episode)[0]))
+    residual, value, support = (np.concatenate(p) for p in zip(*parts))
     rng = np.random.default_rng(seed)
     sample = np.sort(rng.choice(len(b_tr), size=min(TYPICAL_SAMPLE, len(b_tr) // 2),
                                 replace=False))
     keep = np.ones(len(b_tr), bool)
     keep[sample] = False
     typical = decompose(b_tr, b_tr[sample], k=k, values=values, index=index, selection=keep)
-    return {"residual": np.asarray(dec.residual, np.float64)[of].reshape(len(rows), n),
-            "value": np.asarray(dec.value, np.float64)[of].reshape(len(rows), n),
+    return {"residual": np.asarray(residual, np.float64)[of].reshape(len(rows), n),
+            "value": np.asarray(value, np.float64)[of].reshape(len(rows), n),
             "support": np.asarray(support, np.float64)[of].reshape(len(rows), n),
             "value_std": float(np.std(values)) if len(values) else 1.0,
             "p90": float(np.quantile(typical.residual, 0.9)), "distinct": int(len(first))}

@@ -181,3 +181,49 @@ def test_fitted_values_over_ragged_sets_average_the_rows_own_action():
     sets = Sets.join([Sets(np.array([0, len(p)]), p) for p in parts])
     want = [values[p][actions[p] == actions[i]].mean() for i, p in enumerate(parts)]
     np.testing.assert_allclose(fitted_values(values, actions, sets), want, rtol=1e-12)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.integers(0, 9), min_size=1, max_size=15), st.integers(1, 12))
+def test_blocks_cover_the_sets_in_order_within_their_entries(sizes, entries):
+    sets = Sets(np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64),
+                np.arange(sum(sizes), dtype=np.int32))
+    blocks = list(sets.blocks(entries))
+    assert [a for a, _ in blocks] == [0] + [b for _, b in blocks[:-1]]
+    assert blocks[-1][1] == len(sets)
+    for a, b in blocks:
+        part = sets.part(a, b)
+        assert [part[i].tolist() for i in range(b - a)] == \
+            [sets[i].tolist() for i in range(a, b)]
+        assert b - a == 1 or part.indptr[-1] <= entries          # one set may exceed it
+
+
+def test_near_and_fitted_values_are_the_same_worked_in_blocks(monkeypatch):
+    """The neighbourhoods read a few entries at a time (tiny blocks) are those read at once,
+    bit for bit: the sums run in the same order within a set."""
+    import aoc_cli.index.search.denoise as denoise
+    obs, measured, state, _ = _states(noise=0.3, rows=600, gaps=0.15)
+    rng = np.random.default_rng(1)
+    actions = rng.integers(0, 4, len(obs))
+    episode = np.arange(len(obs)) // 7
+    values = rng.normal(size=len(obs))
+    hood = Neighbourhood(obs, actions, episode, 4, values=values, measured=measured)
+    sets = hood.log_sets()
+    whole, fitted = hood.near(sets), fitted_values(values, actions, sets)
+    monkeypatch.setattr(denoise, "ENTRIES", 37)
+    assert len(list(sets.blocks())) > 10
+    blocked = hood.near(sets)
+    np.testing.assert_array_equal(blocked.episodes, whole.episodes)
+    np.testing.assert_array_equal(blocked.likely, whole.likely)
+    np.testing.assert_array_equal(blocked.mean, whole.mean)
+    np.testing.assert_array_equal(fitted_values(values, actions, sets), fitted)
+    # and both are the loop over each set
+    for i in rng.choice(len(sets), 20, replace=False):
+        rows = sets[i]
+        for a in range(4):
+            took = rows[actions[rows] == a]
+            assert whole.episodes[i, a] == len(np.unique(episode[took]))
+            if len(took):
+                assert whole.mean[i, a] == pytest.approx(values[took].mean(), rel=1e-12)
+            else:
+                assert np.isnan(whole.mean[i, a])

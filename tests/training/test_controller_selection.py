@@ -103,6 +103,10 @@ def test_each_candidate_decides_by_the_controllers_rule():
     assert chosen == [0, 1, 0, 2]
 
 
+#: (at once, in blocks of 5) decompositions of the held-out steps made while ``icu`` trains
+BLOCKED = []
+
+
 @pytest.fixture(scope="module")
 def icu(tmp_path_factory):
     """A plain-file icu-sepsis log (150 episodes, 30 held out) and its model trained once as
@@ -119,12 +123,24 @@ def icu(tmp_path_factory):
     steps, refits = controller_selection.FQE_STEPS, controller_selection.FQE_REFITS
     controller_selection.FQE_STEPS, controller_selection.FQE_REFITS = 200, 3
     labels = []
+    original = controller_selection.decompositions
+
+    def both(*args, **kwargs):      # every decomposition again, 5 distinct beliefs at once
+        whole = original(*args, **kwargs)
+        queries, controller_selection.QUERIES = controller_selection.QUERIES, 5
+        try:
+            BLOCKED.append((whole, original(*args, **kwargs)))
+        finally:
+            controller_selection.QUERIES = queries
+        return whole
+    controller_selection.decompositions = both
     try:
         trained = aoc_cli.train("icu", store=root / "store", threads=1, max_epochs=1, hidden=8,
                                 progress=lambda done, total=None, label=None:
                                 labels.append(label))
     finally:
         controller_selection.FQE_STEPS, controller_selection.FQE_REFITS = steps, refits
+        controller_selection.decompositions = original
     aoc_cli.build_index("icu", store=root / "store")
     return root / "store", trained.metrics, labels
 
@@ -165,6 +181,16 @@ def test_train_chooses_the_controller_on_held_out_episodes(icu):
                                                         best["support_penalty"])
     flag = aoc_cli.open_session("icu", store=store, controller={"support_penalty": 1.0})
     assert flag.controller.config.support_penalty == 1.0
+
+
+def test_the_held_out_decompositions_are_the_same_made_in_blocks(icu):
+    assert BLOCKED
+    for whole, blocked in BLOCKED:
+        assert whole["distinct"] > 3 * 5                       # several blocks
+        # the exchange's rounds run over a batch: a query's weights move within its precision
+        for key in ("residual", "value", "support"):
+            np.testing.assert_allclose(blocked[key], whole[key], rtol=1e-9, atol=1e-12)
+        assert (blocked["p90"], blocked["distinct"]) == (whole["p90"], whole["distinct"])
 
 
 def test_the_k_rule_is_saved_with_the_model_and_the_index_takes_it(icu):

@@ -45,6 +45,8 @@ LEAST, CAP = 30, 1000
 SAMPLE = 2000
 #: Queries searched at once.
 _BLOCK = 4096
+#: Set entries worked on at once (:meth:`Sets.blocks`): about 32 MB per (entries,) array.
+ENTRIES = 1 << 22
 
 
 @dataclass(frozen=True)
@@ -79,6 +81,23 @@ class Sets:
     def sizes(self) -> np.ndarray:
         """(S,) each set's rows."""
         return np.diff(self.indptr)
+
+    def part(self, a: int, b: int) -> "Sets":
+        """Sets a to b (exclusive), their own indptr from 0."""
+        lo, hi = self.indptr[a], self.indptr[b]
+        return Sets(self.indptr[a:b + 1] - lo, self.flat[lo:hi])
+
+    def blocks(self, entries: int | None = None):
+        """(a, b) ranges of consecutive sets holding at most ``entries`` rows in all (one set
+        at least): work over the sets' (nnz,) arrays a piece at a time (1,000-row sets of a
+        50k-stay cohort hold 4.5e8 entries)."""
+        entries = ENTRIES if entries is None else int(entries)
+        a, s = 0, len(self)
+        while a < s:
+            b = int(np.searchsorted(self.indptr, self.indptr[a] + entries, side="right")) - 1
+            b = min(max(b, a + 1), s)
+            yield a, b
+            a = b
 
     def owner(self) -> np.ndarray:
         """(nnz,) the set each entry of ``flat`` belongs to."""

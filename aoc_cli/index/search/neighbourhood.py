@@ -214,22 +214,26 @@ class Neighbourhood:
         return self.near(self.sets(obs, measured))
 
     def near(self, sets: Sets) -> Near:
-        """The neighbourhoods made of ``sets`` (S sets): episodes, likely action, mean."""
+        """The neighbourhoods made of ``sets`` (S sets): episodes, likely action, mean (in
+        blocks of sets, so that the (entries,) arrays stay small)."""
         s, k = len(sets), self.n_actions
-        owner, acts = sets.owner(), self.actions[sets.flat]
-        group = owner * k + acts                                      # (query, action)
-        rowcount = np.bincount(group, minlength=s * k).reshape(s, k)
-        # distinct (query, action, episode) triples
+        rowcount, episodes = np.zeros((s, k), np.int64), np.zeros((s, k), np.int64)
+        mean = None if self.values is None else np.full((s, k), np.nan)
         span = int(self.row_episode.max()) + 1 if len(self.row_episode) else 1
-        triple = np.unique(group * span + self.row_episode[sets.flat])
-        episodes = np.bincount(triple // span, minlength=s * k).reshape(s, k)
-        mean = None
-        if self.values is not None:
-            total = np.bincount(group, weights=self.values[sets.flat],
-                                minlength=s * k).reshape(s, k)
-            with np.errstate(invalid="ignore", divide="ignore"):
-                mean = np.where(rowcount > 0, total / rowcount, np.nan)
-        return Near(episodes.astype(np.int64), rowcount.argmax(1).astype(np.int64), sets, mean)
+        for a, b in sets.blocks():
+            part = sets.part(a, b)
+            group = part.owner() * k + self.actions[part.flat]        # (query, action)
+            rowcount[a:b] = np.bincount(group, minlength=(b - a) * k).reshape(b - a, k)
+            # distinct (query, action, episode) triples
+            triple = np.unique(group * span + self.row_episode[part.flat])
+            episodes[a:b] = np.bincount(triple // span,
+                                        minlength=(b - a) * k).reshape(b - a, k)
+            if mean is not None:
+                total = np.bincount(group, weights=self.values[part.flat],
+                                    minlength=(b - a) * k).reshape(b - a, k)
+                have = rowcount[a:b] > 0
+                mean[a:b][have] = total[have] / rowcount[a:b][have]
+        return Near(episodes, rowcount.argmax(1).astype(np.int64), sets, mean)
 
     def _noise(self, obs: np.ndarray, values: np.ndarray, seed: int,
                measured: np.ndarray | None) -> float:
@@ -372,10 +376,8 @@ def fitted_values(values: np.ndarray, actions: np.ndarray, rows: Sets) -> np.nda
     if not isinstance(rows, Sets):
         rows = Sets.dense(rows)
     out = np.empty(len(rows))
-    for a in range(0, len(rows), _BLOCK * 16):          # blocks: (nnz,) arrays stay small
-        b = min(a + _BLOCK * 16, len(rows))
-        lo, hi = rows.indptr[a], rows.indptr[b]
-        part = Sets(rows.indptr[a:b + 1] - lo, rows.flat[lo:hi])
+    for a, b in rows.blocks():                      # blocks: (nnz,) arrays stay small
+        part = rows.part(a, b)
         owner = part.owner()
         same = (actions[part.flat] == actions[a + owner]).astype(np.float64)
         alone = np.bincount(owner, weights=same, minlength=b - a) == 0
