@@ -110,3 +110,24 @@ def test_a_rollout_runs_every_policys_steps_on_one_thread(maze, two_threads):
     rollout(session, env, 1, policy=policy)
     assert seen and set(seen) == {(1, 1)}
     assert (torch.get_num_threads(), faiss.omp_get_max_threads()) == (2, 2)
+
+
+def test_train_threads_hold_for_the_neighbourhoods_search_too(tmp_path, two_threads,
+                                                              monkeypatch):
+    """``aoc train --threads 1`` on a log without repeats: rule 7's FQE over the log's
+    neighbourhoods (FAISS searches, numpy) runs before the belief trains, on one thread
+    too; the caller's pools are given back."""
+    import aoc_cli
+    import aoc_cli.belief.targets as targets
+
+    store = Store(tmp_path)
+    store.write("c", collect("icu-cohort", episodes=60, seed=0)[0])
+    seen, original = [], targets.neighbourhood_values
+
+    def recording(*args, **kwargs):
+        seen.append((torch.get_num_threads(), faiss.omp_get_max_threads()))
+        return original(*args, **kwargs)
+    monkeypatch.setattr(targets, "neighbourhood_values", recording)
+    aoc_cli.train("c", store=tmp_path, belief={"threads": 1, "max_epochs": 1, "hidden": 8})
+    assert seen == [(1, 1)]
+    assert (torch.get_num_threads(), faiss.omp_get_max_threads()) == (2, 2)

@@ -142,7 +142,8 @@ class BeliefConfig(Settings):
                                   help="Share of episodes held out for validation.")
     seed: int = setting(0, help="Seed of the split, initialisation and batches (reproducible "
                                 "on CPU).")
-    threads: int | None = setting(None, bounds=">= 1", help="CPU threads for torch.",
+    threads: int | None = setting(None, bounds=">= 1", help="CPU threads (torch's, FAISS's and "
+                                  "numpy's) for all of training.",
                                   none="every core this process may use")
     device: str = setting("auto", choices=("auto", "cpu", "cuda"),
                           help="auto (a GPU when torch sees one, else CPU), cpu or cuda.")

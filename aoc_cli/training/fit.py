@@ -25,6 +25,7 @@ from aoc_cli.belief.data import prepare
 from aoc_cli.decompose.k_rule import index_k
 from aoc_cli.index.search.neighbourhood import measured_cells, neighbourhood_values
 from aoc_cli.progress import Progress
+from aoc_cli.threads import thread_limits
 from aoc_cli.store import DEFAULT_MODEL, Corpus, check_name, writing_model
 from aoc_cli.training import evidence, tuning
 from aoc_cli.training.record import Recording, TrainingRecord
@@ -114,7 +115,9 @@ def train_corpus(corpus: Corpus, model: str = DEFAULT_MODEL, *, paper: bool = Fa
     penalty = ev is not None and evidence.penalises(ev, config, chosen)
     choose = ev is not None and not no_search and choose_controller \
         and evidence.selects_controller(ev, config, chosen)
-    with writing_model(corpus.path, check_name(model, "model")):  # one writer per model id
+    # --threads holds for all of it: the FQE's FAISS searches and numpy too, not torch alone
+    limits = thread_limits(torch=config.threads, faiss=config.threads, blas=config.threads)
+    with writing_model(corpus.path, check_name(model, "model")), limits:  # one writer a model
         metrics = _train(corpus, config, model, record, overwrite=overwrite,
                          open_names=tuning.open_settings(corpus, config, searched, no_search),
                          defaults_note=tuning.why_no_search(corpus, config, searched, paper,
