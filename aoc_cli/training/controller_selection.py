@@ -6,16 +6,15 @@ controller and the paper's, "in that state" read in the held-out rows nearest th
 (:func:`~aoc_cli.index.search.neighbourhood.episodes_near`) and the paper's first screened at
 :data:`SCREEN` steps (:func:`harm_candidates`).
 
-``aoc train`` holds out the validation episodes (``val_fraction``, 20% by default) from the
-belief's fit; they only stop its training early. After training, at every step of those
-episodes, every action is decomposed over the *training* rows' beliefs and values (as the
-controller will decompose over the index's rows), with the k the model records; each candidate
-controller of :func:`candidates` decides at every held-out step from those decompositions
-(:func:`aoc_cli.control.rule.choose`: the same rule as the controller, its residual cap scaled
-by the training rows' own typical p90 residual); each candidate's decisions are valued by fitted
-Q evaluation on the held-out episodes (:func:`aoc_cli.ope.fqe.fqe_policies`: one batched
-ensemble, :data:`aoc_cli.ope.fqe.REFITS` bootstrap refits over the episodes, the 95% interval
-by Student's t). The rule:
+``aoc train`` holds out the validation episodes (``val_fraction``, 20%) from the belief's fit
+(they only stop it early). After training, at every step of those episodes, every action is
+decomposed over the *training* rows' beliefs and values, with the k the model records; each
+candidate controller of :func:`candidates` decides at every held-out step from those
+decompositions (:func:`aoc_cli.control.rule.choose`: the same rule as the controller, its
+residual cap scaled by the training rows' own typical p90 residual); each candidate's
+decisions are valued by fitted Q evaluation on the held-out episodes
+(:func:`aoc_cli.ope.fqe.fqe_policies`: :data:`aoc_cli.ope.fqe.REFITS` bootstrap refits over
+the episodes, the 95% interval by Student's t). The rule:
 
     the candidate with the highest lower bound, its 95% interval's lower end less the share
     of its decisions the held-out log hardly holds (held out fewer than :data:`MIN_PAIRS`
@@ -60,8 +59,7 @@ TYPICAL_SAMPLE = 500
 #: FQE's gradient steps (None: :func:`aoc_cli.ope.fqe.default_steps`, from the held-out
 #: episodes' horizon) and bootstrap refits.
 FQE_STEPS, FQE_REFITS = None, REFITS
-#: Held-out steps x actions whose beliefs are computed at once; distinct beliefs decomposed
-#: at once (their (Q, k, d_b) float64 neighbours: 110 MB at k 42, d_b 20; the screen's one).
+#: Held-out steps x actions whose beliefs are computed, distinct beliefs decomposed, at once.
 BLOCK, QUERIES = 65536, 16384
 #: Rule 7's premise: the held-out steps at which the paper's controller is first decided (its
 #: median decision's count read there; every action decomposed at each step).
@@ -71,10 +69,10 @@ SCREEN = 500
 MIN_PAIRS = 3
 RULE = ("the highest lower bound of the 95% interval of FQE on the held-out episodes, less "
         "the returns' range times the share of decisions the held-out episodes took fewer "
-        f"than {MIN_PAIRS} times in that state; of "
-        "equal bounds the more conservative; an estimate outside the episodes' returns, or "
-        f"of a candidate whose median decision the held-out episodes took fewer than "
-        f"{MIN_PAIRS} times in that state, is none (rule 2's kept when it has none)")
+        f"than {MIN_PAIRS} times in that state; of equal bounds the more conservative; an "
+        "estimate outside the episodes' returns, or of a candidate whose median decision the "
+        f"held-out episodes took fewer than {MIN_PAIRS} times in that state, is none (rule "
+        "2's kept when it has none)")
 
 
 #: How rule 7's premise reads the rule: "in that state" and the candidate kept.
@@ -194,7 +192,7 @@ def decompositions(net, inputs, data, norm, corpus, k: int, seed: int = 0,
     values = np.asarray(data.values, np.float64)[data.train_rows]
     index = BeliefIndex.build(b_tr, kind="flat")
     episode = row_episodes(corpus.episode_starts)[data.train_rows]
-    parts = []
+    parts = []               # blocks: (Q, k, d_b) float64, 110 MB at k 42, d_b 20
     for i in range(0, max(len(first), 1), QUERIES):
         dec = decompose(b_tr, beliefs[first[i:i + QUERIES]], k=k, values=values, index=index)
         parts.append((dec.residual, dec.value, support_episodes(

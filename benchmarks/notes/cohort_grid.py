@@ -27,6 +27,7 @@ import aoc_cli
 # internal: the test bed's vectorised rollout and the controller over many episodes at once
 from aoc_cli.control.batch import BatchPolicy, LikelyPolicy
 import aoc_cli.envs.icu_cohort as cohort
+from aoc_cli.threads import thread_limits
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -70,6 +71,8 @@ def main() -> None:
     ap.add_argument("--controller", default="{}", help="controller settings, JSON")
     ap.add_argument("--train-args", default="", help="more aoc train flags, one string")
     args = ap.parse_args()
+    if args.threads:                     # the rollouts too, not only aoc train
+        thread_limits(torch=args.threads, faiss=args.threads, blas=args.threads).__enter__()
     store = Path(args.store)
     info = {} if args.reuse else prepare(args.stays, args.noise, args.seed, store,
                                                   args.threads, args.train_args.split())
