@@ -7,7 +7,8 @@ Library code never changes them for good. Work with a thread need of its own run
 * a control step (``Controller.decide`` / ``Controller.decompose_candidates``) and the batched scoring of
   ``aoc evaluate`` run in :func:`one_thread`: a step is ~100 small queries, threads only add
   synchronisation there, and torch's and FAISS's pools must not fight over the cores;
-* training runs with ``BeliefConfig.threads`` torch threads (default: every core);
+* training runs with ``BeliefConfig.threads`` threads in every pool, all of it: the FQE over
+  rule 7's sets and its FAISS searches too (default: every core);
 * the decomposition keeps BLAS to one thread and a single-query FAISS search to one thread
   (:func:`single_threaded_blas`, :func:`faiss_threads`).
 

@@ -25,8 +25,8 @@ from aoc_cli.belief.data import prepare
 from aoc_cli.decompose.k_rule import index_k
 from aoc_cli.index.search.neighbourhood import measured_cells, neighbourhood_values
 from aoc_cli.progress import Progress
-from aoc_cli.threads import thread_limits
 from aoc_cli.store import DEFAULT_MODEL, Corpus, check_name, writing_model
+from aoc_cli.threads import thread_limits
 from aoc_cli.training import evidence, tuning
 from aoc_cli.training.record import Recording, TrainingRecord
 
