@@ -26,7 +26,9 @@ survival is measured:
 A policy that reads the features is rolled out in the MDP through the same noise, gaps and
 hold (:func:`~aoc_cli.envs.icu_cohort.rollout_value`, ``episodes`` a cell, 95% interval); every
 such method of a (size, noise, seed) cell runs on the same rollout seed, so the values are
-paired. A state policy (spibb, clinicians, optimal) is valued exactly.
+paired, and each is set against AOC: AOC's survival less its own, with the interval of the
+per-episode differences (:func:`against_aoc`). A state policy (spibb, clinicians, optimal) is
+valued exactly.
 
 Writes ``results.csv``, ``summary.json`` and ``summary.md`` to ``out``.
 """
@@ -73,6 +75,8 @@ SEES = {"aoc": "noisy features", "bc": "noisy features", "cql": "noisy features"
         "clinicians-nearest": "nearest centre", "modal-nearest": "nearest centre",
         "optimal-nearest": "nearest centre", "optimal": "told the state"}
 D3RLPY = ("bc", "cql")
+#: AOC's survival less a method's, and its 95% interval (:func:`against_aoc`).
+DIFFERENCE = ("aoc_minus", "aoc_minus_low", "aoc_minus_high")
 
 
 def rollout_seed(seed: int) -> int:
@@ -121,6 +125,7 @@ def run_cell(store: Store, stays: int, noise: float, seed: int, cfg: dict, metho
     n_rows = int(len(data.actions))
     rseed = rollout_seed(seed)
     rows: list[dict] = []
+    survived: dict[str, np.ndarray] = {}     # each rolled-out method's (episodes,) outcomes
 
     def rolled(decide) -> dict:
         return {**cohort.rollout_value(decide, episodes, noise=noise, seed=rseed),
@@ -128,6 +133,8 @@ def run_cell(store: Store, stays: int, noise: float, seed: int, cfg: dict, metho
 
     def record(method: str, result: dict | None, started: float, note: str = "", **extra):
         ok = result is not None
+        if ok and "survived" in result:
+            survived[method] = result["survived"]
         rows.append({"task": TASK, "stays": stays, "noise": noise, "rows": n_rows,
                      "seed": seed, "method": method, "sees": SEES[method],
                      "value": result["value"] if ok else None,
@@ -176,6 +183,31 @@ def run_cell(store: Store, stays: int, noise: float, seed: int, cfg: dict, metho
             if key not in cache:
                 cache[key] = rolled(cohort.nearest_centre_policy(nearest[method], seed=rseed))
             record(method, cache[key], started)
+    return against_aoc(rows, survived)
+
+
+def against_aoc(rows: list[dict], survived: dict[str, np.ndarray]) -> list[dict]:
+    """Each row of one cell with ``aoc_minus`` (AOC's survival less the method's) and its 95%
+    interval ``aoc_minus_low/high``: for a rolled-out method the paired difference over the
+    same episodes (:func:`~aoc_cli.envs.icu_cohort.paired_difference`), for an exact one AOC's
+    own interval less the exact value; ``aoc_minus_kind`` says which (None where AOC or the
+    method was not run). ``ahead`` reads the interval: "shown ahead", "shown behind" or "not
+    shown apart"."""
+    aoc = next((r for r in rows if r["method"] == "aoc" and r["status"] == "ok"), None)
+    for r in rows:
+        diff, kind = None, None
+        if aoc is not None and r is not aoc and r["status"] == "ok":
+            if r["kind"] == "monte-carlo":
+                p = cohort.paired_difference(survived["aoc"], survived[r["method"]])
+                diff, kind = (p["difference"], p["low"], p["high"]), "paired"
+            else:
+                diff = tuple(aoc[k] - r["value"] for k in ("value", "low", "high"))
+                kind = "against exact"
+        r["aoc_minus"], r["aoc_minus_low"], r["aoc_minus_high"] = diff or (None, None, None)
+        r["aoc_minus_kind"] = kind
+        r["ahead"] = None if diff is None else ("shown ahead" if diff[1] > 0 else
+                                                "shown behind" if diff[2] < 0 else
+                                                "not shown apart")
     return rows
 
 
@@ -197,6 +229,13 @@ def summarise(rows: list[dict], methods: list[str]) -> list[dict]:
             if done:
                 rec.update({k: float(np.mean([r[k] for r in done]))
                             for k in ("value", "low", "high")})
+            paired = [r for r in done if r.get("aoc_minus") is not None]
+            rec.update({k: float(np.mean([r[k] for r in paired])) if paired else None
+                        for k in DIFFERENCE})
+            rec["aoc_minus_kind"] = paired[0]["aoc_minus_kind"] if paired else None
+            rec["ahead"] = None if not paired else (
+                "shown ahead" if rec["aoc_minus_low"] > 0 else
+                "shown behind" if rec["aoc_minus_high"] < 0 else "not shown apart")
             out.append(rec)
     return out
 
@@ -205,17 +244,24 @@ def markdown(summary: list[dict], episodes: int) -> str:
     lines = [f"Survival in the ICU-Sepsis MDP. Monte-Carlo: {episodes} episodes through the "
              "cohort's noise and gaps, the same episodes (rollout seed) for every method of a "
              "cell: paired. Exact: the state policy's value in the MDP. *told the state*: "
-             "reads the true state, which the cohort never shows (an upper reference).", "",
-             "| method | sees | stays | noise | seeds | survival | 95% interval | kind |",
-             "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+             "reads the true state, which the cohort never shows (an upper reference). "
+             "*aoc minus it*: AOC's survival less the method's, with its 95% interval: over "
+             "the same episodes for a rolled-out method (paired), AOC's own interval for an "
+             "exact one.", "",
+             "| method | sees | stays | noise | seeds | survival | 95% interval | kind "
+             "| aoc minus it | 95% interval | reading |",
+             "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for s in summary:
         if s["status"] != "ok":
             lines.append(f"| {s['method']} | {s['sees']} | {s['stays']} | {s['noise']:g} | 0 "
-                         f"| skipped | {s['note']} | |")
+                         f"| skipped | {s['note']} | | | | |")
             continue
         interval = "" if s["kind"] == "exact" else f"{s['low']:.3f} - {s['high']:.3f}"
+        diff = "| | | |" if s.get("aoc_minus") is None else (
+            f"| {s['aoc_minus']:+.4f} | {s['aoc_minus_low']:+.3f} - {s['aoc_minus_high']:+.3f} "
+            f"| {s['ahead']} ({s['aoc_minus_kind']}) |")
         lines.append(f"| {s['method']} | {s['sees']} | {s['stays']} | {s['noise']:g} | "
-                     f"{s['seeds']} | {s['value']:.4f} | {interval} | {s['kind']} |")
+                     f"{s['seeds']} | {s['value']:.4f} | {interval} | {s['kind']} {diff}")
     return "\n".join(lines) + "\n"
 
 

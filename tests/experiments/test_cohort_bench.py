@@ -40,6 +40,51 @@ def test_tiny_run_values_every_peer_paired_and_writes_the_outputs(tmp_path):
     assert (tmp_path / "out" / "results.csv").read_text().startswith("task,stays,noise,rows")
 
 
+def test_every_method_is_set_against_aoc_on_the_same_episodes(tmp_path, monkeypatch):
+    """AOC's row replaced by the optimal policy through the nearest centre: against that same
+    policy rolled out on the same episodes the paired difference is exactly 0; against the
+    others it is the difference of the values, with the interval of the per-episode
+    differences; against an exact value, AOC's own interval less it."""
+    optimal = icu_cohort.nearest_centre_policy(icu_cohort.optimal_state_policy())
+
+    class Session:
+        history_length, controller = 0, optimal
+
+    monkeypatch.setattr(cohort, "train_aoc", lambda *_a, **_k: ({"val_r2": None}, Session))
+    monkeypatch.setattr(cohort, "BatchPolicy", lambda controller: controller)
+    methods = ["aoc", "optimal-nearest", "modal-nearest", "clinicians"]
+    report = run_cohort(tmp_path / "out", tmp_path / "store", "tiny", methods=methods,
+                        episodes=400)
+    by = {r["method"]: r for r in report["rows"]}
+    assert by["aoc"]["aoc_minus"] is None and by["aoc"]["ahead"] is None
+    same = by["optimal-nearest"]
+    assert by["aoc"]["value"] == same["value"]
+    assert (same["aoc_minus"], same["aoc_minus_low"], same["aoc_minus_high"]) == (0, 0, 0)
+    assert (same["aoc_minus_kind"], same["ahead"]) == ("paired", "not shown apart")
+    modal = by["modal-nearest"]
+    seed = cohort.rollout_seed(0)
+    mine = icu_cohort.rollout_value(optimal, 400, noise=0.3, seed=seed)["survived"]
+    theirs = icu_cohort.rollout_value(icu_cohort.nearest_centre_policy(
+        icu_cohort.sepsis.tables("mean").modal()), 400, noise=0.3, seed=seed)["survived"]
+    d = mine.astype(float) - theirs
+    half = 1.96 * d.std(ddof=1) / len(d) ** 0.5
+    assert modal["aoc_minus"] == pytest.approx(by["aoc"]["value"] - modal["value"], abs=1e-12)
+    assert modal["aoc_minus_low"] == pytest.approx(d.mean() - half, rel=1e-12)
+    # paired: narrower than two independent intervals would be
+    assert modal["aoc_minus_high"] - modal["aoc_minus_low"] < (
+        (by["aoc"]["high"] - by["aoc"]["low"]) ** 2 + (modal["high"] - modal["low"]) ** 2) ** 0.5
+    assert modal["ahead"] == ("shown ahead" if modal["aoc_minus_low"] > 0 else
+                              "shown behind" if modal["aoc_minus_high"] < 0 else
+                              "not shown apart")
+    clin = by["clinicians"]
+    assert clin["aoc_minus_kind"] == "against exact"
+    assert clin["aoc_minus_low"] == pytest.approx(by["aoc"]["low"] - clin["value"], abs=1e-12)
+    summary = {r["method"]: r for r in report["summary"]}
+    assert summary["modal-nearest"]["aoc_minus"] == modal["aoc_minus"]
+    md = (tmp_path / "out" / "summary.md").read_text()
+    assert "| +0.0000 | +0.000 - +0.000 | not shown apart (paired) |" in md
+
+
 def test_without_d3rlpy_its_methods_are_skipped_with_a_note(tmp_path, monkeypatch):
     def missing(*_a, **_k):
         raise MissingExtra("the cql baseline needs the package 'd3rlpy': run "
