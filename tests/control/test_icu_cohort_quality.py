@@ -27,7 +27,7 @@ from aoc_cli.envs import icu_cohort
 pytestmark = pytest.mark.quality
 
 ROOT = Path(__file__).resolve().parents[2]
-STAYS, NOISE, EPISODES = 10_000, 0.3, 20_000
+STAYS, NOISE, EPISODES = 10_000, 0.3, 10_000
 #: "Never below the clinicians by more than 0.005" (their exact survival).
 MARGIN = 0.005
 #: The goal at noise 0.3 and 10k stays: as on exact states.
@@ -59,8 +59,9 @@ def test_aoc_on_a_noisy_cohort_is_never_worse_than_the_clinicians(cohort):
     assert ctl.neighbourhood.masked is not None          # the held cells left out (the gaps)
     result = icu_cohort.rollout_value(BatchPolicy(ctl), EPISODES, noise=NOISE, seed=1)
     clinicians = icu_cohort.clinicians_value()
-    # 20,000 episodes measure a survival to +- 0.006: never below the clinicians by more than
-    # the margin, and above them (measured 0.8126 [0.8072, 0.8181] against 0.7818)
+    # 10,000 episodes measure a survival to +- 0.008 (the suite's time; the results' 20,000:
+    # +- 0.006): never below the clinicians by more than the margin, and above them (measured
+    # over 20,000: 0.8126 [0.8072, 0.8181] against 0.7818)
     assert result["low"] >= clinicians - MARGIN, (result, clinicians)
     assert result["low"] > clinicians, (result, clinicians)
     assert result["value"] >= GOAL, result          # the goal at noise 0.3, 10k stays
