@@ -205,10 +205,13 @@ def against_aoc(rows: list[dict], survived: dict[str, np.ndarray]) -> list[dict]
                 kind = "against exact"
         r["aoc_minus"], r["aoc_minus_low"], r["aoc_minus_high"] = diff or (None, None, None)
         r["aoc_minus_kind"] = kind
-        r["ahead"] = None if diff is None else ("shown ahead" if diff[1] > 0 else
-                                                "shown behind" if diff[2] < 0 else
-                                                "not shown apart")
+        r["ahead"] = None if diff is None else reading(diff[1], diff[2])
     return rows
+
+
+def reading(low: float, high: float) -> str:
+    """What an interval of AOC's survival less a method's shows."""
+    return "shown ahead" if low > 0 else "shown behind" if high < 0 else "not shown apart"
 
 
 def summarise(rows: list[dict], methods: list[str]) -> list[dict]:
@@ -233,9 +236,8 @@ def summarise(rows: list[dict], methods: list[str]) -> list[dict]:
             rec.update({k: float(np.mean([r[k] for r in paired])) if paired else None
                         for k in DIFFERENCE})
             rec["aoc_minus_kind"] = paired[0]["aoc_minus_kind"] if paired else None
-            rec["ahead"] = None if not paired else (
-                "shown ahead" if rec["aoc_minus_low"] > 0 else
-                "shown behind" if rec["aoc_minus_high"] < 0 else "not shown apart")
+            rec["ahead"] = reading(rec["aoc_minus_low"], rec["aoc_minus_high"]) if paired \
+                else None
             out.append(rec)
     return out
 
