@@ -22,12 +22,69 @@ def store(tmp_path, monkeypatch):
 
 
 def run_aoc(*args: str, input: str | None = None, env=None, cwd=None):
-    """Run the real ``aoc`` entry point in a subprocess: (returncode, stdout, stderr)."""
-    proc = subprocess.run(
-        [sys.executable, "-c", "from aoc_cli.cli.app import main; main()", *args],
-        capture_output=True, text=True, input=input, env=env, cwd=cwd,
-    )
-    return proc.returncode, proc.stdout, proc.stderr
+    """Run the real ``aoc`` entry point in a process of its own: (returncode, stdout, stderr).
+
+    Forked from a server that has imported the heavy libraries (:mod:`tests.cli_child`), or a
+    fresh interpreter where the environment given differs from this one's outside ``AOC_*``
+    (``PYTHONPATH``, thread settings: read when an interpreter starts or a library loads)."""
+    env = dict(os.environ if env is None else env)
+    fresh = {k for k in set(env) ^ set(os.environ) | {k for k in env if k in os.environ
+                                                          and env[k] != os.environ[k]}
+             if not k.startswith("AOC_")}
+    if fresh or sys.platform != "linux":
+        proc = subprocess.run(
+            [sys.executable, "-c", "from aoc_cli.cli.app import main; main()", *args],
+            capture_output=True, text=True, input=input, env=env, cwd=cwd,
+        )
+        return proc.returncode, proc.stdout, proc.stderr
+    import tempfile
+
+    from tests import cli_child
+
+    with tempfile.TemporaryDirectory(prefix="aoc-cmd-") as tmp:
+        out, err = os.path.join(tmp, "out"), os.path.join(tmp, "err")
+        stdin = None
+        if input is not None:
+            stdin = os.path.join(tmp, "in")
+            with open(stdin, "w", encoding="utf-8") as f:
+                f.write(input)
+        proc = _forks().Process(target=cli_child.run,
+                                args=(list(args), env, None if cwd is None else str(cwd),
+                                      stdin, out, err))
+        proc.start()
+        proc.join()
+        code = proc.exitcode
+        with open(out, encoding="utf-8", errors="replace") as f:
+            stdout = f.read()
+        with open(err, encoding="utf-8", errors="replace") as f:
+            stderr = f.read()
+    return code, stdout, stderr
+
+
+_FORKS = None
+
+
+def _forks():
+    """The forkserver context whose server has imported :data:`tests.cli_child.PRELOAD`,
+    started here, with OMP_WAIT_POLICY as the ``aoc`` command sets it before its imports."""
+    global _FORKS
+    if _FORKS is None:
+        import multiprocessing
+        from multiprocessing import forkserver
+
+        from tests import cli_child
+
+        ctx = multiprocessing.get_context("forkserver")
+        ctx.set_forkserver_preload([*cli_child.PRELOAD, "tests.cli_child"])
+        before = os.environ.get("OMP_WAIT_POLICY")
+        os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+        try:
+            forkserver.ensure_running()
+        finally:
+            if before is None:
+                os.environ.pop("OMP_WAIT_POLICY", None)
+        _FORKS = ctx
+    return _FORKS
 
 
 @pytest.fixture

@@ -128,6 +128,8 @@ def test_train_threads_hold_for_the_neighbourhoods_search_too(tmp_path, two_thre
         seen.append((torch.get_num_threads(), faiss.omp_get_max_threads()))
         return original(*args, **kwargs)
     monkeypatch.setattr(targets, "neighbourhood_values", recording)
-    aoc_cli.train("c", store=tmp_path, belief={"threads": 1, "max_epochs": 1, "hidden": 8})
+    # (no_select: rule 6's choice of the controller, FQE ensembles, is not what this tests)
+    aoc_cli.train("c", store=tmp_path, no_select=True,
+                  belief={"threads": 1, "max_epochs": 1, "hidden": 8})
     assert seen == [(1, 1)]
     assert (torch.get_num_threads(), faiss.omp_get_max_threads()) == (2, 2)
