@@ -9,7 +9,8 @@ AOC (rule 7: rule 2 over the log's rows near the step's denoised observation, do
 docs/design.md, "Settings from the log's evidence") is never below the clinicians it learned
 from by more than 0.005, shown above them, and at least 0.81, as on exact states: measured
 0.8126 [0.8072, 0.8181] over 20,000 episodes, the clinicians 0.7818 exact, their likely dose
-(what rule 7 keeps) on the same patients 0.7897 (docs/results/icu-cohort.md).
+(what rule 7 keeps) on the same patients 0.7897, and shown above the clinicians' modal dose
+read through the nearest state centre on the same patients (docs/results/icu-cohort.md).
 """
 
 import os
@@ -21,8 +22,8 @@ import numpy as np
 import pytest
 
 from aoc_cli import open_session
-from aoc_cli.control.batch import BatchPolicy, LikelyPolicy
-from aoc_cli.envs import icu_cohort
+from aoc_cli.control.batch import BatchPolicy
+from aoc_cli.envs import icu_cohort, icu_sepsis
 
 pytestmark = pytest.mark.quality
 
@@ -65,14 +66,17 @@ def test_aoc_on_a_noisy_cohort_is_never_worse_than_the_clinicians(cohort):
     assert result["low"] >= clinicians - MARGIN, (result, clinicians)
     assert result["low"] > clinicians, (result, clinicians)
     assert result["value"] >= GOAL, result          # the goal at noise 0.3, 10k stays
-    # on the same patients (common random numbers), against the clinicians' likely dose that
-    # rule 7 keeps where no other dose is better supported: not shown worse by the margin
-    # (measured +0.0229 [0.0170, 0.0288])
-    likely = icu_cohort.rollout_value(LikelyPolicy(ctl), EPISODES, noise=NOISE, seed=1)
-    paired = icu_cohort.paired_difference(result["survived"], likely["survived"])
+    # on the same patients (common random numbers), against the clinicians' modal dose in the
+    # state whose centre is nearest (what they most often give there, read as the features
+    # allow: 0.7898 over 20,000, where rule 7's likely dose, the one it keeps, read 0.7897;
+    # a state policy, so its rollout costs seconds): not shown worse by the margin, and
+    # shown better (measured +0.022 [0.016, 0.028], aoc bench icu-cohort)
+    modal = icu_cohort.rollout_value(
+        icu_cohort.nearest_centre_policy(icu_sepsis.tables("mean").modal()), EPISODES,
+        noise=NOISE, seed=1)
+    paired = icu_cohort.paired_difference(result["survived"], modal["survived"])
     assert paired["low"] > -MARGIN, paired
-    assert paired["low"] > 0, paired          # and shown better than the dose it would keep
-
+    assert paired["low"] > 0, paired
 
 def test_the_value_belief_learns_on_noisy_features(cohort):
     """Its targets, FQE over the log's neighbourhoods, are what the log says near an
