@@ -1,6 +1,6 @@
 """One ``aoc`` command in a process of its own, forked from a server that has already imported
-the heavy libraries (torch, FAISS, numpy, scipy, numba): what ``python -c "from
-aoc_cli.cli.app import main; main()" ARGS`` does, without its two seconds of imports.
+the heavy libraries (torch, FAISS, numpy, scipy, numba, sklearn, pandas, ...): what ``python
+-c "from aoc_cli.cli.app import main; main()" ARGS`` does, without its seconds of imports.
 
 The suite runs a few hundred commands this way (``tests/conftest.py``: ``run_aoc``); a fresh
 interpreter for each spent more of the suite's time in imports than in several of its quality
@@ -18,8 +18,9 @@ import sys
 import traceback
 
 #: Imported once by the server (multiprocessing's forkserver), before any command forks.
-PRELOAD = ["numpy", "scipy.sparse", "scipy.linalg", "torch", "faiss", "numba",
-           "aoc_cli.cli.app"]
+PRELOAD = ["numpy", "scipy.sparse", "scipy.linalg", "torch", "faiss", "numba", "pandas",
+           "pyarrow.csv", "pyarrow.parquet", "h5py", "matplotlib", "gymnasium",
+           "sklearn.linear_model", "sklearn.metrics", "aoc_cli.cli.app"]
 
 
 def run(args: list[str], env: dict, cwd: str | None, stdin: str | None, out: str,
