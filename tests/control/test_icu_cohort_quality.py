@@ -18,7 +18,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from aoc_cli import open_session
@@ -78,6 +77,7 @@ def test_aoc_on_a_noisy_cohort_is_never_worse_than_the_clinicians(cohort):
     paired = icu_cohort.paired_difference(result["survived"], modal["survived"])
     assert paired["low"] > -MARGIN, paired
     assert paired["low"] > 0, paired
+
 
 def test_the_value_belief_learns_on_noisy_features(cohort):
     """Its targets, FQE over the log's neighbourhoods, are what the log says near an
