@@ -28,9 +28,8 @@ def run_aoc(*args: str, input: str | None = None, env=None, cwd=None):
     fresh interpreter where the environment given differs from this one's outside ``AOC_*``
     (``PYTHONPATH``, thread settings: read when an interpreter starts or a library loads)."""
     env = dict(os.environ if env is None else env)
-    fresh = {k for k in set(env) ^ set(os.environ) | {k for k in env if k in os.environ
-                                                          and env[k] != os.environ[k]}
-             if not k.startswith("AOC_")}
+    fresh = {k for k in set(env) | set(os.environ)
+             if env.get(k) != os.environ.get(k) and not k.startswith("AOC_")}
     if fresh or sys.platform != "linux":
         proc = subprocess.run(
             [sys.executable, "-c", "from aoc_cli.cli.app import main; main()", *args],
